@@ -1,0 +1,269 @@
+"""Shared types of optmodels: :class:`Status`, :class:`Solution`, exceptions, timing and
+the small input checks every problem module uses.
+
+Every solver back-end maps its own status codes onto :class:`Status` through an explicit
+table (an unknown code maps to ``Status.ERROR``), and every problem module returns a
+subclass of :class:`Solution` carrying the common fields below plus its own.
+"""
+
+from __future__ import annotations
+
+import enum
+import time
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass, field, fields
+from typing import Any, Self
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+__all__ = [
+    "OptModelsError",
+    "ProblemError",
+    "Solution",
+    "SolveError",
+    "SolverNotAvailable",
+    "Status",
+    "Timer",
+    "as_finite_array",
+    "check_spd",
+    "check_spd_stack",
+]
+
+FloatArray = NDArray[np.float64]
+
+
+# --------------------------------------------------------------------------- errors
+class OptModelsError(Exception):
+    """Base class of every exception raised by optmodels."""
+
+
+class ProblemError(OptModelsError, ValueError):
+    """Bad input: wrong shape, non-finite values, a covariance that is not SPD,
+    degenerate geometry, too few points, an infeasible specification."""
+
+
+class SolverNotAvailable(OptModelsError, ImportError):
+    """The requested solver is not installed; the message carries the install hint."""
+
+
+class SolveError(OptModelsError, RuntimeError):
+    """The solver failed and the caller asked for a solution (``Solution.require_ok``)."""
+
+    def __init__(self, message: str, solution: Solution | None = None) -> None:
+        super().__init__(message)
+        self.solution = solution
+
+
+# --------------------------------------------------------------------------- status
+class Status(enum.Enum):
+    """Outcome of a solve, common to all back-ends."""
+
+    OPTIMAL = "optimal"
+    OPTIMAL_INACCURATE = "optimal_inaccurate"
+    INFEASIBLE = "infeasible"
+    UNBOUNDED = "unbounded"
+    ITERATION_LIMIT = "iteration_limit"
+    ERROR = "error"
+
+    @property
+    def ok(self) -> bool:
+        """True for OPTIMAL and OPTIMAL_INACCURATE: the returned point is a solution."""
+        return self in (Status.OPTIMAL, Status.OPTIMAL_INACCURATE)
+
+
+@dataclass
+class Solution:
+    """Common part of every solution.
+
+    Attributes
+    ----------
+    status : Status
+        Outcome, mapped from the solver's own code (see the back-ends' tables).
+    objective : float
+        Objective of the *original* problem at the returned point (re-evaluated in NumPy,
+        not the solver's internal value).
+    method : str
+        ``"closed_form"``, ``"casadi:ipopt"``, ``"cvxpy:CLARABEL"``, ...
+    build_time, solve_time : float
+        Seconds spent building the model (CVXPY canonicalisation, CasADi graph and
+        derivative construction) and inside the solver.
+    iterations : int or None
+        Solver iterations where the solver reports them.
+    residuals : dict
+        Maximum violation of each constraint group of the original problem at the
+        returned point, re-computed in NumPy.
+    message : str
+        The solver's own status text, or a note.
+    info : dict
+        Anything else a method reports (starts tried, second-order check, ...).
+    """
+
+    status: Status
+    objective: float
+    method: str
+    build_time: float = 0.0
+    solve_time: float = 0.0
+    iterations: int | None = None
+    residuals: dict[str, float] = field(default_factory=dict)
+    message: str = ""
+    info: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def ok(self) -> bool:
+        return self.status.ok
+
+    @property
+    def max_residual(self) -> float:
+        return max(self.residuals.values(), default=0.0)
+
+    def require_ok(self) -> Self:
+        """Return ``self`` if the solve succeeded, else raise :class:`SolveError`."""
+        if not self.ok:
+            raise SolveError(
+                f"{self.method} did not solve the problem: status {self.status.value}"
+                f" ({self.message})",
+                self,
+            )
+        return self
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready dictionary of every field (arrays become lists)."""
+        out: dict[str, Any] = {}
+        for f in fields(self):
+            out[f.name] = _jsonable(getattr(self, f.name))
+        return out
+
+
+def _jsonable(value: Any) -> Any:
+    if isinstance(value, Status):
+        return value.value
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, dict):
+        return {str(k): _jsonable(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_jsonable(v) for v in value]
+    if isinstance(value, float) and not np.isfinite(value):
+        return None if np.isnan(value) else ("inf" if value > 0 else "-inf")
+    return value
+
+
+# --------------------------------------------------------------------------- timing
+class Timer:
+    """Accumulating wall-clock timer: ``with timer: ...`` adds to ``timer.elapsed``."""
+
+    def __init__(self) -> None:
+        self.elapsed = 0.0
+        self._t0 = 0.0
+
+    def __enter__(self) -> Self:
+        self._t0 = time.perf_counter()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.elapsed += time.perf_counter() - self._t0
+
+
+@contextmanager
+def timed() -> Iterator[Timer]:
+    """``with timed() as t: ...`` then ``t.elapsed`` seconds."""
+    t = Timer()
+    with t:
+        yield t
+
+
+# --------------------------------------------------------------------------- checks
+def as_finite_array(
+    name: str,
+    value: ArrayLike,
+    *,
+    ndim: int | tuple[int, ...] | None = None,
+    shape: tuple[int | None, ...] | None = None,
+) -> FloatArray:
+    """Convert ``value`` to a float64 array and check shape and finiteness.
+
+    Raises
+    ------
+    ProblemError
+        Naming ``name``, if the value is not numeric, has the wrong number of dimensions
+        or shape (``None`` in ``shape`` matches any length), or has NaN/inf entries.
+    """
+    try:
+        arr = np.asarray(value, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise ProblemError(f"{name}: not a numeric array ({exc})") from exc
+    if ndim is not None:
+        allowed = (ndim,) if isinstance(ndim, int) else ndim
+        if arr.ndim not in allowed:
+            raise ProblemError(
+                f"{name}: expected {' or '.join(map(str, allowed))} dimensions, "
+                f"got shape {arr.shape}"
+            )
+    if shape is not None:
+        ok = arr.ndim == len(shape) and all(
+            s is None or s == a for s, a in zip(shape, arr.shape, strict=True)
+        )
+        if not ok:
+            want = "(" + ", ".join("*" if s is None else str(s) for s in shape) + ")"
+            raise ProblemError(f"{name}: expected shape {want}, got {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        bad = int(np.size(arr) - np.count_nonzero(np.isfinite(arr)))
+        raise ProblemError(f"{name}: {bad} entries are NaN or infinite")
+    return arr
+
+
+def check_spd_stack(name: str, mats: FloatArray, *, rtol: float = 1e-10) -> None:
+    """Check that every matrix of a stack (..., d, d) is symmetric positive definite.
+
+    Symmetry is checked relative to the matrix's largest entry (``rtol``); definiteness
+    by a Cholesky factorisation. Raises :class:`ProblemError` naming ``name`` and the
+    index of the first offending matrix.
+    """
+    if mats.ndim < 2 or mats.shape[-1] != mats.shape[-2]:
+        raise ProblemError(f"{name}: expected square matrices, got shape {mats.shape}")
+    flat = mats.reshape(-1, mats.shape[-1], mats.shape[-1])
+    scale = np.max(np.abs(flat), axis=(1, 2))
+    asym = np.max(np.abs(flat - flat.transpose(0, 2, 1)), axis=(1, 2))
+    bad = np.flatnonzero(asym > rtol * np.maximum(scale, np.finfo(float).tiny))
+    if bad.size:
+        where = _index_text(name, mats, int(bad[0]))
+        raise ProblemError(f"{where} is not symmetric (max |A - A^T| = {asym[bad[0]]:.3g})")
+    sym = 0.5 * (flat + flat.transpose(0, 2, 1))
+    # Cholesky of the whole stack at once; on failure find the first bad matrix.
+    try:
+        np.linalg.cholesky(sym)
+    except np.linalg.LinAlgError:
+        for i, m in enumerate(sym):
+            try:
+                np.linalg.cholesky(m)
+            except np.linalg.LinAlgError:
+                w = np.linalg.eigvalsh(m)
+                where = _index_text(name, mats, i)
+                raise ProblemError(
+                    f"{where} is not positive definite (smallest eigenvalue {w[0]:.3g})"
+                ) from None
+    # Cholesky accepts matrices that are PD only to round-off; demand a sane condition.
+    w = np.linalg.eigvalsh(sym)
+    cond_bad = np.flatnonzero(w[:, 0] <= 1e-14 * w[:, -1])
+    if cond_bad.size:
+        i = int(cond_bad[0])
+        where = _index_text(name, mats, i)
+        raise ProblemError(
+            f"{where} is numerically singular (eigenvalues {w[i, 0]:.3g} ... {w[i, -1]:.3g})"
+        )
+
+
+def check_spd(name: str, mat: FloatArray, *, rtol: float = 1e-10) -> None:
+    """:func:`check_spd_stack` for a single matrix."""
+    check_spd_stack(name, np.asarray(mat), rtol=rtol)
+
+
+def _index_text(name: str, mats: FloatArray, flat_index: int) -> str:
+    if mats.ndim == 2:
+        return name
+    idx = np.unravel_index(flat_index, mats.shape[:-2])
+    return f"{name}[{', '.join(map(str, idx))}]"

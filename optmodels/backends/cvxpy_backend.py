@@ -7,6 +7,7 @@ else (a solver exception included) becomes ``Status.ERROR`` with the message kep
 from __future__ import annotations
 
 import time
+import warnings
 from typing import Any
 
 import cvxpy as cp
@@ -73,7 +74,10 @@ def solve_problem(
     name = require_solver(solver)
     t0 = time.perf_counter()
     try:
-        problem.solve(solver=name, verbose=verbose, **options)
+        with warnings.catch_warnings():
+            # CVXPY warns "Solution may be inaccurate"; the status below says so.
+            warnings.filterwarnings("ignore", message="Solution may be inaccurate")
+            problem.solve(solver=name, verbose=verbose, **options)
     except cp.error.SolverError as exc:
         wall = time.perf_counter() - t0
         return BackendResult(

@@ -1,0 +1,19 @@
+"""Seeded simulators and the papers' own examples."""
+
+from optmodels.scenarios.maneuver import (
+    PAPER_RADIUS,
+    ManeuverScenario,
+    paper_plane_example,
+    radar_covariances,
+    radar_plane,
+    two_source_plane,
+)
+
+__all__ = [
+    "PAPER_RADIUS",
+    "ManeuverScenario",
+    "paper_plane_example",
+    "radar_covariances",
+    "radar_plane",
+    "two_source_plane",
+]

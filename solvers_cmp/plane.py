@@ -1,0 +1,128 @@
+"""Plane of maneuver: full NLP, reduced NLP, closed form and unweighted SVD.
+
+Two tables:
+
+* **timing/accuracy** (DESIGN.md columns): one instance per (setting, N); each method's
+  status, objective gap and normal angle to the reference (closed form under (1.4), else
+  the best generic solution), max violation of (1.3), build and solve time (median of
+  ``repeats`` runs; the first, cold, build is reported separately).
+* **statistical**: ``runs`` Monte Carlo runs per (setting, N): angle RMSE of the ML plane
+  and of the SVD plane, their ratio, and the Cramér–Rao bound.
+
+Settings: (a) ``two-source``: isotropic errors, α² ∈ {1, 100} alternating (paper's
+motivation for (1.4)); (b) ``radar-broadside`` and ``radar-edge-on``: one radar at the
+origin, σ_range = 10 m, σ_az = σ_el = 2 mrad, 20-50 km (general D_i).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+from tqdm import tqdm
+
+from optmodels import plane, scenarios
+
+SETTINGS: dict[str, Callable[..., scenarios.ManeuverScenario]] = {
+    "two-source": lambda n, rng: scenarios.two_source_plane(n, rng),
+    "radar-broadside": lambda n, rng: scenarios.radar_plane(n, rng, geometry="broadside"),
+    "radar-edge-on": lambda n, rng: scenarios.radar_plane(n, rng, geometry="edge-on"),
+}
+METHODS = ("closed_form", "reduced", "full", "svd")
+
+
+def _data(sc: scenarios.ManeuverScenario) -> plane.PlaneData:
+    return plane.PlaneData(sc.points, sc.cov, sc.alpha2)
+
+
+def _run_method(method: str, data: plane.PlaneData) -> plane.PlaneSolution:
+    if method == "closed_form":
+        return plane.closed_form(data)
+    if method == "svd":
+        return plane.svd_fit(data)
+    return plane.solve(data, method)  # type: ignore[arg-type]
+
+
+def _ml(data: plane.PlaneData) -> plane.PlaneSolution:
+    return plane.closed_form(data) if data.proportional else plane.solve(data, "reduced")
+
+
+def timing_rows(sizes: list[int], *, seed: int = 0, repeats: int = 5,
+                progress: bool = False) -> list[dict[str, Any]]:
+    """One instance per (setting, N); every method timed ``repeats`` times."""
+    rows: list[dict[str, Any]] = []
+    cases = [(s, n) for s in SETTINGS for n in sizes]
+    for setting, n in tqdm(cases, desc="plane timing", disable=not progress):
+        rng = np.random.default_rng([seed, n, list(SETTINGS).index(setting)])
+        data = _data(SETTINGS[setting](n, rng))
+        for method in METHODS:
+            if method == "closed_form" and not data.proportional:
+                continue
+            plane._NLP_CACHE.clear()  # the first run measures a cold build
+            sols = [_run_method(method, data) for _ in range(repeats)]
+            sol = sols[-1]
+            ref_obj = min(s.objective for s in sols)
+            rows.append({
+                "problem": "plane", "setting": setting, "size": n, "seed": seed,
+                "formulation": method,
+                "solver": "ipopt" if method in ("full", "reduced") else "numpy",
+                "settings": "default", "status": sol.status.value,
+                "objective": sol.objective, "_normal": sol.normal, "_ref": ref_obj,
+                "max_violation": sol.max_residual,
+                "cold_build_time": sols[0].build_time,
+                "build_time": float(np.median([s.build_time for s in sols[1:] or sols])),
+                "solve_time": float(np.median([s.solve_time for s in sols])),
+                "iterations": sol.iterations,
+                "starts": sol.info.get("starts", ""),
+            })
+    # reference per case: the best objective among the ML methods (closed form first)
+    for setting, n in cases:
+        case = [r for r in rows if r["setting"] == setting and r["size"] == n]
+        ml = [r for r in case if r["formulation"] != "svd" and r["status"] == "optimal"]
+        cf = [r for r in ml if r["formulation"] == "closed_form"]
+        ref = cf[0] if cf else min(ml, key=lambda r: r["objective"])
+        for r in case:
+            r["reference"] = ref["formulation"]
+            r["objective_gap"] = (r["objective"] - ref["objective"]) / abs(ref["objective"])
+            r["solution_error"] = float(plane.angle_error(r["_normal"], ref["_normal"]))
+    for r in rows:
+        r.pop("_normal")
+        r.pop("_ref")
+    return rows
+
+
+def accuracy_rows(sizes: list[int], *, runs: int = 200, seed: int = 0,
+                  progress: bool = False) -> list[dict[str, Any]]:
+    """Monte Carlo angle RMSE of the ML and SVD planes, per (setting, N)."""
+    rows = []
+    cases = [(s, n) for s in SETTINGS for n in sizes]
+    for setting, n in tqdm(cases, desc="plane Monte Carlo", disable=not progress):
+        rng = np.random.default_rng([seed, n, 100 + list(SETTINGS).index(setting)])
+        err = np.empty((runs, 2))
+        t_ml = np.empty(runs)
+        crb = None
+        for k in range(runs):
+            sc = SETTINGS[setting](n, rng)
+            data = _data(sc)
+            t0 = time.perf_counter()
+            ml = _ml(data)
+            t_ml[k] = time.perf_counter() - t0
+            ml.require_ok()
+            err[k, 0] = plane.angle_error(ml.normal, sc.normal)
+            err[k, 1] = plane.angle_error(plane.svd_fit(data).normal, sc.normal)
+            if crb is None:
+                crb = plane.cramer_rao_bound(plane.PlaneData(sc.truth, sc.cov, sc.alpha2),
+                                             sc.normal, sc.offset)
+        rmse = np.sqrt(np.mean(err**2, axis=0))
+        assert crb is not None
+        rows.append({
+            "setting": setting, "size": n, "runs": runs,
+            "ml_method": "closed_form" if data.proportional else "reduced NLP",
+            "rmse_ml_mrad": rmse[0] * 1e3, "rmse_svd_mrad": rmse[1] * 1e3,
+            "ratio_ml_over_svd": rmse[0] / rmse[1],
+            "crb_first_instance_mrad": crb.angle_rms * 1e3,
+            "ml_time_median_s": float(np.median(t_ml)),
+        })
+    return rows

@@ -7,7 +7,7 @@ from importlib import metadata
 from pathlib import Path
 from typing import Any
 
-from optmodels.io import markdown_table, write_csv, write_json
+from optmodels.io import markdown_table, write_csv
 
 PACKAGES = ("optmodels", "numpy", "scipy", "cvxpy", "casadi", "clarabel", "osqp", "scs",
             "highspy")

@@ -1,0 +1,35 @@
+"""The plane comparison runs end to end and its numbers are consistent."""
+
+from __future__ import annotations
+
+import csv
+from pathlib import Path
+
+from solvers_cmp import plane as cmp_plane
+from solvers_cmp import report
+
+
+def test_plane_comparison_small(tmp_path: Path) -> None:
+    timing = cmp_plane.timing_rows([60], repeats=2)
+    acc = cmp_plane.accuracy_rows([60], runs=30)
+    md = report.write_plane(tmp_path, timing, acc)
+    # every ML formulation solves and agrees with the reference to the plane tolerances
+    for r in timing:
+        assert r["status"] == "optimal"
+        if r["formulation"] != "svd":
+            assert r["solution_error"] <= 1e-7 and abs(r["objective_gap"]) <= 1e-8
+        else:  # SVD is feasible but not optimal for (1.2): its gap is >= 0
+            assert r["objective_gap"] >= -1e-12
+    by = {r["setting"]: r for r in acc}
+    # two sources with 10x different σ: ML beats the unweighted fit by a wide margin
+    # (RMSE ratio ~0.19 at 200 runs; 30 runs give ±15%, so 0.5 is a safe bound).
+    assert by["two-source"]["ratio_ml_over_svd"] < 0.5
+    # edge-on radar: weights barely vary along the normal; ML ≈ SVD (ratio ~0.9-1.0)
+    assert 0.7 < by["radar-edge-on"]["ratio_ml_over_svd"] < 1.15
+    rows = list(csv.DictReader((tmp_path / "plane_timing.csv").open()))
+    assert {"problem", "size", "formulation", "solver", "status", "objective_gap",
+            "solution_error", "max_violation", "build_time", "solve_time",
+            "iterations"} <= set(rows[0])
+    assert "| two-source |" in md
+    env = report.environment()
+    assert env["packages"]["casadi"] and env["cores"]

@@ -135,8 +135,9 @@ def _run_compare(out: Path, problems: Sequence[str], sizes: list[int], runs: int
         if p == "plane":
             timing = cmp_plane.timing_rows(sizes, seed=seed, repeats=repeats, progress=progress)
             acc = cmp_plane.accuracy_rows(sizes, runs=runs, seed=seed, progress=progress)
-            md.append(report.write_plane(out, timing, acc))
-            res["plane"] = {"timing": timing, "accuracy": acc}
+            bench = cmp_plane.benchmark(max(sizes), repeats=repeats, seed=seed)
+            md.append(report.write_plane(out, timing, acc, bench))
+            res["plane"] = {"timing": timing, "accuracy": acc, "benchmark": bench}
         else:
             raise ProblemError(f"--problems: unknown problem {p!r} (known: {PROBLEMS})")
     md.append(f"\nMachine: {env['cpu']}, {env['cores']} cores; Python {env['python']}.\n")

@@ -553,9 +553,15 @@ def solve(
                 and curvature > 0:
             # Under (1.4) a local minimum of Φ on the sphere is the global one.
             break
-        b0 = 0.0  # the scaled data are centred
+        # Start plane (nv0, b0): b0 and the x_i are the best ones *for that plane* --
+        # the weighted offset and the oblique projections (1.8), not orthogonal ones,
+        # which under anisotropic D_i start far from optimal and cost IPOPT dozens of
+        # iterations. This uses only the start plane, never the closed-form solution.
+        dn0 = sc.covs @ nv0
+        w0 = 1.0 / (dn0 @ nv0)
+        b0 = float(np.sum(w0 * (sc.points @ nv0)) / np.sum(w0))
         if formulation == "full":
-            x_start = sc.points - np.outer(sc.points @ nv0 - b0, nv0)
+            x_start = sc.points + ((b0 - sc.points @ nv0) * w0)[:, None] * dn0
             x0 = np.concatenate([x_start.T.ravel(order="F"), nv0, [b0]])
         else:
             x0 = np.concatenate([nv0, [b0]])

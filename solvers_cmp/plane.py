@@ -126,3 +126,45 @@ def accuracy_rows(sizes: list[int], *, runs: int = 200, seed: int = 0,
             "ml_time_median_s": float(np.median(t_ml)),
         })
     return rows
+
+
+def benchmark(n: int = 10_000, repeats: int = 5, seed: int = 0) -> list[dict[str, Any]]:
+    """Cold build + solve times at N points with general D_i (radar, broadside), the
+    closed form under (1.4), and the 800-step sequential closed form; median of
+    ``repeats`` runs each. The NLP cache is cleared before every full/reduced run so that
+    each one pays the CasADi construction."""
+    rng = np.random.default_rng(seed)
+    general = _data(scenarios.radar_plane(n, rng, geometry="broadside"))
+    prop = _data(scenarios.two_source_plane(n, rng))
+    ex = scenarios.paper_plane_example(rng)
+    rows = []
+    for name, fn in (
+        ("full NLP, general D_i, 3 starts (cold build + solve)",
+         lambda: plane.solve(general, "full")),
+        ("full NLP, general D_i, 1 start (cold build + solve)",
+         lambda: plane.solve(general, "full", starts=1)),
+        ("reduced NLP, general D_i, 3 starts (cold build + solve)",
+         lambda: plane.solve(general, "reduced")),
+    ):
+        times = []
+        for _ in range(repeats):
+            plane._NLP_CACHE.clear()
+            t0 = time.perf_counter()
+            sol = fn().require_ok()
+            times.append(time.perf_counter() - t0)
+        rows.append({"case": name, "size": n, "median_s": float(np.median(times)),
+                     "min_s": float(np.min(times)), "starts": sol.info.get("starts")})
+    for name, fn in (
+        ("closed form, D_i = alpha_i^2 D", lambda: plane.closed_form(prop)),
+        ("sequential closed form, 801 steps (paper example)",
+         lambda: plane.identify_sequence(ex.times, ex.points, ex.cov, start=2.0)),
+    ):
+        times = []
+        for _ in range(repeats):
+            t0 = time.perf_counter()
+            fn()
+            times.append(time.perf_counter() - t0)
+        size = n if "sequential" not in name else len(ex.times)
+        rows.append({"case": name, "size": size, "median_s": float(np.median(times)),
+                     "min_s": float(np.min(times)), "starts": ""})
+    return rows

@@ -79,6 +79,7 @@ __all__ = [
     "PlaneSequence",
     "PlaneSolution",
     "angle_error",
+    "clear_nlp_cache",
     "closed_form",
     "constraint_residuals",
     "cramer_rao_bound",
@@ -454,6 +455,12 @@ def _profile_derivatives(sc: _Scaled, normal: FloatArray) -> tuple[float, float]
 #: gradient of Φ below 1e-6 of its curvature (an angle error of ~1e-6 rad at most, and the
 #: finite-difference gradient is accurate to ~1e-8) and feasibility of (1.3) to 1e-8.
 _VERIFY_GRAD = 1e-6
+
+
+def clear_nlp_cache() -> None:
+    """Forget the built CasADi NLPs (the next solve pays the construction again; used by
+    benchmarks that measure cold build + solve)."""
+    _NLP_CACHE.clear()
 
 
 def _principal_axes(points: FloatArray) -> FloatArray:

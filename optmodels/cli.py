@@ -15,6 +15,7 @@ import numpy as np
 
 from optmodels import plane
 from optmodels.core import OptModelsError, ProblemError
+from optmodels.io import json_default
 
 PROBLEMS = ("plane",)
 
@@ -213,21 +214,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"optmodels: error: {exc}", file=sys.stderr)
         return 2
     if args.json:
-        print(json.dumps(result, default=_json_default, indent=2))
+        print(json.dumps(result, default=json_default, indent=2))
     elif hasattr(args, "printer"):
         args.printer(result)
     elif args.command in ("demo", "compare"):
         name = "index.md" if args.command == "demo" else "report.md"
         print(f"wrote {Path(result['out']) / name}")
     return 0
-
-
-def _json_default(o: Any) -> Any:
-    if isinstance(o, np.ndarray):
-        return o.tolist()
-    if isinstance(o, np.generic):
-        return o.item()
-    return str(o)
 
 
 if __name__ == "__main__":

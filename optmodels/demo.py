@@ -14,15 +14,10 @@ from optmodels.io import markdown_table, write_json
 __all__ = ["run_plane_demo"]
 
 
-def _crb_track(truth: np.ndarray, cov: np.ndarray, normal: np.ndarray, offset: float,
-               counts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """CRB (angle RMS, offset std) after each prefix of the true trajectory."""
-    ang = np.empty(len(counts))
-    off = np.empty(len(counts))
-    for k, n in enumerate(counts.astype(int)):
-        c = plane.cramer_rao_bound(plane.PlaneData(truth[:n], cov), normal, offset)
-        ang[k], off[k] = c.angle_rms, c.offset_std
-    return ang, off
+def _crb(sc: scenarios.ManeuverScenario, n: int | None = None) -> tuple[float, float]:
+    """CRB (angle RMS, offset std) from the first ``n`` true positions (default all)."""
+    c = plane.cramer_rao_bound(plane.PlaneData(sc.truth[:n], sc.cov), sc.normal, sc.offset)
+    return c.angle_rms, c.offset_std
 
 
 def run_plane_demo(out: Path, *, runs: int = 200, seed: int = 0,
@@ -38,7 +33,7 @@ def run_plane_demo(out: Path, *, runs: int = 200, seed: int = 0,
     sc = scenarios.paper_plane_example(rng)
     seq = plane.identify_sequence(sc.times, sc.points, sc.cov, start=2.0, resolve_every=100)
     ang1, off1 = plane.plane_errors(seq.normal, seq.offset, sc.normal, sc.offset)
-    crb_ang, crb_off = _crb_track(sc.truth, sc.cov, sc.normal, sc.offset, seq.n_points)
+    crb_ang, crb_off = np.array([_crb(sc, int(n)) for n in seq.n_points]).T
 
     # Monte Carlo over whole sequences
     ang = np.empty((runs, len(seq.times)))
@@ -65,12 +60,7 @@ def run_plane_demo(out: Path, *, runs: int = 200, seed: int = 0,
 
     # CRB at 10 s against the radius the paper does not give
     radii = np.linspace(500, 5000, 46)
-    rb = np.array([
-        (lambda s: (lambda c: (c.angle_rms, c.offset_std))(
-            plane.cramer_rao_bound(plane.PlaneData(s.truth, s.cov), s.normal, s.offset)))(
-            scenarios.paper_plane_example(0, radius=r))
-        for r in radii
-    ])
+    rb = np.array([_crb(scenarios.paper_plane_example(0, radius=r)) for r in radii])
 
     figs = {
         "fig1": plots.plane_trajectory(out / "fig1_trajectory.png", sc.truth, sc.points),

@@ -12,7 +12,14 @@ import numpy as np
 
 from optmodels.core import FloatArray, ProblemError
 
-__all__ = ["PlaneCsv", "markdown_table", "read_plane_csv", "write_csv", "write_json"]
+__all__ = [
+    "PlaneCsv",
+    "json_default",
+    "markdown_table",
+    "read_plane_csv",
+    "write_csv",
+    "write_json",
+]
 
 _COV_COLUMNS = ("cxx", "cxy", "cxz", "cyy", "cyz", "czz")
 
@@ -101,10 +108,11 @@ def _cell(v: Any) -> Any:
 
 
 def write_json(path: str | Path, obj: Any) -> None:
-    Path(path).write_text(json.dumps(obj, indent=2, default=_json_default) + "\n")
+    Path(path).write_text(json.dumps(obj, indent=2, default=json_default) + "\n")
 
 
-def _json_default(o: Any) -> Any:
+def json_default(o: Any) -> Any:
+    """``json.dumps(default=...)`` for NumPy arrays and scalars."""
     if isinstance(o, np.ndarray):
         return o.tolist()
     if isinstance(o, np.generic):

@@ -271,22 +271,37 @@ def reduced_objective(data: PlaneData, normal: ArrayLike, offset: float) -> floa
     return float(np.sum(r * r / _quad_forms(data.covs, n)))
 
 
+def _weighted_offset(
+    points: FloatArray, covs: FloatArray, normal: FloatArray
+) -> tuple[FloatArray, FloatArray, float]:
+    """Weights :math:`w_i = 1/\\langle D_i n, n\\rangle`, projections
+    :math:`\\langle n, x_i^*\\rangle` and the offset minimising (1.12) for this normal."""
+    w = 1.0 / _quad_forms(covs, normal)
+    proj = points @ normal
+    return w, proj, float(np.sum(w * proj) / np.sum(w))
+
+
+def _oblique_projection(
+    points: FloatArray, covs: FloatArray, normal: FloatArray, offset: float
+) -> FloatArray:
+    """(1.8) on raw arrays: :math:`x_i^* + (a - \\langle n, x_i^*\\rangle) D_i n /
+    \\langle D_i n, n\\rangle`."""
+    dn = covs @ normal
+    coef = (offset - points @ normal) / (dn @ normal)
+    return points + coef[:, None] * dn
+
+
 def optimal_offset(data: PlaneData, normal: ArrayLike) -> float:
     """The ``a`` minimising (1.12) for a fixed normal: a weighted mean of
     :math:`\\langle n, x_i^*\\rangle` with weights :math:`1/\\langle D_i n, n\\rangle`
     (under (1.4) this is (1.7))."""
-    n = np.asarray(normal, dtype=float)
-    w = 1.0 / _quad_forms(data.covs, n)
-    return float(np.sum(w * (data.points @ n)) / np.sum(w))
+    return _weighted_offset(data.points, data.covs, np.asarray(normal, dtype=float))[2]
 
 
 def project(data: PlaneData, normal: ArrayLike, offset: float) -> FloatArray:
     """Most likely true positions on a given plane, (1.8):
     :math:`x_i = x_i^* + \\frac{a - \\langle n, x_i^*\\rangle}{\\langle D_i n, n\\rangle} D_i n`."""
-    n = np.asarray(normal, dtype=float)
-    dn = data.covs @ n
-    coef = (offset - data.points @ n) / (dn @ n)
-    return data.points + coef[:, None] * dn
+    return _oblique_projection(data.points, data.covs, np.asarray(normal, dtype=float), offset)
 
 
 def _finish(
@@ -435,9 +450,7 @@ def _profile_derivatives(sc: _Scaled, normal: FloatArray) -> tuple[float, float]
     def phi(d1: float, d2: float) -> float:
         n = normal + d1 * t1 + d2 * t2
         n = n / np.linalg.norm(n)
-        wd = 1.0 / np.einsum("j,ijk,k->i", n, sc.covs, n)
-        proj = sc.points @ n
-        a = np.sum(wd * proj) / np.sum(wd)
+        wd, proj, a = _weighted_offset(sc.points, sc.covs, n)
         return float(np.sum(wd * (proj - a) ** 2))
 
     f0 = phi(0.0, 0.0)
@@ -496,7 +509,7 @@ def solve(
     initial_normal : array_like (3,), optional
         Start from this normal instead (a single start, e.g. a warm start in a sequence).
     ipopt_options : dict, optional
-        Extra IPOPT options (defaults: ``tol = constr_viol_tol = 1e-12``).
+        Extra IPOPT options (defaults: ``tol = constr_viol_tol = 1e-10``).
 
     Returns
     -------
@@ -554,7 +567,6 @@ def solve(
     total_iter = 0
     method = f"casadi:ipopt:{formulation}"
     curvature = float("nan")
-    verified: list[bool] = []
     for nv0 in start_normals:
         if auto and data.proportional and len(start_objs) == 1 and best is not None \
                 and curvature > 0:
@@ -564,11 +576,9 @@ def solve(
         # the weighted offset and the oblique projections (1.8), not orthogonal ones,
         # which under anisotropic D_i start far from optimal and cost IPOPT dozens of
         # iterations. This uses only the start plane, never the closed-form solution.
-        dn0 = sc.covs @ nv0
-        w0 = 1.0 / (dn0 @ nv0)
-        b0 = float(np.sum(w0 * (sc.points @ nv0)) / np.sum(w0))
+        b0 = _weighted_offset(sc.points, sc.covs, nv0)[2]
         if formulation == "full":
-            x_start = sc.points + ((b0 - sc.points @ nv0) * w0)[:, None] * dn0
+            x_start = _oblique_projection(sc.points, sc.covs, nv0, b0)
             x0 = np.concatenate([x_start.T.ravel(order="F"), nv0, [b0]])
         else:
             x0 = np.concatenate([nv0, [b0]])
@@ -580,9 +590,10 @@ def solve(
         # The solver's own normal (not renormalised), so that a violated ‖n‖ = 1 shows in
         # the residuals; "full" reports its own x_i, "reduced" projects by (1.8).
         offset = b * sc.scale + float(normal @ sc.center)
+        x_scaled = xopt[:k].reshape(n_pts, 3) if formulation == "full" else None
         proj = None
-        if formulation == "full" and np.all(np.isfinite(xopt)):
-            proj = xopt[:k].reshape(n_pts, 3) * sc.scale + sc.center
+        if x_scaled is not None and np.all(np.isfinite(xopt)):
+            proj = x_scaled * sc.scale + sc.center
         status = res.status
         message = res.message
         curv_i = float("nan")
@@ -591,13 +602,12 @@ def solve(
             if res.message == "Search_Direction_Becomes_Too_Small":
                 # IPOPT's precision limit: accept only a point verified independently.
                 ok = grad_i <= _VERIFY_GRAD and curv_i > 0 and abs(normal @ normal - 1) <= 1e-8
-                if ok and proj is not None:
-                    ok = float(np.max(np.abs(xopt[:k].reshape(n_pts, 3) @ normal - b))) <= 1e-8
+                if ok and x_scaled is not None:
+                    ok = float(np.max(np.abs(x_scaled @ normal - b))) <= 1e-8
                 if ok:
                     status = Status.OPTIMAL_INACCURATE
                     message += " (KKT point verified: tangent gradient " \
                         f"{grad_i:.1e}, curvature {curv_i:.2f})"
-                verified.append(ok)
         sol = _finish(data, normal, offset, status=status, method=method,
                       message=message, projected=proj)
         start_objs.append(sol.objective)

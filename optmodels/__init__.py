@@ -4,7 +4,7 @@ Each problem module writes the paper's problem in its original constrained form,
 it generically (CVXPY, CasADi/IPOPT) and cross-checks it against the paper's closed form.
 """
 
-from optmodels import plane
+from optmodels import plane, trajectories
 from optmodels.core import (
     OptModelsError,
     ProblemError,
@@ -24,4 +24,5 @@ __all__ = [
     "SolverNotAvailable",
     "Status",
     "plane",
+    "trajectories",
 ]

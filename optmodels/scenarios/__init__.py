@@ -1,5 +1,6 @@
 """Seeded simulators and the papers' own examples."""
 
+from optmodels.scenarios.launcher import TrajectoryScenario, equally_spaced, launcher_release
 from optmodels.scenarios.maneuver import (
     PAPER_RADIUS,
     ManeuverScenario,
@@ -12,6 +13,9 @@ from optmodels.scenarios.maneuver import (
 __all__ = [
     "PAPER_RADIUS",
     "ManeuverScenario",
+    "TrajectoryScenario",
+    "equally_spaced",
+    "launcher_release",
     "paper_plane_example",
     "radar_covariances",
     "radar_plane",

@@ -12,12 +12,13 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from scipy import stats
 
-from optmodels import plane
+from optmodels import plane, trajectories
 from optmodels.core import OptModelsError, ProblemError
 from optmodels.io import json_default
 
-PROBLEMS = ("plane",)
+PROBLEMS = ("plane", "trajectories")
 
 
 def _parse_cov(text: str) -> np.ndarray:
@@ -92,8 +93,86 @@ def _print_plane_fit(res: dict[str, Any]) -> None:
               f"{t['paper_threshold']:.4f} -> {pv}")
 
 
+def _trajectories_fit(args: argparse.Namespace) -> dict[str, Any]:
+    from optmodels.io import read_trajectory_csv
+
+    cols = read_trajectory_csv(args.file)
+    labels = cols["objects"]
+    if cols["sigma2"] is not None:
+        if args.sigma2 is not None:
+            raise ProblemError("--sigma2: the file has a sigma2 column already")
+        sigma2: Any = cols["sigma2"]
+    else:
+        sigma2 = 1.0 if args.sigma2 is None else args.sigma2
+    data = trajectories.TrajectoryData(cols["times"], cols["values"], sigma2, epoch=args.epoch)
+    q = data.n_objects
+    if args.family == "custom":
+        index = {lab: k for k, lab in enumerate(labels)}
+
+        def groups(specs: list[str] | None, flag: str) -> list[list[int]]:
+            out = []
+            for spec in specs or []:
+                names = [x.strip() for x in spec.split(",") if x.strip()]
+                unknown = [x for x in names if x not in index]
+                if unknown:
+                    raise ProblemError(f"{flag}: unknown object(s) {unknown} (have {labels})")
+                out.append([index[x] for x in names])
+            return out
+
+        family: Any = trajectories.Family.custom(
+            q, shared_start=groups(args.shared_start, "--shared-start"),
+            shared_velocity=groups(args.shared_velocity, "--shared-velocity"))
+    else:
+        if args.shared_start or args.shared_velocity:
+            raise ProblemError("--shared-start/--shared-velocity need --family custom")
+        family = args.family
+    if args.method == "closed-form":
+        sol = trajectories.closed_form(data, family)
+    else:
+        sol = trajectories.solve(data, family, formulation=args.formulation, solver=args.method)
+    fam = sol.family
+    assert fam is not None
+    std = sol.std
+    out: dict[str, Any] = {
+        "file": str(args.file), "objects": labels, "coordinates": cols["coordinates"],
+        "n_measurements": data.counts.tolist(), "family": fam.name,
+        "start_groups": [[labels[i] for i in g] for g in fam.start_groups],
+        "velocity_groups": [[labels[i] for i in g] for g in fam.velocity_groups],
+        "epoch": args.epoch, "status": sol.status.value, "method": sol.method,
+        "theta": sol.theta, "theta_std": std, "covariance": sol.covariance,
+        "start": {lab: sol.start[k] for k, lab in enumerate(labels)},
+        "velocity": {lab: sol.velocity[k] for k, lab in enumerate(labels)},
+        "objective": sol.objective, "dof": sol.dof,
+        "fit_p_value": float(stats.chi2.sf(sol.objective, sol.dof)) if sol.dof > 0 else None,
+        "residuals": sol.residuals, "build_time": sol.build_time,
+        "solve_time": sol.solve_time, "iterations": sol.iterations, "message": sol.message,
+    }
+    if sol.ok and fam.n_constraints > 0:
+        out["family_test"] = trajectories.family_test(
+            data, fam, level=args.level,
+            sigma2="estimated" if args.sigma2_unknown else "known").to_dict()
+    return out
+
+
+def _print_trajectories_fit(res: dict[str, Any]) -> None:
+    print(f"{res['file']}: Q = {len(res['objects'])}, N = {res['n_measurements']}, "
+          f"family {res['family']}, {res['method']} -> {res['status']}")
+    for lab in res["objects"]:
+        print(f"  {lab}: start = {np.round(res['start'][lab], 6)}, "
+              f"velocity = {np.round(res['velocity'][lab], 6)}")
+    print(f"  θ std = {np.round(res['theta_std'], 6).tolist()}")
+    pv = res["fit_p_value"]
+    print(f"  χ² = {res['objective']:.6g} on {res['dof']} dof"
+          + (f" (p = {pv:.3g})" if pv is not None else ""))
+    t = res.get("family_test")
+    if t:
+        verdict = "REJECTED" if t["reject"] else "not rejected"
+        print(f"  vs independent lines: statistic {t['statistic']:.4g}, dof {t['dof']}, "
+              f"p = {t['p_value']:.3g} -> {res['family']} {verdict} at level {t['level']}")
+
+
 def _demo(args: argparse.Namespace) -> dict[str, Any]:
-    from optmodels.demo import run_plane_demo
+    from optmodels.demo import run_plane_demo, run_trajectories_demo
 
     out = Path(args.out)
     problems = [args.problem] if args.problem else list(PROBLEMS)
@@ -107,6 +186,13 @@ def _demo(args: argparse.Namespace) -> dict[str, Any]:
             result["problems"]["plane"] = summ
             sections.append("- [Plane of maneuver (paper 000)](plane/report.md): figures 1-4,"
                             " Monte Carlo vs the Cramér–Rao bound")
+        elif p == "trajectories":
+            summ = run_trajectories_demo(out / "trajectories", runs=args.trajectory_runs,
+                                         seed=args.seed, progress=not args.json)
+            result["problems"]["trajectories"] = summ
+            sections.append("- [Dependent linear trajectories (paper 002)]"
+                            "(trajectories/report.md): launcher and parallel scenarios, "
+                            "η against Monte Carlo")
     if not args.problem and not args.no_compare:
         cmp_res = _run_compare(out / "compare", PROBLEMS, args.sizes, args.mc_runs,
                                args.repeats, args.seed, progress=not args.json)
@@ -139,6 +225,13 @@ def _run_compare(out: Path, problems: Sequence[str], sizes: list[int], runs: int
             bench = cmp_plane.benchmark(max(sizes), repeats=repeats, seed=seed)
             md.append(report.write_plane(out, timing, acc, bench))
             res["plane"] = {"timing": timing, "accuracy": acc, "benchmark": bench}
+        elif p == "trajectories":
+            from solvers_cmp import trajectories as cmp_traj
+
+            rows = cmp_traj.rows(seed=seed, repeats=max(1, min(repeats, 3)), progress=progress)
+            bench = cmp_traj.benchmark(repeats=repeats, seed=seed)
+            md.append(report.write_trajectories(out, rows, bench))
+            res["trajectories"] = {"results": rows, "benchmark": bench}
         else:
             raise ProblemError(f"--problems: unknown problem {p!r} (known: {PROBLEMS})")
     md.append(f"\nMachine: {env['cpu']}, {env['cores']} cores; Python {env['python']}.\n")
@@ -172,6 +265,8 @@ def build_parser() -> argparse.ArgumentParser:
     demo.add_argument("--out", default="report", help="output folder (default: report)")
     demo.add_argument("--runs", type=int, default=200, help="Monte Carlo runs of the example")
     demo.add_argument("--seed", type=int, default=0)
+    demo.add_argument("--trajectory-runs", type=int, default=4000,
+                      help="Monte Carlo draws per (Q, N) of the trajectories η table")
     demo.add_argument("--no-compare", action="store_true", help="skip the comparison")
     demo.add_argument("--sizes", type=_int_list, default=[100, 1000, 10000],
                       help="comparison sizes (default 100,1000,10000)")
@@ -202,6 +297,30 @@ def build_parser() -> argparse.ArgumentParser:
     fit.add_argument("--level", type=float, default=0.997, help="χ² test level")
     fit.add_argument("--json", action="store_true")
     fit.set_defaults(func=_plane_fit, printer=_print_plane_fit)
+
+    trj = sub.add_parser("trajectories", help="dependent linear trajectories (paper 002)")
+    tsub = trj.add_subparsers(dest="verb", required=True)
+    tfit = tsub.add_parser("fit", help="fit a family of lines to a CSV of measurements")
+    tfit.add_argument("file", type=Path,
+                      help="CSV with object,t,y or object,t,x,y[,z] [,sigma2]")
+    tfit.add_argument("--family", default="diverging",
+                      choices=("diverging", "parallel", "independent", "custom"))
+    tfit.add_argument("--shared-start", action="append", metavar="A,B,..",
+                      help="custom family: objects sharing a start (repeatable)")
+    tfit.add_argument("--shared-velocity", action="append", metavar="A,B,..",
+                      help="custom family: objects sharing a velocity (repeatable)")
+    tfit.add_argument("--sigma2", type=float, help="error variance (default 1)")
+    tfit.add_argument("--sigma2-unknown", action="store_true",
+                      help="family test with σ² estimated (F test) instead of known (χ²)")
+    tfit.add_argument("--epoch", type=float, default=0.0,
+                      help="time at which the start is defined (default 0)")
+    tfit.add_argument("--method", default="closed-form",
+                      help="closed-form (default) or a CVXPY solver: CLARABEL, OSQP, SCS, ...")
+    tfit.add_argument("--formulation", choices=("constrained", "reduced"),
+                      default="constrained", help="generic formulation (with --method SOLVER)")
+    tfit.add_argument("--level", type=float, default=0.95, help="family test level")
+    tfit.add_argument("--json", action="store_true")
+    tfit.set_defaults(func=_trajectories_fit, printer=_print_trajectories_fit)
     return ap
 
 

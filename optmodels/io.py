@@ -17,6 +17,7 @@ __all__ = [
     "json_default",
     "markdown_table",
     "read_plane_csv",
+    "read_trajectory_csv",
     "write_csv",
     "write_json",
 ]
@@ -80,6 +81,48 @@ def read_plane_csv(path: str | Path) -> PlaneCsv:
             axis=-2,
         )
     return out
+
+
+def read_trajectory_csv(path: str | Path) -> dict[str, Any]:
+    """Read classified measurements: columns ``object, t, y`` (1-D) or ``object, t, x, y``
+    / ``object, t, x, y, z``, optional ``sigma2`` (per-row variance). ``object`` is any
+    label; objects keep the order of their first row. Returns ``objects`` (labels),
+    ``times``, ``values`` (lists per object) and ``sigma2`` (list per object or None)."""
+    p = Path(path)
+    if not p.is_file():
+        raise ProblemError(f"{p}: no such file")
+    with p.open(newline="") as fh:
+        rows = [r for r in csv.reader(fh) if r and any(c.strip() for c in r)]
+    if len(rows) < 2:
+        raise ProblemError(f"{p}: need a header and data rows")
+    header = [h.strip().lower() for h in rows[0]]
+    col = {h: i for i, h in enumerate(header)}
+    for need in ("object", "t"):
+        if need not in col:
+            raise ProblemError(f"{p}: missing column {need!r} (need object, t, y or x, y[, z])")
+    coords = ["x", "y", "z"] if "z" in col else ["x", "y"] if "x" in col else ["y"]
+    missing = [c for c in coords if c not in col]
+    if missing:
+        raise ProblemError(f"{p}: missing column(s) {', '.join(missing)}")
+    num = ["t", *coords] + (["sigma2"] if "sigma2" in col else [])
+    groups: dict[str, list[list[float]]] = {}
+    for k, r in enumerate(rows[1:], start=2):
+        if len(r) != len(header):
+            raise ProblemError(f"{p}: line {k} has {len(r)} fields, header has {len(header)}")
+        try:
+            vals = [float(r[col[c]]) for c in num]
+        except ValueError as exc:
+            raise ProblemError(f"{p}: line {k}: non-numeric value ({exc})") from None
+        groups.setdefault(r[col["object"]].strip(), []).append(vals)
+    arrays = {k: np.array(v) for k, v in groups.items()}
+    nc = len(coords)
+    return {
+        "objects": list(arrays),
+        "coordinates": coords,
+        "times": [a[:, 0] for a in arrays.values()],
+        "values": [a[:, 1] if nc == 1 else a[:, 1:1 + nc] for a in arrays.values()],
+        "sigma2": [a[:, 1 + nc] for a in arrays.values()] if "sigma2" in col else None,
+    }
 
 
 def write_plane_csv(path: str | Path, points: FloatArray, **columns: FloatArray) -> None:

@@ -85,3 +85,69 @@ def radius_bound(path: Path, radii: FloatArray, angle: FloatArray, offset: Float
     ax1.legend(h1 + h2, l1 + l2, fontsize=8)
     ax1.set_title("Cramér–Rao bounds at 10 s vs radius (dashed: chosen)")
     return _save(fig, path)
+
+
+def _line_std(cov: FloatArray, i0: int, i1: int, t: FloatArray) -> FloatArray:
+    """Standard deviation of start + velocity·t from Ψ entries (i0: start, i1: velocity)."""
+    return np.sqrt(cov[i0, i0] + 2 * t * cov[i0, i1] + t * t * cov[i1, i1])
+
+
+def trajectory_fits(path: Path, times: list[FloatArray], values: list[FloatArray],
+                    dep: dict, ind: dict, truth: tuple[FloatArray, FloatArray],
+                    title: str) -> Path:
+    """Paper 002: data and fitted lines (top); error of the fitted lines against the truth
+    with ±3σ bands from Ψ, dependent family (solid) vs independent lines (dashed).
+
+    ``dep``/``ind``: ``start``, ``velocity`` (Q,), ``covariance`` (R, R), ``start_index``,
+    ``velocity_index`` (Q,)."""
+    fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(8, 7.5), sharex=True)
+    tmax = max(float(np.max(t)) for t in times)
+    tt = np.linspace(0.0, tmax, 300)
+    colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    for j, (t, y) in enumerate(zip(times, values, strict=True)):
+        c = colors[j % len(colors)]
+        ax1.plot(t, y / 1e3, ".", ms=2, color=c)
+        ax1.plot(tt, (dep["start"][j] + dep["velocity"][j] * tt) / 1e3, "-", color=c, lw=1,
+                 label=f"object {j + 1}")
+        for fit, ls, lab in ((dep, "-", "family"), (ind, "--", "independent")):
+            err = fit["start"][j] + fit["velocity"][j] * tt - (truth[0][j] + truth[1][j] * tt)
+            sd = _line_std(fit["covariance"], fit["start_index"][j], fit["velocity_index"][j],
+                           tt)
+            ax2.plot(tt, err, ls, color=c, lw=1,
+                     label=f"{lab}, object {j + 1}" if j == 0 else None)
+            if ls == "-":
+                ax2.fill_between(tt, -3 * sd, 3 * sd, color=c, alpha=0.12)
+            else:
+                ax2.plot(tt, 3 * sd, ":", color=c, lw=0.8)
+                ax2.plot(tt, -3 * sd, ":", color=c, lw=0.8)
+    ax1.set_ylabel("along-track position, km")
+    ax1.legend(fontsize=8, ncol=2)
+    ax1.grid(alpha=0.3)
+    ax1.set_title(title)
+    ax2.set_xlabel("time since release, s")
+    ax2.set_ylabel("fit − truth, m")
+    ax2.grid(alpha=0.3)
+    ax2.legend(fontsize=8, title="shaded/dotted: ±3σ from Ψ (14)", title_fontsize=8)
+    return _save(fig, path)
+
+
+def eta_curves(path: Path, rows: list[dict]) -> Path:
+    """η(N) for Q objects: formula, Ψ ratio and Monte Carlo, with the paper's two-object
+    curve and its asymptote 0.625."""
+    fig, ax = plt.subplots(figsize=(7, 4))
+    for q in sorted({r["Q"] for r in rows}):
+        sub = [r for r in rows if r["Q"] == q]
+        n = np.array([r["N"] for r in sub])
+        (line,) = ax.plot(n, [r["eta formula"] for r in sub], "-",
+                          label=f"η(N, Q={q}) formula")
+        ax.errorbar(n, [r["eta MC"] for r in sub], yerr=[2 * r["eta MC avg se"] for r in sub],
+                    fmt="o", ms=4, capsize=3, color=line.get_color(),
+                    label=f"Monte Carlo, Q={q} (±2 se)")
+    ax.axhline(0.625, color="k", ls=":", lw=1, label="paper: 0.625 (N → ∞, Q = 2)")
+    ax.set_xscale("log")
+    ax.set_xlabel("measurements per object N")
+    ax.set_ylabel("Var(dependent) / Var(independent)")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    ax.set_title("η for the unique parameters (equal times t_i = (i−1)ΔT)")
+    return _save(fig, path)

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from optmodels import cli, plane, scenarios
+from optmodels import cli, plane, scenarios, trajectories
 from optmodels.io import write_plane_csv
 
 
@@ -85,3 +85,96 @@ def test_demo_plane_writes_report(tmp_path: Path, capsys) -> None:
     # every solver row reached the closed form's plane (angle within 1e-7 rad)
     assert all(r["angle to closed form, rad"] <= 1e-7 for r in summ["solvers"])
     assert summ["sequence_generic_vs_closed_form_max_angle_rad"] <= 1e-7
+
+
+def _write_traj_csv(path: Path, sc: scenarios.TrajectoryScenario, *, labels: list[str],
+                    sigma2: bool = False) -> None:
+    with path.open("w") as fh:
+        fh.write("object,t,y" + (",sigma2" if sigma2 else "") + "\n")
+        for lab, t, y in zip(labels, sc.times, sc.values, strict=True):
+            for a, b in zip(t, y, strict=True):
+                fh.write(f"{lab},{float(a)!r},{float(b)!r}" + (f",{sc.sigma2!r}" if sigma2 else "") + "\n")
+
+
+@pytest.mark.parametrize("method", ["closed-form", "CLARABEL", "OSQP"])
+def test_trajectories_fit_round_trip(tmp_path: Path, capsys, method: str) -> None:
+    sc = scenarios.launcher_release(3, family="diverging")
+    path = tmp_path / "objects.csv"
+    labels = ["A", "B", "C", "D"]
+    _write_traj_csv(path, sc, labels=labels, sigma2=True)
+    res = run_json(capsys, ["trajectories", "fit", str(path), "--family", "diverging",
+                            "--method", method])
+    ref = trajectories.closed_form(sc.data(), "diverging")
+    assert res["status"] == "optimal" and res["objects"] == labels
+    # repr() floats round-trip exactly; generic solvers agree to 1e-9 (test_trajectories)
+    np.testing.assert_allclose(res["theta"], ref.theta, rtol=1e-9)
+    np.testing.assert_allclose(res["covariance"], ref.covariance, rtol=1e-9)
+    assert res["velocity"]["C"] == pytest.approx(ref.velocity[2], rel=1e-9)
+    t = res["family_test"]
+    assert t["dof"] == 3 and t["p_value"] == pytest.approx(
+        trajectories.family_test(sc.data(), "diverging").p_value, rel=1e-9)
+
+
+def test_trajectories_fit_custom_family_and_vector_values(tmp_path: Path, capsys) -> None:
+    rng = np.random.default_rng(7)
+    times = [np.sort(rng.uniform(0, 50, k)) for k in (8, 12, 10)]
+    vel = rng.normal(size=(3, 2))
+    vals = [np.array([1.0, -2.0]) + np.outer(t, vel[j]) + rng.normal(0, 0.1, (t.size, 2))
+            for j, t in enumerate(times)]
+    path = tmp_path / "xy.csv"
+    with path.open("w") as fh:
+        fh.write("object,t,x,y\n")
+        for j, (t, v) in enumerate(zip(times, vals, strict=True)):
+            for a, (x, y) in zip(t, v, strict=True):
+                fh.write(f"o{j},{float(a)!r},{float(x)!r},{float(y)!r}\n")
+    res = run_json(capsys, ["trajectories", "fit", str(path), "--family", "custom",
+                            "--shared-start", "o0,o2", "--sigma2", "0.01"])
+    fam = trajectories.Family.custom(3, shared_start=[[0, 2]])
+    ref = trajectories.closed_form(trajectories.TrajectoryData(times, vals, 0.01), fam)
+    assert res["start_groups"] == [["o0", "o2"], ["o1"]]
+    np.testing.assert_allclose(res["theta"], ref.theta, rtol=1e-12)
+    assert res["coordinates"] == ["x", "y"] and np.shape(res["covariance"]) == (2, 5, 5)
+
+
+def test_trajectories_fit_errors(tmp_path: Path, capsys) -> None:
+    bad = tmp_path / "bad.csv"
+    bad.write_text("object,t,y\na,0,1\na,0,2\nb,0,1\nb,1,2\n")
+    assert cli.main(["trajectories", "fit", str(bad)]) == 2
+    assert "fewer than 2 distinct times" in capsys.readouterr().err
+    nocol = tmp_path / "nocol.csv"
+    nocol.write_text("id,t,y\na,0,1\n")
+    assert cli.main(["trajectories", "fit", str(nocol)]) == 2
+    assert "missing column 'object'" in capsys.readouterr().err
+    ok = tmp_path / "ok.csv"
+    ok.write_text("object,t,y\na,0,1\na,1,2\nb,0,1\nb,1,2\n")
+    assert cli.main(["trajectories", "fit", str(ok), "--family", "custom",
+                     "--shared-start", "a,z"]) == 2
+    assert "unknown object" in capsys.readouterr().err
+
+
+def test_trajectories_fit_text_output(tmp_path: Path, capsys) -> None:
+    sc = scenarios.launcher_release(4, family="parallel")
+    path = tmp_path / "p.csv"
+    _write_traj_csv(path, sc, labels=["1", "2", "3", "4"])
+    assert cli.main(["trajectories", "fit", str(path), "--family", "parallel",
+                     "--sigma2", str(sc.sigma2)]) == 0
+    out = capsys.readouterr().out
+    assert "velocity" in out and "vs independent lines" in out
+
+
+def test_demo_trajectories_writes_report(tmp_path: Path, capsys) -> None:
+    res = run_json(capsys, ["demo", "trajectories", "--out", str(tmp_path),
+                            "--trajectory-runs", "400"])
+    for f in ("diverging_fits.png", "parallel_fits.png", "eta.png", "report.md",
+              "summary.json"):
+        assert (tmp_path / "trajectories" / f).is_file()
+    summ = res["problems"]["trajectories"]
+    for fam in ("diverging", "parallel"):
+        # the generic solves reproduce the closed form (SCS, first-order, to 1e-7)
+        assert all(g["max rel. diff. θ vs closed form"] < 1e-7 for g in summ[fam]["generic"])
+        verdict = {(t["hypothesis"], t["σ²"]): t["verdict"] for t in summ[fam]["tests"]}
+        other = "parallel" if fam == "diverging" else "diverging"
+        assert verdict[(other, "known")] == "rejected"
+    for row in summ["eta"]:
+        # 400 draws in 20 batches: the MC η is within 5 standard errors of the formula
+        assert abs(row["eta MC"] - row["eta formula"]) < 5 * row["eta MC avg se"] + 1e-12

@@ -33,3 +33,22 @@ def test_plane_comparison_small(tmp_path: Path) -> None:
     assert "| two-source |" in md
     env = report.environment()
     assert env["packages"]["casadi"] and env["cores"]
+
+
+def test_trajectories_comparison_small(tmp_path: Path) -> None:
+    from solvers_cmp import trajectories as cmp_traj
+
+    rows = cmp_traj.rows((2, 5), (10, 40), repeats=1)
+    solvers = {r["solver"] for r in rows} - {"numpy"}
+    assert {"CLARABEL", "OSQP"} <= solvers
+    # 2 families × 4 sizes × (closed form + 2 formulations × solvers)
+    assert len(rows) == 2 * 4 * (1 + 2 * len(solvers))
+    for r in rows:
+        assert r["status"] == "optimal", r
+        # equality-constrained QP: every solver reaches the closed form to the 1e-9 bar
+        assert r["solution_error"] < 1e-9 and abs(r["objective_gap"]) < 1e-9
+        assert r["max_violation"] < 1e-8
+    md = report.write_trajectories(tmp_path, rows)
+    assert "| diverging | 5 | 40 | constrained | OSQP | optimal |" in md
+    csv_rows = list(csv.DictReader((tmp_path / "trajectories_results.csv").open()))
+    assert len(csv_rows) == len(rows)

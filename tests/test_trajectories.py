@@ -53,7 +53,7 @@ def test_closed_form_equals_generic_solve(solver: str, formulation: str, family:
     fam = _family(family, 5)
     g = tr.solve(data, fam, solver=solver, formulation=formulation).require_ok()
     cf = tr.closed_form(data, fam)
-    # The QP has equalities only; with SOLVER_DEFAULTS (eps 1e-10..1e-12, OSQP polish)
+    # The QP has equalities only; with SOLVER_DEFAULTS (Clarabel 1e-12, SCS 1e-9, OSQP polishing)
     # every solver lands on the KKT solution to ~1e-11 relative (measured ≤ 2e-11 over
     # these instances); 1e-9 is the bar.
     assert rel_err(g.theta, cf.theta) < 1e-9

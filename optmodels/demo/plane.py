@@ -1,4 +1,4 @@
-"""``optmodels demo``: the papers' examples, with figures and a short report each."""
+"""Paper 000 demo: the plane of maneuver example (figures 1-4, Monte Carlo vs CRB)."""
 
 from __future__ import annotations
 

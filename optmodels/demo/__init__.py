@@ -1,0 +1,6 @@
+"""``optmodels demo``: the papers' examples, with figures and a short report each."""
+
+from optmodels.demo.plane import run_plane_demo
+from optmodels.demo.trajectories import run_trajectories_demo
+
+__all__ = ["run_plane_demo", "run_trajectories_demo"]

@@ -104,7 +104,12 @@ def write_trajectories(out: Path, rows: list[dict[str, Any]],
           + markdown_table([r for r in rows if r["size"] == big], cols, fmt))
     worst = max((r["solution_error"] for r in rows if r["status"] == "optimal"), default=0.0)
     md += (f"\nLargest solution error of any optimal generic solve against the closed form "
-           f"over the grid: {worst:.1e} (relative to max |θ|).\n")
+           f"over the grid: {worst:.1e} (relative to max |θ|). The QP has equality "
+           "constraints only: Clarabel (one KKT factorisation) and OSQP (its polishing step "
+           "solves the KKT system) land on the closed form to 1e-11 or better; SCS, first-"
+           "order with eps = 1e-9 on the rescaled problem, stops near 3e-8 from N = 100 "
+           "points on. CVXPY's canonicalisation (build) is half of the generic time or "
+           "more; SCS's build of the reduced form is the slowest step of the grid.\n")
     if bench:
         write_csv(out / "trajectories_benchmark.csv", bench)
         md += ("\nBenchmark (wall seconds, median and best of the repeats; targets: closed "

@@ -93,7 +93,8 @@ def _write_traj_csv(path: Path, sc: scenarios.TrajectoryScenario, *, labels: lis
         fh.write("object,t,y" + (",sigma2" if sigma2 else "") + "\n")
         for lab, t, y in zip(labels, sc.times, sc.values, strict=True):
             for a, b in zip(t, y, strict=True):
-                fh.write(f"{lab},{float(a)!r},{float(b)!r}" + (f",{sc.sigma2!r}" if sigma2 else "") + "\n")
+                extra = f",{sc.sigma2!r}" if sigma2 else ""
+                fh.write(f"{lab},{float(a)!r},{float(b)!r}{extra}\n")
 
 
 @pytest.mark.parametrize("method", ["closed-form", "CLARABEL", "OSQP"])

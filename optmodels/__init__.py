@@ -4,7 +4,7 @@ Each problem module writes the paper's problem in its original constrained form,
 it generically (CVXPY, CasADi/IPOPT) and cross-checks it against the paper's closed form.
 """
 
-from optmodels import plane, trajectories
+from optmodels import fusion, plane, trajectories
 from optmodels.core import (
     OptModelsError,
     ProblemError,
@@ -23,6 +23,7 @@ __all__ = [
     "SolveError",
     "SolverNotAvailable",
     "Status",
+    "fusion",
     "plane",
     "trajectories",
 ]

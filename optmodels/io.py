@@ -30,7 +30,8 @@ class PlaneCsv(dict):
     ((N, 3, 3) from ``cxx, cxy, cxz, cyy, cyz, czz``)."""
 
 
-def _read_columns(path: str | Path) -> tuple[list[str], np.ndarray]:
+def _read_rows(path: str | Path) -> tuple[list[str], list[list[str]]]:
+    """Header (stripped, lower-case) and the non-blank data rows of a CSV file, as text."""
     p = Path(path)
     if not p.is_file():
         raise ProblemError(f"{p}: no such file")
@@ -43,6 +44,12 @@ def _read_columns(path: str | Path) -> tuple[list[str], np.ndarray]:
         rows = [r for r in reader if r and any(c.strip() for c in r)]
     if not rows:
         raise ProblemError(f"{p}: no data rows")
+    return header, rows
+
+
+def _read_columns(path: str | Path) -> tuple[list[str], np.ndarray]:
+    p = Path(path)
+    header, rows = _read_rows(p)
     try:
         values = np.array([[float(c) for c in r] for r in rows], dtype=float)
     except ValueError as exc:
@@ -89,13 +96,7 @@ def read_trajectory_csv(path: str | Path) -> dict[str, Any]:
     label; objects keep the order of their first row. Returns ``objects`` (labels),
     ``times``, ``values`` (lists per object) and ``sigma2`` (list per object or None)."""
     p = Path(path)
-    if not p.is_file():
-        raise ProblemError(f"{p}: no such file")
-    with p.open(newline="") as fh:
-        rows = [r for r in csv.reader(fh) if r and any(c.strip() for c in r)]
-    if len(rows) < 2:
-        raise ProblemError(f"{p}: need a header and data rows")
-    header = [h.strip().lower() for h in rows[0]]
+    header, rows = _read_rows(p)
     col = {h: i for i, h in enumerate(header)}
     for need in ("object", "t"):
         if need not in col:
@@ -106,7 +107,7 @@ def read_trajectory_csv(path: str | Path) -> dict[str, Any]:
         raise ProblemError(f"{p}: missing column(s) {', '.join(missing)}")
     num = ["t", *coords] + (["sigma2"] if "sigma2" in col else [])
     groups: dict[str, list[list[float]]] = {}
-    for k, r in enumerate(rows[1:], start=2):
+    for k, r in enumerate(rows, start=2):
         if len(r) != len(header):
             raise ProblemError(f"{p}: line {k} has {len(r)} fields, header has {len(header)}")
         try:

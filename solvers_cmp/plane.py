@@ -24,6 +24,7 @@ import numpy as np
 from tqdm import tqdm
 
 from optmodels import plane, scenarios
+from solvers_cmp.common import repeat
 
 SETTINGS: dict[str, Callable[..., scenarios.ManeuverScenario]] = {
     "two-source": lambda n, rng: scenarios.two_source_plane(n, rng),
@@ -144,25 +145,17 @@ def benchmark(n: int = 10_000, repeats: int = 5, seed: int = 0) -> list[dict[str
         ("reduced NLP, general D_i, 3 starts (cold build + solve)",
          lambda: plane.solve(general, "reduced")),
     ):
-        times = []
-        for _ in range(repeats):
-            plane.clear_nlp_cache()
-            t0 = time.perf_counter()
-            sol = fn().require_ok()
-            times.append(time.perf_counter() - t0)
-        rows.append({"case": name, "size": n, "median_s": float(np.median(times)),
-                     "min_s": float(np.min(times)), "starts": sol.info.get("starts")})
+        rep = repeat(fn, repeats, setup=plane.clear_nlp_cache)
+        sol = [s.require_ok() for s in rep.results][-1]
+        rows.append({"case": name, "size": n, "median_s": rep.median,
+                     "min_s": rep.best, "starts": sol.info.get("starts")})
     for name, fn in (
         ("closed form, D_i = alpha_i^2 D", lambda: plane.closed_form(prop)),
         ("sequential closed form, 801 steps (paper example)",
          lambda: plane.identify_sequence(ex.times, ex.points, ex.cov, start=2.0)),
     ):
-        times = []
-        for _ in range(repeats):
-            t0 = time.perf_counter()
-            fn()
-            times.append(time.perf_counter() - t0)
+        rep = repeat(fn, repeats)
         size = n if "sequential" not in name else len(ex.times)
-        rows.append({"case": name, "size": size, "median_s": float(np.median(times)),
-                     "min_s": float(np.min(times)), "starts": ""})
+        rows.append({"case": name, "size": size, "median_s": rep.median,
+                     "min_s": rep.best, "starts": ""})
     return rows

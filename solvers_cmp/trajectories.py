@@ -10,7 +10,6 @@ re-computed in NumPy.
 
 from __future__ import annotations
 
-import time
 from typing import Any
 
 import numpy as np
@@ -18,6 +17,7 @@ from tqdm import tqdm
 
 from optmodels import trajectories as tr
 from optmodels.backends.cvxpy_backend import available_solvers
+from solvers_cmp.common import repeat
 
 #: CVXPY solvers that accept an equality-constrained least-squares QP, in report order.
 QP_SOLVERS = ("CLARABEL", "OSQP", "SCS", "PIQP", "PROXQP", "DAQP", "QOCO", "ECOS", "CVXOPT")
@@ -39,15 +39,6 @@ def instance(family: str, q: int, n: int, seed: int) -> tr.TrajectoryData:
     return tr.TrajectoryData(times, vals, 1.0)
 
 
-def _timed(fn: Any, repeats: int) -> tuple[Any, list[float], list[Any]]:
-    sols, walls = [], []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        sols.append(fn())
-        walls.append(time.perf_counter() - t0)
-    return sols[-1], walls, sols
-
-
 def rows(objects: tuple[int, ...] = OBJECTS, points: tuple[int, ...] = POINTS, *,
          seed: int = 0, repeats: int = 3, solvers: tuple[str, ...] | None = None,
          progress: bool = False) -> list[dict[str, Any]]:
@@ -58,20 +49,20 @@ def rows(objects: tuple[int, ...] = OBJECTS, points: tuple[int, ...] = POINTS, *
     cases = [(f, q, n) for f in FAMILIES for q in objects for n in points]
     for family, q, n in tqdm(cases, desc="trajectories comparison", disable=not progress):
         data = instance(family, q, n, seed)
-        ref, walls, _ = _timed(lambda d=data, f=family: tr.closed_form(d, f), repeats)
+        cf = repeat(lambda d=data, f=family: tr.closed_form(d, f), repeats)
+        ref = cf.last
         scale = float(np.max(np.abs(ref.theta)))
-        methods: list[tuple[str, str, Any]] = [("closed_form", "numpy", None)]
-        methods += [(form, s, (lambda d=data, f=family, fo=form, so=s:
-                               tr.solve(d, f, formulation=fo, solver=so)))
-                    for form in FORMULATIONS for s in use]
-        for form, solver, fn in methods:
-            if form == "closed_form":
-                sol, sols = ref, [ref]
-                build, solve = 0.0, float(np.median(walls))
-            else:
-                sol, _, sols = _timed(fn, repeats)
-                build = float(np.median([s.build_time for s in sols]))
-                solve = float(np.median([s.solve_time for s in sols]))
+        # (formulation, solver, solution, build time, solve time): closed form first
+        runs: list[tuple[str, str, tr.TrajectorySolution, float, float]] = [
+            ("closed_form", "numpy", ref, 0.0, cf.median)]
+        for form in FORMULATIONS:
+            for s in use:
+                sols = repeat(lambda d=data, f=family, fo=form, so=s:
+                              tr.solve(d, f, formulation=fo, solver=so), repeats).results
+                runs.append((form, s, sols[-1],
+                             float(np.median([x.build_time for x in sols])),
+                             float(np.median([x.solve_time for x in sols]))))
+        for form, solver, sol, build, solve in runs:
             ok = sol.status.ok
             out.append({
                 "problem": "trajectories", "family": family, "objects": q, "points": n,
@@ -100,8 +91,9 @@ def benchmark(q: int = 100, n: int = 1000, *, repeats: int = 5, seed: int = 0
                    lambda d=data, f=family, so=s: tr.solve(d, f, solver=so))
                   for s in ("CLARABEL", "OSQP") if s in available_solvers()]
         for name, fn in cases:
-            sol, walls, _ = _timed(fn, repeats)
-            sol.require_ok()
+            rep = repeat(fn, repeats)
+            for sol in rep.results:
+                sol.require_ok()
             res.append({"case": f"{family}: {name}", "objects": q, "points": n,
-                        "median_s": float(np.median(walls)), "min_s": float(np.min(walls))})
+                        "median_s": rep.median, "min_s": rep.best})
     return res

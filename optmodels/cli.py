@@ -14,11 +14,11 @@ from typing import Any
 import numpy as np
 from scipy import stats
 
-from optmodels import plane, trajectories
+from optmodels import fusion, plane, trajectories
 from optmodels.core import OptModelsError, ProblemError
 from optmodels.io import json_default
 
-PROBLEMS = ("plane", "trajectories")
+PROBLEMS = ("plane", "trajectories", "fusion")
 
 
 def _parse_cov(text: str) -> np.ndarray:
@@ -171,8 +171,56 @@ def _print_trajectories_fit(res: dict[str, Any]) -> None:
               f"p = {t['p_value']:.3g} -> {res['family']} {verdict} at level {t['level']}")
 
 
+def _matrix_arg(flag: str, text: str) -> np.ndarray:
+    """A matrix given inline as JSON (``'[[1,0],[0,2]]'``) or as a path to .npy/.json."""
+    path = Path(text)
+    try:
+        if path.suffix == ".npy" and path.is_file():
+            return np.asarray(np.load(path), dtype=float)
+        if path.suffix == ".json" and path.is_file():
+            return np.asarray(json.loads(path.read_text()), dtype=float)
+        return np.asarray(json.loads(text), dtype=float)
+    except (ValueError, TypeError, OSError) as exc:
+        raise ProblemError(f"{flag}: expected a JSON matrix like '[[1,0],[0,2]]' or a path "
+                           f"to an existing .npy/.json file, got {text!r} ({exc})") from exc
+
+
+def _fusion_weights(args: argparse.Namespace) -> dict[str, Any]:
+    s1, s2 = _matrix_arg("--s1", args.s1), _matrix_arg("--s2", args.s2)
+    n1 = args.n1 if args.n1 is not None else args.n
+    n2 = args.n2 if args.n2 is not None else args.n
+    if n1 is None or n2 is None:
+        raise ProblemError("--n: give the sample size (or --n1 and --n2)")
+    try:
+        w = fusion.weight_matrix(s1, s2)
+    except ProblemError as exc:  # name the command-line flag, not the Python argument
+        msg = str(exc)
+        flag = "--s2" if msg.startswith("S2") else "--s1"
+        raise ProblemError(f"{flag}: {msg}") from None
+    m = w.shape[0]
+    for flag, n in (("--n1" if args.n1 is not None else "--n", n1),
+                    ("--n2" if args.n2 is not None else "--n", n2)):
+        if n <= m:
+            raise ProblemError(f"{flag}: need more snapshots than the dimension m = {m} (the "
+                               f"sample covariance is singular otherwise), got {n}")
+    p1, p2 = fusion.weight_jacobians(s1, s2)
+    cov = fusion.weight_covariance(s1, s2, n1, n2, mean=args.mean)
+    return {"W": w, "P1": p1, "P2": p2, "cov_vec_W": cov,
+            "std_W": np.sqrt(np.clip(np.diag(cov), 0, None)).reshape(m, m, order="F"),
+            "n1": n1, "n2": n2, "mean": args.mean,
+            "note": "vec stacks columns (12); Cov(vec W) is the first-order (10), "
+                    "accurate to a few per cent from n ~ 100 (docs/errata.md)"}
+
+
+def _print_fusion_weights(res: dict[str, Any]) -> None:
+    with np.printoptions(precision=6, suppress=False, linewidth=120):
+        for key in ("W", "std_W", "P1", "P2", "cov_vec_W"):
+            print(f"{key} =\n{res[key]}")
+    print(f"n1 = {res['n1']}, n2 = {res['n2']}, mean = {res['mean']}; {res['note']}")
+
+
 def _demo(args: argparse.Namespace) -> dict[str, Any]:
-    from optmodels.demo import run_plane_demo, run_trajectories_demo
+    from optmodels.demo import run_fusion_demo, run_plane_demo, run_trajectories_demo
 
     out = Path(args.out)
     problems = [args.problem] if args.problem else list(PROBLEMS)
@@ -193,6 +241,13 @@ def _demo(args: argparse.Namespace) -> dict[str, Any]:
             sections.append("- [Dependent linear trajectories (paper 002)]"
                             "(trajectories/report.md): launcher and parallel scenarios, "
                             "η against Monte Carlo")
+        elif p == "fusion":
+            summ = run_fusion_demo(out / "fusion", trials=args.fusion_trials,
+                                   positions=args.fusion_positions, seed=args.seed,
+                                   progress=not args.json)
+            result["problems"]["fusion"] = summ
+            sections.append("- [Fusion of two estimates (paper 003)](fusion/report.md): "
+                            "accuracy of Ŵ vs n, the two-site system with the joint ML")
     if not args.problem and not args.no_compare:
         cmp_res = _run_compare(out / "compare", PROBLEMS, args.sizes, args.mc_runs,
                                args.repeats, args.seed, progress=not args.json)
@@ -232,6 +287,14 @@ def _run_compare(out: Path, problems: Sequence[str], sizes: list[int], runs: int
             bench = cmp_traj.benchmark(repeats=repeats, seed=seed)
             md.append(report.write_trajectories(out, rows, bench))
             res["trajectories"] = {"results": rows, "benchmark": bench}
+        elif p == "fusion":
+            from solvers_cmp import fusion as cmp_fusion
+
+            rows = cmp_fusion.rows(seed=seed, repeats=max(1, min(repeats, 3)),
+                                   progress=progress)
+            bench = cmp_fusion.benchmark(repeats=repeats, seed=seed)
+            md.append(report.write_fusion(out, rows, bench))
+            res["fusion"] = {"results": rows, "benchmark": bench}
         else:
             raise ProblemError(f"--problems: unknown problem {p!r} (known: {PROBLEMS})")
     md.append(f"\nMachine: {env['cpu']}, {env['cores']} cores; Python {env['python']}.\n")
@@ -267,6 +330,10 @@ def build_parser() -> argparse.ArgumentParser:
     demo.add_argument("--seed", type=int, default=0)
     demo.add_argument("--trajectory-runs", type=int, default=4000,
                       help="Monte Carlo draws per (Q, N) of the trajectories η table")
+    demo.add_argument("--fusion-trials", type=int, default=100_000,
+                      help="Monte Carlo draws of Ŵ per (case, estimator, n) in the fusion demo")
+    demo.add_argument("--fusion-positions", type=int, default=40,
+                      help="emitter positions of the fusion demo's two-site study")
     demo.add_argument("--no-compare", action="store_true", help="skip the comparison")
     demo.add_argument("--sizes", type=_int_list, default=[100, 1000, 10000],
                       help="comparison sizes (default 100,1000,10000)")
@@ -321,6 +388,21 @@ def build_parser() -> argparse.ArgumentParser:
     tfit.add_argument("--level", type=float, default=0.95, help="family test level")
     tfit.add_argument("--json", action="store_true")
     tfit.set_defaults(func=_trajectories_fit, printer=_print_trajectories_fit)
+
+    fus = sub.add_parser("fusion", help="fusion of two estimates (paper 003)")
+    fsub = fus.add_subparsers(dest="verb", required=True)
+    fw = fsub.add_parser("weights", help="W, the Jacobians P1, P2 (13)-(14) and Cov(vec W) (10)")
+    fw.add_argument("--s1", required=True,
+                    help="error covariance of estimate 1: JSON '[[..],[..]]' or .npy/.json path")
+    fw.add_argument("--s2", required=True, help="error covariance of estimate 2 (as --s1)")
+    fw.add_argument("--n", type=int, help="snapshots behind both sample covariances")
+    fw.add_argument("--n1", type=int, help="snapshots behind S1 (overrides --n)")
+    fw.add_argument("--n2", type=int, help="snapshots behind S2 (overrides --n)")
+    fw.add_argument("--mean", choices=("sample", "known"), default="sample",
+                    help="sample covariances about the sample mean (default) or the known "
+                         "mean (the paper's literal (3))")
+    fw.add_argument("--json", action="store_true")
+    fw.set_defaults(func=_fusion_weights, printer=_print_fusion_weights)
     return ap
 
 

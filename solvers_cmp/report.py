@@ -117,3 +117,33 @@ def write_trajectories(out: Path, rows: list[dict[str, Any]],
                + markdown_table(bench, ["case", "objects", "points", "median_s", "min_s"],
                                 {"median_s": ".4f", "min_s": ".4f"}))
     return md + "\n"
+
+
+def write_fusion(out: Path, rows: list[dict[str, Any]],
+                 bench: list[dict[str, Any]] | None = None) -> str:
+    """Write ``fusion_results.csv`` (and ``fusion_benchmark.csv``) and return the Markdown
+    section."""
+    out.mkdir(parents=True, exist_ok=True)
+    write_csv(out / "fusion_results.csv", rows)
+    cols = ["case", "size", "formulation", "solver", "status", "solution_error",
+            "objective_gap", "max_violation", "build_time", "solve_time", "iterations"]
+    fmt = {"solution_error": ".1e", "objective_gap": ".1e", "max_violation": ".1e",
+           "build_time": ".4f", "solve_time": ".4f"}
+    md = ("## Fusion of two estimates (paper 003)\n\n"
+          "Closed forms ((1)-(2) for independent estimates, (S1 − S12)D⁺ for correlated "
+          "ones) against CVXPY on the generic problems (weighted least squares in α; "
+          "minimum trace of the fused covariance in W), size = m; and the two-site joint "
+          "ML (size = number of independent problems T, solved as one block-separable NLP) "
+          "by IPOPT against a NumPy Gauss-Newton, solution error in units of the CRB "
+          "RMS:\n\n" + markdown_table(rows, cols, fmt))
+    md += ("\nEvery problem here is an unconstrained least-squares problem: Clarabel and "
+           "OSQP land on the closed form to round-off, SCS (first-order) near 1e-8. CVXPY's "
+           "canonicalisation (~6 ms) dominates their times; the closed forms take well "
+           "under a millisecond.\n")
+    if bench:
+        write_csv(out / "fusion_benchmark.csv", bench)
+        md += ("\nBenchmark (wall seconds, median and best of the repeats; target: Monte "
+               "Carlo of Ŵ with 10⁵ trials at m = 3 in ≤ 2 s):\n\n"
+               + markdown_table(bench, ["case", "median_s", "min_s"],
+                                {"median_s": ".4f", "min_s": ".4f"}))
+    return md + "\n"

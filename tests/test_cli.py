@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from optmodels import cli, plane, scenarios, trajectories
+from optmodels import cli, fusion, plane, scenarios, trajectories
 from optmodels.io import write_plane_csv
 
 
@@ -179,3 +179,61 @@ def test_demo_trajectories_writes_report(tmp_path: Path, capsys) -> None:
     for row in summ["eta"]:
         # 400 draws in 20 batches: the MC η is within 5 standard errors of the formula
         assert abs(row["eta MC"] - row["eta formula"]) < 5 * row["eta MC avg se"] + 1e-12
+
+
+def test_fusion_weights_round_trip(tmp_path: Path, capsys) -> None:
+    s1 = [[1.0, 0.2], [0.2, 2.0]]
+    s2 = [[2.0, -0.3], [-0.3, 1.0]]
+    res = run_json(capsys, ["fusion", "weights", "--s1", json.dumps(s1), "--s2",
+                            json.dumps(s2), "--n", "30"])
+    np.testing.assert_allclose(res["W"], fusion.weight_matrix(s1, s2), rtol=1e-15)
+    p1, p2 = fusion.weight_jacobians(s1, s2)
+    np.testing.assert_allclose(res["P1"], p1, rtol=1e-15)
+    np.testing.assert_allclose(res["P2"], p2, rtol=1e-15)
+    np.testing.assert_allclose(res["cov_vec_W"],
+                               fusion.weight_covariance(s1, s2, 30, 30, mean="sample"))
+    # files (.npy and .json), separate sizes and the known-mean estimator
+    np.save(tmp_path / "s1.npy", np.array(s1))
+    (tmp_path / "s2.json").write_text(json.dumps(s2))
+    res = run_json(capsys, ["fusion", "weights", "--s1", str(tmp_path / "s1.npy"), "--s2",
+                            str(tmp_path / "s2.json"), "--n1", "10", "--n2", "50",
+                            "--mean", "known"])
+    np.testing.assert_allclose(res["cov_vec_W"],
+                               fusion.weight_covariance(s1, s2, 10, 50, mean="known"))
+    assert cli.main(["fusion", "weights", "--s1", json.dumps(s1), "--s2", json.dumps(s2),
+                     "--n", "30"]) == 0
+    assert "std_W" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize(("args", "flag"), [
+    (["--s1", "[[1,0.5],[0,1]]", "--s2", "[[1,0],[0,1]]", "--n", "9"], "--s1"),
+    (["--s1", "[[1,0],[0,1]]", "--s2", "[[1,0],[0,-1]]", "--n", "9"], "--s2"),
+    (["--s1", "[[1,0],[0,1]]", "--s2", "[[1,0],[0,1]]", "--n", "2"], "--n"),
+    (["--s1", "[[1,0],[0,1]]", "--s2", "[[1,0],[0,1]]", "--n1", "9", "--n2", "1"], "--n2"),
+    (["--s1", "nonsense", "--s2", "[[1,0],[0,1]]", "--n", "9"], "--s1"),
+    (["--s1", "[[1,0],[0,1]]", "--s2", "[[1,0],[0,1]]"], "--n"),
+])
+def test_fusion_weights_errors(capsys, args: list[str], flag: str) -> None:
+    assert cli.main(["fusion", "weights", *args]) == 2
+    assert f"{flag}:" in capsys.readouterr().err
+
+
+def test_demo_fusion_writes_report(tmp_path: Path, capsys) -> None:
+    res = run_json(capsys, ["demo", "fusion", "--out", str(tmp_path), "--fusion-trials",
+                            "4000", "--fusion-positions", "3"])
+    for f in ("maps.png", "positions.png", "vs_n.png", "report.md", "summary.json"):
+        assert (tmp_path / "fusion" / f).is_file()
+    summ = res["problems"]["fusion"]
+    for row in summ["positions_rows"]:
+        assert row["ML status"] == "optimal"
+        # ML RMS over 1000 draws: relative se ≈ 1/√(2·1000) = 2.2 %; 5 se
+        assert abs(row["joint ML / CRB"] - 1) < 0.11
+        # the correlated fusion equals the ML to first order: O(σ) relative ≈ 1e-3 here
+        assert abs(row["correlated fusion, W at true x"] - 1) < 5e-3
+        # fusion (1) ignores S12: never better than the ML beyond MC noise
+        assert row["fusion (1), W at true x"] > 0.99
+    for row in summ["weight_accuracy"]:
+        # 4000 draws: the variance's relative se is √(2/4000) = 2.2 %; the linearisation
+        # error at n = 100 is ≤ 3 % (measured at 10⁵ draws): 3 % + 5 se
+        if row["n"] == 100:
+            assert row["max |lin/MC − 1| (diag)"] < 0.03 + 5 * row["MC se of a variance"]

@@ -153,3 +153,178 @@ def test_bad_input() -> None:
         fu.monte_carlo_weight(ok, ok, 5, 1)
     with pytest.raises(ProblemError, match="a2"):
         fu.fuse([0.0, 0.0], ok, [0.0], ok)
+
+
+# ---------------------------------------------------------------- correlated fusion
+def joint_cov(rng: np.random.Generator, m: int, rank: int) -> np.ndarray:
+    """A valid joint covariance of (a1, a2), (2m, 2m), of the given rank."""
+    a = rng.normal(size=(2 * m, rank))
+    return a @ a.T
+
+
+@pytest.mark.parametrize(("m", "rank"), [(2, 4), (3, 6), (2, 3), (3, 4)])
+def test_correlated_fusion_closed_form_equals_cvxpy(m: int, rank: int) -> None:
+    """Full-rank and rank-deficient joint covariances (rank 3 of 4 is the two-site case,
+    where D = Cov(a1 − a2) is singular and W is not unique): the generic minimum-trace
+    problem and (S1 − S12)D⁺ give the same fused estimate and covariance."""
+    rng = np.random.default_rng(30 + 10 * m + rank)
+    j = joint_cov(rng, m, rank) + 1e-3 * np.eye(2 * m) * (rank == 2 * m)
+    s1, s2, s12 = j[:m, :m], j[m:, m:], j[:m, m:]
+    a1, a2 = rng.normal(size=m), rng.normal(size=m)
+    cf = fu.fuse(a1, s1, a2, s2, s12=s12)
+    g = fu.fuse(a1, s1, a2, s2, s12=s12, method="cvxpy").require_ok()
+    # Clarabel's default tolerances (1e-8) on an O(1)-scaled least-squares problem
+    np.testing.assert_allclose(g.estimate, cf.estimate, rtol=1e-6, atol=1e-6)
+    np.testing.assert_allclose(g.covariance, cf.covariance, rtol=1e-6, atol=1e-8)
+    assert cf.residuals["gradient"] < 1e-10 and g.residuals["gradient"] < 1e-6
+    # minimum variance: no better than either input, and the trace beats random weights
+    for w in rng.normal(size=(20, m, m)):
+        assert np.trace(fu.fused_covariance(w, s1, s2, s12)) >= cf.objective * (1 - 1e-12)
+
+
+def test_correlated_weight_reduces_to_the_paper_weight() -> None:
+    rng = np.random.default_rng(40)
+    s1, s2 = spd(rng, 3), spd(rng, 3)
+    np.testing.assert_allclose(fu.weight_matrix_correlated(s1, s2, np.zeros((3, 3))),
+                               fu.weight_matrix(s1, s2), atol=1e-12)
+    w = fu.weight_matrix(s1, s2)
+    inv = np.linalg.inv(np.linalg.inv(s1) + np.linalg.inv(s2))
+    np.testing.assert_allclose(fu.fused_covariance(w, s1, s2), inv, rtol=1e-10)
+
+
+def test_correlated_fusion_by_monte_carlo() -> None:
+    """Draw (a1, a2) with a known joint covariance; the fused errors' covariance equals
+    fused_covariance within 4 standard errors (relative se of a variance √(2/T))."""
+    rng = np.random.default_rng(41)
+    m, trials = 2, 50_000
+    j = joint_cov(rng, m, 3)
+    s1, s2, s12 = j[:m, :m], j[m:, m:], j[:m, m:]
+    w = fu.weight_matrix_correlated(s1, s2, s12)
+    e = rng.multivariate_normal(np.zeros(2 * m), j, size=trials, method="eigh")
+    fused = e[:, :m] + (e[:, m:] - e[:, :m]) @ w.T
+    pred = fu.fused_covariance(w, s1, s2, s12)
+    np.testing.assert_allclose(np.var(fused, axis=0), np.diag(pred),
+                               rtol=4 * np.sqrt(2 / trials))
+
+
+def test_weight_from_samples_converges() -> None:
+    """Ŵ from n = 20 000 snapshots is within 5 standard deviations of (10) of W (the
+    linearisation is accurate to ~1 % at this n, see the n-study)."""
+    rng = np.random.default_rng(42)
+    s1, s2 = spd(rng, 2), spd(rng, 2)
+    n = 20_000
+    a1 = rng.multivariate_normal([1.0, 2.0], s1, size=n)
+    a2 = rng.multivariate_normal([1.0, 2.0], s2, size=n)
+    w_hat = fu.weight_from_samples(a1, a2)
+    sd = np.sqrt(np.diag(fu.weight_covariance(s1, s2, n, n, mean="sample"))).reshape(
+        2, 2, order="F")
+    assert np.all(np.abs(w_hat - fu.weight_matrix(s1, s2)) < 5 * sd)
+    with pytest.raises(ProblemError, match="snapshots"):
+        fu.weight_from_samples(a1[:2], a2[:2])
+
+
+# ---------------------------------------------------------------- two-site system
+SYSTEM = fu.TwoSiteSystem.on_baseline()
+POSITIONS = np.array([[8_000.0, 30_000.0], [-25_000.0, 12_000.0], [3_000.0, 55_000.0],
+                      [30_000.0, 6_000.0]])
+
+
+def test_two_site_model_and_estimators() -> None:
+    """Jacobian against central differences (step 1 m on positions of 10-60 km: truncation
+    ~(h/ρ)² ~ 1e-9 relative); both estimators invert the noise-free measurements."""
+    z = SYSTEM.measure(POSITIONS)
+    # azimuth clockwise from North: straight North of A is 0, East of A is +π/2
+    north, east = SYSTEM.site_a + np.array([0.0, 1e3]), SYSTEM.site_a + np.array([1e3, 1.0])
+    np.testing.assert_allclose(SYSTEM.measure(north)[0], 0.0, atol=1e-15)
+    np.testing.assert_allclose(SYSTEM.measure(east)[0], np.pi / 2, atol=2e-3)
+    j = SYSTEM.jacobian(POSITIONS)
+    h = 1.0
+    for k in range(2):
+        e = np.eye(2)[k] * h
+        fd = (SYSTEM.measure(POSITIONS + e) - SYSTEM.measure(POSITIONS - e)) / (2 * h)
+        np.testing.assert_allclose(j[..., k], fd, rtol=1e-7, atol=1e-13)
+    # closed forms are exact: round-off of 1e-16 × ranges of 6e4 m
+    np.testing.assert_allclose(SYSTEM.triangulate(z), POSITIONS, atol=1e-6)
+    np.testing.assert_allclose(SYSTEM.azimuth_range_difference(z), POSITIONS, atol=1e-6)
+
+
+def test_two_site_covariances_by_monte_carlo() -> None:
+    """First-order S1, S2, S12 against 40 000 draws at 1/10 of the default noise (the
+    second-order bias is then ~1e-3 relative); tolerance 4 se of each element."""
+    small = fu.TwoSiteSystem.on_baseline(sigma_azimuth=3e-4, sigma_range_difference=0.3)
+    rng = np.random.default_rng(43)
+    x = POSITIONS[0]
+    z = small.sample(x, 40_000, rng)
+    a = np.hstack([small.triangulate(z), small.azimuth_range_difference(z)])
+    s1, s2, s12 = small.covariances(x)
+    pred = np.block([[s1, s12], [s12.T, s2]])
+    c = a - a.mean(axis=0)
+    prod = np.einsum("ti,tj->tij", c, c)
+    se = prod.std(axis=0, ddof=1) / np.sqrt(len(a))
+    assert np.all(np.abs(prod.mean(axis=0) - pred) < 4 * se + 1e-3 * np.abs(pred))
+    # both estimates lie on the bearing from A: D = Cov(a1 − a2) has rank 1
+    d = s1 + s2 - s12 - s12.T
+    lam = np.linalg.eigvalsh(d)
+    assert abs(lam[0]) < 1e-12 * lam[1]
+
+
+def test_joint_ml_ipopt_equals_gauss_newton() -> None:
+    """Two independent solvers of the original problem; they agree to 1e-4 m on errors of
+    tens to hundreds of metres (both are converged to ~1e-10 relative stationarity)."""
+    rng = np.random.default_rng(44)
+    for x in POSITIONS:
+        z = SYSTEM.sample(x, 300, rng)
+        ip = SYSTEM.joint_ml(z).require_ok()
+        gn = SYSTEM.joint_ml(z, method="gauss_newton").require_ok()
+        assert ip.status is fu.Status.OPTIMAL and ip.residuals["stationarity"] < 1e-6
+        np.testing.assert_allclose(ip.estimate, gn.estimate, atol=1e-4)
+        assert ip.objective == pytest.approx(gn.objective, rel=1e-9)
+
+
+def test_joint_ml_and_correlated_fusion_agree_to_first_order() -> None:
+    """Scale all noise by ε. The joint ML and the correlated fusion differ by O(ε²) while
+    their errors are O(ε): the ratio max|ML − fused| / RMS error falls ∝ ε (expect ×0.01
+    from ε = 1 to 0.01; asserted < 0.03). Fusion (1), which ignores S12, differs at first
+    order: its ratio does not fall (asserted > 0.05 at both ε)."""
+    rng = np.random.default_rng(45)
+    ratios: dict[str, list[float]] = {"correlated": [], "paper": []}
+    x = POSITIONS[1]
+    for eps in (1.0, 0.01):
+        sys_e = fu.TwoSiteSystem.on_baseline(sigma_azimuth=3e-3 * eps,
+                                             sigma_range_difference=3.0 * eps)
+        z = sys_e.sample(x, 2000, rng)
+        ml = sys_e.joint_ml(z).require_ok().estimate
+        rms = np.sqrt(np.mean(np.sum((ml - x) ** 2, axis=1)))
+        for key, corr in (("correlated", True), ("paper", False)):
+            fused = sys_e.fused(z, weights_at="true", x_true=x, correlated=corr)
+            ratios[key].append(float(np.max(np.linalg.norm(fused - ml, axis=1)) / rms))
+    assert ratios["correlated"][1] < 0.03 * ratios["correlated"][0]
+    assert min(ratios["paper"]) > 0.05
+    # first-order covariances: the correlated fusion attains the CRB exactly
+    s1, s2, s12 = SYSTEM.covariances(x)
+    w = fu.weight_matrix_correlated(s1, s2, s12)
+    np.testing.assert_allclose(fu.fused_covariance(w, s1, s2, s12), SYSTEM.crb(x), rtol=1e-8)
+    assert np.trace(fu.fused_covariance(fu.weight_matrix(s1, s2), s1, s2, s12)) > 1.01 * \
+        np.trace(SYSTEM.crb(x))
+
+
+def test_two_site_bad_input() -> None:
+    with pytest.raises(ProblemError, match="site_b"):
+        fu.TwoSiteSystem(np.zeros(2), np.zeros(2), 1e-3, 1.0)
+    with pytest.raises(ProblemError, match="sigma_azimuth"):
+        fu.TwoSiteSystem.on_baseline(sigma_azimuth=0.0)
+    with pytest.raises(ProblemError, match="sigma_range_difference"):
+        fu.TwoSiteSystem.on_baseline(sigma_range_difference=np.nan)
+    with pytest.raises(ProblemError, match="z"):
+        SYSTEM.joint_ml(np.zeros((3, 2)))
+    with pytest.raises(ProblemError, match="method"):
+        SYSTEM.joint_ml(SYSTEM.measure(POSITIONS), method="newton")  # type: ignore[arg-type]
+    with pytest.raises(ProblemError, match="x_true"):
+        SYSTEM.fused(SYSTEM.measure(POSITIONS), weights_at="true")
+    # a cross-covariance that no pair of estimates can have
+    with pytest.raises(ProblemError, match="s12"):
+        fu.fuse([0.0, 0.0], np.eye(2), [1.0, 1.0], np.eye(2), s12=2 * np.eye(2))
+    # no intersection: target behind the sites on the baseline's line
+    z = SYSTEM.measure(np.array([[0.0, 10_000.0]]))
+    z[0, 0], z[0, 1] = 0.0, np.pi
+    assert np.all(np.isnan(SYSTEM.triangulate(z)))

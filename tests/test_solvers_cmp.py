@@ -52,3 +52,23 @@ def test_trajectories_comparison_small(tmp_path: Path) -> None:
     assert "| diverging | 5 | 40 | constrained | OSQP | optimal |" in md
     csv_rows = list(csv.DictReader((tmp_path / "trajectories_results.csv").open()))
     assert len(csv_rows) == len(rows)
+
+
+def test_fusion_comparison_small(tmp_path: Path) -> None:
+    from solvers_cmp import fusion as cmp_fusion
+
+    rows = cmp_fusion.rows((2, 5), (1, 50), repeats=1)
+    solvers = {r["solver"] for r in rows if r["case"] != "two-site joint ML"} - {"numpy"}
+    assert {"CLARABEL", "OSQP"} <= solvers
+    # 2 kinds × 2 sizes × (closed form + solvers) + 2 ML sizes × 2 methods
+    assert len(rows) == 2 * 2 * (1 + len(solvers)) + 2 * 2
+    for r in rows:
+        assert r["status"] == "optimal", r
+        # unconstrained least squares: SCS (first-order, eps 1e-9 on O(1) data) within
+        # 1e-7 of the closed form, the others at round-off; the joint ML by IPOPT and
+        # Gauss-Newton agree to 1e-6 CRB (both converged to ~1e-10 stationarity)
+        assert r["solution_error"] < (1e-7 if r["solver"] == "SCS" else 1e-6), r
+        assert r["max_violation"] < 1e-6
+    md = report.write_fusion(tmp_path, rows)
+    assert "| correlated | 5 | min-trace W | CLARABEL | optimal |" in md
+    assert len(list(csv.DictReader((tmp_path / "fusion_results.csv").open()))) == len(rows)

@@ -198,16 +198,20 @@ def _fusion_weights(args: argparse.Namespace) -> dict[str, Any]:
         flag = "--s2" if msg.startswith("S2") else "--s1"
         raise ProblemError(f"{flag}: {msg}") from None
     m = w.shape[0]
-    for flag, n in (("--n1" if args.n1 is not None else "--n", n1),
-                    ("--n2" if args.n2 is not None else "--n", n2)):
-        if n <= m:
-            raise ProblemError(f"{flag}: need more snapshots than the dimension m = {m} (the "
-                               f"sample covariance is singular otherwise), got {n}")
+    try:
+        s12 = _matrix_arg("--s12", args.s12) if args.s12 else None
+        cov = fusion.weight_covariance(s1, s2, n1, n2, mean=args.mean, s12=s12)
+    except ProblemError as exc:  # n1/n2 -> the flag the user typed
+        msg = str(exc)
+        if msg.startswith("s12"):
+            raise ProblemError(f"--s12: {msg}") from None
+        which = "n2" if msg.startswith("n2") else "n1"
+        flag = f"--{which}" if getattr(args, which) is not None else "--n"
+        raise ProblemError(f"{flag}: {msg}") from None
     p1, p2 = fusion.weight_jacobians(s1, s2)
-    cov = fusion.weight_covariance(s1, s2, n1, n2, mean=args.mean)
     return {"W": w, "P1": p1, "P2": p2, "cov_vec_W": cov,
             "std_W": np.sqrt(np.clip(np.diag(cov), 0, None)).reshape(m, m, order="F"),
-            "n1": n1, "n2": n2, "mean": args.mean,
+            "n1": n1, "n2": n2, "mean": args.mean, "shared_snapshots": args.s12 is not None,
             "note": "vec stacks columns (12); Cov(vec W) is the first-order (10), "
                     "accurate to a few per cent from n ~ 100 (docs/errata.md)"}
 
@@ -401,6 +405,9 @@ def build_parser() -> argparse.ArgumentParser:
     fw.add_argument("--mean", choices=("sample", "known"), default="sample",
                     help="sample covariances about the sample mean (default) or the known "
                          "mean (the paper's literal (3))")
+    fw.add_argument("--s12", help="Cov(a1, a2) when both sample covariances come from the "
+                                   "same snapshots of correlated estimators (adds the cross "
+                                   "block to (10); needs n1 = n2)")
     fw.add_argument("--json", action="store_true")
     fw.set_defaults(func=_fusion_weights, printer=_print_fusion_weights)
     return ap

@@ -291,10 +291,7 @@ def weight_jacobians(s1: ArrayLike, s2: ArrayLike, *,
     a, b = _pair(s1, s2)
     m = a.shape[0]
     if method == "closed_form":
-        w = _weight(a, b)
-        i = np.eye(m)
-        c1, c2 = np.linalg.inv(a), np.linalg.inv(b)
-        return np.kron((c1 @ w).T, i - w), -np.kron((c2 @ (i - w)).T, w)
+        return _jacobians(a, b)
     if method == "ad":
         x1, x2 = ca.SX.sym("S1", m, m), ca.SX.sym("S2", m, m)
         wsym = ca.solve((x1 + x2).T, x1.T).T  # S1 (S1+S2)^-1 for general (unsymmetric) S
@@ -303,6 +300,14 @@ def weight_jacobians(s1: ArrayLike, s2: ArrayLike, *,
         p1, p2 = f(a, b)
         return np.array(p1), np.array(p2)
     raise ProblemError(f"method: expected 'closed_form' or 'ad', got {method!r}")
+
+
+def _jacobians(a: FloatArray, b: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """(13)-(14) as Kronecker products, for validated S1 = a, S2 = b."""
+    w = _weight(a, b)
+    i = np.eye(a.shape[0])
+    c1, c2 = np.linalg.inv(a), np.linalg.inv(b)
+    return np.kron((c1 @ w).T, i - w), -np.kron((c2 @ (i - w)).T, w)
 
 
 def commutation_matrix(m: int) -> FloatArray:
@@ -314,10 +319,15 @@ def commutation_matrix(m: int) -> FloatArray:
     return k
 
 
-def _check_n(name: str, n: int, m: int) -> int:
-    if int(n) != n or n <= m:
-        raise ProblemError(f"{name}: need an integer sample size n > m = {m} (the sample "
-                           f"covariance is singular otherwise), got {n}")
+def _check_n(name: str, n: int, m: int, mean: str = "sample") -> int:
+    """n snapshots give a nonsingular Ŝ (3) a.s. iff n ≥ m with the known mean and
+    n ≥ m + 1 with the sample mean (one degree of freedom spent on it); the divisor
+    n − 1 needs n ≥ 2."""
+    least = max(2, m if mean == "known" else m + 1)
+    if int(n) != n or n < least:
+        rel = "n ≥ m" if mean == "known" else "n > m"
+        raise ProblemError(f"{name}: need an integer sample size {rel} = {m} with the {mean} "
+                           f"mean (the sample covariance is singular otherwise), got {n}")
     return int(n)
 
 
@@ -335,27 +345,55 @@ def sample_covariance_moments(sigma: ArrayLike, n: int, *, mean: MeanKind = "kno
     In matrix form Cov(vec Ŝ) = c (Σ ⊗ Σ)(I + K), K the commutation matrix.
     """
     s = _cov("sigma", sigma)
+    _check_mean(mean)
+    return _moments(s, _check_n("n", n, s.shape[0], mean), mean)
+
+
+def _check_mean(mean: str) -> None:
+    if mean not in ("known", "sample"):
+        raise ProblemError(f"mean: expected 'known' or 'sample', got {mean!r}")
+
+
+def _moments(s: FloatArray, n: int, mean: str) -> tuple[FloatArray, FloatArray]:
+    """(4)-(5) or their sample-mean counterparts for validated inputs."""
     m = s.shape[0]
-    n = _check_n("n", n, m)
     if mean == "known":
         mu, c = n / (n - 1) * s, n / (n - 1) ** 2
-    elif mean == "sample":
-        mu, c = s.copy(), 1.0 / (n - 1)
     else:
-        raise ProblemError(f"mean: expected 'known' or 'sample', got {mean!r}")
+        mu, c = s.copy(), 1.0 / (n - 1)
     return mu, c * np.kron(s, s) @ (np.eye(m * m) + commutation_matrix(m))
 
 
 def weight_covariance(s1: ArrayLike, s2: ArrayLike, n1: int, n2: int, *,
-                      mean: MeanKind = "known") -> FloatArray:
-    """Linearised Cov(vec Ŵ) (10): P1 Cov(vec Ŝ1) P1ᵀ + P2 Cov(vec Ŝ2) P2ᵀ with the
-    Jacobians (13)-(14) at the true S_μ and the moments of :func:`sample_covariance_moments`.
-    Valid to first order in 1/n (see :func:`monte_carlo_weight` for the exact law)."""
+                      mean: MeanKind = "known", s12: ArrayLike | None = None) -> FloatArray:
+    """Linearised Cov(vec Ŵ) (10): P C_C Pᵀ with P = [P1 P2] the Jacobians (13)-(14) at
+    the true S_μ and C_C the covariance of (vec Ŝ1, vec Ŝ2) from
+    :func:`sample_covariance_moments`.
+
+    ``s12=None`` (the paper): Ŝ1 and Ŝ2 from independent snapshots, C_C block-diagonal,
+    (10) as printed. ``s12`` = Cov(a1, a2): both sample covariances come from the **same**
+    n1 = n2 snapshot pairs of correlated estimators, and C_C gets the off-diagonal block
+    Cov(vec Ŝ1, vec Ŝ2) = c (S12 ⊗ S12)(I + K) (c as in the diagonal blocks) -- the case
+    of the paper's own two-site example, where the printed (10) is off by factors of
+    2-4 even at n = 100 (see ``docs/errata.md``). Valid to first order in 1/n (see
+    :func:`monte_carlo_weight` for the exact law with independent snapshots)."""
     a, b = _pair(s1, s2)
-    p1, p2 = weight_jacobians(a, b)
-    _, k1 = sample_covariance_moments(a, n1, mean=mean)
-    _, k2 = sample_covariance_moments(b, n2, mean=mean)
-    return p1 @ k1 @ p1.T + p2 @ k2 @ p2.T
+    _check_mean(mean)
+    m = a.shape[0]
+    n1, n2 = _check_n("n1", n1, m, mean), _check_n("n2", n2, m, mean)
+    p1, p2 = _jacobians(a, b)
+    _, k1 = _moments(a, n1, mean)
+    _, k2 = _moments(b, n2, mean)
+    out = p1 @ k1 @ p1.T + p2 @ k2 @ p2.T
+    if s12 is not None:
+        if n1 != n2:
+            raise ProblemError(f"n2: with s12 both sample covariances come from the same "
+                               f"snapshots, so n1 = n2 is required (got {n1}, {n2})")
+        c, _ = _cross(s12, a, b)
+        _, k12 = _moments(c, n1, mean)  # same c·(X ⊗ X)(I + K) form with X = S12
+        cross = p1 @ k12 @ p2.T
+        out = out + cross + cross.T
+    return out
 
 
 @dataclass(frozen=True)
@@ -378,9 +416,8 @@ def monte_carlo_weight(s1: ArrayLike, s2: ArrayLike, n1: int, n2: int, *,
     """
     a, b = _pair(s1, s2)
     m = a.shape[0]
-    n1, n2 = _check_n("n1", n1, m), _check_n("n2", n2, m)
-    if mean not in ("known", "sample"):
-        raise ProblemError(f"mean: expected 'known' or 'sample', got {mean!r}")
+    _check_mean(mean)
+    n1, n2 = _check_n("n1", n1, m, mean), _check_n("n2", n2, m, mean)
     if int(trials) != trials or trials < 2:
         raise ProblemError(f"trials: need an integer >= 2, got {trials}")
     rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)

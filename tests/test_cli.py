@@ -237,3 +237,15 @@ def test_demo_fusion_writes_report(tmp_path: Path, capsys) -> None:
         # error at n = 100 is ≤ 3 % (measured at 10⁵ draws): 3 % + 5 se
         if row["n"] == 100:
             assert row["max |lin/MC − 1| (diag)"] < 0.03 + 5 * row["MC se of a variance"]
+
+
+def test_fusion_weights_shared_snapshots(capsys) -> None:
+    s1, s2, s12 = [[2.0, 0.3], [0.3, 1.0]], [[1.5, 0.0], [0.0, 2.0]], [[0.8, 0.1], [0.0, 0.6]]
+    res = run_json(capsys, ["fusion", "weights", "--s1", json.dumps(s1), "--s2",
+                            json.dumps(s2), "--s12", json.dumps(s12), "--n", "40"])
+    np.testing.assert_allclose(res["cov_vec_W"], fusion.weight_covariance(
+        s1, s2, 40, 40, mean="sample", s12=s12))
+    assert res["shared_snapshots"] is True
+    assert cli.main(["fusion", "weights", "--s1", json.dumps(s1), "--s2", json.dumps(s2),
+                     "--s12", "[[5,0],[0,5]]", "--n", "40"]) == 2
+    assert "--s12:" in capsys.readouterr().err

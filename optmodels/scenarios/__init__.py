@@ -9,15 +9,23 @@ from optmodels.scenarios.maneuver import (
     radar_plane,
     two_source_plane,
 )
+from optmodels.scenarios.radar_network import (
+    AircraftPaths,
+    RadarNetworkScenario,
+    radar_network,
+)
 
 __all__ = [
     "PAPER_RADIUS",
+    "AircraftPaths",
     "ManeuverScenario",
+    "RadarNetworkScenario",
     "TrajectoryScenario",
     "equally_spaced",
     "launcher_release",
     "paper_plane_example",
     "radar_covariances",
+    "radar_network",
     "radar_plane",
     "two_source_plane",
 ]

@@ -1,0 +1,28 @@
+"""Radar bias fields (paper 001, Bedin): from radar plots to uncertainty sets (part 1),
+and the smoothest field on them (part 2).
+
+Paper: ``shared/papers/001_d6b2428a10e192f8.txt``. Errata: ``docs/errata.md``.
+"""
+
+from optmodels.biasfield.data import PlotTable, RadarSet
+from optmodels.biasfield.fields import BiasField
+from optmodels.biasfield.geometry import (
+    bias_from_shift,
+    from_polar,
+    polar_jacobian,
+    shift_from_bias,
+    to_polar,
+    wrap_angle,
+)
+
+__all__ = [
+    "BiasField",
+    "PlotTable",
+    "RadarSet",
+    "bias_from_shift",
+    "from_polar",
+    "polar_jacobian",
+    "shift_from_bias",
+    "to_polar",
+    "wrap_angle",
+]

@@ -1,0 +1,126 @@
+"""Radars and radar plots (paper 001, (1)): the tables the bias-field pipeline reads."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from optmodels.biasfield.geometry import from_polar, polar_jacobian
+from optmodels.core import FloatArray, ProblemError, as_finite_array
+
+__all__ = ["PlotTable", "RadarSet"]
+
+
+@dataclass(frozen=True)
+class RadarSet:
+    """m 2-D radars: ``sites`` (m, 2) East-North (m); per radar ``sigma_range`` (m),
+    ``sigma_azimuth`` (rad), ``max_range`` (m) and ``names``.
+
+    The noise covariance of a plot is V_i = diag(σ_r², σ_az²) in the radar's polar frame,
+    and, to first order, ∇p_i⁻¹ V_i ∇p_i⁻ᵀ in Cartesian coordinates (:meth:`cartesian_cov`).
+    """
+
+    sites: FloatArray
+    sigma_range: FloatArray
+    sigma_azimuth: FloatArray
+    max_range: FloatArray
+    names: tuple[str, ...] = field(default=())
+
+    def __post_init__(self) -> None:
+        sites = as_finite_array("sites", self.sites, ndim=2)
+        if sites.shape[1] != 2:
+            raise ProblemError(f"sites: expected (m, 2), got {sites.shape}")
+        m = sites.shape[0]
+        if m < 2:
+            raise ProblemError(f"sites: the bias field needs at least 2 radars, got {m}")
+        object.__setattr__(self, "sites", sites)
+        for name in ("sigma_range", "sigma_azimuth", "max_range"):
+            v = np.broadcast_to(as_finite_array(name, getattr(self, name)), (m,)).astype(float)
+            if np.any(v <= 0):
+                raise ProblemError(f"{name}: need positive values, got {v}")
+            object.__setattr__(self, name, v)
+        names = tuple(self.names) or tuple(f"R{i + 1}" for i in range(m))
+        if len(names) != m or len(set(names)) != m:
+            raise ProblemError(f"names: need {m} distinct names, got {names}")
+        object.__setattr__(self, "names", names)
+
+    @property
+    def m(self) -> int:
+        return int(self.sites.shape[0])
+
+    def index(self, radar: str | int) -> int:
+        """Index of a radar given by name or index."""
+        if isinstance(radar, (int, np.integer)) and 0 <= int(radar) < self.m:
+            return int(radar)
+        if radar in self.names:
+            return self.names.index(str(radar))
+        raise ProblemError(f"radar: unknown radar id {radar!r} (known: {self.names})")
+
+    def polar_cov(self, i: int) -> FloatArray:
+        return np.diag([self.sigma_range[i] ** 2, self.sigma_azimuth[i] ** 2])
+
+    def cartesian_cov(self, i: int, x: ArrayLike) -> FloatArray:
+        """V_i(x) in Cartesian coordinates, (..., 2, 2), to first order."""
+        ginv = np.linalg.inv(polar_jacobian(x, self.sites[i]))
+        return ginv @ self.polar_cov(i) @ np.swapaxes(ginv, -1, -2)
+
+
+@dataclass(frozen=True)
+class PlotTable:
+    """Radar plots, one row each: ``time`` (s), ``radar`` (index into a :class:`RadarSet`),
+    ``range`` (m), ``azimuth`` (rad, clockwise from North), ``object`` (track id, −1 if
+    unknown). Rows are kept in the order given."""
+
+    time: FloatArray
+    radar: np.ndarray
+    range: FloatArray
+    azimuth: FloatArray
+    object: np.ndarray
+
+    def __post_init__(self) -> None:
+        t = as_finite_array("time", self.time, ndim=1)
+        n = t.shape[0]
+        r = as_finite_array("range", self.range, shape=(n,))
+        az = as_finite_array("azimuth", self.azimuth, shape=(n,))
+        if np.any(r < 0):
+            raise ProblemError("range: negative ranges")
+        rad = np.asarray(self.radar)
+        obj = np.asarray(self.object)
+        for name, arr in (("radar", rad), ("object", obj)):
+            if arr.shape != (n,) or not np.issubdtype(arr.dtype, np.integer):
+                raise ProblemError(f"{name}: expected {n} integers, got {arr.dtype} "
+                                   f"{arr.shape}")
+        object.__setattr__(self, "time", t)
+        object.__setattr__(self, "range", r)
+        object.__setattr__(self, "azimuth", az)
+        object.__setattr__(self, "radar", rad.astype(np.int64))
+        object.__setattr__(self, "object", obj.astype(np.int64))
+
+    def __len__(self) -> int:
+        return int(self.time.shape[0])
+
+    def check(self, radars: RadarSet) -> None:
+        """Radar ids exist and ranges are within each radar's ``max_range``."""
+        bad = (self.radar < 0) | (self.radar >= radars.m)
+        if bad.any():
+            raise ProblemError(f"radar: unknown radar index {int(self.radar[bad][0])} in "
+                               f"{int(bad.sum())} plots (radars 0..{radars.m - 1})")
+        over = self.range > radars.max_range[self.radar]
+        if over.any():
+            raise ProblemError(f"range: {int(over.sum())} plots beyond their radar's "
+                               "max_range (outside the valid range)")
+
+    def cartesian(self, radars: RadarSet) -> FloatArray:
+        """Plot positions z (n, 2) in the common Cartesian frame."""
+        out = np.empty((len(self), 2))
+        for i in range(radars.m):
+            sel = self.radar == i
+            out[sel] = from_polar(np.column_stack([self.range[sel], self.azimuth[sel]]),
+                                  radars.sites[i])
+        return out
+
+    def subset(self, mask: np.ndarray) -> PlotTable:
+        return PlotTable(self.time[mask], self.radar[mask], self.range[mask],
+                         self.azimuth[mask], self.object[mask])

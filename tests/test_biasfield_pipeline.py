@@ -1,0 +1,121 @@
+"""Bias field, part 1 (paper 001): geometry, bias fields, the radar-network simulator."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from optmodels import ProblemError
+from optmodels import biasfield as bf
+from optmodels.scenarios.radar_network import radar_network
+
+SITE = np.array([1_000.0, -2_000.0])
+
+
+def points(rng: np.random.Generator, n: int) -> np.ndarray:
+    return SITE + rng.uniform(-200e3, 200e3, (n, 2))
+
+
+def test_polar_round_trip_and_convention() -> None:
+    rng = np.random.default_rng(0)
+    x = points(rng, 500)
+    pol = bf.to_polar(x, SITE)
+    # exact inverse up to round-off of 1e-16 × 3e5 m
+    np.testing.assert_allclose(bf.from_polar(pol, SITE), x, atol=1e-9)
+    assert np.all(pol[:, 1] > -np.pi) and np.all(pol[:, 1] <= np.pi)
+    # azimuth clockwise from North: North 0, East +π/2, South π, West −π/2
+    compass = SITE + np.array([[0, 1e3], [1e3, 0], [0, -1e3], [-1e3, 0]])
+    np.testing.assert_allclose(bf.to_polar(compass, SITE)[:, 1],
+                               [0, np.pi / 2, np.pi, -np.pi / 2], atol=1e-15)
+    np.testing.assert_allclose(bf.wrap_angle([np.pi, -np.pi, 3 * np.pi, 0.5]),
+                               [np.pi, np.pi, np.pi, 0.5])
+
+
+def test_polar_jacobian_vs_finite_differences() -> None:
+    """Central differences with h = 1 m at ranges ≥ ~1 km: truncation (h/r)² ≤ 1e-6
+    relative, round-off 1e-16·r/h ≤ 1e-10."""
+    rng = np.random.default_rng(1)
+    x = points(rng, 200)
+    x = x[np.linalg.norm(x - SITE, axis=1) > 1e3]
+    j = bf.polar_jacobian(x, SITE)
+    h = 1.0
+    for k in range(2):
+        e = np.eye(2)[k] * h
+        d = bf.to_polar(x + e, SITE) - bf.to_polar(x - e, SITE)
+        d[:, 1] = bf.wrap_angle(d[:, 1])
+        np.testing.assert_allclose(j[..., k], d / (2 * h), rtol=1e-5, atol=1e-15)
+    with pytest.raises(ProblemError, match="site"):
+        bf.polar_jacobian(SITE[None], SITE)
+
+
+def test_shift_and_bias_are_inverse() -> None:
+    rng = np.random.default_rng(2)
+    x = points(rng, 300)
+    f = np.column_stack([rng.uniform(-300, 300, 300), rng.uniform(-0.01, 0.01, 300)])
+    s = bf.shift_from_bias(x, SITE, f)
+    np.testing.assert_allclose(bf.bias_from_shift(x, SITE, s), f, rtol=1e-9, atol=1e-12)
+    # first order: s ≈ ∇p⁻¹ f, error O(|f|²/r) -- below 1 % of |s| for these sizes
+    lin = np.einsum("nij,nj->ni", np.linalg.inv(bf.polar_jacobian(x, SITE)), f)
+    err = np.linalg.norm(s - lin, axis=1) / np.linalg.norm(s, axis=1)
+    assert np.median(err) < 0.01
+
+
+def test_bias_fields() -> None:
+    x = np.array([[0.0, 0.0], [1e4, 2e4]])
+    np.testing.assert_allclose(bf.BiasField.constant(5.0, 0.01)(x), [[5.0, 0.01]] * 2)
+    lin = bf.BiasField.linear([1.0, 0.0], [[1e-3, 0.0], [0.0, 1e-8]], origin=[0.0, 0.0])
+    np.testing.assert_allclose(lin(x), [[1.0, 0.0], [11.0, 2e-4]])
+    sm = bf.BiasField.smooth(np.random.default_rng(3), center=[0, 0], scale=1e5,
+                             range_amplitude=100.0, azimuth_amplitude=0.005)
+    v = sm(np.random.default_rng(4).uniform(-2e5, 2e5, (1000, 2)))
+    assert np.abs(v[:, 0]).max() < 400 and np.abs(v[:, 1]).max() < 0.02
+    with pytest.raises(ProblemError, match="field"):
+        bf.BiasField.from_callable(lambda x: x[..., :1])(x)
+
+
+def test_simulated_plots_follow_the_model() -> None:
+    """Plots minus (true polar position + true bias) is the polar noise: mean 0 within 4
+    se, standard deviation σ within 4 se (se of an sd ≈ σ/√(2n))."""
+    sc = radar_network(5, n_aircraft=20, duration=900.0)
+    p = sc.plots
+    sc.plots.check(sc.radars)
+    assert set(np.unique(p.radar)) == set(range(sc.radars.m))
+    # asynchronous: no object is reported by two radars at the same instant
+    assert len(np.unique(np.stack([p.time, p.object], 1), axis=0)) == len(p)
+    for i in range(sc.radars.m):
+        sel = p.radar == i
+        n = int(sel.sum())
+        pol = bf.to_polar(sc.true_position[sel], sc.radars.sites[i])
+        d = np.column_stack([p.range[sel] - pol[:, 0] - sc.true_bias[sel, 0],
+                             bf.wrap_angle(p.azimuth[sel] - pol[:, 1] - sc.true_bias[sel, 1])])
+        sig = np.array([sc.radars.sigma_range[i], sc.radars.sigma_azimuth[i]])
+        assert np.all(np.abs(d.mean(0)) < 4 * sig / np.sqrt(n))
+        assert np.all(np.abs(d.std(0) / sig - 1) < 4 / np.sqrt(2 * n))
+        # each scan reports an aircraft once: consecutive plots of one object ≈ one period
+        obj = p.object[sel]
+        gaps = np.diff(p.time[sel][obj == obj[0]])
+        assert np.median(gaps) == pytest.approx(np.median(gaps[gaps < 2 * np.median(gaps)]))
+    z = p.cartesian(sc.radars)
+    np.testing.assert_allclose(np.median(np.linalg.norm(
+        z - sc.true_position - sc.true_shift(), axis=1)), 120, rtol=0.8)
+
+
+def test_radar_set_and_plot_table_bad_input() -> None:
+    with pytest.raises(ProblemError, match="at least 2 radars"):
+        bf.RadarSet(np.zeros((1, 2)), 1.0, 1.0, 1.0)
+    with pytest.raises(ProblemError, match="sigma_range"):
+        bf.RadarSet(np.zeros((2, 2)), -1.0, 1.0, 1.0)
+    radars = bf.RadarSet(np.array([[0.0, 0.0], [1e4, 0.0]]), 50.0, 1e-3, 1e5)
+    with pytest.raises(ProblemError, match="unknown radar id"):
+        radars.index("R9")
+    t = bf.PlotTable(np.array([0.0, 1.0]), np.array([0, 2]), np.array([1e3, 2e3]),
+                     np.zeros(2), np.zeros(2, dtype=int))
+    with pytest.raises(ProblemError, match="unknown radar index"):
+        t.check(radars)
+    far = bf.PlotTable(np.array([0.0]), np.array([1]), np.array([2e5]), np.zeros(1),
+                       np.zeros(1, dtype=int))
+    with pytest.raises(ProblemError, match="max_range"):
+        far.check(radars)
+    with pytest.raises(ProblemError, match="NaN"):
+        bf.PlotTable(np.array([np.nan]), np.array([0]), np.array([1.0]), np.zeros(1),
+                     np.zeros(1, dtype=int))

@@ -119,3 +119,48 @@ def test_radar_set_and_plot_table_bad_input() -> None:
     with pytest.raises(ProblemError, match="NaN"):
         bf.PlotTable(np.array([np.nan]), np.array([0]), np.array([1.0]), np.zeros(1),
                      np.zeros(1, dtype=int))
+
+
+def test_track_fits_against_truth() -> None:
+    """Straight paths, constant azimuth biases: the GLS polyline of each radar's track
+    estimates ξ_i(t) = x(t) + s_i(x(t)). Mahalanobis distances e ᵀCov⁻¹e at interior times
+    average 2 (χ²₂) within 5 se (se = 2/√N); Σχ²/Σdof = 1 within 5/√(Σdof/2)."""
+    from optmodels.biasfield.tracks import fit_tracks
+
+    sc = radar_network(1, n_aircraft=20, duration=1200.0, turn_rate=(0.0, 0.0),
+                       fields="constant")
+    fits, dropped = fit_tracks(sc.plots, sc.radars)
+    used = sum(f.rows.size for f in fits)
+    # nothing silently lost: every plot is used or counted as dropped
+    assert used + dropped.total == len(sc.plots)
+    m2 = []
+    for f in fits:
+        tt = np.linspace(f.knots[0], f.knots[-1], 5)[1:-1]
+        x = sc.paths.at(f.object, tt)
+        xi = x + bf.shift_from_bias(x, sc.radars.sites[f.radar], sc.fields[f.radar](x))
+        e = f.at(tt) - xi
+        m2.extend(np.einsum("ti,tij,tj->t", e, np.linalg.inv(f.cov_at(tt)), e))
+    assert abs(np.mean(m2) - 2) < 5 * 2 / np.sqrt(len(m2))
+    chi2 = sum(f.chi2 for f in fits)
+    dof = sum(f.dof for f in fits)
+    assert abs(chi2 / dof - 1) < 5 / np.sqrt(dof / 2)
+    w = np.concatenate([f.whitened for f in fits])
+    assert np.all(np.abs(w.mean(axis=0)) < 5 / np.sqrt(len(w)))
+    # mean_over is the exact average of the polyline and its covariance
+    f = fits[0]
+    tt = np.linspace(*f.span, 7)
+    mean, cov = f.mean_over(tt)
+    np.testing.assert_allclose(mean, f.at(tt).mean(axis=0), rtol=1e-12)
+    assert np.all(np.linalg.eigvalsh(cov) > 0)
+
+
+def test_track_fit_drops_short_tracks() -> None:
+    from optmodels.biasfield.tracks import fit_tracks
+
+    radars = bf.RadarSet(np.array([[0.0, 0.0], [1e4, 0.0]]), 50.0, 1e-3, 2e5)
+    t = np.array([0.0, 5.0, 100.0, 104.0, 108.0, 112.0, 116.0, 120.0])
+    plots = bf.PlotTable(t, np.zeros(8, dtype=int), np.full(8, 5e4), np.linspace(0, 0.01, 8),
+                         np.array([0, 0, 1, 1, 1, 1, 1, -1]))
+    fits, dropped = fit_tracks(plots, radars, knot_spacing=20.0)
+    assert dropped.counts == {"no object id": 1, "too few plots for the polyline": 2}
+    assert len(fits) == 1 and fits[0].object == 1 and fits[0].rows.size == 5

@@ -14,13 +14,17 @@ from optmodels.biasfield.geometry import (
     to_polar,
     wrap_angle,
 )
+from optmodels.biasfield.tracks import TrackFit, fit_tracks, hat_basis
 
 __all__ = [
     "BiasField",
     "PlotTable",
     "RadarSet",
+    "TrackFit",
     "bias_from_shift",
+    "fit_tracks",
     "from_polar",
+    "hat_basis",
     "polar_jacobian",
     "shift_from_bias",
     "to_polar",

@@ -50,9 +50,10 @@ class AircraftPaths:
 
 def fly_paths(rng: np.random.Generator, n_aircraft: int, duration: float, *,
               region: float = 150e3, speed: tuple[float, float] = (150.0, 250.0),
-              dt: float = 1.0) -> AircraftPaths:
+              turn_rate: tuple[float, float] = (0.3, 1.0), dt: float = 1.0) -> AircraftPaths:
     """Aircraft entering at random times and places in a square of half-side ``region``,
-    flying legs of 2-10 min joined by turns of 1-3 °/s lasting 20-90 s."""
+    flying legs of 2-10 min joined by turns of ``turn_rate`` °/s lasting 20-90 s
+    (``turn_rate=(0, 0)``: straight paths)."""
     times = np.arange(0.0, float(duration) + dt, dt)
     nt = times.size
     pos = np.empty((n_aircraft, nt, 2))
@@ -67,7 +68,8 @@ def fly_paths(rng: np.random.Generator, n_aircraft: int, duration: float, *,
         while k < nt:
             leg = int(rng.uniform(120, 600) / dt)
             turn = int(rng.uniform(20, 90) / dt)
-            rate[k + leg:k + leg + turn] = np.deg2rad(rng.uniform(1, 3)) * rng.choice([-1, 1])
+            rate[k + leg:k + leg + turn] = np.deg2rad(rng.uniform(*turn_rate)) * rng.choice(
+                [-1, 1])
             k += leg + turn
         psi = heading + np.cumsum(rate) * dt
         vel = v * np.column_stack([np.sin(psi), np.cos(psi)])  # heading clockwise from North
@@ -174,8 +176,8 @@ def radar_network(seed: int | np.random.Generator, *, n_aircraft: int = 30,
                   sigma_range: float | ArrayLike = 60.0,
                   sigma_azimuth: float | ArrayLike = SIGMA_AZIMUTH,
                   max_range: float | ArrayLike = 250e3,
-                  periods: ArrayLike | None = None, region: float = 150e3
-                  ) -> RadarNetworkScenario:
+                  periods: ArrayLike | None = None, region: float = 150e3,
+                  turn_rate: tuple[float, float] = (0.3, 1.0)) -> RadarNetworkScenario:
     """A seeded radar network scenario.
 
     ``fields``: ``"zero"``; ``"constant"`` (an azimuth bias of ±0.1-0.3° per radar, no range
@@ -212,6 +214,6 @@ def radar_network(seed: int | np.random.Generator, *, n_aircraft: int = 30,
                                               azimuth_amplitude=np.deg2rad(0.3)))
     else:
         flist = list(fields)
-    paths = fly_paths(rng, n_aircraft, duration, region=region)
+    paths = fly_paths(rng, n_aircraft, duration, region=region, turn_rate=turn_rate)
     plots, xs, fs = simulate_plots(rng, radars, paths, flist, periods=periods)
     return RadarNetworkScenario(plots, radars, flist, paths, xs, fs)

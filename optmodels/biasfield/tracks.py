@@ -1,0 +1,190 @@
+r"""Track fitting (paper 001, (3) and section 3): per radar and object, the biased motion
+ξ_i^a(t) = x^a(t) + s_i(x^a(t)) as a polyline g(t)θ with knots at fixed times, fitted to
+the radar's plots by generalised least squares with the plot covariances V_i.
+
+A polyline with knots τ_0 < … < τ_K is Σ_k h_k(t)θ_k with hat functions h_k; θ_k ∈ R² is
+the position at τ_k. With plots z_j at t_j and Cartesian covariances V_j (first order,
+evaluated at the plot), the GLS estimate solves
+
+.. math::
+    \min_\theta \sum_j (z_j - g(t_j)\theta)^T V_j^{-1} (z_j - g(t_j)\theta),\qquad
+    \operatorname{Cov}\hat\theta = \Big(\sum_j g(t_j)^T V_j^{-1} g(t_j)\Big)^{-1}.
+
+Knots are the multiples of ``knot_spacing`` (absolute times, the same for every radar
+observing an object, so that the interpolation error of a curved path is nearly common to
+all radars -- and a common shift is invisible to the bias field anyway). A track is split
+where plots are more than ``max_gap`` apart; a piece with fewer plots than its polyline
+has parameters (plus ``min_redundancy``) is dropped and reported.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import ArrayLike
+from scipy import linalg
+
+from optmodels.biasfield.data import PlotTable, RadarSet
+from optmodels.core import FloatArray, ProblemError
+
+__all__ = ["TrackFit", "fit_tracks", "hat_basis"]
+
+
+def hat_basis(t: ArrayLike, knots: FloatArray) -> FloatArray:
+    """(T, K) hat-function values h_k(t) of the polyline with these knots (t inside)."""
+    tt = np.asarray(t, dtype=float)
+    k = np.clip(np.searchsorted(knots, tt, side="right") - 1, 0, len(knots) - 2)
+    u = (tt - knots[k]) / (knots[k + 1] - knots[k])
+    out = np.zeros((tt.size, len(knots)))
+    rows = np.arange(tt.size)
+    out[rows, k] = 1.0 - u
+    out[rows, k + 1] = u
+    return out
+
+
+@dataclass
+class TrackFit:
+    """One radar's fitted polyline for one object over [knots[0], knots[-1]].
+
+    ``theta`` (K, 2) positions at the knots; ``cov`` (2K, 2K) covariance of
+    ``theta.ravel()`` (x0, y0, x1, y1, …); ``rows`` the indices of the plots used;
+    ``chi2`` the GLS residual sum Σ rᵀV⁻¹r with ``dof`` = 2n − 2K degrees of freedom;
+    ``whitened`` (n, 2) residuals V^{-1/2}(z − ξ̂) (zero mean, unit covariance if the
+    motion model and V are right).
+    """
+
+    radar: int
+    object: int
+    knots: FloatArray
+    theta: FloatArray
+    cov: FloatArray
+    rows: np.ndarray
+    chi2: float
+    dof: int
+    whitened: FloatArray = field(repr=False)
+
+    @property
+    def span(self) -> tuple[float, float]:
+        return float(self.knots[0]), float(self.knots[-1])
+
+    def at(self, t: ArrayLike) -> FloatArray:
+        """ξ̂(t), (T, 2), for t inside the span."""
+        return hat_basis(t, self.knots) @ self.theta
+
+    def cov_at(self, t: ArrayLike) -> FloatArray:
+        """Cov ξ̂(t), (T, 2, 2)."""
+        g = self._design(t)
+        return np.einsum("tia,ab,tjb->tij", g, self.cov, g)
+
+    def mean_over(self, t: ArrayLike) -> tuple[FloatArray, FloatArray]:
+        """Average of ξ̂ over the instants t and its covariance (exact: a linear function
+        of θ̂)."""
+        h = hat_basis(t, self.knots).mean(axis=0)
+        g = np.kron(h[None, :], np.eye(2))
+        return h @ self.theta, g @ self.cov @ g.T
+
+    def _design(self, t: ArrayLike) -> FloatArray:
+        h = hat_basis(t, self.knots)
+        return np.einsum("tk,ij->tikj", h, np.eye(2)).reshape(h.shape[0], 2, -1)
+
+
+@dataclass
+class Dropped:
+    """Plots not used, with the reason: ``counts`` reason → number of plots."""
+
+    counts: dict[str, int] = field(default_factory=dict)
+
+    def add(self, reason: str, n: int) -> None:
+        if n:
+            self.counts[reason] = self.counts.get(reason, 0) + int(n)
+
+    @property
+    def total(self) -> int:
+        return sum(self.counts.values())
+
+
+def _pieces(t: FloatArray, max_gap: float) -> list[np.ndarray]:
+    cuts = np.flatnonzero(np.diff(t) > max_gap) + 1
+    return np.split(np.arange(t.size), cuts)
+
+
+def fit_tracks(plots: PlotTable, radars: RadarSet, *, knot_spacing: float = 20.0,
+               max_gap: float | None = None, min_redundancy: int = 2
+               ) -> tuple[list[TrackFit], Dropped]:
+    """GLS polyline fits of every (radar, object) track of ``plots``.
+
+    Plots with ``object == -1`` cannot be assigned to a track and are dropped (counted).
+    ``max_gap`` (default ``knot_spacing``) splits tracks at longer silences; each piece
+    gets knots at the multiples of ``knot_spacing`` that bracket it, and knots whose
+    support holds no plot are removed (the polyline then spans the gap linearly). Returns
+    the fits and the dropped-plot counts.
+    """
+    if not knot_spacing > 0:
+        raise ProblemError(f"knot_spacing: need a positive duration, got {knot_spacing}")
+    gap = float(knot_spacing if max_gap is None else max_gap)
+    plots.check(radars)
+    z_all = plots.cartesian(radars)
+    dropped = Dropped()
+    dropped.add("no object id", int(np.sum(plots.object < 0)))
+    fits: list[TrackFit] = []
+    for i in range(radars.m):
+        sel_r = np.flatnonzero((plots.radar == i) & (plots.object >= 0))
+        if sel_r.size == 0:
+            continue
+        vcov = radars.cartesian_cov(i, z_all[sel_r])
+        vinv = np.linalg.inv(vcov)
+        pos_in = {int(r): k for k, r in enumerate(sel_r)}
+        for a in np.unique(plots.object[sel_r]):
+            rows_a = sel_r[plots.object[sel_r] == a]
+            rows_a = rows_a[np.argsort(plots.time[rows_a], kind="stable")]
+            for piece in _pieces(plots.time[rows_a], gap):
+                rows = rows_a[piece]
+                fit = _fit_piece(i, int(a), rows, plots.time[rows], z_all[rows],
+                                 vinv[[pos_in[int(r)] for r in rows]], knot_spacing,
+                                 min_redundancy)
+                if fit is None:
+                    dropped.add("too few plots for the polyline", rows.size)
+                else:
+                    fits.append(fit)
+    return fits, dropped
+
+
+def _fit_piece(radar: int, obj: int, rows: np.ndarray, t: FloatArray, z: FloatArray,
+               vinv: FloatArray, spacing: float, redundancy: int) -> TrackFit | None:
+    lo, hi = np.floor(t[0] / spacing), np.ceil(t[-1] / spacing)
+    knots = np.arange(lo, max(hi, lo + 1) + 1) * spacing
+    # keep knots whose hat support holds plots (the end knots always do)
+    h = hat_basis(t, knots)
+    knots = knots[h.sum(axis=0) > 1e-9]
+    if knots.size < 2:
+        knots = np.array([t[0], max(t[-1], t[0] + spacing)])
+    k = knots.size
+    if 2 * t.size < 2 * k + redundancy:
+        return None
+    # normal equations N = Σ_j (h_j h_jᵀ) ⊗ V_j⁻¹, b = Σ_j h_j ⊗ V_j⁻¹ z_j (θ row-major);
+    # each plot touches the two knots of its interval, so N is block-tridiagonal
+    idx = np.clip(np.searchsorted(knots, t, side="right") - 1, 0, k - 2)
+    u = (t - knots[idx]) / (knots[idx + 1] - knots[idx])
+    wts = np.column_stack([1.0 - u, u])
+    nblk = np.zeros((k, k, 2, 2))
+    bblk = np.zeros((k, 2))
+    vz = np.einsum("nab,nb->na", vinv, z)
+    for p_ in range(2):
+        np.add.at(bblk, idx + p_, wts[:, p_, None] * vz)
+        for q_ in range(2):
+            np.add.at(nblk, (idx + p_, idx + q_), (wts[:, p_] * wts[:, q_])[:, None, None] * vinv)
+    nmat = nblk.transpose(0, 2, 1, 3).reshape(2 * k, 2 * k)
+    b = bblk.reshape(-1)
+    h = hat_basis(t, knots)  # (n, K)
+    try:
+        chol = linalg.cho_factor(nmat)
+    except linalg.LinAlgError:
+        return None
+    theta = linalg.cho_solve(chol, b).reshape(k, 2)
+    cov = linalg.cho_solve(chol, np.eye(2 * k))
+    r = z - h @ theta
+    lchol = np.linalg.cholesky(vinv)  # V⁻¹ = L Lᵀ → whitened residual Lᵀ r
+    white = np.einsum("nab,na->nb", lchol, r)
+    return TrackFit(radar, obj, knots, theta, 0.5 * (cov + cov.T), rows,
+                    float(np.sum(white**2)), int(2 * t.size - 2 * k), white)

@@ -4,6 +4,14 @@ and the smoothest field on them (part 2).
 Paper: ``shared/papers/001_d6b2428a10e192f8.txt``. Errata: ``docs/errata.md``.
 """
 
+from optmodels.biasfield.cells import (
+    FieldData,
+    build_field_data,
+    laplacian,
+    neighbours,
+    place_centers,
+    uncertainty_sets,
+)
 from optmodels.biasfield.data import PlotTable, RadarSet
 from optmodels.biasfield.fields import BiasField
 from optmodels.biasfield.geometry import (
@@ -18,15 +26,21 @@ from optmodels.biasfield.tracks import TrackFit, fit_tracks, hat_basis
 
 __all__ = [
     "BiasField",
+    "FieldData",
     "PlotTable",
     "RadarSet",
     "TrackFit",
     "bias_from_shift",
+    "build_field_data",
     "fit_tracks",
     "from_polar",
     "hat_basis",
+    "laplacian",
+    "neighbours",
+    "place_centers",
     "polar_jacobian",
     "shift_from_bias",
     "to_polar",
+    "uncertainty_sets",
     "wrap_angle",
 ]

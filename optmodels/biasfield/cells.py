@@ -1,0 +1,280 @@
+r"""Cells, averaging and uncertainty sets (paper 001, section 3 and (9)-(10)).
+
+* Cell centres x̌_(k): a grid, or k-means of the fitted positions (where traffic is).
+  A sample belongs to the cell of its nearest centre if it lies within ``cell_radius``.
+* Averaging (6)-(7): for every object seen by **all** m radars in cell k, the fitted
+  ξ̂_i^a(t) are averaged over the instants τ_(k)^a the object spent in the cell (a regular
+  grid of instants inside the common span of the m fits), then over the objects. The
+  covariance follows exactly (the average is linear in the fitted knots; objects and
+  radars are independent).
+* Neighbours c(x, y): Delaunay edges (or all pairs within a radius); weights
+  a_ij = 1/‖x_i − x_j‖²; Q the graph Laplacian of (9).
+* Uncertainty sets (10) in the polar space F, linearised at ξ̂_(k) = mean_i ξ̂_i(k):
+
+  .. math::
+      \varphi = \Phi^0 + \Phi^1\eta,\quad \Phi^0_k = [p_i(\hat\xi_{i(k)}) - p_i(\hat\xi_{(k)})]_i,
+      \quad \Phi^1 = \operatorname{blockdiag}_k [\nabla p_i(\hat\xi_{(k)})]_i,
+
+  η_k = ξ̂_(k) − x_(k) ∈ R² per cell, so Φ¹ is 2mK × 2K and **block-diagonal** (the
+  printed (10) stacks the blocks in one column, which does not fit η ∈ R^{2K}).
+"""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass, field
+from typing import Literal
+
+import numpy as np
+from numpy.typing import ArrayLike
+from scipy import sparse
+from scipy.cluster.vq import kmeans2
+from scipy.spatial import Delaunay, cKDTree
+
+from optmodels.biasfield.data import PlotTable, RadarSet
+from optmodels.biasfield.geometry import polar_jacobian, to_polar, wrap_angle
+from optmodels.biasfield.tracks import TrackFit, fit_tracks
+from optmodels.core import FloatArray, ProblemError, as_finite_array
+
+__all__ = ["FieldData", "build_field_data", "laplacian", "neighbours", "place_centers",
+           "uncertainty_sets"]
+
+
+@dataclass
+class FieldData:
+    """Input of the field selection (part 2).
+
+    ``radars`` (m, 2) sites; ``centers`` (K, 2); ``xi`` (K, m, 2) averaged biased
+    positions ξ̂_i(k); ``adjacency`` (K, K) symmetric 0/1; ``P`` the weight of ‖·‖_F: (2, 2)
+    for every radar, or (2m, 2m); ``xi_cov`` (K, m, 2, 2) covariances of ξ̂_i(k) if known.
+    """
+
+    radars: FloatArray
+    centers: FloatArray
+    xi: FloatArray
+    adjacency: np.ndarray
+    P: FloatArray
+    xi_cov: FloatArray | None = None
+
+    def __post_init__(self) -> None:
+        self.radars = as_finite_array("radars", self.radars, ndim=2)
+        m = self.radars.shape[0]
+        if self.radars.shape[1] != 2 or m < 2:
+            raise ProblemError(f"radars: expected (m, 2) with m ≥ 2, got {self.radars.shape}")
+        self.centers = as_finite_array("centers", self.centers, ndim=2)
+        k = self.centers.shape[0]
+        self.xi = as_finite_array("xi", self.xi, shape=(k, m, 2))
+        adj = np.asarray(self.adjacency)
+        if adj.shape != (k, k) or not np.array_equal(adj, adj.T):
+            raise ProblemError(f"adjacency: expected a symmetric ({k}, {k}) matrix")
+        if np.any(np.diag(adj)):
+            raise ProblemError("adjacency: a cell cannot neighbour itself (c(x, x) = 0)")
+        self.adjacency = (adj != 0).astype(np.int8)
+        p = as_finite_array("P", self.P, ndim=2)
+        if p.shape not in ((2, 2), (2 * m, 2 * m)):
+            raise ProblemError(f"P: expected (2, 2) or ({2 * m}, {2 * m}), got {p.shape}")
+        if not np.allclose(p, p.T) or np.linalg.eigvalsh(p)[0] <= 0:
+            raise ProblemError("P: must be symmetric positive definite")
+        self.P = p
+        if self.xi_cov is not None:
+            self.xi_cov = as_finite_array("xi_cov", self.xi_cov, shape=(k, m, 2, 2))
+
+    @property
+    def m(self) -> int:
+        return int(self.radars.shape[0])
+
+    @property
+    def k(self) -> int:
+        return int(self.centers.shape[0])
+
+
+def place_centers(points: ArrayLike, count: int, *, method: Literal["kmeans", "grid"] = "kmeans",
+                  seed: int | np.random.Generator = 0) -> FloatArray:
+    """Cell centres: k-means of ``points`` (traffic concentrations) or a square grid of about
+    ``count`` nodes over their bounding box."""
+    pts = as_finite_array("points", points, ndim=2)
+    if pts.shape[0] < count or count < 2:
+        raise ProblemError(f"count: need 2 ≤ count ≤ number of points ({pts.shape[0]}), "
+                           f"got {count}")
+    if method == "kmeans":
+        rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
+        scale = pts.std(axis=0)
+        # k-means++ seeding is O(N K²) in scipy (minutes at K = 2000); random points,
+        # then Lloyd iterations, are O(N K) per iteration
+        cent, _ = kmeans2(pts / scale, count, iter=20, seed=rng, minit="points")
+        return cent * scale
+    if method == "grid":
+        lo, hi = pts.min(axis=0), pts.max(axis=0)
+        side = int(np.ceil(np.sqrt(count)))
+        gx, gy = np.meshgrid(np.linspace(lo[0], hi[0], side), np.linspace(lo[1], hi[1], side))
+        return np.column_stack([gx.ravel(), gy.ravel()])
+    raise ProblemError(f"method: expected 'kmeans' or 'grid', got {method!r}")
+
+
+def neighbours(centers: ArrayLike, *, method: Literal["delaunay", "radius"] = "delaunay",
+               radius: float | None = None) -> np.ndarray:
+    """Symmetric 0/1 adjacency c(x, y): Delaunay edges, or all pairs within ``radius``."""
+    c = as_finite_array("centers", centers, ndim=2)
+    k = c.shape[0]
+    adj = np.zeros((k, k), dtype=np.int8)
+    if method == "delaunay":
+        if k < 3:
+            adj[:] = 1
+        else:
+            tri = Delaunay(c)
+            for s in tri.simplices:
+                for a in range(3):
+                    for b in range(a + 1, 3):
+                        adj[s[a], s[b]] = adj[s[b], s[a]] = 1
+    elif method == "radius":
+        if radius is None or not radius > 0:
+            raise ProblemError(f"radius: need a positive radius, got {radius}")
+        for i, j in cKDTree(c).query_pairs(radius):
+            adj[i, j] = adj[j, i] = 1
+    else:
+        raise ProblemError(f"method: expected 'delaunay' or 'radius', got {method!r}")
+    np.fill_diagonal(adj, 0)
+    return adj
+
+
+def laplacian(centers: ArrayLike, adjacency: ArrayLike) -> sparse.csr_matrix:
+    """Q of (9): Q_ij = −a_ij, Q_ii = Σ_j a_ij, a_ij = c_ij/‖x_i − x_j‖² (sparse)."""
+    c = as_finite_array("centers", centers, ndim=2)
+    adj = sparse.coo_matrix(np.asarray(adjacency))
+    d2 = np.sum((c[adj.row] - c[adj.col]) ** 2, axis=1)
+    if np.any(d2 == 0):
+        raise ProblemError("centers: two neighbouring centres coincide")
+    a = sparse.csr_matrix((1.0 / d2, (adj.row, adj.col)), shape=adj.shape)
+    return (sparse.diags(np.asarray(a.sum(axis=1)).ravel()) - a).tocsr()
+
+
+def uncertainty_sets(data: FieldData) -> tuple[FloatArray, sparse.csr_matrix]:
+    """(Φ0 (2mK,), Φ1 sparse (2mK, 2K)) of (10), ordered cell by cell, radar by radar,
+    [range, azimuth]; azimuth differences wrapped. η_k = ξ̂_(k) − x_(k)."""
+    m, k = data.m, data.k
+    mean = data.xi.mean(axis=1)  # ξ̂_(k)
+    phi0 = np.empty((k, m, 2))
+    blocks = []
+    for i in range(m):
+        d = to_polar(data.xi[:, i], data.radars[i]) - to_polar(mean, data.radars[i])
+        phi0[:, i] = np.column_stack([d[:, 0], wrap_angle(d[:, 1])])
+    jac = np.stack([polar_jacobian(mean, data.radars[i]) for i in range(m)], axis=1)
+    for kk in range(k):
+        blocks.append(jac[kk].reshape(2 * m, 2))
+    return phi0.reshape(-1), sparse.block_diag(blocks, format="csr")
+
+
+@dataclass
+class Diagnostics:
+    """What :func:`build_field_data` used and dropped."""
+
+    dropped_plots: dict[str, int] = field(default_factory=dict)
+    samples_per_cell: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
+    objects_per_cell: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
+    dropped_cells: int = 0
+    fits: list[TrackFit] = field(default_factory=list, repr=False)
+
+
+def build_field_data(plots: PlotTable, radars: RadarSet, *, cells: int | ArrayLike = 50,
+                     cell_radius: float | None = None, knot_spacing: float = 20.0,
+                     sample_step: float = 5.0, neighbour_method: Literal[
+                         "delaunay", "radius"] = "delaunay", neighbour_radius: float | None = None,
+                     P: ArrayLike | None = None, exclude_radius: float = 20e3, seed: int = 0
+                     ) -> tuple[FieldData, Diagnostics]:
+    """Plots → :class:`FieldData`: track fits (3), cells, averaging (6)-(7), neighbours.
+
+    ``cells``: a number of k-means centres, or the centres (K, 2) themselves.
+    ``cell_radius``: samples farther than this from every centre belong to no cell
+    (default: 1.5 × the median nearest-neighbour distance of the centres). ``P`` defaults
+    to diag(1/σ_r², 1/σ_az²) of each radar (the F norm in noise units). Cells without an
+    object seen by all m radars are dropped with a warning (counted in the diagnostics).
+    Samples within ``exclude_radius`` of any radar are not used: the paper's neighbourhoods
+    B_i, where the field is not smooth and the linearisation of p_i fails.
+    """
+    fits, dropped = fit_tracks(plots, radars, knot_spacing=knot_spacing)
+    diag = Diagnostics(dropped_plots=dict(dropped.counts), fits=fits)
+    m = radars.m
+    by_obj: dict[int, list[list[TrackFit]]] = {}
+    for f in fits:
+        by_obj.setdefault(f.object, [[] for _ in range(m)])[f.radar].append(f)
+    # samples: instants where all m radars have a fit, with each radar's piece
+    samples: list[tuple[FloatArray, list[list[TrackFit]], np.ndarray]] = []
+    all_pos = []
+    for per_radar in by_obj.values():
+        if any(not p for p in per_radar):
+            continue
+        lo = max(min(f.span[0] for f in p) for p in per_radar)
+        hi = min(max(f.span[1] for f in p) for p in per_radar)
+        if hi <= lo:
+            continue
+        t = np.arange(lo, hi, sample_step)
+        pidx = np.full((m, t.size), -1)
+        for i, pieces in enumerate(per_radar):
+            pieces.sort(key=lambda f: f.span[0])
+            for j, f in enumerate(pieces):
+                pidx[i, (t >= f.span[0]) & (t <= f.span[1])] = j
+        ok = np.all(pidx >= 0, axis=0)
+        if not ok.any():
+            continue
+        t, pidx = t[ok], pidx[:, ok]
+        pos = np.zeros((t.size, 2))
+        for i, pieces in enumerate(per_radar):
+            for j in np.unique(pidx[i]):
+                sel = pidx[i] == j
+                pos[sel] += pieces[j].at(t[sel]) / m
+        samples.append((t, per_radar, pidx))
+        all_pos.append(pos)
+    if not samples:
+        raise ProblemError("plots: no object is seen by all m radars at the same time; "
+                           "no cell can be formed")
+    pos_all = np.vstack(all_pos)
+    if np.ndim(cells) == 0:
+        centers = place_centers(pos_all, int(cells), seed=seed)  # type: ignore[arg-type]
+    else:
+        centers = as_finite_array("cells", cells, ndim=2)
+    tree = cKDTree(centers)
+    if cell_radius is None:
+        nn = tree.query(centers, k=2)[0][:, 1]
+        cell_radius = 1.5 * float(np.median(nn))
+    k0 = centers.shape[0]
+    sum_xi = np.zeros((k0, m, 2))
+    sum_cov = np.zeros((k0, m, 2, 2))
+    n_obj = np.zeros(k0, dtype=int)
+    n_smp = np.zeros(k0, dtype=int)
+    for (t, per_radar, pidx), pos in zip(samples, all_pos, strict=True):
+        dist, cell = tree.query(pos)
+        near = np.min(np.linalg.norm(pos[:, None] - radars.sites[None], axis=2), axis=1)
+        inside = (dist <= cell_radius) & (near > exclude_radius)
+        for kk in np.unique(cell[inside]):
+            sel = inside & (cell == kk)
+            n_sel = int(sel.sum())
+            n_obj[kk] += 1
+            n_smp[kk] += n_sel
+            for i in range(m):
+                # average over the object's instants in the cell, piece by piece (6)-(7)
+                for j in np.unique(pidx[i, sel]):
+                    ts = t[sel & (pidx[i] == j)]
+                    w = ts.size / n_sel
+                    mean_p, cov_p = per_radar[i][j].mean_over(ts)
+                    sum_xi[kk, i] += w * mean_p
+                    sum_cov[kk, i] += w * w * cov_p
+    keep = n_obj > 0
+    diag.dropped_cells = int(np.sum(~keep))
+    if diag.dropped_cells:
+        warnings.warn(f"build_field_data: {diag.dropped_cells} of {k0} cells hold no object "
+                      "seen by all radars and were dropped", stacklevel=2)
+    if keep.sum() < 2:
+        raise ProblemError("cells: fewer than 2 cells hold objects seen by all radars")
+    centers = centers[keep]
+    xi = sum_xi[keep] / n_obj[keep, None, None]
+    xi_cov = sum_cov[keep] / (n_obj[keep, None, None, None] ** 2)
+    diag.samples_per_cell = n_smp[keep]
+    diag.objects_per_cell = n_obj[keep]
+    adj = neighbours(centers, method=neighbour_method, radius=neighbour_radius)
+    if P is None:
+        p = sparse.block_diag([np.diag([1 / radars.sigma_range[i] ** 2,
+                                        1 / radars.sigma_azimuth[i] ** 2])
+                               for i in range(m)]).toarray()
+    else:
+        p = np.asarray(P, dtype=float)
+    return FieldData(radars.sites, centers, xi, adj, p, xi_cov), diag

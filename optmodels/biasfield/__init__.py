@@ -4,6 +4,7 @@ and the smoothest field on them (part 2).
 Paper: ``shared/papers/001_d6b2428a10e192f8.txt``. Errata: ``docs/errata.md``.
 """
 
+from optmodels.biasfield.baseline import BaselineResult, azimuth_bias_baseline
 from optmodels.biasfield.cells import (
     FieldData,
     build_field_data,
@@ -25,11 +26,13 @@ from optmodels.biasfield.geometry import (
 from optmodels.biasfield.tracks import TrackFit, fit_tracks, hat_basis
 
 __all__ = [
+    "BaselineResult",
     "BiasField",
     "FieldData",
     "PlotTable",
     "RadarSet",
     "TrackFit",
+    "azimuth_bias_baseline",
     "bias_from_shift",
     "build_field_data",
     "fit_tracks",

@@ -150,20 +150,23 @@ def fit_tracks(plots: PlotTable, radars: RadarSet, *, knot_spacing: float = 20.0
     return fits, dropped
 
 
-def _fit_piece(radar: int, obj: int, rows: np.ndarray, t: FloatArray, z: FloatArray,
-               vinv: FloatArray, spacing: float, redundancy: int) -> TrackFit | None:
+def _knots(t: FloatArray, spacing: float) -> FloatArray:
+    """Multiples of ``spacing`` bracketing t, without knots whose hat support holds no
+    plot (the polyline then spans such a gap linearly)."""
     lo, hi = np.floor(t[0] / spacing), np.ceil(t[-1] / spacing)
     knots = np.arange(lo, max(hi, lo + 1) + 1) * spacing
-    # keep knots whose hat support holds plots (the end knots always do)
-    h = hat_basis(t, knots)
-    knots = knots[h.sum(axis=0) > 1e-9]
+    knots = knots[hat_basis(t, knots).sum(axis=0) > 1e-9]
     if knots.size < 2:
         knots = np.array([t[0], max(t[-1], t[0] + spacing)])
+    return knots
+
+
+def polyline_normal(t: FloatArray, knots: FloatArray, vinv: FloatArray, z: FloatArray
+                    ) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Normal equations of the polyline GLS: N = Σ_j (h_j h_jᵀ) ⊗ V_j⁻¹ (2K, 2K),
+    b = Σ_j h_j ⊗ V_j⁻¹z_j (θ row-major), and the hat values h (n, K). Each plot touches
+    the two knots of its interval, so N is block-tridiagonal; it is assembled by scatter."""
     k = knots.size
-    if 2 * t.size < 2 * k + redundancy:
-        return None
-    # normal equations N = Σ_j (h_j h_jᵀ) ⊗ V_j⁻¹, b = Σ_j h_j ⊗ V_j⁻¹ z_j (θ row-major);
-    # each plot touches the two knots of its interval, so N is block-tridiagonal
     idx = np.clip(np.searchsorted(knots, t, side="right") - 1, 0, k - 2)
     u = (t - knots[idx]) / (knots[idx + 1] - knots[idx])
     wts = np.column_stack([1.0 - u, u])
@@ -174,17 +177,28 @@ def _fit_piece(radar: int, obj: int, rows: np.ndarray, t: FloatArray, z: FloatAr
         np.add.at(bblk, idx + p_, wts[:, p_, None] * vz)
         for q_ in range(2):
             np.add.at(nblk, (idx + p_, idx + q_), (wts[:, p_] * wts[:, q_])[:, None, None] * vinv)
-    nmat = nblk.transpose(0, 2, 1, 3).reshape(2 * k, 2 * k)
-    b = bblk.reshape(-1)
-    h = hat_basis(t, knots)  # (n, K)
+    return nblk.transpose(0, 2, 1, 3).reshape(2 * k, 2 * k), bblk.reshape(-1), \
+        hat_basis(t, knots)
+
+
+def whiten(vinv: FloatArray, r: FloatArray) -> FloatArray:
+    """Lᵀr with V⁻¹ = LLᵀ: residuals in noise units (unit covariance if V is right)."""
+    return np.einsum("nab,na->nb", np.linalg.cholesky(vinv), r)
+
+
+def _fit_piece(radar: int, obj: int, rows: np.ndarray, t: FloatArray, z: FloatArray,
+               vinv: FloatArray, spacing: float, redundancy: int) -> TrackFit | None:
+    knots = _knots(t, spacing)
+    k = knots.size
+    if 2 * t.size < 2 * k + redundancy:
+        return None
+    nmat, b, h = polyline_normal(t, knots, vinv, z)
     try:
         chol = linalg.cho_factor(nmat)
     except linalg.LinAlgError:
         return None
     theta = linalg.cho_solve(chol, b).reshape(k, 2)
     cov = linalg.cho_solve(chol, np.eye(2 * k))
-    r = z - h @ theta
-    lchol = np.linalg.cholesky(vinv)  # V⁻¹ = L Lᵀ → whitened residual Lᵀ r
-    white = np.einsum("nab,na->nb", lchol, r)
+    white = whiten(vinv, z - h @ theta)
     return TrackFit(radar, obj, knots, theta, 0.5 * (cov + cov.T), rows,
                     float(np.sum(white**2)), int(2 * t.size - 2 * k), white)

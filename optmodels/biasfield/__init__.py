@@ -23,6 +23,7 @@ from optmodels.biasfield.geometry import (
     to_polar,
     wrap_angle,
 )
+from optmodels.biasfield.ingest import read_plots, read_radars, read_tracks
 from optmodels.biasfield.tracks import TrackFit, fit_tracks, hat_basis
 
 __all__ = [
@@ -42,6 +43,9 @@ __all__ = [
     "neighbours",
     "place_centers",
     "polar_jacobian",
+    "read_plots",
+    "read_radars",
+    "read_tracks",
     "shift_from_bias",
     "to_polar",
     "uncertainty_sets",

@@ -146,6 +146,10 @@ def test_track_fits_against_truth() -> None:
     assert abs(chi2 / dof - 1) < 5 / np.sqrt(dof / 2)
     w = np.concatenate([f.whitened for f in fits])
     assert np.all(np.abs(w.mean(axis=0)) < 5 / np.sqrt(len(w)))
+    chk = bf.residual_check(fits, sc.radars.m)
+    # per radar: Σχ²/dof = 1 within 5 se, and no rejection at 1e-4
+    assert np.all(np.abs(chk.chi2 / chk.dof - 1) < 5 / np.sqrt(chk.dof / 2))
+    assert np.all(chk.p_value > 1e-4)
     # mean_over is the exact average of the polyline and its covariance
     f = fits[0]
     tt = np.linspace(*f.span, 7)
@@ -182,6 +186,8 @@ def test_uncertainty_sets_contain_the_true_field(fields: str) -> None:
                        sigma_azimuth=1e-8, fields=fields, turn_rate=(0.0, 0.0))
     fd, diag = bf.build_field_data(sc.plots, sc.radars, cells=30)
     assert fd.xi.shape == (fd.k, 4, 2) and diag.objects_per_cell.min() >= 1
+    # every kept cell rests on plots of all four radars (≥ one per radar)
+    assert diag.plots_per_cell.min() >= 4 and diag.samples_per_cell.min() >= 1
     phi0, phi1 = bf.uncertainty_sets(fd)
     assert phi0.shape == (8 * fd.k,) and phi1.shape == (8 * fd.k, 2 * fd.k)
     f = np.concatenate([np.concatenate([sc.fields[i](fd.xi[k].mean(0)) for i in range(fd.m)])
@@ -218,6 +224,15 @@ def test_common_shift_in_a_cell_is_invisible() -> None:
     gap = np.abs(alt_v - f_v).reshape(fd.k, fd.m, 2)
     r_alt = np.abs(_set_residual(fd, alt_v))
     assert np.median(gap[..., 1]) > 2e-3  # a real difference: ~|c|/r rad (0.27°)
+    # in the shift space no linearisation is involved: both truths lie in S_ξ̂ up to the
+    # variation of s_i over the cell (the paper's ε), asserted at 5 % of max |s| (90 %)
+    s0, s1 = bf.uncertainty_sets(fd, space="cartesian")
+    s_true = np.concatenate([np.concatenate([bf.shift_from_bias(
+        fd.xi[k].mean(0), sc.radars.sites[i], sc.fields[i](fd.xi[k].mean(0)))
+        for i in range(fd.m)]) for k in range(fd.k)])
+    for cand in (s_true, s_true - np.tile(c, fd.m * fd.k)):
+        eta_s = np.linalg.lstsq(s1.toarray(), cand - s0, rcond=None)[0]
+        assert np.quantile(np.abs(cand - s0 - s1 @ eta_s), 0.9) < 0.05 * np.abs(s_true).max()
     ratio = r_alt[..., 1] / gap[..., 1]
     assert np.median(ratio) < 0.02 and np.quantile(ratio, 0.9) < 0.05
     # Q is a graph Laplacian: symmetric, rows sum to 0, positive semidefinite

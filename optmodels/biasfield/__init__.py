@@ -24,7 +24,13 @@ from optmodels.biasfield.geometry import (
     wrap_angle,
 )
 from optmodels.biasfield.ingest import read_plots, read_radars, read_tracks
-from optmodels.biasfield.tracks import TrackFit, fit_tracks, hat_basis
+from optmodels.biasfield.tracks import (
+    ResidualCheck,
+    TrackFit,
+    fit_tracks,
+    hat_basis,
+    residual_check,
+)
 
 __all__ = [
     "BaselineResult",
@@ -32,6 +38,7 @@ __all__ = [
     "FieldData",
     "PlotTable",
     "RadarSet",
+    "ResidualCheck",
     "TrackFit",
     "azimuth_bias_baseline",
     "bias_from_shift",
@@ -46,6 +53,7 @@ __all__ = [
     "read_plots",
     "read_radars",
     "read_tracks",
+    "residual_check",
     "shift_from_bias",
     "to_polar",
     "uncertainty_sets",

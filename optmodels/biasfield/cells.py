@@ -148,11 +148,20 @@ def laplacian(centers: ArrayLike, adjacency: ArrayLike) -> sparse.csr_matrix:
     return (sparse.diags(np.asarray(a.sum(axis=1)).ravel()) - a).tocsr()
 
 
-def uncertainty_sets(data: FieldData) -> tuple[FloatArray, sparse.csr_matrix]:
+def uncertainty_sets(data: FieldData, *, space: Literal["polar", "cartesian"] = "polar"
+                     ) -> tuple[FloatArray, sparse.csr_matrix]:
     """(Φ0 (2mK,), Φ1 sparse (2mK, 2K)) of (10), ordered cell by cell, radar by radar,
-    [range, azimuth]; azimuth differences wrapped. η_k = ξ̂_(k) − x_(k)."""
+    [range, azimuth]; azimuth differences wrapped. η_k = ξ̂_(k) − x_(k).
+
+    ``space="cartesian"``: the exact sets S_ξ̂ of section 3 in the shift space,
+    s = [ξ̂_i(k) − ξ̂_(k)]_i + [I; …; I] η_k (a common shift per cell is free)."""
     m, k = data.m, data.k
     mean = data.xi.mean(axis=1)  # ξ̂_(k)
+    if space == "cartesian":
+        s0 = (data.xi - mean[:, None, :]).reshape(-1)
+        return s0, sparse.block_diag([np.tile(np.eye(2), (m, 1))] * k, format="csr")
+    if space != "polar":
+        raise ProblemError(f"space: expected 'polar' or 'cartesian', got {space!r}")
     phi0 = np.empty((k, m, 2))
     blocks = []
     for i in range(m):
@@ -166,10 +175,13 @@ def uncertainty_sets(data: FieldData) -> tuple[FloatArray, sparse.csr_matrix]:
 
 @dataclass
 class Diagnostics:
-    """What :func:`build_field_data` used and dropped."""
+    """What :func:`build_field_data` used and dropped: plots dropped by reason, per kept
+    cell the averaging instants (``samples_per_cell``), the plots behind them (all radars)
+    and the objects, and the number of cells dropped for lack of data."""
 
     dropped_plots: dict[str, int] = field(default_factory=dict)
     samples_per_cell: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
+    plots_per_cell: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
     objects_per_cell: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
     dropped_cells: int = 0
     fits: list[TrackFit] = field(default_factory=list, repr=False)
@@ -241,6 +253,8 @@ def build_field_data(plots: PlotTable, radars: RadarSet, *, cells: int | ArrayLi
     sum_cov = np.zeros((k0, m, 2, 2))
     n_obj = np.zeros(k0, dtype=int)
     n_smp = np.zeros(k0, dtype=int)
+    n_plt = np.zeros(k0, dtype=int)
+    plot_times = plots.time
     for (t, per_radar, pidx), pos in zip(samples, all_pos, strict=True):
         dist, cell = tree.query(pos)
         near = np.min(np.linalg.norm(pos[:, None] - radars.sites[None], axis=2), axis=1)
@@ -255,6 +269,8 @@ def build_field_data(plots: PlotTable, radars: RadarSet, *, cells: int | ArrayLi
                 for j in np.unique(pidx[i, sel]):
                     ts = t[sel & (pidx[i] == j)]
                     w = ts.size / n_sel
+                    pt = plot_times[per_radar[i][j].rows]
+                    n_plt[kk] += int(np.sum((pt >= ts[0]) & (pt <= ts[-1] + sample_step)))
                     mean_p, cov_p = per_radar[i][j].mean_over(ts)
                     sum_xi[kk, i] += w * mean_p
                     sum_cov[kk, i] += w * w * cov_p
@@ -269,6 +285,7 @@ def build_field_data(plots: PlotTable, radars: RadarSet, *, cells: int | ArrayLi
     xi = sum_xi[keep] / n_obj[keep, None, None]
     xi_cov = sum_cov[keep] / (n_obj[keep, None, None, None] ** 2)
     diag.samples_per_cell = n_smp[keep]
+    diag.plots_per_cell = n_plt[keep]
     diag.objects_per_cell = n_obj[keep]
     adj = neighbours(centers, method=neighbour_method, radius=neighbour_radius)
     if P is None:

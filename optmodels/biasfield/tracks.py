@@ -28,7 +28,7 @@ from scipy import linalg
 from optmodels.biasfield.data import PlotTable, RadarSet
 from optmodels.core import FloatArray, ProblemError
 
-__all__ = ["TrackFit", "fit_tracks", "hat_basis"]
+__all__ = ["ResidualCheck", "TrackFit", "fit_tracks", "hat_basis", "residual_check"]
 
 
 def hat_basis(t: ArrayLike, knots: FloatArray) -> FloatArray:
@@ -202,3 +202,37 @@ def _fit_piece(radar: int, obj: int, rows: np.ndarray, t: FloatArray, z: FloatAr
     white = whiten(vinv, z - h @ theta)
     return TrackFit(radar, obj, knots, theta, 0.5 * (cov + cov.T), rows,
                     float(np.sum(white**2)), int(2 * t.size - 2 * k), white)
+
+
+@dataclass(frozen=True)
+class ResidualCheck:
+    """Per radar: whitened-residual ``mean`` (m, 2) and covariance ``cov`` (m, 2, 2),
+    ``chi2``, ``dof`` and the upper-tail ``p_value`` of Σχ² (the paper's check that the
+    track model (3) fits: mean ≈ 0 and covariance ≈ V_i, i.e. ≈ (1 − p/n)I whitened)."""
+
+    mean: FloatArray
+    cov: FloatArray
+    chi2: FloatArray
+    dof: np.ndarray
+    p_value: FloatArray
+
+
+def residual_check(fits: list[TrackFit], m: int) -> ResidualCheck:
+    """Pool the whitened residuals of ``fits`` per radar (0..m−1)."""
+    from scipy import stats
+
+    mean = np.full((m, 2), np.nan)
+    cov = np.full((m, 2, 2), np.nan)
+    chi2 = np.zeros(m)
+    dof = np.zeros(m, dtype=int)
+    for i in range(m):
+        mine = [f for f in fits if f.radar == i]
+        if not mine:
+            continue
+        w = np.concatenate([f.whitened for f in mine])
+        mean[i], cov[i] = w.mean(axis=0), np.cov(w.T)
+        chi2[i] = sum(f.chi2 for f in mine)
+        dof[i] = sum(f.dof for f in mine)
+    with np.errstate(invalid="ignore"):
+        p = np.where(dof > 0, stats.chi2.sf(chi2, np.maximum(dof, 1)), np.nan)
+    return ResidualCheck(mean, cov, chi2, dof, p)

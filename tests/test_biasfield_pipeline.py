@@ -372,3 +372,17 @@ def test_read_tracks_to_enu_and_simulate(tmp_path) -> None:
     plots, _, _ = simulate_plots(np.random.default_rng(1), sc.radars, got,
                                   [bf.BiasField.constant()] * sc.radars.m)
     assert len(plots) > 10 and set(np.unique(plots.object)) <= {0, 1, 2}
+
+
+@pytest.mark.parametrize("module", [
+    "optmodels.scenarios.radar_network", "optmodels.biasfield.ingest",
+    "optmodels.biasfield.cells", "optmodels.biasfield.baseline", "optmodels.scenarios"])
+def test_modules_import_first(module: str) -> None:
+    """Each module imports in a fresh interpreter as the first optmodels import (guards
+    against import cycles between biasfield and scenarios)."""
+    import subprocess
+    import sys
+
+    res = subprocess.run([sys.executable, "-c", f"import {module}"], capture_output=True,
+                         text=True, check=False)
+    assert res.returncode == 0, res.stderr

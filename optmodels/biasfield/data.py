@@ -10,7 +10,7 @@ from numpy.typing import ArrayLike
 from optmodels.biasfield.geometry import from_polar, polar_jacobian
 from optmodels.core import FloatArray, ProblemError, as_finite_array
 
-__all__ = ["PlotTable", "RadarSet"]
+__all__ = ["AircraftPaths", "PlotTable", "RadarSet"]
 
 
 @dataclass(frozen=True)
@@ -124,3 +124,20 @@ class PlotTable:
     def subset(self, mask: np.ndarray) -> PlotTable:
         return PlotTable(self.time[mask], self.radar[mask], self.range[mask],
                          self.azimuth[mask], self.object[mask])
+
+
+@dataclass(frozen=True)
+class AircraftPaths:
+    """Dense true paths: ``times`` (T,) shared grid (s) and ``positions`` (A, T, 2) (m);
+    ``active`` (A, T) where each aircraft is airborne."""
+
+    times: FloatArray
+    positions: FloatArray
+    active: np.ndarray
+
+    def at(self, a: int, t: ArrayLike) -> FloatArray:
+        """Position of aircraft ``a`` at times t (linear interpolation on the grid)."""
+        tt = np.asarray(t, dtype=float)
+        p = self.positions[a]
+        return np.stack([np.interp(tt, self.times, p[:, 0]), np.interp(tt, self.times, p[:, 1])],
+                        axis=-1)

@@ -20,10 +20,9 @@ from typing import Any
 import numpy as np
 import pymap3d
 
-from optmodels.biasfield.data import PlotTable, RadarSet
+from optmodels.biasfield.data import AircraftPaths, PlotTable, RadarSet
 from optmodels.core import FloatArray, ProblemError
 from optmodels.io import _read_rows
-from optmodels.scenarios.radar_network import AircraftPaths
 
 __all__ = ["GeodeticOrigin", "read_plots", "read_radars", "read_tracks"]
 

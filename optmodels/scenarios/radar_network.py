@@ -17,7 +17,7 @@ from typing import Literal
 import numpy as np
 from numpy.typing import ArrayLike
 
-from optmodels.biasfield.data import PlotTable, RadarSet
+from optmodels.biasfield.data import AircraftPaths, PlotTable, RadarSet
 from optmodels.biasfield.fields import BiasField
 from optmodels.biasfield.geometry import shift_from_bias, to_polar, wrap_angle
 from optmodels.core import FloatArray, ProblemError, as_finite_array
@@ -29,23 +29,6 @@ __all__ = ["AircraftPaths", "RadarNetworkScenario", "fly_paths", "radar_network"
 #: Default azimuth noise, 0.08° (rad).
 SIGMA_AZIMUTH = float(np.deg2rad(0.08))
 DEFAULT_SITES = np.array([[-90e3, -60e3], [100e3, -70e3], [80e3, 110e3], [-70e3, 90e3]])
-
-
-@dataclass(frozen=True)
-class AircraftPaths:
-    """Dense true paths: ``times`` (T,) shared grid (s) and ``positions`` (A, T, 2) (m);
-    ``active`` (A, T) where each aircraft is airborne."""
-
-    times: FloatArray
-    positions: FloatArray
-    active: np.ndarray
-
-    def at(self, a: int, t: ArrayLike) -> FloatArray:
-        """Position of aircraft ``a`` at times t (linear interpolation on the grid)."""
-        tt = np.asarray(t, dtype=float)
-        p = self.positions[a]
-        return np.stack([np.interp(tt, self.times, p[:, 0]), np.interp(tt, self.times, p[:, 1])],
-                        axis=-1)
 
 
 def fly_paths(rng: np.random.Generator, n_aircraft: int, duration: float, *,

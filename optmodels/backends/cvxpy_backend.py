@@ -78,7 +78,10 @@ def solve_problem(
             # CVXPY warns "Solution may be inaccurate"; the status below says so.
             warnings.filterwarnings("ignore", message="Solution may be inaccurate")
             problem.solve(solver=name, verbose=verbose, **options)
-    except cp.error.SolverError as exc:
+    except (cp.error.SolverError, ValueError, ArithmeticError) as exc:
+        # SolverError: CVXPY's own; ValueError/ArithmeticError: raised by a solver's Python
+        # interface on a problem it cannot take (e.g. SCS with no constraint rows). The
+        # inputs were validated before, so this is the solver's failure, reported as such.
         wall = time.perf_counter() - t0
         return BackendResult(
             status=Status.ERROR,

@@ -11,6 +11,7 @@ from optmodels.biasfield.cells import (
     laplacian,
     neighbours,
     place_centers,
+    synthetic_field_data,
     uncertainty_sets,
 )
 from optmodels.biasfield.data import PlotTable, RadarSet
@@ -24,6 +25,12 @@ from optmodels.biasfield.geometry import (
     wrap_angle,
 )
 from optmodels.biasfield.ingest import read_plots, read_radars, read_tracks
+from optmodels.biasfield.selection import (
+    FieldSolution,
+    closed_form,
+    solve,
+    solve_lipschitz,
+)
 from optmodels.biasfield.tracks import (
     ResidualCheck,
     TrackFit,
@@ -36,6 +43,7 @@ __all__ = [
     "BaselineResult",
     "BiasField",
     "FieldData",
+    "FieldSolution",
     "PlotTable",
     "RadarSet",
     "ResidualCheck",
@@ -43,6 +51,7 @@ __all__ = [
     "azimuth_bias_baseline",
     "bias_from_shift",
     "build_field_data",
+    "closed_form",
     "fit_tracks",
     "from_polar",
     "hat_basis",
@@ -55,6 +64,9 @@ __all__ = [
     "read_tracks",
     "residual_check",
     "shift_from_bias",
+    "solve",
+    "solve_lipschitz",
+    "synthetic_field_data",
     "to_polar",
     "uncertainty_sets",
     "wrap_angle",

@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import warnings
 from dataclasses import dataclass, field
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -37,7 +37,7 @@ from optmodels.biasfield.tracks import TrackFit, fit_tracks
 from optmodels.core import FloatArray, ProblemError, as_finite_array
 
 __all__ = ["FieldData", "build_field_data", "laplacian", "neighbours", "place_centers",
-           "uncertainty_sets"]
+           "synthetic_field_data", "uncertainty_sets"]
 
 
 @dataclass
@@ -45,7 +45,8 @@ class FieldData:
     """Input of the field selection (part 2).
 
     ``radars`` (m, 2) sites; ``centers`` (K, 2); ``xi`` (K, m, 2) averaged biased
-    positions ξ̂_i(k); ``adjacency`` (K, K) symmetric 0/1; ``P`` the weight of ‖·‖_F: (2, 2)
+    positions ξ̂_i(k); ``adjacency`` symmetric 0/1, given as a dense or sparse (K, K) matrix
+    or an (E, 2) edge list, stored sparse (CSR); ``P`` the weight of ‖·‖_F: (2, 2)
     for every radar, or (2m, 2m); ``xi_cov`` (K, m, 2, 2) covariances of ξ̂_i(k) if known.
     """
 
@@ -64,12 +65,7 @@ class FieldData:
         self.centers = as_finite_array("centers", self.centers, ndim=2)
         k = self.centers.shape[0]
         self.xi = as_finite_array("xi", self.xi, shape=(k, m, 2))
-        adj = np.asarray(self.adjacency)
-        if adj.shape != (k, k) or not np.array_equal(adj, adj.T):
-            raise ProblemError(f"adjacency: expected a symmetric ({k}, {k}) matrix")
-        if np.any(np.diag(adj)):
-            raise ProblemError("adjacency: a cell cannot neighbour itself (c(x, x) = 0)")
-        self.adjacency = (adj != 0).astype(np.int8)
+        self.adjacency = _as_adjacency(self.adjacency, k)
         p = as_finite_array("P", self.P, ndim=2)
         if p.shape not in ((2, 2), (2 * m, 2 * m)):
             raise ProblemError(f"P: expected (2, 2) or ({2 * m}, {2 * m}), got {p.shape}")
@@ -86,6 +82,32 @@ class FieldData:
     @property
     def k(self) -> int:
         return int(self.centers.shape[0])
+
+
+def _as_adjacency(adj: Any, k: int) -> sparse.csr_matrix:
+    """Dense/sparse (K, K) 0/1 matrix or (E, 2) edge list → symmetric CSR int8."""
+    if sparse.issparse(adj):
+        a = sparse.csr_matrix(adj)
+    else:
+        arr = np.asarray(adj)
+        if arr.ndim == 2 and arr.shape[1] == 2 and arr.shape != (k, k) and \
+                np.issubdtype(arr.dtype, np.integer):
+            if arr.size and (arr.min() < 0 or arr.max() >= k):
+                raise ProblemError(f"adjacency: edge list refers to cells outside 0..{k - 1}")
+            a = sparse.csr_matrix((np.ones(arr.shape[0]), (arr[:, 0], arr[:, 1])), shape=(k, k))
+            a = a + a.T
+        else:
+            a = sparse.csr_matrix(arr)
+    if a.shape != (k, k):
+        raise ProblemError(f"adjacency: expected ({k}, {k}) or an (E, 2) edge list, got "
+                           f"{a.shape}")
+    a = (a != 0).astype(np.int8).tocsr()
+    if (a != a.T).nnz:
+        raise ProblemError("adjacency: not symmetric (c(x, y) must equal c(y, x))")
+    if a.diagonal().any():
+        raise ProblemError("adjacency: a cell cannot neighbour itself (c(x, x) = 0)")
+    a.eliminate_zeros()
+    return a
 
 
 def place_centers(points: ArrayLike, count: int, *, method: Literal["kmeans", "grid"] = "kmeans",
@@ -112,35 +134,31 @@ def place_centers(points: ArrayLike, count: int, *, method: Literal["kmeans", "g
 
 
 def neighbours(centers: ArrayLike, *, method: Literal["delaunay", "radius"] = "delaunay",
-               radius: float | None = None) -> np.ndarray:
-    """Symmetric 0/1 adjacency c(x, y): Delaunay edges, or all pairs within ``radius``."""
+               radius: float | None = None) -> sparse.csr_matrix:
+    """Symmetric 0/1 adjacency c(x, y) (sparse): Delaunay edges, or all pairs within
+    ``radius``."""
     c = as_finite_array("centers", centers, ndim=2)
     k = c.shape[0]
-    adj = np.zeros((k, k), dtype=np.int8)
     if method == "delaunay":
         if k < 3:
-            adj[:] = 1
+            pairs = np.array([[0, 1]]) if k == 2 else np.zeros((0, 2), dtype=int)
         else:
-            tri = Delaunay(c)
-            for s in tri.simplices:
-                for a in range(3):
-                    for b in range(a + 1, 3):
-                        adj[s[a], s[b]] = adj[s[b], s[a]] = 1
+            simp = Delaunay(c).simplices
+            pairs = np.vstack([simp[:, [0, 1]], simp[:, [1, 2]], simp[:, [0, 2]]])
     elif method == "radius":
         if radius is None or not radius > 0:
             raise ProblemError(f"radius: need a positive radius, got {radius}")
-        for i, j in cKDTree(c).query_pairs(radius):
-            adj[i, j] = adj[j, i] = 1
+        pairs = cKDTree(c).query_pairs(radius, output_type="ndarray")
     else:
         raise ProblemError(f"method: expected 'delaunay' or 'radius', got {method!r}")
-    np.fill_diagonal(adj, 0)
-    return adj
+    return _as_adjacency(np.asarray(pairs, dtype=np.int64).reshape(-1, 2), k) if k != 2 \
+        else _as_adjacency(np.array([[0, 1], [1, 0]]), 2)
 
 
 def laplacian(centers: ArrayLike, adjacency: ArrayLike) -> sparse.csr_matrix:
     """Q of (9): Q_ij = −a_ij, Q_ii = Σ_j a_ij, a_ij = c_ij/‖x_i − x_j‖² (sparse)."""
     c = as_finite_array("centers", centers, ndim=2)
-    adj = sparse.coo_matrix(np.asarray(adjacency))
+    adj = sparse.coo_matrix(adjacency if sparse.issparse(adjacency) else np.asarray(adjacency))
     d2 = np.sum((c[adj.row] - c[adj.col]) ** 2, axis=1)
     if np.any(d2 == 0):
         raise ProblemError("centers: two neighbouring centres coincide")
@@ -295,3 +313,36 @@ def build_field_data(plots: PlotTable, radars: RadarSet, *, cells: int | ArrayLi
     else:
         p = np.asarray(P, dtype=float)
     return FieldData(radars.sites, centers, xi, adj, p, xi_cov), diag
+
+
+def synthetic_field_data(seed: int | np.random.Generator, *, cells: int = 200,
+                         sites: ArrayLike | None = None, fields: list[Any] | None = None,
+                         region: float = 150e3, noise: float = 0.0,
+                         exclude_radius: float = 20e3) -> tuple[FieldData, FloatArray]:
+    """FieldData without plots: K random cell centres (none within ``exclude_radius`` of a
+    radar), true positions x_k at the centres, ξ_i(k) = x_k + s_i(x_k) (+ Gaussian noise of
+    ``noise`` metres), Delaunay neighbours and P = diag(1/(50 m)², 1/(1 mrad)²) per radar.
+    ``fields`` defaults to smooth random fields. Returns the data and the true field
+    (K, m, 2) at the centres."""
+    from optmodels.biasfield.fields import BiasField
+    from optmodels.biasfield.geometry import shift_from_bias
+
+    rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
+    s = (np.array([[-90e3, -60e3], [100e3, -70e3], [80e3, 110e3], [-70e3, 90e3]])
+         if sites is None else as_finite_array("sites", sites, ndim=2))
+    m = s.shape[0]
+    flist = fields or [BiasField.smooth(rng, center=np.zeros(2), scale=region,
+                                        range_amplitude=150.0, azimuth_amplitude=np.deg2rad(0.3))
+                       for _ in range(m)]
+    pts: list[FloatArray] = []
+    while sum(len(p) for p in pts) < cells:
+        cand = rng.uniform(-region, region, (2 * cells, 2))
+        near = np.min(np.linalg.norm(cand[:, None] - s[None], axis=2), axis=1)
+        pts.append(cand[near > exclude_radius])
+    x = np.vstack(pts)[:cells]
+    truth = np.stack([flist[i](x) for i in range(m)], axis=1)
+    xi = np.stack([x + shift_from_bias(x, s[i], truth[:, i]) for i in range(m)], axis=1)
+    if noise > 0:
+        xi = xi + rng.normal(0.0, noise, xi.shape)
+    p = np.diag([1 / 50.0**2, 1 / 1e-3**2])
+    return FieldData(s, x, xi, neighbours(x), p), truth

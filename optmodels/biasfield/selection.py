@@ -1,0 +1,407 @@
+r"""The smoothest bias field on the uncertainty sets (paper 001, section 4, (8)-(11)).
+
+Original problem (9)-(10), optionally with the box (8):
+
+.. math::
+    \min_{\varphi,\eta}\ \varphi^T R\varphi,\quad R = Q\otimes P,\qquad
+    \text{s.t.}\ \varphi = \Phi^0 + \Phi^1\eta,\quad
+    |f^1_{j}| \le K^1,\ |f^2_{j}| \le K^2 .
+
+φ stacks f(x̌_k) = [f_1; …; f_m] (range, azimuth per radar) cell by cell; η_k ∈ R² per
+cell; Φ¹ is block-diagonal (see :mod:`optmodels.biasfield.cells`). The objective is written
+as ‖Gφ‖² with the sparse edge-difference factor G (one 2m-row block √a_ij (f_i − f_j)ᵀL
+per neighbour pair, P = LLᵀ), so GᵀG = Q ⊗ P and no dense 2mK × 2mK matrix exists.
+
+Closed form (11), with the sign fixed: η* = −(Φ¹ᵀRΦ¹)⁻¹Φ¹ᵀRΦ⁰ (the printed (11) has no
+minus sign; with (10)'s "+Φ¹η" the minimiser needs it). Solved by a sparse Cholesky-like
+factorisation (scipy ``splu``) of the 2K × 2K matrix.
+
+The Lipschitz class: the smallest L with ‖f(x_i) − f(x_j)‖_P ≤ L‖x_i − x_j‖ on neighbour
+pairs, an SOCP over the same sets (:func:`solve_lipschitz`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from typing import Any, Literal
+
+import cvxpy as cp
+import numpy as np
+from numpy.typing import ArrayLike
+from scipy import sparse
+from scipy.sparse import csgraph
+from scipy.sparse import linalg as splinalg
+
+from optmodels.backends.cvxpy_backend import solve_problem
+from optmodels.biasfield.cells import FieldData, laplacian, uncertainty_sets
+from optmodels.core import FloatArray, ProblemError, Solution, Status, timed
+
+__all__ = ["FieldSolution", "box_feasibility", "closed_form", "edge_factor", "kkt_residuals",
+           "objective", "solve", "solve_lipschitz"]
+
+#: Default solver options: tight enough for the 1e-8 agreement with the closed form.
+SOLVER_DEFAULTS: dict[str, dict[str, Any]] = {
+    # OSQP's polish refines its KKT solve 3 times by default: on these problems that left
+    # 1e-3 relative errors in φ while reporting "solved, polishing successful"; 50 reach 1e-15
+    "OSQP": {"eps_abs": 1e-9, "eps_rel": 1e-9, "polishing": True, "polish_refine_iter": 50,
+             "max_iter": 200_000},
+    "SCS": {"eps_abs": 1e-9, "eps_rel": 1e-9, "max_iters": 200_000},
+    # Clarabel's default gap 1e-8 leaves ~2e-6 relative errors in a box-bound φ of the
+    # reduced problem; 1e-10 brings them to ~3e-8 for one more iteration
+    "CLARABEL": {"tol_gap_abs": 1e-10, "tol_gap_rel": 1e-10, "tol_feas": 1e-10,
+                 "tol_ktratio": 1e-8},
+}
+
+
+@dataclass
+class FieldSolution(Solution):
+    """A field on the cells: ``field`` (K, m, 2) = [range, azimuth] bias per cell and radar,
+    ``phi`` (2mK,), ``eta`` (K, 2); ``active`` (K, m, 2) box constraints at their bound
+    (+1 upper, −1 lower, 0 free); ``duals`` (K, m, 2) their multipliers (≥ 0, signed like
+    ``active``); ``lipschitz`` L for :func:`solve_lipschitz`."""
+
+    field: FloatArray = dataclasses.field(default_factory=lambda: np.empty(0))
+    phi: FloatArray = dataclasses.field(default_factory=lambda: np.empty(0))
+    eta: FloatArray = dataclasses.field(default_factory=lambda: np.empty(0))
+    active: np.ndarray = dataclasses.field(default_factory=lambda: np.empty(0))
+    duals: FloatArray = dataclasses.field(default_factory=lambda: np.empty(0))
+    lipschitz: float | None = None
+
+
+# ----------------------------------------------------------------------------- pieces
+def _p_full(data: FieldData) -> FloatArray:
+    m = data.m
+    return np.kron(np.eye(m), data.P) if data.P.shape == (2, 2) else data.P
+
+
+def _edges(data: FieldData) -> tuple[np.ndarray, np.ndarray, FloatArray]:
+    upper = sparse.triu(data.adjacency, k=1).tocoo()
+    i, j = upper.row, upper.col
+    d2 = np.sum((data.centers[i] - data.centers[j]) ** 2, axis=1)
+    return i, j, d2
+
+
+def _check_graph(data: FieldData) -> tuple[int, np.ndarray]:
+    """Connected components of the neighbour graph; isolated cells are refused."""
+    n, labels = csgraph.connected_components(data.adjacency, directed=False)
+    sizes = np.bincount(labels)
+    lonely = np.flatnonzero(sizes[labels] == 1)
+    if lonely.size:
+        raise ProblemError(f"adjacency: cells {lonely[:10].tolist()} have no neighbour; their "
+                           "field is not determined by the smoothness criterion (add edges "
+                           "or drop them)")
+    return int(n), labels
+
+
+def edge_factor(data: FieldData) -> sparse.csr_matrix:
+    """Sparse G (2m·E × 2mK) with GᵀG = Q ⊗ P: for each neighbour pair (i < j) the rows
+    √a_ij Lᵀ(f(x̌_i) − f(x̌_j)), a_ij = 1/‖x̌_i − x̌_j‖², P = LLᵀ."""
+    m2 = 2 * data.m
+    lt = np.linalg.cholesky(_p_full(data)).T
+    i, j, d2 = _edges(data)
+    w = 1.0 / np.sqrt(d2)
+    e = np.arange(i.size)
+    diff = sparse.csr_matrix((np.concatenate([w, -w]), (np.concatenate([e, e]),
+                                                        np.concatenate([i, j]))),
+                             shape=(i.size, data.k))
+    g = sparse.kron(diff, sparse.csr_matrix(lt), format="csr")
+    assert g.shape == (i.size * m2, data.k * m2)
+    return g
+
+
+def objective(data: FieldData, phi: ArrayLike) -> float:
+    """J(φ) = φᵀ(Q ⊗ P)φ (9) (half the paper's sum over ordered pairs, see errata)."""
+    g = edge_factor(data)
+    v = g @ np.asarray(phi, dtype=float)
+    return float(v @ v)
+
+
+def _r_matrix(data: FieldData) -> sparse.csr_matrix:
+    return sparse.kron(laplacian(data.centers, data.adjacency), sparse.csr_matrix(_p_full(data)),
+                       format="csr")
+
+
+def _box(data: FieldData, box: tuple[float, float] | None) -> FloatArray | None:
+    if box is None:
+        return None
+    k1, k2 = (float(b) for b in box)
+    if not (k1 > 0 and k2 > 0) or not np.isfinite([k1, k2]).all():
+        raise ProblemError(f"box: need positive finite bounds (K1 m, K2 rad), got {box}")
+    return np.tile([k1, k2], data.m * data.k)
+
+
+def _finish(data: FieldData, phi: FloatArray, eta: FloatArray, common: dict[str, Any],
+            bound: FloatArray | None, duals: FloatArray | None,
+            lipschitz: float | None = None) -> FieldSolution:
+    k, m = data.k, data.m
+    phi0, phi1 = uncertainty_sets(data)
+    res: dict[str, float] = {}
+    scale = max(float(np.max(np.abs(phi0))), 1e-300)
+    res["set"] = float(np.max(np.abs(phi - phi0 - phi1 @ eta))) / scale
+    active = np.zeros(phi.size, dtype=np.int8)
+    if bound is not None:
+        res["box"] = float(np.max(np.maximum(np.abs(phi) - bound, 0.0) / bound))
+        tol = 1e-6 * bound
+        active[phi >= bound - tol] = 1
+        active[phi <= -bound + tol] = -1
+    dual = np.zeros(phi.size) if duals is None else duals
+    return FieldSolution(objective=objective(data, phi), residuals=res,
+                         field=phi.reshape(k, m, 2), phi=phi, eta=eta.reshape(k, 2),
+                         active=active.reshape(k, m, 2), duals=dual.reshape(k, m, 2),
+                         lipschitz=lipschitz, **common)
+
+
+# ----------------------------------------------------------------------------- closed form
+def closed_form(data: FieldData) -> FieldSolution:
+    """(11) with sparse linear algebra: η* = −(Φ¹ᵀRΦ¹)⁻¹Φ¹ᵀRΦ⁰, φ* = Φ⁰ + Φ¹η*."""
+    _check_graph(data)
+    with timed() as tm:
+        phi0, phi1 = uncertainty_sets(data)
+        r = _r_matrix(data)
+        a = (phi1.T @ r @ phi1).tocsc()
+        b = phi1.T @ (r @ phi0)
+        try:
+            eta = -splinalg.splu(a).solve(b)
+        except RuntimeError as exc:  # exactly singular
+            raise ProblemError(f"data: Φ1ᵀRΦ1 is singular ({exc}); the field is not "
+                               "identifiable on these cells") from None
+        phi = phi0 + phi1 @ eta
+    common = {"status": Status.OPTIMAL, "method": "closed_form", "solve_time": tm.elapsed,
+              "message": "(11), sign corrected"}
+    sol = _finish(data, phi, eta, common, None, None)
+    grad = phi1.T @ (r @ phi)
+    sol.residuals["stationarity"] = float(np.max(np.abs(grad))) / max(
+        float(np.max(np.abs(b))), 1e-300)
+    return sol
+
+
+# ----------------------------------------------------------------------------- QP
+def _scales(data: FieldData) -> FloatArray:
+    """Per-component scale of φ (range, azimuth) so that the solver sees O(1) numbers."""
+    phi0, _ = uncertainty_sets(data)
+    v = np.abs(phi0.reshape(-1, 2))
+    s = np.array([max(float(np.median(v[:, 0])), 1e-9), max(float(np.median(v[:, 1])), 1e-15)])
+    return np.tile(s, data.m * data.k)
+
+
+def solve(data: FieldData, *, box: tuple[float, float] | None = None,
+          solver: str = "CLARABEL", formulation: Literal["constrained", "reduced"] = "reduced",
+          **options: Any) -> FieldSolution:
+    """The QP (9)-(10) [+ box (8)] in CVXPY.
+
+    ``formulation="constrained"``: the original problem as written -- variables φ and η,
+    the equality φ = Φ⁰ + Φ¹η, objective φᵀRφ. ``"reduced"`` (default): φ eliminated,
+    min over η of (Φ⁰ + Φ¹η)ᵀR(Φ⁰ + Φ¹η) with the box on Φ⁰ + Φ¹η; the same minimiser,
+    a 2K-variable quadratic form instead of 2(m + 1)K variables and 2mK equalities (at
+    K = 10⁴ Clarabel needs ~2 s instead of ~45 s). R enters as a sparse ``psd_wrap``-ed
+    quadratic form (CVXPY's own PSD check of a large matrix takes minutes). φ is rescaled
+    per component (metres and radians differ by 10⁵) and η by the range scale before the
+    solver sees them.
+
+    Box infeasibility is diagnosed cell by cell (:func:`box_feasibility`) and reported as
+    INFEASIBLE with the offending cells in ``message``; a solver failure is never returned
+    as a field. KKT residuals are re-computed in NumPy (:func:`kkt_residuals`) and a
+    claimed optimum failing them is downgraded (:data:`VERIFY_TOL`, :data:`REJECT_TOL`).
+    """
+    _check_graph(data)
+    if formulation not in ("constrained", "reduced"):
+        raise ProblemError(f"formulation: expected 'constrained' or 'reduced', got "
+                           f"{formulation!r}")
+    bound = _box(data, box)
+    method = f"cvxpy:{solver}:{formulation}"
+    phi0, phi1 = uncertainty_sets(data)
+    if bound is not None:
+        bad = box_feasibility(data, box)  # type: ignore[arg-type]
+        if bad.size:
+            nan = np.full(phi0.size, np.nan)
+            return _finish(data, nan, np.full(phi1.shape[1], np.nan), {
+                "status": Status.INFEASIBLE, "method": method,
+                "message": f"box (8) misses the uncertainty sets of cells {bad[:20].tolist()}"
+                           f"{' …' if bad.size > 20 else ''} ({bad.size} cells): no field "
+                           "in these sets satisfies |f_range| ≤ K1, |f_azimuth| ≤ K2"},
+                bound, None)
+    sc = _scales(data)
+    with timed() as tb:
+        gs = (edge_factor(data) @ sparse.diags(sc)).tocsr()
+        rs = (gs.T @ gs).tocsc()
+        u0 = phi0 / sc
+        norm2 = max(float(np.sum((gs @ u0) ** 2)), 1e-300)
+        # η (metres) in units of the range scale: the constraint matrix is then O(1)
+        bmat = (sparse.diags(1 / sc) @ phi1 * sc[0]).tocsr()
+        eta = cp.Variable(phi1.shape[1])
+        if formulation == "constrained":
+            u: Any = cp.Variable(phi0.size)
+            cons = [u == u0 + bmat @ eta]
+            obj = cp.quad_form(u, cp.psd_wrap(rs / norm2))
+        else:
+            u = u0 + bmat @ eta
+            cons = []
+            obj = (cp.quad_form(eta, cp.psd_wrap((bmat.T @ rs @ bmat).tocsc() / norm2))
+                   + (2.0 / norm2) * (bmat.T @ (rs @ u0)) @ eta)
+        box_cons = [u <= bound / sc, -u <= bound / sc] if bound is not None else []
+        prob = cp.Problem(cp.Minimize(obj), cons + box_cons)
+    opts = {**SOLVER_DEFAULTS.get(solver.upper(), {}), **options}
+    res = solve_problem(prob, solver, **opts)
+    common = res.common()
+    common["build_time"] += tb.elapsed
+    common["method"] = method
+    if not res.status.ok or eta.value is None:
+        nan = np.full(phi0.size, np.nan)
+        return _finish(data, nan, np.full(phi1.shape[1], np.nan), common, bound, None)
+    et = np.asarray(eta.value) * sc[0]
+    phi = phi0 + phi1 @ et if formulation == "reduced" else np.asarray(u.value) * sc
+    duals = None
+    if bound is not None:
+        # multipliers of the box in φ units (the scaled objective is J / norm2)
+        up = np.asarray(box_cons[0].dual_value) / sc * norm2
+        lo = np.asarray(box_cons[1].dual_value) / sc * norm2
+        duals = up - lo
+    sol = _finish(data, phi, et, common, bound, duals)
+    sol.residuals.update(kkt_residuals(data, sol, box))
+    return _verify(sol)
+
+
+#: A claimed optimum whose NumPy-recomputed KKT residual (stationarity, box violation,
+#: complementarity) exceeds VERIFY_TOL is reported OPTIMAL_INACCURATE, above REJECT_TOL
+#: ERROR (without a field).
+VERIFY_TOL, REJECT_TOL = 1e-6, 1e-3
+
+
+def _verify(sol: FieldSolution) -> FieldSolution:
+    worst = max((v for k, v in sol.residuals.items() if k != "dual_sign"), default=0.0)
+    if not sol.status.ok:
+        return sol
+    if not np.isfinite(worst) or worst > REJECT_TOL:
+        sol.status = Status.ERROR
+        sol.message += f"; KKT residual {worst:.1e} fails the NumPy check"
+        sol.field = np.full_like(sol.field, np.nan)
+        sol.phi = np.full_like(sol.phi, np.nan)
+    elif worst > VERIFY_TOL and sol.status == Status.OPTIMAL:
+        sol.status = Status.OPTIMAL_INACCURATE
+        sol.message += f"; KKT residual {worst:.1e} (NumPy check)"
+    return sol
+
+
+def kkt_residuals(data: FieldData, sol: FieldSolution,
+                  box: tuple[float, float] | None = None) -> dict[str, float]:
+    """KKT of the QP in η: Φ¹ᵀ(2Rφ + μ) = 0 with μ the box multipliers (μ_j ≥ 0 at an upper
+    bound, ≤ 0 at a lower one, 0 inside), relative to the gradient at η = 0 (or ‖Φ¹ᵀμ‖ if
+    larger); complementarity
+    |μ_j|·slack_j relative to the objective."""
+    phi0, phi1 = uncertainty_sets(data)
+    r = _r_matrix(data)
+    mu = sol.duals.reshape(-1)
+    g1 = phi1.T @ (2 * (r @ sol.phi))
+    g2 = phi1.T @ mu
+    g0 = phi1.T @ (2 * (r @ phi0))  # the gradient at η = 0: the problem's own scale
+    scale = max(float(np.max(np.abs(g0))), float(np.max(np.abs(g2))), 1e-300)
+    out = {"stationarity": float(np.max(np.abs(g1 + g2))) / scale}
+    bound = _box(data, box)
+    if bound is not None:
+        slack = bound - np.abs(sol.phi)
+        # interior-point duals of inactive bounds are tiny but not exactly 0: allow 1e-7
+        tiny = 1e-7 * float(np.max(np.abs(mu))) + 1e-300
+        sign_ok = np.where(sol.phi > 0, mu >= -tiny, mu <= tiny)
+        out["dual_sign"] = float(np.mean(~sign_ok))
+        out["complementarity"] = float(np.max(np.abs(mu) * np.maximum(slack, 0))) / max(
+            sol.objective, 1e-300)
+    return out
+
+
+def box_feasibility(data: FieldData, box: tuple[float, float]) -> np.ndarray:
+    """Cells whose uncertainty set misses the box (8). The box and the sets are per cell,
+    so each cell is a 2-variable feasibility problem: the polygon ∩_j {η : |Φ⁰_j + a_jᵀη| ≤
+    b_j}. It is non-empty iff one of the pairwise intersections of its boundary lines is
+    feasible (a bounded polygon -- two radars at different sites give two independent
+    directions -- has its vertices among them); all cells are checked at once.
+    Returns the indices of the infeasible cells."""
+    bound = _box(data, box)
+    assert bound is not None
+    phi0, phi1 = uncertainty_sets(data)
+    k, m2 = data.k, 2 * data.m
+    a = _cell_blocks(phi1, k, m2)
+    p0 = phi0.reshape(k, m2) / bound.reshape(k, m2)
+    a = a / bound.reshape(k, m2)[..., None]
+    # lines: a_jᵀη = ±1 − p0_j  (2·m2 per cell)
+    lines_a = np.concatenate([a, a], axis=1)
+    lines_b = np.concatenate([1 - p0, -1 - p0], axis=1)
+    ii, jj = np.triu_indices(2 * m2, 1)
+    mat = np.stack([lines_a[:, ii], lines_a[:, jj]], axis=2)  # (k, pairs, 2, 2)
+    rhs = np.stack([lines_b[:, ii], lines_b[:, jj]], axis=2)
+    det = mat[..., 0, 0] * mat[..., 1, 1] - mat[..., 0, 1] * mat[..., 1, 0]
+    ok_det = np.abs(det) > 1e-12 * np.max(np.abs(mat), axis=(2, 3)) ** 2
+    det = np.where(ok_det, det, 1.0)
+    eta = np.stack([(rhs[..., 0] * mat[..., 1, 1] - mat[..., 0, 1] * rhs[..., 1]) / det,
+                    (mat[..., 0, 0] * rhs[..., 1] - rhs[..., 0] * mat[..., 1, 0]) / det], -1)
+    val = p0[:, None, :] + np.einsum("kjd,kpd->kpj", a, eta)  # (k, pairs, m2)
+    inside = np.all(np.abs(val) <= 1 + 1e-9, axis=2) & ok_det
+    return np.flatnonzero(~inside.any(axis=1))
+
+
+def _cell_blocks(phi1: sparse.csr_matrix, k: int, m2: int) -> FloatArray:
+    """The (m2, 2) diagonal blocks of the block-diagonal Φ¹, as (k, m2, 2)."""
+    coo = phi1.tocoo()
+    out = np.zeros((k, m2, 2))
+    out[coo.row // m2, coo.row % m2, coo.col % 2] = coo.data
+    return out
+
+
+# ----------------------------------------------------------------------------- Lipschitz
+def solve_lipschitz(data: FieldData, *, box: tuple[float, float] | None = None,
+                    solver: str = "CLARABEL", cap: float | None = None,
+                    **options: Any) -> FieldSolution:
+    """The field of smallest Lipschitz constant on neighbour pairs:
+
+    min L  s.t.  ‖Lᵀ_P(f(x̌_i) − f(x̌_j))‖ ≤ L‖x̌_i − x̌_j‖ (all neighbour pairs),
+                 φ = Φ⁰ + Φ¹η  [, box (8)],
+
+    an SOCP (Clarabel / SCS). ``cap`` adds L ≤ cap (used by the minimality test: a cap
+    below the optimum must make the problem infeasible). The solution's ``lipschitz`` is
+    re-computed from the returned field.
+    """
+    _check_graph(data)
+    bound = _box(data, box)
+    if bound is not None:
+        bad = box_feasibility(data, box)  # type: ignore[arg-type]
+        if bad.size:
+            raise ProblemError(f"box: the box misses the uncertainty sets of cells "
+                               f"{bad[:20].tolist()}")
+    phi0, phi1 = uncertainty_sets(data)
+    sc = _scales(data)
+    m2 = 2 * data.m
+    lt = np.linalg.cholesky(_p_full(data)).T
+    i, j, d2 = _edges(data)
+    dist = np.sqrt(d2)
+    with timed() as tb:
+        u = cp.Variable(phi0.size)
+        eta = cp.Variable(phi1.shape[1])
+        lip = cp.Variable(nonneg=True)
+        ref = float(np.median(dist))
+        cons = [u == phi0 / sc + (sparse.diags(1 / sc) @ phi1) @ eta]
+        # D_e u = Lᵀ(f_i − f_j) for every edge, in scaled units
+        e = np.arange(i.size)
+        diff = sparse.csr_matrix((np.concatenate([np.ones(i.size), -np.ones(i.size)]),
+                                  (np.concatenate([e, e]), np.concatenate([i, j]))),
+                                 shape=(i.size, data.k))
+        dmat = (sparse.kron(diff, sparse.csr_matrix(lt)) @ sparse.diags(sc)).tocsr()
+        lip0 = float(np.max(np.linalg.norm((dmat @ (phi0 / sc)).reshape(-1, m2), axis=1)
+                            / dist)) * ref or 1.0
+        dexpr = cp.reshape(dmat @ u, (i.size, m2), order="C") / lip0
+        cons.append(cp.SOC(cp.multiply(lip, dist / ref), dexpr, axis=1))
+        if bound is not None:
+            cons += [u <= bound / sc, -u <= bound / sc]
+        if cap is not None:
+            cons.append(lip <= cap * ref / lip0)
+        prob = cp.Problem(cp.Minimize(lip), cons)
+    res = solve_problem(prob, solver, **{**SOLVER_DEFAULTS.get(solver.upper(), {}), **options})
+    common = res.common()
+    common["build_time"] += tb.elapsed
+    if not res.status.ok or u.value is None:
+        nan = np.full(phi0.size, np.nan)
+        return _finish(data, nan, np.full(phi1.shape[1], np.nan), common, bound, None)
+    phi = np.asarray(u.value) * sc
+    jumps = np.linalg.norm((sparse.kron(diff, sparse.csr_matrix(lt)) @ phi).reshape(-1, m2),
+                           axis=1) / dist
+    return _finish(data, phi, np.asarray(eta.value), common, bound, None,
+                   lipschitz=float(np.max(jumps)))

@@ -179,3 +179,18 @@ def test_box_feasibility_matches_per_cell_lps() -> None:
             if r.status == 2:
                 slow.append(k)
         np.testing.assert_array_equal(sel.box_feasibility(fd, box), slow)
+
+
+def test_identifiability_report() -> None:
+    """Sparse condition number and per-cell spread against dense linear algebra."""
+    fd, _ = bf.synthetic_field_data(2, cells=200)
+    idf = sel.identifiability(fd, batch=64)
+    phi0, phi1 = bf.uncertainty_sets(fd)
+    h = (phi1.T @ sel._r_matrix(fd) @ phi1).toarray()
+    assert idf.condition == pytest.approx(np.linalg.cond(h), rel=1e-6)
+    hi = np.linalg.inv(h)
+    spread = np.sqrt([np.trace(hi[2 * k:2 * k + 2, 2 * k:2 * k + 2]) for k in range(fd.k)])
+    np.testing.assert_allclose(idf.spread, spread, rtol=1e-8)
+    # the worst-determined cells have fewer neighbours than the typical cell
+    deg = np.asarray(fd.adjacency.sum(axis=1)).ravel()
+    assert np.mean(deg[idf.worst[:10]]) < np.median(deg)

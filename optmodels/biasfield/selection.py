@@ -37,8 +37,8 @@ from optmodels.backends.cvxpy_backend import solve_problem
 from optmodels.biasfield.cells import FieldData, laplacian, uncertainty_sets
 from optmodels.core import FloatArray, ProblemError, Solution, Status, timed
 
-__all__ = ["FieldSolution", "box_feasibility", "closed_form", "edge_factor", "kkt_residuals",
-           "objective", "solve", "solve_lipschitz"]
+__all__ = ["FieldSolution", "Identifiability", "box_feasibility", "closed_form", "edge_factor",
+           "identifiability", "kkt_residuals", "objective", "solve", "solve_lipschitz"]
 
 #: Default solver options: tight enough for the 1e-8 agreement with the closed form.
 SOLVER_DEFAULTS: dict[str, dict[str, Any]] = {
@@ -405,3 +405,43 @@ def solve_lipschitz(data: FieldData, *, box: tuple[float, float] | None = None,
                            axis=1) / dist
     return _finish(data, phi, np.asarray(eta.value), common, bound, None,
                    lipschitz=float(np.max(jumps)))
+
+
+@dataclass(frozen=True)
+class Identifiability:
+    """How well the smoothness criterion pins the field down.
+
+    ``condition``: condition number of H = Φ¹ᵀRΦ¹ (2K × 2K); ``spread`` (K,):
+    √tr of the 2 × 2 diagonal blocks of H⁻¹ per cell (metres per unit √J: how far η_k,
+    the per-cell common shift, can move for a given rise of J); ``worst``: cells by
+    decreasing spread. What no method can recover: the common Cartesian shift in each cell
+    (η_k itself) is fixed only by the smoothness prior, never by the data.
+    """
+
+    condition: float
+    spread: FloatArray
+    worst: np.ndarray
+
+
+def identifiability(data: FieldData, *, batch: int = 512) -> Identifiability:
+    """Condition of Φ¹ᵀRΦ¹ (sparse eigenvalues) and the per-cell spread from the diagonal
+    blocks of its inverse (one sparse factorisation, solved in batches of columns)."""
+    _check_graph(data)
+    _, phi1 = uncertainty_sets(data)
+    h = (phi1.T @ _r_matrix(data) @ phi1).tocsc()
+    lu = splinalg.splu(h)
+    n = h.shape[0]
+    diag = np.empty((n // 2, 2, 2))
+    for start in range(0, n, batch):
+        cols = np.arange(start, min(start + batch, n))
+        rhs = np.zeros((n, cols.size))
+        rhs[cols, np.arange(cols.size)] = 1.0
+        x = lu.solve(rhs)
+        for c_i, c in enumerate(cols):
+            diag[c // 2, :, c % 2] = x[2 * (c // 2):2 * (c // 2) + 2, c_i]
+    spread = np.sqrt(np.maximum(np.trace(diag, axis1=1, axis2=2), 0.0))
+    lam_max = float(splinalg.eigsh(h, k=1, which="LA", return_eigenvectors=False)[0])
+    inv_max = float(splinalg.eigsh(splinalg.LinearOperator(h.shape, matvec=lu.solve,
+                                                           dtype=float),
+                                   k=1, which="LA", return_eigenvectors=False)[0])
+    return Identifiability(lam_max * inv_max, spread, np.argsort(-spread))

@@ -185,7 +185,7 @@ def test_identifiability_report() -> None:
     """Sparse condition number and per-cell spread against dense linear algebra."""
     fd, _ = bf.synthetic_field_data(2, cells=200)
     idf = sel.identifiability(fd, batch=64)
-    phi0, phi1 = bf.uncertainty_sets(fd)
+    _, phi1 = bf.uncertainty_sets(fd)
     h = (phi1.T @ sel._r_matrix(fd) @ phi1).toarray()
     assert idf.condition == pytest.approx(np.linalg.cond(h), rel=1e-6)
     hi = np.linalg.inv(h)

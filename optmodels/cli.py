@@ -299,6 +299,12 @@ def _run_compare(out: Path, problems: Sequence[str], sizes: list[int], runs: int
             bench = cmp_fusion.benchmark(repeats=repeats, seed=seed)
             md.append(report.write_fusion(out, rows, bench))
             res["fusion"] = {"results": rows, "benchmark": bench}
+        elif p == "biasfield":
+            from solvers_cmp import biasfield as cmp_bf
+
+            rows = cmp_bf.rows(seed=seed, repeats=1, progress=progress)
+            md.append(report.write_biasfield(out, rows))
+            res["biasfield"] = {"results": rows}
         else:
             raise ProblemError(f"--problems: unknown problem {p!r} (known: {PROBLEMS})")
     md.append(f"\nMachine: {env['cpu']}, {env['cores']} cores; Python {env['python']}.\n")

@@ -147,3 +147,34 @@ def write_fusion(out: Path, rows: list[dict[str, Any]],
                + markdown_table(bench, ["case", "median_s", "min_s"],
                                 {"median_s": ".4f", "min_s": ".4f"}))
     return md + "\n"
+
+
+def write_biasfield(out: Path, rows: list[dict[str, Any]],
+                    bench: list[dict[str, Any]] | None = None) -> str:
+    """Write ``biasfield_results.csv`` (and ``biasfield_benchmark.csv``) and return the
+    Markdown section."""
+    out.mkdir(parents=True, exist_ok=True)
+    write_csv(out / "biasfield_results.csv", rows)
+    cols = ["case", "size", "formulation", "solver", "status", "solution_error",
+            "objective_gap", "max_violation", "active_bounds", "build_time", "solve_time",
+            "iterations"]
+    fmt = {"solution_error": ".1e", "objective_gap": ".1e", "max_violation": ".1e",
+           "build_time": ".3f", "solve_time": ".3f"}
+    md = ("## Smoothest radar bias field (paper 001, section 4)\n\n"
+          "Synthetic uncertainty sets (4 radars, smooth fields), size = K cells. The sparse "
+          "closed form (11) (sign corrected) against CVXPY on the original problem (φ, η and "
+          "φ = Φ⁰ + Φ¹η: 'constrained') and with φ eliminated ('reduced'), without a box "
+          "and with the box (8) at 99-99.9 % of the unconstrained field's largest |f| (binding "
+          "in a few cells). Error: per component (range, azimuth) relative to its largest "
+          "value, against the closed form (no box) or the lowest-J solve (box):\n\n"
+          + markdown_table(rows, cols, fmt))
+    md += ("\nSCS cannot take the reduced problem without any constraint row (reported as "
+           "an error, never as a field). OSQP needs many iterations once the box binds; "
+           "Clarabel on the reduced form is the fastest generic route at every size.\n")
+    if bench:
+        write_csv(out / "biasfield_benchmark.csv", bench)
+        md += ("\nBenchmark (wall seconds; targets at K = 10⁴, m = 4: closed form ≤ 1 s and "
+               "≥ 20× a dense solve, QP with box ≤ 30 s):\n\n"
+               + markdown_table(bench, ["case", "cells", "median_s", "min_s"],
+                                {"median_s": ".3f", "min_s": ".3f"}))
+    return md + "\n"

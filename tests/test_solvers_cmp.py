@@ -72,3 +72,20 @@ def test_fusion_comparison_small(tmp_path: Path) -> None:
     md = report.write_fusion(tmp_path, rows)
     assert "| correlated | 5 | min-trace W | CLARABEL | optimal |" in md
     assert len(list(csv.DictReader((tmp_path / "fusion_results.csv").open()))) == len(rows)
+
+
+def test_biasfield_comparison_small(tmp_path: Path) -> None:
+    from solvers_cmp import biasfield as cmp_bf
+
+    rows = cmp_bf.rows((60,), repeats=1, solvers=("CLARABEL", "SCS"))
+    cases = {(r["case"], r["formulation"], r["solver"]): r for r in rows}
+    assert cases[("no box", "closed_form", "numpy")]["status"] == "optimal"
+    assert cases[("no box", "reduced", "SCS")]["status"] == "error"  # no constraint rows
+    for r in rows:
+        if r["status"] == "optimal":
+            # no box: 1e-8 against the closed form; box: solvers agree to 1e-6
+            assert r["solution_error"] < (1e-8 if r["case"] == "no box" else 1e-6), r
+            assert r["max_violation"] < 1e-6
+    assert any(r["active_bounds"] > 0 for r in rows if r["case"] != "no box")
+    md = report.write_biasfield(tmp_path, rows)
+    assert "| box (8) binding | 60 | reduced | CLARABEL | optimal |" in md

@@ -18,7 +18,7 @@ from optmodels import fusion, plane, trajectories
 from optmodels.core import OptModelsError, ProblemError
 from optmodels.io import json_default
 
-PROBLEMS = ("plane", "trajectories", "fusion")
+PROBLEMS = ("plane", "trajectories", "fusion", "biasfield")
 
 
 def _parse_cov(text: str) -> np.ndarray:
@@ -223,8 +223,97 @@ def _print_fusion_weights(res: dict[str, Any]) -> None:
     print(f"n1 = {res['n1']}, n2 = {res['n2']}, mean = {res['mean']}; {res['note']}")
 
 
+def _biasfield_build(args: argparse.Namespace) -> dict[str, Any]:
+    import warnings
+
+    from optmodels import biasfield as bf
+
+    radars, origin = bf.read_radars(args.radars)
+    plots, dropped = bf.read_plots(args.plots, radars, azimuth_unit=args.azimuth_unit,
+                                   drop_out_of_range=args.drop_out_of_range)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        fd, diag = bf.build_field_data(plots, radars, cells=args.cells,
+                                       knot_spacing=args.knot_spacing)
+    fd.save(args.out)
+    chk = bf.residual_check(diag.fits, radars.m)
+    return {"out": str(args.out), "cells": fd.k, "radars": list(radars.names),
+            "plots": len(plots), "dropped_plots": {**dropped, **diag.dropped_plots},
+            "dropped_cells": diag.dropped_cells, "warnings": [str(w.message) for w in caught],
+            "track_chi2_per_dof": (chk.chi2 / np.maximum(chk.dof, 1)).tolist(),
+            "origin": origin}
+
+
+def _print_biasfield_build(res: dict[str, Any]) -> None:
+    print(f"wrote {res['out']}: {res['cells']} cells, radars {', '.join(res['radars'])}, "
+          f"{res['plots']} plots; dropped plots {res['dropped_plots'] or 'none'}, "
+          f"dropped cells {res['dropped_cells']}")
+    print("track model χ²/dof per radar: "
+          + ", ".join(f"{v:.3f}" for v in res["track_chi2_per_dof"]))
+
+
+def _biasfield_solve(args: argparse.Namespace) -> dict[str, Any]:
+    from optmodels import biasfield as bf
+    from optmodels import plots as plt_
+
+    fd = bf.FieldData.load(args.file)
+    box = None
+    if args.box:
+        try:
+            k1, k2 = (float(v) for v in args.box.split(","))
+        except ValueError as exc:
+            raise ProblemError(f"--box: expected K1,K2 (metres, degrees), got {args.box!r}"
+                               ) from exc
+        box = (k1, float(np.deg2rad(k2)))
+    if args.lipschitz:
+        sol = bf.solve_lipschitz(fd, box=box, solver=args.solver)
+    elif args.solver == "closed-form":
+        if box is not None:
+            raise ProblemError("--box: the closed form (11) has no box; choose a --solver")
+        sol = bf.closed_form(fd)
+    else:
+        sol = bf.solve(fd, box=box, solver=args.solver, formulation=args.formulation)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    res: dict[str, Any] = {"status": sol.status.value, "method": sol.method,
+                           "message": sol.message, "objective": sol.objective,
+                           "lipschitz": sol.lipschitz, "residuals": sol.residuals,
+                           "cells": fd.k, "out": str(out)}
+    if sol.status.ok:
+        np.savez_compressed(out / "field.npz", field=sol.field, eta=sol.eta,
+                            centers=fd.centers, radars=fd.radars, active=sol.active)
+        with (out / "field.csv").open("w") as fh:
+            fh.write("cell,x,y,radar,range_bias_m,azimuth_bias_deg,active_range,"
+                     "active_azimuth\n")
+            for k in range(fd.k):
+                for i in range(fd.m):
+                    f = sol.field[k, i]
+                    fh.write(f"{k},{fd.centers[k, 0]!r},{fd.centers[k, 1]!r},{i},"
+                             f"{float(f[0])!r},{float(np.rad2deg(f[1]))!r},"
+                             f"{int(sol.active[k, i, 0])},{int(sol.active[k, i, 1])}\n")
+        for comp, name in ((1, "azimuth"), (0, "range")):
+            plt_.bias_maps(out / f"{name}_map.png", fd.centers, {"estimate": sol.field},
+                           fd.radars, component=comp)
+        res["active_bounds"] = int(np.sum(sol.active != 0))
+        res["files"] = ["field.csv", "field.npz", "azimuth_map.png", "range_map.png"]
+    return res
+
+
+def _print_biasfield_solve(res: dict[str, Any]) -> None:
+    print(f"{res['method']}: {res['status']} ({res['message']})")
+    if res["status"] in ("optimal", "optimal_inaccurate"):
+        lip = f", L = {res['lipschitz']:.4g}" if res["lipschitz"] is not None else ""
+        print(f"J = {res['objective']:.6g}{lip}, {res.get('active_bounds', 0)} active bounds; "
+              f"wrote {', '.join(res['files'])} to {res['out']}")
+
+
 def _demo(args: argparse.Namespace) -> dict[str, Any]:
-    from optmodels.demo import run_fusion_demo, run_plane_demo, run_trajectories_demo
+    from optmodels.demo import (
+        run_biasfield_demo,
+        run_fusion_demo,
+        run_plane_demo,
+        run_trajectories_demo,
+    )
 
     out = Path(args.out)
     problems = [args.problem] if args.problem else list(PROBLEMS)
@@ -252,6 +341,12 @@ def _demo(args: argparse.Namespace) -> dict[str, Any]:
             result["problems"]["fusion"] = summ
             sections.append("- [Fusion of two estimates (paper 003)](fusion/report.md): "
                             "accuracy of Ŵ vs n, the two-site system with the joint ML")
+        elif p == "biasfield":
+            summ = run_biasfield_demo(out / "biasfield", seed=args.seed)
+            result["problems"]["biasfield"] = summ
+            sections.append("- [Radar bias fields (paper 001)](biasfield/report.md): plots to "
+                            "uncertainty sets, the smoothest field with and without the box, "
+                            "fig. 4 maps, the parametric baseline")
     if not args.problem and not args.no_compare:
         cmp_res = _run_compare(out / "compare", PROBLEMS, args.sizes, args.mc_runs,
                                args.repeats, args.seed, progress=not args.json)
@@ -416,6 +511,31 @@ def build_parser() -> argparse.ArgumentParser:
                                    "block to (10); needs n1 = n2)")
     fw.add_argument("--json", action="store_true")
     fw.set_defaults(func=_fusion_weights, printer=_print_fusion_weights)
+
+    bfp = sub.add_parser("biasfield", help="radar bias fields (paper 001)")
+    bsub = bfp.add_subparsers(dest="verb", required=True)
+    bb = bsub.add_parser("build", help="plots -> FieldData .npz (track fits, cells, averaging)")
+    bb.add_argument("plots", type=Path, help="CSV/Parquet: time,radar,range,azimuth[,object]")
+    bb.add_argument("--radars", type=Path, required=True,
+                    help="CSV: name,x,y|lat,lon[,alt],sigma_range,sigma_azimuth(deg),max_range")
+    bb.add_argument("--cells", type=int, default=200, help="number of k-means cells")
+    bb.add_argument("--knot-spacing", type=float, default=20.0, help="polyline knots, s")
+    bb.add_argument("--azimuth-unit", choices=("deg", "rad"), default="deg")
+    bb.add_argument("--drop-out-of-range", action="store_true")
+    bb.add_argument("--out", type=Path, default=Path("fielddata.npz"))
+    bb.add_argument("--json", action="store_true")
+    bb.set_defaults(func=_biasfield_build, printer=_print_biasfield_build)
+    bs = bsub.add_parser("solve", help="the smoothest field on a FieldData .npz")
+    bs.add_argument("file", type=Path)
+    bs.add_argument("--box", help="K1,K2: |range bias| ≤ K1 m, |azimuth bias| ≤ K2 deg (8)")
+    bs.add_argument("--solver", default="CLARABEL",
+                    help="closed-form, or a CVXPY solver (CLARABEL, OSQP, SCS, ...)")
+    bs.add_argument("--formulation", choices=("reduced", "constrained"), default="reduced")
+    bs.add_argument("--lipschitz", action="store_true",
+                    help="smallest Lipschitz constant instead of the quadratic criterion")
+    bs.add_argument("--out", default="biasfield_out", help="folder for field.csv/.npz, maps")
+    bs.add_argument("--json", action="store_true")
+    bs.set_defaults(func=_biasfield_solve, printer=_print_biasfield_solve)
     return ap
 
 

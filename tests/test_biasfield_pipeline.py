@@ -168,6 +168,8 @@ def test_track_fit_drops_short_tracks() -> None:
     fits, dropped = fit_tracks(plots, radars, knot_spacing=20.0)
     assert dropped.counts == {"no object id": 1, "too few plots for the polyline": 2}
     assert len(fits) == 1 and fits[0].object == 1 and fits[0].rows.size == 5
+    # the end knots are the first and last plots: a fit is never evaluated beyond its data
+    assert fits[0].span == (100.0, 116.0)
 
 
 def _set_residual(fd: bf.FieldData, f: np.ndarray) -> np.ndarray:

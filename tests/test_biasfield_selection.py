@@ -194,3 +194,21 @@ def test_identifiability_report() -> None:
     # the worst-determined cells have fewer neighbours than the typical cell
     deg = np.asarray(fd.adjacency.sum(axis=1)).ravel()
     assert np.mean(deg[idf.worst[:10]]) < np.median(deg)
+
+
+def test_disconnected_graph_is_solved_per_component() -> None:
+    """Two separate groups of cells: the joint solve equals solving each group alone."""
+    fd, _ = bf.synthetic_field_data(4, cells=80)
+    left = fd.centers[:, 0] < 0
+    adj = fd.adjacency.toarray()
+    adj[np.ix_(left, ~left)] = 0
+    adj[np.ix_(~left, left)] = 0
+    split = bf.FieldData(fd.radars, fd.centers, fd.xi, adj, fd.P)
+    both = sel.closed_form(split)
+    assert both.info["components"] >= 2
+    for part in (left, ~left):
+        sub = bf.FieldData(fd.radars, fd.centers[part], fd.xi[part], adj[np.ix_(part, part)],
+                           fd.P)
+        alone = sel.closed_form(sub)
+        np.testing.assert_allclose(both.field[part], alone.field, rtol=1e-8,
+                                   atol=1e-10 * np.abs(alone.field).max())

@@ -249,3 +249,69 @@ def test_fusion_weights_shared_snapshots(capsys) -> None:
     assert cli.main(["fusion", "weights", "--s1", json.dumps(s1), "--s2", json.dumps(s2),
                      "--s12", "[[5,0],[0,5]]", "--n", "40"]) == 2
     assert "--s12:" in capsys.readouterr().err
+
+
+def test_biasfield_build_and_solve(tmp_path: Path, capsys) -> None:
+    """Plots and radars as CSV → FieldData .npz → the field, equal to the library's."""
+    import warnings
+
+    from optmodels import biasfield as bf
+    from optmodels.scenarios.radar_network import radar_network
+
+    sc = radar_network(3, n_aircraft=30, duration=1200.0, fields="smooth")
+    r = sc.radars
+    rows = ["name,x,y,sigma_range,sigma_azimuth,max_range"] + [
+        ",".join([r.names[i], *(repr(float(v)) for v in (
+            r.sites[i, 0], r.sites[i, 1], r.sigma_range[i], np.rad2deg(r.sigma_azimuth[i]),
+            r.max_range[i]))]) for i in range(r.m)]
+    (tmp_path / "radars.csv").write_text("\n".join(rows) + "\n")
+    p = sc.plots
+    lines = ["time,radar,range,azimuth,object"] + [
+        f"{float(t)!r},{r.names[k]},{float(g)!r},{float(np.rad2deg(a))!r},{o}"
+        for t, k, g, a, o in zip(p.time, p.radar, p.range, p.azimuth, p.object, strict=True)]
+    (tmp_path / "plots.csv").write_text("\n".join(lines) + "\n")
+    npz = tmp_path / "fd.npz"
+    res = run_json(capsys, ["biasfield", "build", str(tmp_path / "plots.csv"), "--radars",
+                            str(tmp_path / "radars.csv"), "--cells", "40", "--out", str(npz)])
+    radars, _ = bf.read_radars(tmp_path / "radars.csv")
+    plots, _ = bf.read_plots(tmp_path / "plots.csv", radars)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        ref, _ = bf.build_field_data(plots, radars, cells=40)
+    fd = bf.FieldData.load(npz)
+    assert res["cells"] == fd.k == ref.k
+    # the command is the library on the same input (k-means with the same seed)
+    np.testing.assert_array_equal(fd.xi, ref.xi)
+    assert (fd.adjacency != ref.adjacency).nnz == 0
+    out = tmp_path / "out"
+    res = run_json(capsys, ["biasfield", "solve", str(npz), "--out", str(out)])
+    cf = bf.closed_form(fd)
+    got = np.load(out / "field.npz")["field"]
+    # Clarabel (tightened) vs the closed form: 1e-8 relative per component
+    assert np.all(np.abs(got - cf.field).max(axis=(0, 1))
+                  < 1e-8 * np.abs(cf.field).max(axis=(0, 1)))
+    assert (out / "azimuth_map.png").is_file() and (out / "field.csv").is_file()
+    big = np.abs(cf.field).max(axis=(0, 1))
+    res = run_json(capsys, ["biasfield", "solve", str(npz), "--out", str(out), "--box",
+                            f"{1e-3 * big[0]},{np.rad2deg(1e-3 * big[1])}"])
+    assert res["status"] == "infeasible" and "cells" in res["message"]
+    res = run_json(capsys, ["biasfield", "solve", str(npz), "--out", str(out), "--lipschitz"])
+    assert res["status"] == "optimal" and res["lipschitz"] > 0
+    assert cli.main(["biasfield", "solve", str(npz), "--box", "1"]) == 2
+    assert "--box" in capsys.readouterr().err
+    assert cli.main(["biasfield", "solve", str(tmp_path / "missing.npz")]) == 2
+
+
+def test_demo_biasfield_writes_report(tmp_path: Path, capsys) -> None:
+    res = run_json(capsys, ["demo", "biasfield", "--out", str(tmp_path)])
+    for f in ("azimuth_maps.png", "range_maps.png", "report.md", "summary.json"):
+        assert (tmp_path / "biasfield" / f).is_file()
+    summ = res["problems"]["biasfield"]
+    m = {r["method"]: r for r in summ["methods"]}
+    # generic QP = closed form (Clarabel, 1e-8 relative on fields of ~100 m)
+    assert m["QP reduced (Clarabel)"]["max |Δ vs (11)|, m"] < 1e-5
+    box = next(r for k, r in m.items() if k.startswith("QP + box"))
+    assert box["active bounds"] > 0 and box["J / J(11)"] > 1
+    assert m["Lipschitz SOCP"]["status"] == "optimal"
+    base = {r["field"]: r for r in summ["baseline"]}
+    assert base["constant"]["p-value"] > 1e-3 and base["smooth"]["p-value"] < 1e-6

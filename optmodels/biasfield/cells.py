@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import warnings
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any, Literal
 
 import numpy as np
@@ -82,6 +83,34 @@ class FieldData:
     @property
     def k(self) -> int:
         return int(self.centers.shape[0])
+
+    def save(self, path: str | Path) -> None:
+        """Write an ``.npz`` (radars, centers, xi, edges (E, 2), P[, xi_cov])."""
+        upper = sparse.triu(self.adjacency, k=1).tocoo()
+        arrays = {"radars": self.radars, "centers": self.centers, "xi": self.xi,
+                  "edges": np.column_stack([upper.row, upper.col]).astype(np.int64),
+                  "P": self.P}
+        if self.xi_cov is not None:
+            arrays["xi_cov"] = self.xi_cov
+        np.savez_compressed(path, **arrays)  # type: ignore[arg-type]
+
+    @classmethod
+    def load(cls, path: str | Path) -> FieldData:
+        """Read an ``.npz`` written by :meth:`save` (or by hand with the same keys; the
+        neighbours as ``edges`` (E, 2) or a dense ``adjacency`` (K, K))."""
+        p = Path(path)
+        if not p.is_file():
+            raise ProblemError(f"{p}: no such file")
+        try:
+            with np.load(p, allow_pickle=False) as z:
+                d = {k: z[k] for k in z.files}
+        except (OSError, ValueError) as exc:
+            raise ProblemError(f"{p}: not a readable .npz ({exc})") from None
+        missing = {"radars", "centers", "xi", "P"} - set(d)
+        if missing or not ({"edges", "adjacency"} & set(d)):
+            raise ProblemError(f"{p}: missing arrays {sorted(missing) or ['edges']}")
+        adj = d["edges"] if "edges" in d else d["adjacency"]
+        return cls(d["radars"], d["centers"], d["xi"], adj, d["P"], d.get("xi_cov"))
 
 
 def _as_adjacency(adj: Any, k: int) -> sparse.csr_matrix:

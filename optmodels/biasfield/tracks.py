@@ -10,9 +10,10 @@ evaluated at the plot), the GLS estimate solves
     \min_\theta \sum_j (z_j - g(t_j)\theta)^T V_j^{-1} (z_j - g(t_j)\theta),\qquad
     \operatorname{Cov}\hat\theta = \Big(\sum_j g(t_j)^T V_j^{-1} g(t_j)\Big)^{-1}.
 
-Knots are the multiples of ``knot_spacing`` (absolute times, the same for every radar
-observing an object, so that the interpolation error of a curved path is nearly common to
-all radars -- and a common shift is invisible to the bias field anyway). A track is split
+Interior knots are the multiples of ``knot_spacing`` (absolute times, the same for every
+radar observing an object, so that the interpolation error of a curved path is nearly
+common to all radars -- and a common shift is invisible to the bias field anyway); the end
+knots are the first and last plots, so a fit is never evaluated beyond its data. A track is split
 where plots are more than ``max_gap`` apart; a piece with fewer plots than its polyline
 has parameters (plus ``min_redundancy``) is dropped and reported.
 """
@@ -151,13 +152,24 @@ def fit_tracks(plots: PlotTable, radars: RadarSet, *, knot_spacing: float = 20.0
 
 
 def _knots(t: FloatArray, spacing: float) -> FloatArray:
-    """Multiples of ``spacing`` bracketing t, without knots whose hat support holds no
-    plot (the polyline then spans such a gap linearly)."""
-    lo, hi = np.floor(t[0] / spacing), np.ceil(t[-1] / spacing)
-    knots = np.arange(lo, max(hi, lo + 1) + 1) * spacing
-    knots = knots[hat_basis(t, knots).sum(axis=0) > 1e-9]
-    if knots.size < 2:
-        knots = np.array([t[0], max(t[-1], t[0] + spacing)])
+    """Knots of a piece: its first and last plot times, and the multiples of ``spacing``
+    between them (the same absolute instants for every radar). Interior knots closer than
+    spacing/2 to an end, or whose hat support carries less than half a plot of weight,
+    are dropped (the polyline then spans them linearly): no knot is left to be determined
+    by a stray plot at the far end of its support, and no position is ever extrapolated
+    beyond the plots."""
+    t0, t1 = float(t[0]), float(t[-1])
+    if t1 - t0 < 1e-9:
+        return np.array([t0, t0 + spacing])
+    inner = np.arange(np.ceil(t0 / spacing), np.floor(t1 / spacing) + 1) * spacing
+    inner = inner[(inner > t0 + 0.5 * spacing) & (inner < t1 - 0.5 * spacing)]
+    knots = np.concatenate([[t0], inner, [t1]])
+    while knots.size > 2:
+        support = hat_basis(t, knots).sum(axis=0)
+        weak = np.flatnonzero(support[1:-1] < 0.5) + 1
+        if weak.size == 0:
+            break
+        knots = np.delete(knots, weak[np.argmin(support[weak])])
     return knots
 
 

@@ -1,7 +1,8 @@
 """``optmodels demo``: the papers' examples, with figures and a short report each."""
 
+from optmodels.demo.biasfield import run_biasfield_demo
 from optmodels.demo.fusion import run_fusion_demo
 from optmodels.demo.plane import run_plane_demo
 from optmodels.demo.trajectories import run_trajectories_demo
 
-__all__ = ["run_fusion_demo", "run_plane_demo", "run_trajectories_demo"]
+__all__ = ["run_biasfield_demo", "run_fusion_demo", "run_plane_demo", "run_trajectories_demo"]

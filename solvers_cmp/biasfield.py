@@ -22,7 +22,7 @@ from solvers_cmp.common import repeat
 
 QP_SOLVERS = ("CLARABEL", "OSQP", "SCS", "PIQP", "PROXQP", "QOCO")
 FORMULATIONS = ("constrained", "reduced")
-CELLS = (100, 1000)
+CELLS = (100, 500)
 #: Box at this fraction of the unconstrained field's largest |f| per component: binds in a
 #: few cells and stays feasible (checked per instance).
 BOX_FRACTION = 0.99

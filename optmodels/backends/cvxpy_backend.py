@@ -109,5 +109,18 @@ def solve_problem(
         iterations=int(iters) if iters is not None else None,
         message=str(problem.status),
         objective=objective,
-        info={"extra_stats": extra} if isinstance(extra, dict) else {},
+        info=_extra_info(extra),
     )
+
+
+def _extra_info(extra: Any) -> dict[str, Any]:
+    """Solver extras worth keeping: a dict as is; HiGHS' info object → MIP gap and bound
+    (so that a MILP stopped by a limit can report the gap it reached)."""
+    if isinstance(extra, dict):
+        return {"extra_stats": extra}
+    out: dict[str, Any] = {}
+    for key in ("mip_gap", "mip_dual_bound", "mip_node_count"):
+        val = getattr(extra, key, None)
+        if isinstance(val, (int, float)):
+            out[key] = float(val)
+    return out

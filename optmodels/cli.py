@@ -307,6 +307,78 @@ def _print_biasfield_solve(res: dict[str, Any]) -> None:
               f"wrote {', '.join(res['files'])} to {res['out']}")
 
 
+def _assignment_solve(args: argparse.Namespace) -> dict[str, Any]:
+    from optmodels import assignment as asg
+
+    path = Path(args.case)
+    if not path.is_file():
+        raise ProblemError(f"{path}: no such file")
+    try:
+        case = json.loads(path.read_text())
+    except json.JSONDecodeError as exc:
+        raise ProblemError(f"{path}: not valid JSON ({exc})") from None
+    fields = ("means", "covs", "measurements", "meas_cov", "volume", "pd", "rho",
+              "max_group_size", "group_gate")
+    unknown = sorted(set(case) - set(fields))
+    if unknown:
+        raise ProblemError(f"{path}: unknown fields {unknown} (expected {fields})")
+    missing = sorted(set(fields[:7]) - set(case))
+    if missing:
+        raise ProblemError(f"{path}: missing fields {missing}")
+    data = asg.AssignmentData(**case)
+    if args.method == "milp":
+        sol = asg.solve(data, solver=args.solver, time_limit=args.time_limit)
+    elif args.method == "brute-force":
+        if asg.count_hypotheses(data.q, data.n) > 10_000_000:
+            raise ProblemError("--method brute-force: more than 10⁷ hypotheses; use milp")
+        sol = asg.brute_force(data)
+    else:
+        sol = asg.linear_assignment(data)
+    res: dict[str, Any] = {"status": sol.status.value, "method": sol.method,
+                           "message": sol.message, "partition": sol.partition,
+                           "assignment": sol.assignment, "log_score": sol.log_score,
+                           "mip_gap": sol.mip_gap, "solve_time": sol.solve_time,
+                           "build_time": sol.build_time,
+                           "hypotheses_total": asg.count_hypotheses(data.q, data.n)}
+    if args.k:
+        kb = asg.k_best(data, args.k, solver=args.solver)
+        res["k_best"] = [{"partition": h.partition, "assignment": h.assignment,
+                          "log_score": h.log_score} for h in kb.hypotheses]
+        res["marginals"] = [{("background" if not k else ",".join(map(str, k))): v
+                             for k, v in b.items()} for b in kb.beta]
+        res["neglected_mass_bound"] = kb.neglected
+    return res
+
+
+def _print_assignment_solve(res: dict[str, Any]) -> None:
+    print(f"{res['method']}: {res['status']} ({res['message']}); log score "
+          f"{res['log_score']:.6f}; {res['hypotheses_total']} hypotheses in total")
+    blocks = ["+".join(map(str, b)) for b in res["partition"]]
+    print("blocks: " + ", ".join(blocks))
+    for i, a in enumerate(res["assignment"]):
+        print(f"  measurement {i}: {'background' if a < 0 else blocks[a]}")
+    if "k_best" in res:
+        print(f"{len(res['k_best'])} best hypotheses; neglected mass ≤ "
+              f"{res['neglected_mass_bound']:.3g} of the listed")
+
+
+def _assignment_count(args: argparse.Namespace) -> dict[str, Any]:
+    from optmodels import assignment as asg
+
+    per = asg.count_per_variant(args.q, args.n)
+    return {"q": args.q, "n": args.n, "total": asg.count_hypotheses(args.q, args.n),
+            "variants": sum(v[0] for v in per.values()),
+            "per_blocks": {b: {"variants": v[0], "hypotheses_each": v[1]}
+                           for b, v in per.items()}}
+
+
+def _print_assignment_count(res: dict[str, Any]) -> None:
+    print(f"Q = {res['q']} objects, N = {res['n']} measurements: {res['variants']} unresolved "
+          f"variants, {res['total']} hypotheses")
+    for b, v in res["per_blocks"].items():
+        print(f"  {b} blocks: {v['variants']} variants × {v['hypotheses_each']} hypotheses")
+
+
 def _demo(args: argparse.Namespace) -> dict[str, Any]:
     from optmodels.demo import (
         run_biasfield_demo,
@@ -511,6 +583,23 @@ def build_parser() -> argparse.ArgumentParser:
                                    "block to (10); needs n1 = n2)")
     fw.add_argument("--json", action="store_true")
     fw.set_defaults(func=_fusion_weights, printer=_print_fusion_weights)
+
+    asp = sub.add_parser("assignment", help="joint assignment with merges (paper 004)")
+    asub = asp.add_subparsers(dest="verb", required=True)
+    aso = asub.add_parser("solve", help="the MAP hypothesis of a CASE.json")
+    aso.add_argument("case", help="JSON with means, covs, measurements, meas_cov, volume, pd, "
+                                  "rho [, max_group_size, group_gate]")
+    aso.add_argument("--method", choices=("milp", "brute-force", "linear"), default="milp")
+    aso.add_argument("--solver", default="HIGHS", help="MILP solver (HIGHS, SCIP, ...)")
+    aso.add_argument("--time-limit", type=float, help="MILP time limit, s")
+    aso.add_argument("--k", type=int, default=0, help="also list the k best and marginals")
+    aso.add_argument("--json", action="store_true")
+    aso.set_defaults(func=_assignment_solve, printer=_print_assignment_solve)
+    aco = asub.add_parser("count", help="number of hypotheses (14) for Q objects, N marks")
+    aco.add_argument("q", type=int)
+    aco.add_argument("n", type=int)
+    aco.add_argument("--json", action="store_true")
+    aco.set_defaults(func=_assignment_count, printer=_print_assignment_count)
 
     bfp = sub.add_parser("biasfield", help="radar bias fields (paper 001)")
     bsub = bfp.add_subparsers(dest="verb", required=True)

@@ -315,3 +315,34 @@ def test_demo_biasfield_writes_report(tmp_path: Path, capsys) -> None:
     assert m["Lipschitz SOCP"]["status"] == "optimal"
     base = {r["field"]: r for r in summ["baseline"]}
     assert base["constant"]["p-value"] > 1e-3 and base["smooth"]["p-value"] < 1e-6
+
+
+def test_assignment_cli(tmp_path: Path, capsys) -> None:
+    from optmodels import assignment as asg
+
+    rng = np.random.default_rng(4)
+    means = rng.uniform(0, 3, (3, 2))
+    meas = means + rng.normal(0, 0.5, (3, 2))
+    case = {"means": means.tolist(), "covs": [np.eye(2).tolist()] * 3,
+            "measurements": meas.tolist(), "meas_cov": (0.25 * np.eye(2)).tolist(),
+            "volume": 9.0, "pd": 0.9, "rho": 0.3}
+    path = tmp_path / "case.json"
+    path.write_text(json.dumps(case))
+    res = run_json(capsys, ["assignment", "solve", str(path), "--k", "3"])
+    ref = asg.brute_force(asg.AssignmentData(**case))
+    assert res["status"] == "optimal"
+    assert [tuple(b) for b in res["partition"]] == ref.partition
+    assert res["assignment"] == list(ref.assignment)
+    assert res["log_score"] == pytest.approx(ref.log_score, abs=1e-9)
+    assert len(res["k_best"]) == 3 and res["hypotheses_total"] == 77
+    res = run_json(capsys, ["assignment", "solve", str(path), "--method", "brute-force"])
+    assert res["log_score"] == pytest.approx(ref.log_score, abs=1e-12)
+    cnt = run_json(capsys, ["assignment", "count", "3", "3"])
+    assert cnt["variants"] == 5 and cnt["total"] == asg.count_hypotheses(3, 3)
+    bad = tmp_path / "bad.json"
+    bad.write_text(json.dumps({**case, "pd": 1.5}))
+    assert cli.main(["assignment", "solve", str(bad)]) == 2
+    assert "pd" in capsys.readouterr().err
+    bad.write_text(json.dumps({**case, "speed": 1}))
+    assert cli.main(["assignment", "solve", str(bad)]) == 2
+    assert "unknown fields" in capsys.readouterr().err

@@ -356,13 +356,16 @@ def _prune(data: AssignmentData, groups: list[tuple[int, ...]], gain: FloatArray
 
     2. Measurement i on a merged group S is dominated if splitting S into singletons, giving
        i to its best member and leaving the others undetected, scores at least as much:
-       (|S| − 1) ln ρ + gain_iS ≤ max_{j∈S} gain_ij + (|S| − 1) ln(1 − P_D). The swap is
-       always feasible (S's members are used nowhere else), so γ_iS is never needed.
+       (|S| − 1) ln ρ + gain_iS ≤ max_{j∈S} gain_ij + (|S| − 1) ln(1 − P_D); or if peeling
+       one member j off (i on S ∖ {j}, {j} undetected) does: gain_iS + ln ρ ≤
+       gain_{i,S∖j} + ln(1 − P_D). The swaps are always feasible (S's members are used
+       nowhere else), so γ_iS is never needed.
     3. A merged group left without any measurement can only be undetected; if
        ρ ≤ 1 − P_D, its singletons (undetected) score at least as much
        (|S| ln(1 − P_D) ≥ (|S| − 1) ln ρ + ln(1 − P_D)), so z_S is never needed.
     """
     lr, l1 = math.log(data.rho), math.log1p(-data.pd)
+    index = {g: c for c, g in enumerate(groups)}
     single = {g[0]: c for c, g in enumerate(groups) if len(g) == 1}
     keep_g = np.ones(len(groups), dtype=bool)
     for c, g in enumerate(groups):
@@ -370,6 +373,12 @@ def _prune(data: AssignmentData, groups: list[tuple[int, ...]], gain: FloatArray
             continue
         best_member = np.max(gain[:, [single[j] for j in g]], axis=1)
         dominated = (len(g) - 1) * lr + gain[:, c] <= best_member + (len(g) - 1) * l1
+        # 2'. peel one member j: S \ {j} keeps i, {j} undetected. S \ {j} is a candidate
+        # too (subsets of a gated clique are cliques, sizes only shrink)
+        for j in g:
+            rest = index.get(tuple(x for x in g if x != j))
+            if rest is not None:
+                dominated |= gain[:, c] + lr <= gain[:, rest] + l1
         usable[:, c] &= ~dominated
         if not usable[:, c].any() and lr <= l1:
             keep_g[c] = False

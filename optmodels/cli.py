@@ -466,6 +466,12 @@ def _run_compare(out: Path, problems: Sequence[str], sizes: list[int], runs: int
             bench = cmp_fusion.benchmark(repeats=repeats, seed=seed)
             md.append(report.write_fusion(out, rows, bench))
             res["fusion"] = {"results": rows, "benchmark": bench}
+        elif p == "assignment":
+            from solvers_cmp import assignment as cmp_as
+
+            rows = cmp_as.rows(seed=seed, repeats=max(1, min(repeats, 3)), progress=progress)
+            md.append(report.write_assignment(out, rows))
+            res["assignment"] = {"results": rows}
         elif p == "biasfield":
             from solvers_cmp import biasfield as cmp_bf
 

@@ -89,3 +89,16 @@ def test_biasfield_comparison_small(tmp_path: Path) -> None:
     assert any(r["active_bounds"] > 0 for r in rows if r["case"] != "no box")
     md = report.write_biasfield(tmp_path, rows)
     assert "| box (8) binding | 60 | reduced | CLARABEL | optimal |" in md
+
+
+def test_assignment_comparison_small(tmp_path: Path) -> None:
+    from solvers_cmp import assignment as cmp_as
+
+    rows = cmp_as.rows(((3, 4, None), (5, 6, None), (20, 22, 3.0)), repeats=1)
+    assert {r["formulation"] for r in rows} >= {"joint MILP", "enumeration (14)",
+                                                 "linear assignment"}
+    for r in rows:
+        assert r["status"] == "optimal" and r["solution_error"] == 0, r
+        assert abs(r["objective_gap"]) < 1e-9
+    md = report.write_assignment(tmp_path, rows)
+    assert "| 5 | 6 | allowed | none | enumeration (14) | python | optimal |" in md

@@ -18,7 +18,7 @@ from optmodels import fusion, plane, trajectories
 from optmodels.core import OptModelsError, ProblemError
 from optmodels.io import json_default
 
-PROBLEMS = ("plane", "trajectories", "fusion", "biasfield")
+PROBLEMS = ("plane", "trajectories", "fusion", "biasfield", "assignment")
 
 
 def _parse_cov(text: str) -> np.ndarray:
@@ -381,6 +381,7 @@ def _print_assignment_count(res: dict[str, Any]) -> None:
 
 def _demo(args: argparse.Namespace) -> dict[str, Any]:
     from optmodels.demo import (
+        run_assignment_demo,
         run_biasfield_demo,
         run_fusion_demo,
         run_plane_demo,
@@ -413,6 +414,13 @@ def _demo(args: argparse.Namespace) -> dict[str, Any]:
             result["problems"]["fusion"] = summ
             sections.append("- [Fusion of two estimates (paper 003)](fusion/report.md): "
                             "accuracy of Ŵ vs n, the two-site system with the joint ML")
+        elif p == "assignment":
+            summ = run_assignment_demo(out / "assignment", seed=args.seed,
+                                       progress=not args.json)
+            result["problems"]["assignment"] = summ
+            sections.append("- [Joint assignment with unresolved groups (paper 004)]"
+                            "(assignment/report.md): MAP by one MILP vs resolved-only "
+                            "association, closely spaced space objects")
         elif p == "biasfield":
             summ = run_biasfield_demo(out / "biasfield", seed=args.seed)
             result["problems"]["biasfield"] = summ

@@ -346,3 +346,20 @@ def test_assignment_cli(tmp_path: Path, capsys) -> None:
     bad.write_text(json.dumps({**case, "speed": 1}))
     assert cli.main(["assignment", "solve", str(bad)]) == 2
     assert "unknown fields" in capsys.readouterr().err
+
+
+def test_demo_assignment_writes_report(tmp_path: Path, capsys, monkeypatch) -> None:
+    from optmodels.demo import assignment as demo_as
+
+    monkeypatch.setattr(demo_as, "SEPARATIONS", (40.0, 400.0))
+    res = run_json(capsys, ["demo", "assignment", "--out", str(tmp_path)])
+    for f in ("association.png", "report.md", "summary.json"):
+        assert (tmp_path / "assignment" / f).is_file()
+    rows = {r["separation, m"]: r for r in res["problems"]["assignment"]["rows"]}
+    # below the resolution (150 m) the MAP recognises merges: better than resolved-only by
+    # more than 2 standard errors of the difference (8 runs); far apart they agree closely
+    close = rows[40.0]
+    assert close["MAP correct"] - close["GNN correct"] > 2 * np.hypot(close["MAP se"],
+                                                                     close["GNN se"])
+    far = rows[400.0]
+    assert abs(far["MAP correct"] - far["GNN correct"]) < 0.05

@@ -34,7 +34,7 @@ from __future__ import annotations
 
 import itertools
 import math
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -59,6 +59,7 @@ __all__ = [
     "AssignmentData",
     "AssignmentSolution",
     "KBest",
+    "block_log_prior",
     "brute_force",
     "candidate_groups",
     "count_hypotheses",
@@ -82,7 +83,13 @@ class AssignmentData:
     ``meas_cov`` (d, d); surveillance ``volume`` Δx; detection probability ``pd`` ∈ (0, 1);
     per-merge prior factor ``rho`` > 0; candidate groups limited by ``max_group_size``
     (default: all sizes) and ``group_gate`` (members pairwise within this Mahalanobis
-    distance of each other's predictions, under K_i + K_j; default: no gate)."""
+    distance of each other's predictions, under K_i + K_j; default: no gate).
+
+    Your own model: ``log_likelihood(data, S)`` → (N,) ln φ_iS for block S (replaces the
+    Gaussian default), and ``block_log_prior(S, detected)`` → the block's share of ln P(H)
+    (default (|S| − 1) ln ρ + ln P_D or ln(1 − P_D)). The prior must decompose over blocks
+    for the MILP to stay linear. With a custom prior only the background-dominance pruning
+    is applied (the others rely on the default prior's form)."""
 
     means: FloatArray
     covs: FloatArray
@@ -93,6 +100,8 @@ class AssignmentData:
     rho: float
     max_group_size: int | None = None
     group_gate: float | None = None
+    log_likelihood: Callable[[AssignmentData, tuple[int, ...]], FloatArray] | None = None
+    block_log_prior: Callable[[tuple[int, ...], bool], float] | None = None
 
     def __post_init__(self) -> None:
         self.means = as_finite_array("means", self.means, ndim=2)
@@ -225,9 +234,29 @@ def candidate_groups(data: AssignmentData) -> list[tuple[int, ...]]:
     return out
 
 
+def block_log_prior(data: AssignmentData, group: tuple[int, ...], detected: bool) -> float:
+    """A block's share of ln P(H): the user's ``block_log_prior`` or the default
+    (|S| − 1) ln ρ + (ln P_D if detected else ln(1 − P_D))."""
+    if data.block_log_prior is not None:
+        v = float(data.block_log_prior(tuple(group), bool(detected)))
+        if not np.isfinite(v):
+            raise ProblemError(f"block_log_prior: non-finite value for {group}, {detected}")
+        return v
+    return (len(group) - 1) * math.log(data.rho) + (
+        math.log(data.pd) if detected else math.log1p(-data.pd))
+
+
 def log_likelihoods(data: AssignmentData, groups: Sequence[tuple[int, ...]]) -> FloatArray:
-    """ln φ_iS (N, len(groups)) of the default model."""
+    """ln φ_iS (N, len(groups)): the user's ``log_likelihood`` or the default model."""
     out = np.empty((data.n, len(groups)))
+    if data.log_likelihood is not None:
+        for c, g in enumerate(groups):
+            v = np.asarray(data.log_likelihood(data, tuple(g)), dtype=float)
+            if v.shape != (data.n,) or np.any(np.isnan(v)) or np.any(v == np.inf):
+                raise ProblemError(f"log_likelihood: expected {data.n} finite log values "
+                                   f"(or −inf) for block {g}, got shape {v.shape}")
+            out[:, c] = v
+        return out
     for c, g in enumerate(groups):
         idx = list(g)
         mean = data.means[idx].mean(axis=0)
@@ -250,9 +279,7 @@ def score(data: AssignmentData, partition: Partition, assignment: Sequence[int],
         raise ProblemError("assignment: a block received more than one measurement")
     ll = loglik if loglik is not None else dict(zip(blocks, log_likelihoods(data, blocks).T,
                                                     strict=True))
-    s = (data.q - len(blocks)) * math.log(data.rho)
-    for k in range(len(blocks)):
-        s += math.log(data.pd) if k in used else math.log1p(-data.pd)
+    s = sum(block_log_prior(data, b, k in used) for k, b in enumerate(blocks))
     for i, k in enumerate(a):
         s += float(ll[blocks[k]][i]) if k >= 0 else -math.log(data.volume)
     return s
@@ -332,7 +359,9 @@ def linear_assignment(data: AssignmentData) -> AssignmentSolution:
     with timed() as tm:
         q, n = data.q, data.n
         singles = [(j,) for j in range(q)]
-        gain = log_likelihoods(data, singles) + math.log(data.pd) - math.log1p(-data.pd)
+        gain = log_likelihoods(data, singles) + np.array(
+            [block_log_prior(data, g, True) - block_log_prior(data, g, False)
+             for g in singles])
         big = -1e300
         mat = np.full((n, q + n), big)
         mat[:, :q] = gain
@@ -407,18 +436,18 @@ def solve(data: AssignmentData, *, solver: str = "HIGHS", mip_gap: float = 0.0,
     with timed() as tb:
         q, n = data.q, data.n
         ll = log_likelihoods(data, groups)
-        bonus = math.log(data.pd) - math.log1p(-data.pd)
+        bonus = np.array([block_log_prior(data, g, True) - block_log_prior(data, g, False)
+                          for g in groups])
         bg = -math.log(data.volume)
         gain = ll + bonus
         if prune:
             usable = gain > bg  # exact pruning 1 (module docstring)
-            if fixed_partition is None:
+            if fixed_partition is None and data.block_log_prior is None:
                 groups, gain, usable = _prune(data, groups, gain, usable)
         else:
-            usable = np.ones_like(gain, dtype=bool)
+            usable = np.isfinite(gain)  # a user's −inf likelihood: impossible, no variable
         keep = np.argwhere(usable)
-        g_cost = np.array([(len(g) - 1) * math.log(data.rho) + math.log1p(-data.pd)
-                           for g in groups])
+        g_cost = np.array([block_log_prior(data, g, False) for g in groups])
         z = cp.Variable(len(groups), boolean=True)
         gam = cp.Variable(len(keep), boolean=True) if len(keep) else None
         g0 = cp.Variable(n, boolean=True) if n else None

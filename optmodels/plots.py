@@ -272,7 +272,11 @@ def association_rates(path: Path, rows: list[dict]) -> Path:
     sep = [r["separation, m"] for r in rows]
     fig, ax = plt.subplots(figsize=(7, 4.2))
     for key, label, style in (("MAP", "MAP joint assignment (merges, MILP)", "o-"),
-                              ("GNN", "resolved only (linear assignment)", "s--")):
+                              ("GNN", "resolved only (linear assignment)", "s--"),
+                              ("SS-GNN", "Stone Soup GNNWith2DAssignment", "^:"),
+                              ("SS-JPDA", "Stone Soup JPDA (most probable)", "v:")):
+        if f"{key} correct" not in rows[0]:
+            continue
         ax.errorbar(sep, [r[f"{key} correct"] for r in rows],
                     yerr=[2 * r[f"{key} se"] for r in rows], fmt=style, capsize=3, label=label)
     ax.set_xscale("log")

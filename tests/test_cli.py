@@ -363,3 +363,8 @@ def test_demo_assignment_writes_report(tmp_path: Path, capsys, monkeypatch) -> N
                                                                      close["GNN se"])
     far = rows[400.0]
     assert abs(far["MAP correct"] - far["GNN correct"]) < 0.05
+    # the external peer (in the test extra): far apart, Stone Soup's GNN runs the same
+    # Kalman filter on (almost always) the same associations; its gate differs from our
+    # clutter model only on rare clutter points -- measured 0.1 %, asserted 2 %
+    assert far["SS-GNN RMS pos, m"] == pytest.approx(far["GNN RMS pos, m"], rel=0.02)
+    assert "SS-JPDA correct" in far

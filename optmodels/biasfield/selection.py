@@ -58,6 +58,10 @@ SOCP_DEFAULTS: dict[str, dict[str, Any]] = {"SCS": {"eps_abs": 1e-9, "eps_rel": 
                                                      "max_iters": 200_000}}
 
 
+#: (Φ⁰, Φ¹) of (10), computed once per solve and handed to the helpers below.
+Sets = tuple[FloatArray, sparse.csr_matrix]
+
+
 @dataclass
 class FieldSolution(Solution):
     """A field on the cells: ``field`` (K, m, 2) = [range, azimuth] bias per cell and radar,
@@ -135,11 +139,12 @@ def _box(data: FieldData, box: tuple[float, float] | None) -> FloatArray | None:
     return np.tile([k1, k2], data.m * data.k)
 
 
-def _finish(data: FieldData, phi: FloatArray, eta: FloatArray, common: dict[str, Any],
+def _finish(data: FieldData, sets: Sets, phi: FloatArray, eta: FloatArray,
+            common: dict[str, Any],
             bound: FloatArray | None, duals: FloatArray | None,
             lipschitz: float | None = None) -> FieldSolution:
     k, m = data.k, data.m
-    phi0, phi1 = uncertainty_sets(data)
+    phi0, phi1 = sets
     res: dict[str, float] = {}
     scale = max(float(np.max(np.abs(phi0))), 1e-300)
     res["set"] = float(np.max(np.abs(phi - phi0 - phi1 @ eta))) / scale
@@ -176,7 +181,7 @@ def closed_form(data: FieldData) -> FieldSolution:
         phi = phi0 + phi1 @ eta
     common = {"status": Status.OPTIMAL, "method": "closed_form", "solve_time": tm.elapsed,
               "message": "(11), sign corrected"}
-    sol = _finish(data, phi, eta, common, None, None)
+    sol = _finish(data, (phi0, phi1), phi, eta, common, None, None)
     sol.info["components"] = n_comp
     grad = phi1.T @ (r @ phi)
     sol.residuals["stationarity"] = float(np.max(np.abs(grad))) / max(
@@ -185,9 +190,8 @@ def closed_form(data: FieldData) -> FieldSolution:
 
 
 # ----------------------------------------------------------------------------- QP
-def _scales(data: FieldData) -> FloatArray:
+def _scales(data: FieldData, phi0: FloatArray) -> FloatArray:
     """Per-component scale of φ (range, azimuth) so that the solver sees O(1) numbers."""
-    phi0, _ = uncertainty_sets(data)
     v = np.abs(phi0.reshape(-1, 2))
     s = np.array([max(float(np.median(v[:, 0])), 1e-9), max(float(np.median(v[:, 1])), 1e-15)])
     return np.tile(s, data.m * data.k)
@@ -218,18 +222,19 @@ def solve(data: FieldData, *, box: tuple[float, float] | None = None,
                            f"{formulation!r}")
     bound = _box(data, box)
     method = f"cvxpy:{solver}:{formulation}"
-    phi0, phi1 = uncertainty_sets(data)
+    sets = uncertainty_sets(data)
+    phi0, phi1 = sets
     if bound is not None:
-        bad = box_feasibility(data, box)  # type: ignore[arg-type]
+        bad = box_feasibility(data, box, sets=sets)  # type: ignore[arg-type]
         if bad.size:
             nan = np.full(phi0.size, np.nan)
-            return _finish(data, nan, np.full(phi1.shape[1], np.nan), {
+            return _finish(data, sets, nan, np.full(phi1.shape[1], np.nan), {
                 "status": Status.INFEASIBLE, "method": method,
                 "message": f"box (8) misses the uncertainty sets of cells {bad[:20].tolist()}"
                            f"{' …' if bad.size > 20 else ''} ({bad.size} cells): no field "
                            "in these sets satisfies |f_range| ≤ K1, |f_azimuth| ≤ K2"},
                 bound, None)
-    sc = _scales(data)
+    sc = _scales(data, phi0)
     with timed() as tb:
         gs = (edge_factor(data) @ sparse.diags(sc)).tocsr()
         rs = (gs.T @ gs).tocsc()
@@ -256,7 +261,7 @@ def solve(data: FieldData, *, box: tuple[float, float] | None = None,
     common["method"] = method
     if not res.status.ok or eta.value is None:
         nan = np.full(phi0.size, np.nan)
-        return _finish(data, nan, np.full(phi1.shape[1], np.nan), common, bound, None)
+        return _finish(data, sets, nan, np.full(phi1.shape[1], np.nan), common, bound, None)
     et = np.asarray(eta.value) * sc[0]
     phi = phi0 + phi1 @ et if formulation == "reduced" else np.asarray(u.value) * sc
     duals = None
@@ -265,9 +270,9 @@ def solve(data: FieldData, *, box: tuple[float, float] | None = None,
         up = np.asarray(box_cons[0].dual_value) / sc * norm2
         lo = np.asarray(box_cons[1].dual_value) / sc * norm2
         duals = up - lo
-    sol = _finish(data, phi, et, common, bound, duals)
+    sol = _finish(data, sets, phi, et, common, bound, duals)
     sol.info["components"] = n_comp
-    sol.residuals.update(kkt_residuals(data, sol, box))
+    sol.residuals.update(kkt_residuals(data, sol, box, sets=sets))
     return _verify(sol)
 
 
@@ -293,12 +298,13 @@ def _verify(sol: FieldSolution) -> FieldSolution:
 
 
 def kkt_residuals(data: FieldData, sol: FieldSolution,
-                  box: tuple[float, float] | None = None) -> dict[str, float]:
+                  box: tuple[float, float] | None = None, *,
+                  sets: Sets | None = None) -> dict[str, float]:
     """KKT of the QP in η: Φ¹ᵀ(2Rφ + μ) = 0 with μ the box multipliers (μ_j ≥ 0 at an upper
     bound, ≤ 0 at a lower one, 0 inside), relative to the gradient at η = 0 (or ‖Φ¹ᵀμ‖ if
     larger); complementarity
     |μ_j|·slack_j relative to the objective."""
-    phi0, phi1 = uncertainty_sets(data)
+    phi0, phi1 = uncertainty_sets(data) if sets is None else sets
     r = _r_matrix(data)
     mu = sol.duals.reshape(-1)
     g1 = phi1.T @ (2 * (r @ sol.phi))
@@ -318,7 +324,8 @@ def kkt_residuals(data: FieldData, sol: FieldSolution,
     return out
 
 
-def box_feasibility(data: FieldData, box: tuple[float, float]) -> np.ndarray:
+def box_feasibility(data: FieldData, box: tuple[float, float], *,
+                    sets: Sets | None = None) -> np.ndarray:
     """Cells whose uncertainty set misses the box (8). The box and the sets are per cell,
     so each cell is a 2-variable feasibility problem: the polygon ∩_j {η : |Φ⁰_j + a_jᵀη| ≤
     b_j}. It is non-empty iff one of the pairwise intersections of its boundary lines is
@@ -327,7 +334,7 @@ def box_feasibility(data: FieldData, box: tuple[float, float]) -> np.ndarray:
     Returns the indices of the infeasible cells."""
     bound = _box(data, box)
     assert bound is not None
-    phi0, phi1 = uncertainty_sets(data)
+    phi0, phi1 = uncertainty_sets(data) if sets is None else sets
     k, m2 = data.k, 2 * data.m
     a = _cell_blocks(phi1, k, m2)
     p0 = phi0.reshape(k, m2) / bound.reshape(k, m2)
@@ -371,13 +378,14 @@ def solve_lipschitz(data: FieldData, *, box: tuple[float, float] | None = None,
     """
     _check_graph(data)
     bound = _box(data, box)
+    sets = uncertainty_sets(data)
+    phi0, phi1 = sets
     if bound is not None:
-        bad = box_feasibility(data, box)  # type: ignore[arg-type]
+        bad = box_feasibility(data, box, sets=sets)  # type: ignore[arg-type]
         if bad.size:
             raise ProblemError(f"box: the box misses the uncertainty sets of cells "
                                f"{bad[:20].tolist()}")
-    phi0, phi1 = uncertainty_sets(data)
-    sc = _scales(data)
+    sc = _scales(data, phi0)
     m2 = 2 * data.m
     lt = np.linalg.cholesky(_p_full(data)).T
     i, j, d2 = _edges(data)
@@ -410,11 +418,11 @@ def solve_lipschitz(data: FieldData, *, box: tuple[float, float] | None = None,
     common["build_time"] += tb.elapsed
     if not res.status.ok or u.value is None:
         nan = np.full(phi0.size, np.nan)
-        return _finish(data, nan, np.full(phi1.shape[1], np.nan), common, bound, None)
+        return _finish(data, sets, nan, np.full(phi1.shape[1], np.nan), common, bound, None)
     phi = np.asarray(u.value) * sc
     jumps = np.linalg.norm((sparse.kron(diff, sparse.csr_matrix(lt)) @ phi).reshape(-1, m2),
                            axis=1) / dist
-    return _finish(data, phi, np.asarray(eta.value), common, bound, None,
+    return _finish(data, sets, phi, np.asarray(eta.value), common, bound, None,
                    lipschitz=float(np.max(jumps)))
 
 

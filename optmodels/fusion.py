@@ -108,8 +108,10 @@ def weight_matrix(s1: ArrayLike, s2: ArrayLike) -> FloatArray:
 
 
 def _weight(a: FloatArray, b: FloatArray) -> FloatArray:
-    # S1 (S1+S2)^-1 = ((S1+S2)^-1 S1)^T for symmetric S1, S2
-    return linalg.solve(a + b, a, assume_a="pos").T
+    """S1(S1 + S2)⁻¹ = ((S1 + S2)⁻¹S1)ᵀ for symmetric S1, S2; stacks (..., m, m) too."""
+    if a.ndim == 2:
+        return linalg.solve(a + b, a, assume_a="pos").T
+    return np.swapaxes(np.linalg.solve(a + b, a), -1, -2)
 
 
 @dataclass
@@ -428,7 +430,7 @@ def monte_carlo_weight(s1: ArrayLike, s2: ArrayLike, n1: int, n2: int, *,
         draws.append(np.asarray(x).reshape(trials, m, m) / (n - 1))
     sa, sb = draws
     # Ŵ = Ŝ1 (Ŝ1+Ŝ2)^-1 = ((Ŝ1+Ŝ2)^-1 Ŝ1)^T (symmetric draws)
-    w = np.linalg.solve(sa + sb, sa).transpose(0, 2, 1)
+    w = _weight(sa, sb)
     vw = w.transpose(0, 2, 1).reshape(trials, m * m)  # column-major vec per trial
     return WeightMonteCarlo(mean=w.mean(axis=0), cov=np.cov(vw.T), trials=int(trials))
 
@@ -676,11 +678,7 @@ class TwoSiteSystem:
             res, u = run_nlpsol(built, x0=np.zeros(2 * t), p=params)
             est = start + length[:, None] * u.reshape(t, 2, order="F")
             common = res.common()
-        wr = self.residuals(zz, est)
-        jw = self.jacobian(est) / np.sqrt(np.diag(self.noise_cov))[:, None]
-        g = np.einsum("tki,tk->ti", jw, wr)
-        stat = np.linalg.norm(g, axis=1) / (
-            np.linalg.norm(jw, axis=(1, 2)) * np.linalg.norm(wr, axis=1) + 1.0)
+        _, wr, _, stat = self._whitened(zz, est)
         worst = float(np.max(stat)) if t else 0.0
         if common["message"] == "Search_Direction_Becomes_Too_Small" and worst <= 1e-6:
             # IPOPT's precision limit (tiny noise makes the whitened problem stiff): accept
@@ -699,6 +697,17 @@ class TwoSiteSystem:
         return JointMLSolution(objective=obj, residuals={"stationarity": worst},
                                estimate=est, stationarity=stat, **common)
 
+    def _whitened(self, z: FloatArray, x: FloatArray
+                  ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+        """Whitened Jacobian (T, 3, 2), residuals (T, 3), gradient J_tᵀR⁻¹r_t (T, 2) and the
+        relative stationarity ‖g_t‖ / (‖J_t‖‖r_t‖ + 1) per row, at positions x."""
+        jw = self.jacobian(x) / np.sqrt(np.diag(self.noise_cov))[:, None]
+        r = self.residuals(z, x)
+        g = np.einsum("tki,tk->ti", jw, r)
+        stat = np.linalg.norm(g, axis=1) / (
+            np.linalg.norm(jw, axis=(1, 2)) * np.linalg.norm(r, axis=1) + 1.0)
+        return jw, r, g, stat
+
     def _gauss_newton(self, z: FloatArray, start: FloatArray, max_iter: int = 50
                       ) -> tuple[FloatArray, dict[str, Any]]:
         """Vectorised Gauss-Newton with step halving; stops when every row's full step is
@@ -707,17 +716,12 @@ class TwoSiteSystem:
         its direction lowers the cost any more (round-off floor)."""
         t0 = time.perf_counter()
         x = start.copy()
-        sd = np.sqrt(np.diag(self.noise_cov))
         cost = np.sum(self.residuals(z, x) ** 2, axis=1)
         it, converged = 0, False
         stalled = np.zeros(len(x), dtype=bool)
         for it in range(1, max_iter + 1):  # noqa: B007 (reported below)
-            jw = self.jacobian(x) / sd[:, None]
-            r = self.residuals(z, x)
-            g = np.einsum("tki,tk->ti", jw, r)
+            jw, _, g, stat = self._whitened(z, x)
             step = np.linalg.solve(np.swapaxes(jw, 1, 2) @ jw, g[..., None])[..., 0]
-            stat = np.linalg.norm(g, axis=1) / (
-                np.linalg.norm(jw, axis=(1, 2)) * np.linalg.norm(r, axis=1) + 1.0)
             done = (np.max(np.abs(step), axis=1) < 1e-10 * self.baseline) | (stat < 1e-10) \
                 | stalled
             if done.all():
@@ -768,7 +772,7 @@ class TwoSiteSystem:
         if correlated:
             wts = _correlated_weight(s1, s12, s1 + s2 - s12 - np.swapaxes(s12, -1, -2))
         else:
-            wts = np.swapaxes(np.linalg.solve(s1 + s2, s1), -1, -2)
+            wts = _weight(s1, s2)
         out[ok] = a1[ok] + np.einsum("tij,tj->ti", wts, a2[ok] - a1[ok])
         return out
 

@@ -42,12 +42,9 @@ def write_plane(out: Path, timing: list[dict[str, Any]], accuracy: list[dict[str
     out.mkdir(parents=True, exist_ok=True)
     write_csv(out / "plane_timing.csv", timing)
     write_csv(out / "plane_accuracy.csv", accuracy)
-    bench_md = ""
-    if bench:
-        write_csv(out / "plane_benchmark.csv", bench)
-        bench_md = ("\nBenchmark (median and best of the repeats, seconds):\n\n"
-                    + markdown_table(bench, ["case", "size", "median_s", "min_s", "starts"],
-                                     {"median_s": ".4f", "min_s": ".4f"}))
+    bench_md = _benchmark(out, "plane", bench,
+                          "Benchmark (median and best of the repeats, seconds):",
+                          ["case", "size", "median_s", "min_s", "starts"], ".4f")
     tcols = ["setting", "size", "formulation", "status", "objective_gap", "solution_error",
              "max_violation", "cold_build_time", "build_time", "solve_time", "iterations"]
     acols = ["setting", "size", "runs", "ml_method", "rmse_ml_mrad", "rmse_svd_mrad",
@@ -85,12 +82,26 @@ under a nearly constant aspect.
 """
 
 
+def _results_csv(out: Path, problem: str, rows: list[dict[str, Any]]) -> None:
+    out.mkdir(parents=True, exist_ok=True)
+    write_csv(out / f"{problem}_results.csv", rows)
+
+
+def _benchmark(out: Path, problem: str, bench: list[dict[str, Any]] | None, intro: str,
+               cols: list[str], digits: str) -> str:
+    """Write ``{problem}_benchmark.csv`` and return its Markdown paragraph ('' if none)."""
+    if not bench:
+        return ""
+    write_csv(out / f"{problem}_benchmark.csv", bench)
+    return (f"\n{intro}\n\n"
+            + markdown_table(bench, cols, {"median_s": digits, "min_s": digits}))
+
+
 def write_trajectories(out: Path, rows: list[dict[str, Any]],
                        bench: list[dict[str, Any]] | None = None) -> str:
     """Write ``trajectories_results.csv`` (and ``trajectories_benchmark.csv``) and return
     the Markdown section."""
-    out.mkdir(parents=True, exist_ok=True)
-    write_csv(out / "trajectories_results.csv", rows)
+    _results_csv(out, "trajectories", rows)
     cols = ["family", "objects", "points", "formulation", "solver", "status",
             "solution_error", "objective_gap", "max_violation", "build_time", "solve_time",
             "iterations"]
@@ -110,12 +121,10 @@ def write_trajectories(out: Path, rows: list[dict[str, Any]],
            "order with eps = 1e-9 on the rescaled problem, stops near 3e-8 from N = 100 "
            "points on. CVXPY's canonicalisation (build) is half of the generic time or "
            "more; SCS's build of the reduced form is the slowest step of the grid.\n")
-    if bench:
-        write_csv(out / "trajectories_benchmark.csv", bench)
-        md += ("\nBenchmark (wall seconds, median and best of the repeats; targets: closed "
-               "form ≤ 0.01 s, CVXPY ≤ 2 s):\n\n"
-               + markdown_table(bench, ["case", "objects", "points", "median_s", "min_s"],
-                                {"median_s": ".4f", "min_s": ".4f"}))
+    md += _benchmark(out, "trajectories", bench,
+                     "Benchmark (wall seconds, median and best of the repeats; targets: "
+                     "closed form ≤ 0.01 s, CVXPY ≤ 2 s):",
+                     ["case", "objects", "points", "median_s", "min_s"], ".4f")
     return md + "\n"
 
 
@@ -123,8 +132,7 @@ def write_fusion(out: Path, rows: list[dict[str, Any]],
                  bench: list[dict[str, Any]] | None = None) -> str:
     """Write ``fusion_results.csv`` (and ``fusion_benchmark.csv``) and return the Markdown
     section."""
-    out.mkdir(parents=True, exist_ok=True)
-    write_csv(out / "fusion_results.csv", rows)
+    _results_csv(out, "fusion", rows)
     cols = ["case", "size", "formulation", "solver", "status", "solution_error",
             "objective_gap", "max_violation", "build_time", "solve_time", "iterations"]
     fmt = {"solution_error": ".1e", "objective_gap": ".1e", "max_violation": ".1e",
@@ -140,12 +148,10 @@ def write_fusion(out: Path, rows: list[dict[str, Any]],
            "OSQP land on the closed form to round-off, SCS (first-order) near 1e-8. CVXPY's "
            "canonicalisation (~6 ms) dominates their times; the closed forms take well "
            "under a millisecond.\n")
-    if bench:
-        write_csv(out / "fusion_benchmark.csv", bench)
-        md += ("\nBenchmark (wall seconds, median and best of the repeats; target: Monte "
-               "Carlo of Ŵ with 10⁵ trials at m = 3 in ≤ 2 s):\n\n"
-               + markdown_table(bench, ["case", "median_s", "min_s"],
-                                {"median_s": ".4f", "min_s": ".4f"}))
+    md += _benchmark(out, "fusion", bench,
+                     "Benchmark (wall seconds, median and best of the repeats; target: Monte "
+                     "Carlo of Ŵ with 10⁵ trials at m = 3 in ≤ 2 s):",
+                     ["case", "median_s", "min_s"], ".4f")
     return md + "\n"
 
 
@@ -153,8 +159,7 @@ def write_biasfield(out: Path, rows: list[dict[str, Any]],
                     bench: list[dict[str, Any]] | None = None) -> str:
     """Write ``biasfield_results.csv`` (and ``biasfield_benchmark.csv``) and return the
     Markdown section."""
-    out.mkdir(parents=True, exist_ok=True)
-    write_csv(out / "biasfield_results.csv", rows)
+    _results_csv(out, "biasfield", rows)
     cols = ["case", "size", "formulation", "solver", "status", "solution_error",
             "objective_gap", "max_violation", "active_bounds", "build_time", "solve_time",
             "iterations"]
@@ -171,19 +176,16 @@ def write_biasfield(out: Path, rows: list[dict[str, Any]],
     md += ("\nSCS cannot take the reduced problem without any constraint row (reported as "
            "an error, never as a field). OSQP needs many iterations once the box binds; "
            "Clarabel on the reduced form is the fastest generic route at every size.\n")
-    if bench:
-        write_csv(out / "biasfield_benchmark.csv", bench)
-        md += ("\nBenchmark (wall seconds; targets at K = 10⁴, m = 4: closed form ≤ 1 s and "
-               "≥ 20× a dense solve, QP with box ≤ 30 s):\n\n"
-               + markdown_table(bench, ["case", "cells", "median_s", "min_s"],
-                                {"median_s": ".3f", "min_s": ".3f"}))
+    md += _benchmark(out, "biasfield", bench,
+                     "Benchmark (wall seconds; targets at K = 10⁴, m = 4: closed form ≤ 1 s "
+                     "and ≥ 20× a dense solve, QP with box ≤ 30 s):",
+                     ["case", "cells", "median_s", "min_s"], ".3f")
     return md + "\n"
 
 
 def write_assignment(out: Path, rows: list[dict[str, Any]]) -> str:
     """Write ``assignment_results.csv`` and return the Markdown section."""
-    out.mkdir(parents=True, exist_ok=True)
-    write_csv(out / "assignment_results.csv", rows)
+    _results_csv(out, "assignment", rows)
     cols = ["size", "measurements", "merges", "gate", "formulation", "solver", "status",
             "solution_error", "objective_gap", "build_time", "solve_time", "total_time",
             "hypotheses"]

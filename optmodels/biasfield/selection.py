@@ -102,20 +102,22 @@ def _check_graph(data: FieldData) -> tuple[int, np.ndarray]:
     return int(n), labels
 
 
+def _edge_difference(data: FieldData, weights: FloatArray) -> sparse.csr_matrix:
+    """Rows weights_e · Lᵀ(f(x̌_i) − f(x̌_j)) for every neighbour pair e = (i < j), P = LLᵀ:
+    (2m·E × 2mK)."""
+    i, j, _ = _edges(data)
+    e = np.arange(i.size)
+    diff = sparse.csr_matrix((np.concatenate([weights, -weights]),
+                              (np.concatenate([e, e]), np.concatenate([i, j]))),
+                             shape=(i.size, data.k))
+    lt = np.linalg.cholesky(_p_full(data)).T
+    return sparse.kron(diff, sparse.csr_matrix(lt), format="csr")
+
+
 def edge_factor(data: FieldData) -> sparse.csr_matrix:
     """Sparse G (2m·E × 2mK) with GᵀG = Q ⊗ P: for each neighbour pair (i < j) the rows
     √a_ij Lᵀ(f(x̌_i) − f(x̌_j)), a_ij = 1/‖x̌_i − x̌_j‖², P = LLᵀ."""
-    m2 = 2 * data.m
-    lt = np.linalg.cholesky(_p_full(data)).T
-    i, j, d2 = _edges(data)
-    w = 1.0 / np.sqrt(d2)
-    e = np.arange(i.size)
-    diff = sparse.csr_matrix((np.concatenate([w, -w]), (np.concatenate([e, e]),
-                                                        np.concatenate([i, j]))),
-                             shape=(i.size, data.k))
-    g = sparse.kron(diff, sparse.csr_matrix(lt), format="csr")
-    assert g.shape == (i.size * m2, data.k * m2)
-    return g
+    return _edge_difference(data, 1.0 / np.sqrt(_edges(data)[2]))
 
 
 def objective(data: FieldData, phi: ArrayLike) -> float:
@@ -387,24 +389,20 @@ def solve_lipschitz(data: FieldData, *, box: tuple[float, float] | None = None,
                                f"{bad[:20].tolist()}")
     sc = _scales(data, phi0)
     m2 = 2 * data.m
-    lt = np.linalg.cholesky(_p_full(data)).T
-    i, j, d2 = _edges(data)
+    _, _, d2 = _edges(data)
     dist = np.sqrt(d2)
+    jump = _edge_difference(data, np.ones(dist.size))  # Lᵀ(f_i − f_j) per edge
     with timed() as tb:
         u = cp.Variable(phi0.size)
         eta = cp.Variable(phi1.shape[1])
         lip = cp.Variable(nonneg=True)
         ref = float(np.median(dist))
         cons = [u == phi0 / sc + (sparse.diags(1 / sc) @ phi1) @ eta]
-        # D_e u = Lᵀ(f_i − f_j) for every edge, in scaled units
-        e = np.arange(i.size)
-        diff = sparse.csr_matrix((np.concatenate([np.ones(i.size), -np.ones(i.size)]),
-                                  (np.concatenate([e, e]), np.concatenate([i, j]))),
-                                 shape=(i.size, data.k))
-        dmat = (sparse.kron(diff, sparse.csr_matrix(lt)) @ sparse.diags(sc)).tocsr()
+        # the same in scaled units
+        dmat = (jump @ sparse.diags(sc)).tocsr()
         lip0 = float(np.max(np.linalg.norm((dmat @ (phi0 / sc)).reshape(-1, m2), axis=1)
                             / dist)) * ref or 1.0
-        dexpr = cp.reshape(dmat @ u, (i.size, m2), order="C") / lip0
+        dexpr = cp.reshape(dmat @ u, (dist.size, m2), order="C") / lip0
         cons.append(cp.SOC(cp.multiply(lip, dist / ref), dexpr, axis=1))
         if bound is not None:
             cons += [u <= bound / sc, -u <= bound / sc]
@@ -420,8 +418,7 @@ def solve_lipschitz(data: FieldData, *, box: tuple[float, float] | None = None,
         nan = np.full(phi0.size, np.nan)
         return _finish(data, sets, nan, np.full(phi1.shape[1], np.nan), common, bound, None)
     phi = np.asarray(u.value) * sc
-    jumps = np.linalg.norm((sparse.kron(diff, sparse.csr_matrix(lt)) @ phi).reshape(-1, m2),
-                           axis=1) / dist
+    jumps = np.linalg.norm((jump @ phi).reshape(-1, m2), axis=1) / dist
     return _finish(data, sets, phi, np.asarray(eta.value), common, bound, None,
                    lipschitz=float(np.max(jumps)))
 

@@ -428,10 +428,14 @@ def _demo(args: argparse.Namespace) -> dict[str, Any]:
                             "uncertainty sets, the smoothest field with and without the box, "
                             "fig. 4 maps, the parametric baseline")
     if not args.problem and not args.no_compare:
-        cmp_res = _run_compare(out / "compare", PROBLEMS, args.sizes, args.mc_runs,
-                               args.repeats, args.seed, progress=not args.json)
+        cmp_res = _run_harness(out / "compare", PROBLEMS, sizes=args.sizes, solvers=None,
+                               profile="default", seed=args.seed,
+                               time_limit=args.time_limit, quick=args.sizes is None,
+                               progress=not args.json)
         result["compare"] = cmp_res
-        sections.append("- [Solver and formulation comparison](compare/report.md)")
+        sections.append("- [Solver and formulation comparison](compare/report.md): every "
+                        "problem's original form on every installed solver against the "
+                        "closed form (success, time, scaling plots)")
     result["seconds"] = time.perf_counter() - t0
     out.mkdir(parents=True, exist_ok=True)
     (out / "index.md").write_text(
@@ -441,8 +445,52 @@ def _demo(args: argparse.Namespace) -> dict[str, Any]:
     return result
 
 
+def _run_harness(out: Path, problems: Sequence[str], *, sizes: list[int] | None,
+                 solvers: list[str] | None, profile: str, seed: int,
+                 time_limit: float | None, quick: bool = False, progress: bool,
+                 instances: list[str] | None = None) -> dict[str, Any]:
+    """The comparison harness (:mod:`solvers_cmp.harness`) and its report.
+
+    ``quick``: the main job's sweep -- each problem's two smallest default sizes."""
+    from optmodels.backends.casadi_backend import probe_nlp_plugins
+    from optmodels.backends.casadi_qp import probe_plugins
+    from optmodels.io import write_json
+    from solvers_cmp import cases as cs
+    from solvers_cmp import harness, report
+
+    for p in problems:
+        if p not in cs.REGISTRY:
+            raise ProblemError(f"--problems: unknown problem {p!r} (known: "
+                               f"{', '.join(cs.REGISTRY)})")
+    out.mkdir(parents=True, exist_ok=True)
+    env = report.environment()
+    write_json(out / "environment.json", env)
+    rows: list[dict[str, Any]] = []
+    for p in problems:
+        p_sizes = sizes
+        if p_sizes is None and quick:
+            p_sizes = list(cs.adapter(p).sizes[:2])
+        rows += harness.run_sweep([p], out, sizes=p_sizes, solvers=solvers,
+                                  profile=profile, seeds=(seed,), time_limit=time_limit,
+                                  instances=instances, progress=progress)
+    prof = harness.PROFILES[profile]
+    limit = float(time_limit or prof.time_limit)
+    notes = {f"CasADi conic {k}": v for k, v in probe_plugins().items() if v != "ok"}
+    notes |= {f"CasADi nlpsol {k}": v for k, v in probe_nlp_plugins().items() if v != "ok"}
+    report.write_harness_report(out, rows, profile=profile, time_limit=limit,
+                                error_tol=prof.error_tol, violation_tol=prof.violation_tol,
+                                notes=notes)
+    return {"out": str(out), "runs": len(rows),
+            "successes": sum(bool(r["success"]) for r in rows),
+            "failures": [{k: r[k] for k in ("problem", "instance", "size", "formulation",
+                                            "solver", "status", "reason")}
+                         for r in rows if not r["success"]]}
+
+
 def _run_compare(out: Path, problems: Sequence[str], sizes: list[int], runs: int,
                  repeats: int, seed: int, progress: bool) -> dict[str, Any]:
+    """The per-problem studies (``optmodels compare --details``): plane Monte Carlo
+    accuracy, benchmarks at the issues' target sizes, problem-specific tables."""
     from optmodels.io import write_json
     from solvers_cmp import plane as cmp_plane
     from solvers_cmp import report
@@ -495,8 +543,56 @@ def _run_compare(out: Path, problems: Sequence[str], sizes: list[int], runs: int
 
 def _compare(args: argparse.Namespace) -> dict[str, Any]:
     problems = [p.strip() for p in args.problems.split(",") if p.strip()]
-    return _run_compare(Path(args.out), problems, args.sizes, args.runs, args.repeats,
-                        args.seed, progress=not args.json)
+    solvers = [x.strip() for x in args.solvers.split(",") if x.strip()] if args.solvers \
+        else None
+    instances = [x.strip() for x in args.instances.split(",") if x.strip()] \
+        if args.instances else None
+    if args.details:
+        return _run_compare(Path(args.out), problems, args.sizes or [100, 1000, 10000],
+                            args.runs, args.repeats, args.seed, progress=not args.json)
+    return _run_harness(Path(args.out), problems, sizes=args.sizes, solvers=solvers,
+                        profile=args.profile, seed=args.seed, time_limit=args.time_limit,
+                        instances=instances, progress=not args.json)
+
+
+def _montecarlo(args: argparse.Namespace) -> dict[str, Any]:
+    from optmodels import montecarlo as mc
+    from optmodels.io import write_json
+
+    params: dict[str, Any] = {}
+    for item in args.param or []:
+        key, sep, val = item.partition("=")
+        if not sep or not key:
+            raise ProblemError(f"--param: expected NAME=VALUE, got {item!r}")
+        try:
+            params[key] = json.loads(val)
+        except json.JSONDecodeError:
+            params[key] = val
+    try:
+        study = mc.study(args.study, **params)
+    except TypeError as exc:
+        raise ProblemError(f"--param: {exc}") from exc
+    res = mc.run(study, args.trials, args.seed, scheduler=args.scheduler,
+                 checkpoint=args.checkpoint, workers=args.workers, progress=not args.json)
+    out = {"study": res.study, "seed": res.seed, "trials": int(res.trials.size),
+           "resumed": res.resumed, "engine": res.engine, "summary": res.summary,
+           "means": {k: res.mean(k) for k in res.values},
+           "standard_errors": {k: res.se(k) for k in res.values} if res.trials.size > 1
+           else {}}
+    if args.out:
+        Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+        write_json(Path(args.out), {**out, "values": res.values})
+    return out
+
+
+def _print_montecarlo(res: dict[str, Any]) -> None:
+    print(f"{res['study']}: {res['trials']} trials (seed {res['seed']}, {res['resumed']} "
+          f"from the checkpoint), engine {res['engine']}")
+    for k, v in res["summary"].items():
+        print(f"  {k:>22s} = {v:.6g}")
+    for k, v in res["means"].items():
+        se = res["standard_errors"].get(k)
+        print(f"  mean {k:>17s} = {v:.6g}" + (f" ± {se:.2g}" if se is not None else ""))
 
 
 def _int_list(text: str) -> list[int]:
@@ -504,8 +600,8 @@ def _int_list(text: str) -> list[int]:
         vals = [int(x) for x in text.split(",") if x.strip()]
     except ValueError as exc:
         raise argparse.ArgumentTypeError(f"expected integers like 100,1000 ({exc})") from exc
-    if not vals or min(vals) < 4:
-        raise argparse.ArgumentTypeError("sizes must be integers >= 4")
+    if not vals or min(vals) < 1:
+        raise argparse.ArgumentTypeError("sizes must be positive integers")
     return vals
 
 
@@ -526,22 +622,50 @@ def build_parser() -> argparse.ArgumentParser:
     demo.add_argument("--fusion-positions", type=int, default=40,
                       help="emitter positions of the fusion demo's two-site study")
     demo.add_argument("--no-compare", action="store_true", help="skip the comparison")
-    demo.add_argument("--sizes", type=_int_list, default=[100, 1000, 10000],
-                      help="comparison sizes (default 100,1000,10000)")
-    demo.add_argument("--mc-runs", type=int, default=200, help="comparison Monte Carlo runs")
-    demo.add_argument("--repeats", type=int, default=5, help="timing repeats (median)")
+    demo.add_argument("--sizes", type=_int_list, default=None,
+                      help="comparison sizes for every problem (default: each problem's "
+                           "two smallest default sizes)")
+    demo.add_argument("--time-limit", type=float, default=5.0,
+                      help="comparison time limit per run, s (default 5)")
     demo.add_argument("--json", action="store_true", help="machine-readable output")
     demo.set_defaults(func=_demo)
 
-    cmp_ = sub.add_parser("compare", help="compare solvers and formulations")
-    cmp_.add_argument("--problems", default=",".join(PROBLEMS))
-    cmp_.add_argument("--sizes", type=_int_list, default=[100, 1000, 10000])
-    cmp_.add_argument("--runs", type=int, default=200, help="Monte Carlo runs per case")
-    cmp_.add_argument("--repeats", type=int, default=5, help="timing repeats (median)")
+    cmp_ = sub.add_parser("compare", help="compare solvers and formulations (solvers_cmp)")
+    cmp_.add_argument("--problems", default=",".join(PROBLEMS),
+                      help="comma-separated (default: all)")
+    cmp_.add_argument("--sizes", type=_int_list, default=None,
+                      help="sizes for every problem (default: each problem's own; see "
+                           "report.md for what size means per problem)")
+    cmp_.add_argument("--solvers", help="comma-separated solver names (CLARABEL, OSQP, "
+                                        "CASADI_QPOASES, ipopt, sqpmethod, HIGHS, ...); the "
+                                        "closed form is always kept")
+    cmp_.add_argument("--instances", help="comma-separated instance names (e.g. box,radar)")
+    cmp_.add_argument("--profile", choices=("default", "high"), default="default")
+    cmp_.add_argument("--time-limit", type=float, help="per run, s (default: the profile's)")
     cmp_.add_argument("--seed", type=int, default=0)
     cmp_.add_argument("--out", default="report/compare")
+    cmp_.add_argument("--details", action="store_true",
+                      help="run the per-problem studies instead (plane Monte Carlo accuracy, "
+                           "benchmarks at the issues' target sizes)")
+    cmp_.add_argument("--runs", type=int, default=200, help="--details: Monte Carlo runs")
+    cmp_.add_argument("--repeats", type=int, default=5, help="--details: timing repeats")
     cmp_.add_argument("--json", action="store_true")
     cmp_.set_defaults(func=_compare)
+
+    mcp = sub.add_parser("montecarlo", help="run a seeded Monte Carlo study (local or Dask)")
+    mcp.add_argument("study", help="plane-angle, trajectories-eta, fusion-weight, "
+                                   "biasfield-recovery, assignment-separation")
+    mcp.add_argument("--trials", type=int, default=1000)
+    mcp.add_argument("--seed", type=int, default=0)
+    mcp.add_argument("--param", action="append", metavar="NAME=VALUE",
+                     help="study parameter (repeatable), e.g. --param n=100")
+    mcp.add_argument("--scheduler", default=None,
+                     help="processes (default), serial, or a Dask address tcp://host:8786")
+    mcp.add_argument("--workers", type=int, help="local processes (default: all cores)")
+    mcp.add_argument("--checkpoint", help="JSON-lines file; a rerun resumes from it")
+    mcp.add_argument("--out", help="write the per-trial values and summary to this JSON")
+    mcp.add_argument("--json", action="store_true")
+    mcp.set_defaults(func=_montecarlo, printer=_print_montecarlo)
 
     pl = sub.add_parser("plane", help="plane of maneuver (paper 000)")
     plsub = pl.add_subparsers(dest="verb", required=True)

@@ -183,8 +183,10 @@ def as_finite_array(
     *,
     ndim: int | tuple[int, ...] | None = None,
     shape: tuple[int | None, ...] | None = None,
+    max_abs: float | None = None,
 ) -> FloatArray:
-    """Convert ``value`` to a float64 array and check shape and finiteness.
+    """Convert ``value`` to a float64 array and check shape and finiteness (and, with
+    ``max_abs``, magnitude: see :data:`MAX_MAGNITUDE`).
 
     Raises
     ------
@@ -213,7 +215,17 @@ def as_finite_array(
     if not np.all(np.isfinite(arr)):
         bad = int(np.size(arr) - np.count_nonzero(np.isfinite(arr)))
         raise ProblemError(f"{name}: {bad} entries are NaN or infinite")
+    if max_abs is not None and arr.size and float(np.max(np.abs(arr))) > max_abs:
+        raise ProblemError(f"{name}: |entries| up to {float(np.max(np.abs(arr))):.3g}, above "
+                           f"{max_abs:.0e} (squares and sums of squares would overflow "
+                           "float64; change units)")
     return arr
+
+
+#: Largest magnitude accepted where a problem squares its inputs (least-squares sums):
+#: (1e100)² · N stays far below float64's 1.8e308. Found by the robustness sweep
+#: (tests/test_robustness.py): 1e150-scale times overflowed Σt² into inf.
+MAX_MAGNITUDE = 1e100
 
 
 def check_spd_stack(name: str, mats: FloatArray, *, rtol: float = 1e-10) -> None:

@@ -175,7 +175,7 @@ def weight_matrix_correlated(s1: ArrayLike, s2: ArrayLike, s12: ArrayLike) -> Fl
 def fuse(a1: ArrayLike, s1: ArrayLike, a2: ArrayLike, s2: ArrayLike, *,
          s12: ArrayLike | None = None,
          method: Literal["closed_form", "cvxpy"] = "closed_form",
-         solver: str = "CLARABEL") -> FusionSolution:
+         solver: str = "CLARABEL", **solver_options: Any) -> FusionSolution:
     """Fuse two estimates a1, a2 of the same α with error covariances S1, S2.
 
     Independent estimates (``s12=None``, the paper's assumption): (1)-(2) in closed form, or
@@ -188,14 +188,15 @@ def fuse(a1: ArrayLike, s1: ArrayLike, a2: ArrayLike, s2: ArrayLike, *,
 
     ``covariance`` is the fused error covariance (under the stated correlation);
     ``residuals["gradient"]`` is the relative norm of the optimality condition at the
-    returned point, re-computed in NumPy for either method.
+    returned point, re-computed in NumPy for either method. ``solver_options`` go to the
+    CVXPY solver (``method="cvxpy"``).
     """
     s1a, s2a = _pair(s1, s2)
     m = s1a.shape[0]
     x1 = as_finite_array("a1", a1, shape=(m,))
     x2 = as_finite_array("a2", a2, shape=(m,))
     if s12 is not None:
-        return _fuse_correlated(x1, s1a, x2, s2a, s12, method, solver)
+        return _fuse_correlated(x1, s1a, x2, s2a, s12, method, solver, solver_options)
     c1, c2 = np.linalg.inv(s1a), np.linalg.inv(s2a)
     w = _weight(s1a, s2a)
     cov = (np.eye(m) - w) @ s1a
@@ -207,27 +208,56 @@ def fuse(a1: ArrayLike, s1: ArrayLike, a2: ArrayLike, s2: ArrayLike, *,
                                   "solve_time": tm.elapsed, "message": "(1)-(2)"}
     elif method == "cvxpy":
         with timed() as tb:
-            alpha = cp.Variable(m)
-            obj = (cp.quad_form(alpha - x1, cp.psd_wrap(c1))
-                   + cp.quad_form(alpha - x2, cp.psd_wrap(c2)))
+            # α = a1 + d·u with d the spread of the two estimates and C_μ divided by
+            # ‖C1 + C2‖: the solver sees an O(1) problem whatever the units. (The robustness
+            # sweep found Clarabel returning α = 0 as 'optimal' for estimates at 1e-151:
+            # its absolute tolerances swallowed the whole problem.)
+            d = max(float(np.max(np.abs(x2 - x1))), 1e-300)
+            cn = max(float(np.max(np.abs(c1 + c2))), 1e-300)
+            delta = (x2 - x1) / d
+            u = cp.Variable(m)
+            obj = (cp.quad_form(u, cp.psd_wrap(c1 / cn))
+                   + cp.quad_form(u - delta, cp.psd_wrap(c2 / cn)))
             prob = cp.Problem(cp.Minimize(obj))
-        res = solve_problem(prob, solver)
+        res = solve_problem(prob, solver, **solver_options)
         common = res.common()
         common["build_time"] += tb.elapsed
-        est = (np.asarray(alpha.value) if res.status.ok and alpha.value is not None
+        est = (x1 + d * np.asarray(u.value) if res.status.ok and u.value is not None
                else np.full(m, np.nan))
     else:
         raise ProblemError(f"method: expected 'closed_form' or 'cvxpy', got {method!r}")
     grad = c1 @ (est - x1) + c2 @ (est - x2)
     scale = np.abs(c1) @ np.abs(x1) + np.abs(c2) @ np.abs(x2) + np.abs(c1 + c2) @ np.abs(est)
     res_grad = float(np.max(np.abs(grad) / (scale + 1e-300)))
+    _verify(common, res_grad)
     return FusionSolution(objective=_wls_objective(est, x1, c1, x2, c2),
                           residuals={"gradient": res_grad}, estimate=est, covariance=cov,
                           W=w, **common)
 
 
+#: A generic solve whose NumPy-recomputed optimality residual exceeds VERIFY_TOL is
+#: reported OPTIMAL_INACCURATE, above REJECT_TOL ERROR (a solver's 'optimal' is not taken
+#: on trust).
+VERIFY_TOL, REJECT_TOL = 1e-6, 1e-3
+
+
+def _verify(common: dict[str, Any], res_grad: float) -> None:
+    status = common["status"]
+    if not status.ok:
+        return
+    if not np.isfinite(res_grad) or res_grad > REJECT_TOL:
+        common["status"] = Status.ERROR
+        common["message"] = f"{common.get('message', '')}; optimality residual " \
+            f"{res_grad:.1e} fails the NumPy check"
+    elif res_grad > VERIFY_TOL and status == Status.OPTIMAL:
+        common["status"] = Status.OPTIMAL_INACCURATE
+        common["message"] = f"{common.get('message', '')}; optimality residual " \
+            f"{res_grad:.1e} (NumPy check)"
+
+
 def _fuse_correlated(x1: FloatArray, a: FloatArray, x2: FloatArray, b: FloatArray,
-                     s12: ArrayLike, method: str, solver: str) -> FusionSolution:
+                     s12: ArrayLike, method: str, solver: str,
+                     solver_options: dict[str, Any]) -> FusionSolution:
     c, d = _cross(s12, a, b)
     m = a.shape[0]
     eye = np.eye(m)
@@ -245,7 +275,7 @@ def _fuse_correlated(x1: FloatArray, a: FloatArray, x2: FloatArray, b: FloatArra
             wv = cp.Variable((m, m))
             expr = cp.hstack([eye - wv, wv]) @ (root / scale)
             prob = cp.Problem(cp.Minimize(cp.sum_squares(expr)))
-        res = solve_problem(prob, solver)
+        res = solve_problem(prob, solver, **solver_options)
         common = res.common()
         common["build_time"] += tb.elapsed
         w = (np.asarray(wv.value) if res.status.ok and wv.value is not None
@@ -257,6 +287,7 @@ def _fuse_correlated(x1: FloatArray, a: FloatArray, x2: FloatArray, b: FloatArra
     cov = fused_covariance(w, a, b, c)
     grad = w @ d - (a - c)
     res_grad = float(np.max(np.abs(grad)) / (np.max(np.abs(d)) * max(1.0, np.max(np.abs(w)))))
+    _verify(common, res_grad)
     return FusionSolution(objective=float(np.trace(cov)), residuals={"gradient": res_grad},
                           estimate=est, covariance=cov, W=w, **common)
 

@@ -62,9 +62,11 @@ from scipy import stats
 
 from optmodels.backends.casadi_backend import BuiltNlp, build_nlpsol, run_nlpsol
 from optmodels.core import (
+    MAX_MAGNITUDE,
     FloatArray,
     ProblemError,
     Solution,
+    SolverNotAvailable,
     Status,
     as_finite_array,
     check_spd,
@@ -138,11 +140,11 @@ class PlaneData:
     base_cov: FloatArray | None = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
-        pts = as_finite_array("points", self.points, shape=(None, 3))
+        pts = as_finite_array("points", self.points, shape=(None, 3), max_abs=MAX_MAGNITUDE)
         n = pts.shape[0]
         if n < 3:
             raise ProblemError(f"points: a plane needs at least 3 points, got {n}")
-        cov = as_finite_array("cov", self.cov, ndim=(2, 3))
+        cov = as_finite_array("cov", self.cov, ndim=(2, 3), max_abs=MAX_MAGNITUDE)
         alpha2: FloatArray | None
         if cov.ndim == 2:
             if cov.shape != (3, 3):
@@ -151,11 +153,12 @@ class PlaneData:
             if self.alpha2 is None:
                 alpha2 = np.ones(n)
             else:
-                alpha2 = as_finite_array("alpha2", self.alpha2, shape=(n,))
-                if np.any(alpha2 <= 0):
+                alpha2 = as_finite_array("alpha2", self.alpha2, shape=(n,),
+                                         max_abs=MAX_MAGNITUDE)
+                if np.any(alpha2 < 1 / MAX_MAGNITUDE):
                     raise ProblemError(
-                        f"alpha2: the factors of (1.4) must be > 0; "
-                        f"{int(np.sum(alpha2 <= 0))} are not"
+                        f"alpha2: the factors of (1.4) must be ≥ 1e-100; "
+                        f"{int(np.sum(alpha2 < 1 / MAX_MAGNITUDE))} are not"
                     )
             base = 0.5 * (cov + cov.T)
             covs = alpha2[:, None, None] * base
@@ -179,6 +182,17 @@ class PlaneData:
                 "points: the points are collinear; every plane through their line fits "
                 "(the two smallest generalized eigenvalues coincide), the plane is not unique"
             )
+        # Found by the robustness sweep: covariances at 1e±150 relative to the points made
+        # the scaled problem's inverses and quadratic forms overflow. The plane problem is
+        # invariant to x → s·x, D → s²·D; what must stay in range is the noise relative to
+        # the extent of the data.
+        eig = np.linalg.eigvalsh(covs)
+        ext2 = max(float(spread[0]) ** 2 / n, 1e-300)
+        if float(eig.min()) < 1e-100 * ext2 or float(eig.max()) > 1e100 * ext2:
+            raise ProblemError(
+                f"cov: variances from {float(eig.min()):.3g} to {float(eig.max()):.3g} for "
+                f"points spread over {np.sqrt(ext2):.3g}; outside 1e±100 of the spread² "
+                "(float64 cannot hold the weights); check units")
         object.__setattr__(self, "points", pts)
         object.__setattr__(self, "cov", cov)
         object.__setattr__(self, "alpha2", alpha2)
@@ -415,18 +429,18 @@ _NLP_CACHE_SIZE = 8
 
 
 def _get_nlp(
-    formulation: Formulation, n: int, options: dict[str, Any] | None
+    formulation: Formulation, n: int, options: dict[str, Any] | None, plugin: str = "ipopt"
 ) -> tuple[BuiltNlp, bool]:
     """Built NLP for this structure, and whether it was built by this call.
 
     The symbolic construction does not depend on the data values, so Monte Carlo and
     sequential runs pay it once per (formulation, N, options).
     """
-    key = (formulation, n, tuple(sorted((options or {}).items())))
+    key = (formulation, n, plugin, repr(sorted((options or {}).items())))
     if key in _NLP_CACHE:
         return _NLP_CACHE[key], False
     problem = _full_problem(n) if formulation == "full" else _reduced_problem(n)
-    built = build_nlpsol(problem, options=options)
+    built = build_nlpsol(problem, plugin=plugin, options=options)
     if len(_NLP_CACHE) >= _NLP_CACHE_SIZE:
         _NLP_CACHE.pop(next(iter(_NLP_CACHE)))
     _NLP_CACHE[key] = built
@@ -490,8 +504,10 @@ def solve(
     starts: int | Literal["auto"] = "auto",
     initial_normal: ArrayLike | None = None,
     ipopt_options: dict[str, Any] | None = None,
+    plugin: str = "ipopt",
+    plugin_options: dict[str, Any] | None = None,
 ) -> PlaneSolution:
-    """Solve the ML plane problem generically with CasADi + IPOPT.
+    """Solve the ML plane problem generically with CasADi + IPOPT (or another NLP plugin).
 
     Parameters
     ----------
@@ -510,6 +526,13 @@ def solve(
         Start from this normal instead (a single start, e.g. a warm start in a sequence).
     ipopt_options : dict, optional
         Extra IPOPT options (defaults: ``tol = constr_viol_tol = 1e-10``).
+    plugin : str
+        CasADi ``nlpsol`` plugin: ``"ipopt"`` (default) or another that loads here, e.g.
+        ``"sqpmethod"``, ``"blocksqp"``, ``"feasiblesqpmethod"`` (see
+        :data:`optmodels.backends.casadi_backend.NLP_PLUGINS`). Every result is re-checked
+        against (1.3) in NumPy whatever the plugin.
+    plugin_options : dict, optional
+        Options for a plugin other than IPOPT (CasADi's option dictionary).
 
     Returns
     -------
@@ -548,7 +571,15 @@ def solve(
         start_normals = list(_principal_axes(sc.points)[: 3 if auto else int(starts)])
 
     with timed() as t_prep:
-        built, fresh = _get_nlp(formulation, n_pts, ipopt_options)
+        try:
+            if plugin == "ipopt":
+                built, fresh = _get_nlp(formulation, n_pts, ipopt_options)
+            else:
+                built, fresh = _get_nlp(formulation, n_pts, plugin_options, plugin)
+        except RuntimeError as exc:  # CasADi: unknown plugin/option, missing library
+            raise SolverNotAvailable(
+                f"plugin: CasADi nlpsol {plugin!r} could not be built for the plane NLP: "
+                f"{str(exc).splitlines()[0][:200]}") from exc
         if formulation == "full":
             params = np.concatenate(
                 [sc.points.T.ravel(order="F"), _upper(np.linalg.inv(sc.covs)).ravel(order="F")]
@@ -565,7 +596,7 @@ def solve(
     start_status: list[str] = []
     total_solve = 0.0
     total_iter = 0
-    method = f"casadi:ipopt:{formulation}"
+    method = f"casadi:{plugin}:{formulation}"
     curvature = float("nan")
     for nv0 in start_normals:
         if auto and data.proportional and len(start_objs) == 1 and best is not None \

@@ -286,3 +286,55 @@ def association_rates(path: Path, rows: list[dict]) -> Path:
     ax.grid(alpha=0.3)
     ax.legend()
     return _save(fig, path)
+
+
+def scaling(path: Path, rows: list[dict], *, title: str, size_label: str,
+            time_limit: float) -> Path:
+    """Log-log total time (build + solve) vs size, one panel per instance, one line per
+    (formulation, solver); failed runs drawn as × at the time limit; the closed form (the
+    floor) as a thick black line."""
+    instances = sorted({r["instance"] for r in rows})
+    fig, axes = plt.subplots(1, len(instances), figsize=(5.2 * len(instances), 4.2),
+                             squeeze=False, sharey=True)
+    series = sorted({(r["formulation"], r["solver"]) for r in rows},
+                    key=lambda fs: (fs[0] != "closed_form", fs))
+    cmap = plt.get_cmap("tab20")
+    colors = {fs: cmap(k % 20) for k, fs in enumerate(s for s in series if s[0] != "closed_form")}
+    for ax, inst in zip(axes[0], instances, strict=True):
+        for fs in series:
+            rs = sorted((r for r in rows if r["instance"] == inst
+                         and (r["formulation"], r["solver"]) == fs), key=lambda r: r["size"])
+            if not rs:
+                continue
+            ok = [r for r in rs if r["success"]]
+            bad = [r for r in rs if not r["success"]]
+            floor = fs[0] == "closed_form"
+            style = {"color": "k", "lw": 2.5, "ls": "--"} if floor else {
+                "color": colors[fs], "lw": 1.2, "marker": "o", "ms": 3}
+            label = "closed form" if floor else f"{fs[1]} ({fs[0]})"
+            if ok:
+                ax.plot([r["size"] for r in ok],
+                        [max(r["build_time"] + r["solve_time"], 1e-6) for r in ok],
+                        label=label, **style)
+            if bad:
+                ax.plot([r["size"] for r in bad], [time_limit] * len(bad), "x",
+                        color=style["color"], ms=7, label=None if ok else label + " (failed)")
+        ax.axhline(time_limit, color="0.6", lw=0.8, ls=":")
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.set_xlabel(size_label)
+        ax.set_title(f"{title}: {inst}")
+        ax.grid(True, which="both", alpha=0.3)
+    axes[0][0].set_ylabel("build + solve time, s (× = failed, at the time limit)")
+    handles, labels = axes[0][-1].get_legend_handles_labels()
+    for ax in axes[0][:-1]:
+        h, lab = ax.get_legend_handles_labels()
+        for hh, ll in zip(h, lab, strict=True):
+            if ll not in labels:
+                handles.append(hh)
+                labels.append(ll)
+    fig.tight_layout()
+    fig.legend(handles, labels, loc="center left", bbox_to_anchor=(1.0, 0.5), fontsize=7)
+    fig.savefig(path, dpi=110, bbox_inches="tight")  # the legend sits right of the panels
+    plt.close(fig)
+    return path

@@ -68,7 +68,15 @@ from numpy.typing import ArrayLike
 from scipy import linalg, stats
 
 from optmodels.backends.cvxpy_backend import solve_problem
-from optmodels.core import FloatArray, ProblemError, Solution, Status, as_finite_array, timed
+from optmodels.core import (
+    MAX_MAGNITUDE,
+    FloatArray,
+    ProblemError,
+    Solution,
+    Status,
+    as_finite_array,
+    timed,
+)
 
 __all__ = [
     "FAMILIES",
@@ -170,8 +178,9 @@ class TrajectoryData:
         ts, ys, ws = [], [], []
         dims = set()
         for j in range(q):
-            t = as_finite_array(f"times[{j}]", self.times[j], ndim=1)
-            y = as_finite_array(f"values[{j}]", self.values[j], ndim=(1, 2))
+            t = as_finite_array(f"times[{j}]", self.times[j], ndim=1, max_abs=MAX_MAGNITUDE)
+            y = as_finite_array(f"values[{j}]", self.values[j], ndim=(1, 2),
+                                max_abs=MAX_MAGNITUDE)
             if t.size == 0:
                 raise ProblemError(f"times[{j}]: object {j} has no measurements")
             if y.shape[0] != t.size:
@@ -197,8 +206,9 @@ class TrajectoryData:
             isinstance(self.sigma2, np.ndarray) and self.sigma2.ndim == 0
         ):
             s2 = float(as_finite_array("sigma2", self.sigma2))
-            if s2 <= 0:
-                raise ProblemError(f"sigma2: must be positive, got {s2}")
+            if not 1 / MAX_MAGNITUDE <= s2 <= MAX_MAGNITUDE:
+                raise ProblemError(f"sigma2: must be in [1e-100, 1e100] (positive, and its "
+                                   f"inverse a usable weight), got {s2}")
             scalar = s2
             ws = [np.full((t.size, d), 1.0 / s2) for t in ts]
         else:
@@ -213,8 +223,9 @@ class TrajectoryData:
                     raise ProblemError(
                         f"sigma2[{j}]: shape {s2.shape} does not match ({ts[j].size}, {d})"
                     ) from None
-                if np.any(s2 <= 0):
-                    raise ProblemError(f"sigma2[{j}]: variances must be positive")
+                if np.any(s2 < 1 / MAX_MAGNITUDE) or np.any(s2 > MAX_MAGNITUDE):
+                    raise ProblemError(
+                        f"sigma2[{j}]: variances must be positive, in [1e-100, 1e100]")
                 ws.append(1.0 / s2)
         object.__setattr__(self, "t", np.concatenate(ts))
         object.__setattr__(self, "y", np.concatenate(ys))

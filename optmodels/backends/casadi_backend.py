@@ -9,6 +9,7 @@ an unknown string maps to ``Status.ERROR``.
 
 from __future__ import annotations
 
+import functools
 import time
 from dataclasses import dataclass
 from typing import Any
@@ -16,10 +17,65 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
-from optmodels.backends.common import BackendResult
+from optmodels.backends.common import BackendResult, probe_in_child
 from optmodels.core import Status
 
-__all__ = ["IPOPT_STATUS", "BuiltNlp", "build_nlpsol", "run_nlpsol"]
+__all__ = ["IPOPT_STATUS", "NLP_PLUGINS", "NLP_PLUGIN_DEFAULTS", "BuiltNlp", "build_nlpsol",
+           "nlp_plugins", "probe_nlp_plugins", "run_nlpsol"]
+
+#: CasADi NLP plugins the comparison tries, in report order (commercial ones left out).
+NLP_PLUGINS = ("ipopt", "sqpmethod", "feasiblesqpmethod", "blocksqp", "fatrop")
+_QRQP_QUIET = {"print_iter": False, "print_header": False, "print_info": False,
+               "error_on_fail": False}
+#: Quiet defaults per plugin; sqpmethod and feasiblesqpmethod use CasADi's own qrqp QP
+#: solver (no third-party library involved).
+NLP_PLUGIN_DEFAULTS: dict[str, dict[str, Any]] = {
+    "sqpmethod": {"qpsol": "qrqp", "qpsol_options": _QRQP_QUIET, "print_header": False,
+                  "print_iteration": False, "print_status": False, "max_iter": 200,
+                  "error_on_fail": False},
+    "feasiblesqpmethod": {"qpsol": "qrqp", "qpsol_options": _QRQP_QUIET,
+                          "print_header": False, "print_iteration": False,
+                          "print_status": False, "max_iter": 200, "error_on_fail": False},
+    "blocksqp": {"print_header": False, "print_iteration": False, "print_maxit_reached":
+                 False, "error_on_fail": False},
+    "fatrop": {"fatrop": {"print_level": 0}, "error_on_fail": False},
+}
+
+
+_NLP_PROBE = r"""
+import sys
+import casadi as ca
+import numpy as np
+from optmodels.backends.casadi_backend import build_nlpsol
+for plugin in sys.argv[1:]:
+    if not ca.has_nlpsol(plugin):
+        print(plugin, "does not load", flush=True); continue
+    x = ca.SX.sym("x", 2)
+    try:
+        built = build_nlpsol({"x": x, "f": ca.sumsqr(x), "g": x[0] + x[1] - 1}, plugin=plugin)
+        res = built.solver(x0=[1.0, 0.0], lbg=0, ubg=0)  # a feasible start
+        xs = np.asarray(res["x"], dtype=float).ravel()
+        ok = bool(built.solver.stats().get("success")) and np.allclose(xs, 0.5, atol=1e-6)
+        print(plugin, "ok" if ok else "wrong answer on the test NLP", flush=True)
+    except RuntimeError as exc:
+        lines = [ln for ln in str(exc).splitlines() if "Error code" in ln]
+        msg = (lines[0].strip() if lines else str(exc).splitlines()[0])[:160]
+        print(plugin, "error: " + msg, flush=True)
+"""
+
+
+@functools.cache
+def probe_nlp_plugins() -> dict[str, str]:
+    """For each of :data:`NLP_PLUGINS`: ``"ok"`` if it loads and solves
+    ``min ‖x‖² s.t. x₁ + x₂ = 1`` to 1e-6, else why not (e.g. blocksqp needs HSL's MA27,
+    which is not redistributed with CasADi). Runs in a child interpreter (see
+    :func:`optmodels.backends.common.probe_in_child`)."""
+    return probe_in_child(_NLP_PROBE, NLP_PLUGINS)
+
+
+def nlp_plugins() -> tuple[str, ...]:
+    """The plugins of :data:`NLP_PLUGINS` that load and pass :func:`probe_nlp_plugins`."""
+    return tuple(p for p, v in probe_nlp_plugins().items() if v == "ok")
 
 IPOPT_STATUS: dict[str, Status] = {
     "Solve_Succeeded": Status.OPTIMAL,
@@ -73,6 +129,7 @@ def build_nlpsol(
     if plugin == "ipopt":
         opts["ipopt"] = {**IPOPT_DEFAULTS, **(options or {})}
     else:
+        opts.update(NLP_PLUGIN_DEFAULTS.get(plugin, {}))
         opts.update(options or {})
     t0 = time.perf_counter()
     solver = ca.nlpsol("optmodels_nlp", plugin, nlp, opts)

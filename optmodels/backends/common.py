@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -31,3 +32,34 @@ class BackendResult:
             "iterations": self.iterations,
             "message": self.message,
         }
+
+
+def probe_in_child(script: str, names: Sequence[str], timeout: float = 120.0
+                   ) -> dict[str, str]:
+    """Run ``script`` (Python source that takes plugin names as ``sys.argv[1:]`` and prints
+    ``"<name> <verdict>"`` per name, flushing each line) in a child interpreter.
+
+    A plugin that crashes the interpreter (seen here: a segfault inside a solver library)
+    costs only the child: the verdict is ``"crashed ..."`` and the probe resumes with the
+    next name. Solver noise on the child's stdout/stderr is discarded.
+    """
+    import subprocess
+    import sys
+
+    todo = list(names)
+    res: dict[str, str] = {}
+    while todo:
+        try:
+            proc = subprocess.run([sys.executable, "-c", script, *todo], capture_output=True,
+                                  text=True, timeout=timeout, check=False)
+        except subprocess.TimeoutExpired:
+            res[todo.pop(0)] = f"probe timed out after {timeout:g} s"
+            continue
+        for line in proc.stdout.splitlines():
+            name, _, verdict = line.partition(" ")
+            if name in todo and verdict:
+                res[name] = verdict
+                todo.remove(name)
+        if todo:  # the child died on the first name left
+            res[todo.pop(0)] = f"crashed the interpreter (exit code {proc.returncode})"
+    return res

@@ -12,6 +12,7 @@ from typing import Any
 
 import cvxpy as cp
 
+from optmodels.backends.casadi_qp import CasadiConic, casadi_qp_plugins, plugin_of, probe_plugins
 from optmodels.backends.common import BackendResult
 from optmodels.core import SolverNotAvailable, Status
 
@@ -50,8 +51,20 @@ def available_solvers() -> list[str]:
 
 
 def require_solver(name: str) -> str:
-    """Return the canonical (upper-case) solver name or raise :class:`SolverNotAvailable`."""
+    """Return the canonical (upper-case) solver name or raise :class:`SolverNotAvailable`.
+
+    ``CASADI_<PLUGIN>`` names a CasADi conic plugin driven through CVXPY
+    (:class:`optmodels.backends.casadi_qp.CasadiConic`): QPs only.
+    """
     key = name.upper()
+    plugin = plugin_of(key)
+    if plugin is not None:
+        if plugin not in casadi_qp_plugins():
+            why = probe_plugins().get(plugin, "not a CasADi conic plugin tried here")
+            raise SolverNotAvailable(f"{key!r}: CasADi conic plugin {plugin!r} is not usable "
+                                     f"here ({why}); usable: "
+                                     f"{', '.join(casadi_qp_plugins()) or 'none'}")
+        return key
     if key not in available_solvers():
         hint = PIP_NAMES.get(key, key.lower())
         raise SolverNotAvailable(
@@ -72,12 +85,14 @@ def solve_problem(
     exception is caught and reported as ``Status.ERROR``, never re-raised as a solution.
     """
     name = require_solver(solver)
+    plugin = plugin_of(name)
+    target: Any = CasadiConic(plugin) if plugin is not None else name
     t0 = time.perf_counter()
     try:
         with warnings.catch_warnings():
             # CVXPY warns "Solution may be inaccurate"; the status below says so.
             warnings.filterwarnings("ignore", message="Solution may be inaccurate")
-            problem.solve(solver=name, verbose=verbose, **options)
+            problem.solve(solver=target, verbose=verbose, **options)
     except (cp.error.SolverError, ValueError, ArithmeticError) as exc:
         # SolverError: CVXPY's own; ValueError/ArithmeticError: raised by a solver's Python
         # interface on a problem it cannot take (e.g. SCS with no constraint rows). The

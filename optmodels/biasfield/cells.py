@@ -35,7 +35,7 @@ from scipy.spatial import Delaunay, cKDTree
 from optmodels.biasfield.data import PlotTable, RadarSet
 from optmodels.biasfield.geometry import polar_jacobian, to_polar, wrap_angle
 from optmodels.biasfield.tracks import TrackFit, fit_tracks
-from optmodels.core import FloatArray, ProblemError, as_finite_array
+from optmodels.core import MAX_MAGNITUDE, FloatArray, ProblemError, as_finite_array, check_spd
 
 __all__ = ["FieldData", "build_field_data", "laplacian", "neighbours", "place_centers",
            "synthetic_field_data", "uncertainty_sets"]
@@ -63,15 +63,25 @@ class FieldData:
         m = self.radars.shape[0]
         if self.radars.shape[1] != 2 or m < 2:
             raise ProblemError(f"radars: expected (m, 2) with m ≥ 2, got {self.radars.shape}")
-        self.centers = as_finite_array("centers", self.centers, ndim=2)
+        self.centers = as_finite_array("centers", self.centers, ndim=2, max_abs=MAX_MAGNITUDE)
         k = self.centers.shape[0]
-        self.xi = as_finite_array("xi", self.xi, shape=(k, m, 2))
+        self.xi = as_finite_array("xi", self.xi, shape=(k, m, 2), max_abs=MAX_MAGNITUDE)
         self.adjacency = _as_adjacency(self.adjacency, k)
-        p = as_finite_array("P", self.P, ndim=2)
+        if self.centers.shape[1] != 2:
+            raise ProblemError(f"centers: expected (K, 2), got {self.centers.shape}")
+        upper = sparse.triu(self.adjacency, k=1).tocoo()
+        d2 = np.sum((self.centers[upper.row] - self.centers[upper.col]) ** 2, axis=1)
+        if np.any(d2 <= 0):
+            e = int(np.flatnonzero(d2 <= 0)[0])
+            # found by the robustness sweep: a_ij = 1/‖x̌_i − x̌_j‖² divided by zero
+            raise ProblemError(f"centers: neighbours {upper.row[e]} and {upper.col[e]} "
+                               "coincide (a_ij = 1/‖x̌_i − x̌_j‖² is undefined); merge the cells")
+        p = as_finite_array("P", self.P, ndim=2, max_abs=MAX_MAGNITUDE)
         if p.shape not in ((2, 2), (2 * m, 2 * m)):
             raise ProblemError(f"P: expected (2, 2) or ({2 * m}, {2 * m}), got {p.shape}")
-        if not np.allclose(p, p.T) or np.linalg.eigvalsh(p)[0] <= 0:
-            raise ProblemError("P: must be symmetric positive definite")
+        # Cholesky, as the solver will use it (the robustness sweep found a P whose smallest
+        # eigenvalue was positive but whose Cholesky factorisation failed)
+        check_spd("P", p)
         self.P = p
         if self.xi_cov is not None:
             self.xi_cov = as_finite_array("xi_cov", self.xi_cov, shape=(k, m, 2, 2))

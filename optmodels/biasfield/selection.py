@@ -319,7 +319,9 @@ def kkt_residuals(data: FieldData, sol: FieldSolution,
         slack = bound - np.abs(sol.phi)
         # interior-point duals of inactive bounds are tiny but not exactly 0: allow 1e-7
         tiny = 1e-7 * float(np.max(np.abs(mu))) + 1e-300
-        sign_ok = np.where(sol.phi > 0, mu >= -tiny, mu <= tiny)
+        # at φ_j = 0 (a zero bound, both sides active) either sign is a valid multiplier;
+        # the robustness sweep found box = (0, 0) flagged as a sign error
+        sign_ok = np.where(sol.phi > 0, mu >= -tiny, np.where(sol.phi < 0, mu <= tiny, True))
         out["dual_sign"] = float(np.mean(~sign_ok))
         out["complementarity"] = float(np.max(np.abs(mu) * np.maximum(slack, 0))) / max(
             sol.objective, 1e-300)

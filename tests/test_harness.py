@@ -1,0 +1,180 @@
+"""solvers_cmp harness: rows, resume, isolation (time-outs and crashes), metrics, report,
+CLI; the CasADi conic bridge and NLP plugins it compares."""
+
+from __future__ import annotations
+
+import csv
+import json
+from pathlib import Path
+
+import cvxpy as cp
+import numpy as np
+import pytest
+
+from optmodels import plane, scenarios
+from optmodels import trajectories as tr
+from optmodels.backends.casadi_backend import nlp_plugins
+from optmodels.backends.casadi_qp import CasadiConic, casadi_qp_plugins
+from optmodels.backends.common import probe_in_child
+from optmodels.cli import main
+from solvers_cmp import cases as cs
+from solvers_cmp import harness, report
+
+
+@pytest.fixture()
+def trouble() -> None:
+    cs.register("trouble", "tests.harness_adapters:Trouble")
+    yield
+    cs.REGISTRY.pop("trouble", None)
+
+
+def _csv_rows(path: Path) -> list[dict[str, str]]:
+    return list(csv.DictReader(path.open()))
+
+
+def test_sweep_rows_resume_and_errors(tmp_path: Path) -> None:
+    rows = harness.run_sweep(["trajectories"], tmp_path, sizes=[10],
+                             solvers=["CLARABEL", "OSQP"], isolate=False)
+    # closed form + 2 formulations × 2 solvers, for both families
+    assert len(rows) == 2 * 5
+    assert all(r["success"] for r in rows), [r["reason"] for r in rows]
+    file_rows = _csv_rows(tmp_path / "results.csv")
+    assert list(file_rows[0]) == list(harness.COLUMNS)
+    # the recorded error is the real one: re-solve one row independently
+    data = cs.adapter("trajectories").make("parallel", 10, 0)
+    ref = tr.closed_form(data, "parallel")
+    sol = tr.solve(data, "parallel", formulation="reduced", solver="CLARABEL")
+    err = np.max(np.abs(sol.theta - ref.theta)) / np.max(np.abs(ref.theta))
+    row = next(r for r in rows if r["instance"] == "parallel"
+               and r["formulation"] == "reduced" and r["solver"] == "CLARABEL")
+    # same deterministic solver on the same data: identical up to round-off (1e-12 of θ)
+    assert row["solution_error"] == pytest.approx(err, abs=1e-12)
+    # rerun: nothing new is run or written
+    again = harness.run_sweep(["trajectories"], tmp_path, sizes=[10],
+                              solvers=["CLARABEL", "OSQP"], isolate=False)
+    assert len(again) == 10 and len(_csv_rows(tmp_path / "results.csv")) == 10
+    # drop one finished row: only that one is run again
+    lines = (tmp_path / "results.csv").read_text().splitlines()
+    (tmp_path / "results.csv").write_text("\n".join(lines[:-1]) + "\n")
+    harness.run_sweep(["trajectories"], tmp_path, sizes=[10],
+                      solvers=["CLARABEL", "OSQP"], isolate=False)
+    assert len(_csv_rows(tmp_path / "results.csv")) == 10
+
+
+def test_time_limit_crash_and_exception_are_rows(tmp_path: Path, trouble: None) -> None:
+    rows = harness.run_sweep(["trouble"], tmp_path, time_limit=3.0)
+    by = {r["solver"]: r for r in rows}
+    assert by["numpy"]["success"] and by["ok"]["success"]
+    assert by["crash"]["status"] == "crashed" and not by["crash"]["success"]
+    assert "exit code" in by["crash"]["message"]
+    assert by["sleep"]["status"] == "time_limit" and "3 s time limit" in by["sleep"]["message"]
+    assert by["raise"]["status"] == "error" and "exploded" in by["raise"]["message"]
+    # 'sloppy' solves, but 1e-3 off the reference: a failure by the error tolerance
+    assert by["sloppy"]["status"] == "optimal" and not by["sloppy"]["success"]
+    assert by["sloppy"]["solution_error"] == pytest.approx(1e-3 / 2)
+    assert "solution error" in by["sloppy"]["reason"]
+    # the runs after the crash and the time-out still ran (the sweep went on)
+    assert [r["solver"] for r in rows] == ["numpy", "crash", "ok", "sleep", "raise", "sloppy"]
+    md = report.write_harness_report(tmp_path, rows, profile="default", time_limit=3.0,
+                                     error_tol=1e-5, violation_tol=1e-6)
+    for solver in ("crash", "sleep", "raise", "sloppy"):  # every failure is explained
+        assert f"**{solver}**" in md
+    assert (tmp_path / "trouble_scaling.png").stat().st_size > 0
+
+
+def test_shifted_geometric_mean_and_summary() -> None:
+    # exp(mean(log(t + 0.01))) − 0.01 for t = 0.01, 0.03: √(0.02·0.04) − 0.01
+    assert harness.shifted_geometric_mean([0.01, 0.03]) == pytest.approx(
+        np.sqrt(0.02 * 0.04) - 0.01, rel=1e-12)
+    base = {"problem": "p", "formulation": "f", "build_time": 0.0, "solution_error": 0.0,
+            "max_violation": 0.0}
+    rows = [{**base, "solver": "a", "success": True, "solve_time": 0.01},
+            {**base, "solver": "a", "success": False, "solve_time": 0.001},
+            {**base, "solver": "b", "success": True, "solve_time": 0.03}]
+    summ = {s["solver"]: s for s in harness.summarise(rows, time_limit=10.0)}
+    assert summ["a"]["success_rate"] == 0.5
+    # the failure is charged the time limit, not its own (short) time
+    assert summ["a"]["sgm_solve_time"] == pytest.approx(np.sqrt(0.02 * 10.01) - 0.01)
+    assert summ["b"]["rel_solve_time"] == pytest.approx(1.0)
+
+
+def test_cli_compare_writes_everything(tmp_path: Path, capsys: pytest.CaptureFixture[str]
+                                       ) -> None:
+    out = tmp_path / "cmp"
+    assert main(["compare", "--problems", "fusion", "--instances", "independent",
+                 "--sizes", "3,6", "--solvers", "CLARABEL,CASADI_QRQP", "--out", str(out),
+                 "--json"]) == 0
+    res = json.loads(capsys.readouterr().out)
+    assert res["runs"] == 2 * 3 and res["successes"] == 6, res["failures"]
+    for name in ("results.csv", "report.md", "summary.csv", "environment.json",
+                 "fusion_scaling.png"):
+        assert (out / name).stat().st_size > 0
+    env = json.loads((out / "environment.json").read_text())
+    assert env["packages"]["cvxpy"] and env["cpu"]
+    rows = _csv_rows(out / "results.csv")
+    assert {r["solver_version"].split()[0] for r in rows} == {"numpy", "clarabel", "casadi"}
+
+
+def test_cli_compare_bad_arguments(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["compare", "--problems", "nonsense", "--out", "/tmp/x"]) == 2
+    assert "--problems" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main(["compare", "--profile", "extreme"])
+
+
+def test_casadi_bridge_matches_clarabel_with_duals() -> None:
+    rng = np.random.default_rng(0)
+    a, b = rng.normal(size=(8, 3)), rng.normal(size=8)
+    x = cp.Variable(3)
+    cons = [cp.sum(x) == 1, x <= 0.4]
+    prob = cp.Problem(cp.Minimize(cp.sum_squares(a @ x - b)), cons)
+    prob.solve(solver="CLARABEL", tol_gap_abs=1e-12, tol_gap_rel=1e-12, tol_feas=1e-12)
+    x_ref, d_eq, d_in = x.value.copy(), cons[0].dual_value, cons[1].dual_value.copy()
+    assert np.max(d_in) > 1e-3  # the box is active: the inequality duals are tested
+    for plugin in ("qrqp", "qpoases"):
+        assert plugin in casadi_qp_plugins()
+        prob.solve(solver=CasadiConic(plugin))
+        # active-set / direct methods: the KKT solution to ~1e-9 (scale of x is 1)
+        np.testing.assert_allclose(x.value, x_ref, atol=1e-7)
+        np.testing.assert_allclose(cons[0].dual_value, d_eq, rtol=1e-6)
+        np.testing.assert_allclose(cons[1].dual_value, d_in, atol=1e-6)
+
+
+def test_trajectories_through_casadi_plugin() -> None:
+    data = cs.adapter("trajectories").make("diverging", 20, 1)
+    ref = tr.closed_form(data, "diverging")
+    sol = tr.solve(data, "diverging", solver="CASADI_QRQP").require_ok()
+    assert np.max(np.abs(sol.theta - ref.theta)) / np.max(np.abs(ref.theta)) < 1e-9
+
+
+@pytest.mark.parametrize("plugin", ["sqpmethod", "fatrop"])
+def test_plane_nlp_plugins_reach_the_closed_form(plugin: str) -> None:
+    assert plugin in nlp_plugins()
+    sc = scenarios.two_source_plane(40, np.random.default_rng(3))
+    data = plane.PlaneData(sc.points, sc.cov, sc.alpha2)
+    sol = plane.solve(data, "reduced", plugin=plugin).require_ok()
+    # a KKT point to the plugin's tolerance (~1e-8) and the global one under (1.4)
+    assert plane.angle_error(sol.normal, plane.closed_form(data).normal) < 1e-6
+
+
+def test_unknown_plugin_is_a_clear_error() -> None:
+    from optmodels.core import SolverNotAvailable
+
+    sc = scenarios.two_source_plane(10, np.random.default_rng(3))
+    data = plane.PlaneData(sc.points, sc.cov, sc.alpha2)
+    with pytest.raises(SolverNotAvailable, match="plugin"):
+        plane.solve(data, "reduced", plugin="no_such_solver")
+    with pytest.raises(SolverNotAvailable, match="CASADI_HIGHS"):
+        tr.solve(cs.adapter("trajectories").make("diverging", 10, 0), "diverging",
+                 solver="CASADI_HIGHS")
+
+
+def test_probe_survives_a_crashing_plugin() -> None:
+    script = ("import os, signal, sys\n"
+              "for name in sys.argv[1:]:\n"
+              "    if name == 'bad':\n"
+              "        os.kill(os.getpid(), signal.SIGSEGV)\n"
+              "    print(name, 'ok', flush=True)\n")
+    res = probe_in_child(script, ["a", "bad", "c"])
+    assert res["a"] == "ok" and res["c"] == "ok"
+    assert res["bad"].startswith("crashed")

@@ -46,6 +46,7 @@ from scipy import linalg, stats
 from optmodels.backends.casadi_backend import BuiltNlp, build_nlpsol, run_nlpsol
 from optmodels.backends.cvxpy_backend import solve_problem
 from optmodels.core import (
+    MAX_MAGNITUDE,
     FloatArray,
     ProblemError,
     Solution,
@@ -76,12 +77,18 @@ MeanKind = Literal["known", "sample"]
 
 
 def _cov(name: str, s: ArrayLike, m: int | None = None) -> FloatArray:
-    arr = as_finite_array(name, s, ndim=2)
+    arr = as_finite_array(name, s, ndim=2, max_abs=MAX_MAGNITUDE)
     if arr.shape[0] != arr.shape[1]:
         raise ProblemError(f"{name}: expected a square matrix, got shape {arr.shape}")
     if m is not None and arr.shape[0] != m:
         raise ProblemError(f"{name}: expected ({m}, {m}) like S1, got {arr.shape}")
     check_spd(name, arr)
+    low = float(np.linalg.eigvalsh(0.5 * (arr + arr.T))[0])
+    if low < 1 / MAX_MAGNITUDE:
+        # found by the robustness sweep: C = S⁻¹ at 1e151 times estimates at 1e149
+        # overflowed; variances below 1e-100 are a units problem, not a fusion one
+        raise ProblemError(f"{name}: smallest eigenvalue {low:.3g} below 1e-100 (its inverse "
+                           "overflows against the estimates); change units")
     return 0.5 * (arr + arr.T)
 
 
@@ -193,8 +200,8 @@ def fuse(a1: ArrayLike, s1: ArrayLike, a2: ArrayLike, s2: ArrayLike, *,
     """
     s1a, s2a = _pair(s1, s2)
     m = s1a.shape[0]
-    x1 = as_finite_array("a1", a1, shape=(m,))
-    x2 = as_finite_array("a2", a2, shape=(m,))
+    x1 = as_finite_array("a1", a1, shape=(m,), max_abs=MAX_MAGNITUDE)
+    x2 = as_finite_array("a2", a2, shape=(m,), max_abs=MAX_MAGNITUDE)
     if s12 is not None:
         return _fuse_correlated(x1, s1a, x2, s2a, s12, method, solver, solver_options)
     c1, c2 = np.linalg.inv(s1a), np.linalg.inv(s2a)

@@ -270,8 +270,7 @@ def write_harness_report(out: Path, rows: list[dict[str, Any]], *, profile: str,
                              "success": best["success_rate"],
                              "solve (sgm, s)": best["sgm_solve_time"],
                              "build (sgm, s)": best["sgm_build_time"],
-                             "closed form (sgm, s)": cf["sgm_solve_time"] if cf else
-                             float("nan"),
+                             "closed form (sgm, s)": cf["sgm_solve_time"] if cf else "—",
                              "max error": best["max_error"]})
     md.append("## Headline\n")
     md.append(markdown_table(headline, ["problem", "best generic", "success",

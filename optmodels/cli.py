@@ -465,21 +465,19 @@ def _run_harness(out: Path, problems: Sequence[str], *, sizes: list[int] | None,
     out.mkdir(parents=True, exist_ok=True)
     env = report.environment()
     write_json(out / "environment.json", env)
-    rows: list[dict[str, Any]] = []
-    for p in problems:
-        p_sizes = sizes
-        if p_sizes is None and quick:
-            p_sizes = list(cs.adapter(p).sizes[:2])
-        rows += harness.run_sweep([p], out, sizes=p_sizes, solvers=solvers,
-                                  profile=profile, seeds=(seed,), time_limit=time_limit,
-                                  instances=instances, progress=progress)
+    plan_sizes: harness.Sizes = sizes
+    if sizes is None and quick:
+        plan_sizes = {p: list(cs.adapter(p).sizes[:2]) for p in problems}
+    rows = harness.run_sweep(problems, out, sizes=plan_sizes, solvers=solvers,
+                             profile=profile, seeds=(seed,), time_limit=time_limit,
+                             instances=instances, progress=progress)
     prof = harness.PROFILES[profile]
     limit = float(time_limit or prof.time_limit)
     notes = {f"CasADi conic {k}": v for k, v in probe_plugins().items() if v != "ok"}
     notes |= {f"CasADi nlpsol {k}": v for k, v in probe_nlp_plugins().items() if v != "ok"}
     report.write_harness_report(out, rows, profile=profile, time_limit=limit,
                                 error_tol=prof.error_tol, violation_tol=prof.violation_tol,
-                                notes=notes)
+                                notes=notes, env=env)
     return {"out": str(out), "runs": len(rows),
             "successes": sum(bool(r["success"]) for r in rows),
             "failures": [{k: r[k] for k in ("problem", "instance", "size", "formulation",

@@ -73,6 +73,24 @@ class Status(enum.Enum):
         return self in (Status.OPTIMAL, Status.OPTIMAL_INACCURATE)
 
 
+#: A generic solve's claimed optimum is re-checked in NumPy against the original problem:
+#: a residual above VERIFY_TOL makes it OPTIMAL_INACCURATE, above REJECT_TOL an ERROR.
+VERIFY_TOL, REJECT_TOL = 1e-6, 1e-3
+
+
+def verified_status(status: Status, worst: float) -> Status:
+    """The status after the NumPy re-check with largest residual ``worst``: ERROR if it is
+    non-finite or above :data:`REJECT_TOL`, OPTIMAL → OPTIMAL_INACCURATE above
+    :data:`VERIFY_TOL`; a status that was not OK stays as it is."""
+    if not status.ok:
+        return status
+    if not np.isfinite(worst) or worst > REJECT_TOL:
+        return Status.ERROR
+    if worst > VERIFY_TOL and status == Status.OPTIMAL:
+        return Status.OPTIMAL_INACCURATE
+    return status
+
+
 @dataclass
 class Solution:
     """Common part of every solution.

@@ -54,6 +54,7 @@ from optmodels.core import (
     as_finite_array,
     check_spd,
     timed,
+    verified_status,
 )
 
 __all__ = [
@@ -242,24 +243,15 @@ def fuse(a1: ArrayLike, s1: ArrayLike, a2: ArrayLike, s2: ArrayLike, *,
                           W=w, **common)
 
 
-#: A generic solve whose NumPy-recomputed optimality residual exceeds VERIFY_TOL is
-#: reported OPTIMAL_INACCURATE, above REJECT_TOL ERROR (a solver's 'optimal' is not taken
-#: on trust).
-VERIFY_TOL, REJECT_TOL = 1e-6, 1e-3
-
-
 def _verify(common: dict[str, Any], res_grad: float) -> None:
-    status = common["status"]
-    if not status.ok:
-        return
-    if not np.isfinite(res_grad) or res_grad > REJECT_TOL:
-        common["status"] = Status.ERROR
+    """A solver's 'optimal' is not taken on trust: :func:`optmodels.core.verified_status`
+    with the NumPy-recomputed optimality residual."""
+    new = verified_status(common["status"], res_grad)
+    if new != common["status"]:
+        verdict = "fails the NumPy check" if new == Status.ERROR else "(NumPy check)"
+        common["status"] = new
         common["message"] = f"{common.get('message', '')}; optimality residual " \
-            f"{res_grad:.1e} fails the NumPy check"
-    elif res_grad > VERIFY_TOL and status == Status.OPTIMAL:
-        common["status"] = Status.OPTIMAL_INACCURATE
-        common["message"] = f"{common.get('message', '')}; optimality residual " \
-            f"{res_grad:.1e} (NumPy check)"
+            f"{res_grad:.1e} {verdict}"
 
 
 def _fuse_correlated(x1: FloatArray, a: FloatArray, x2: FloatArray, b: FloatArray,

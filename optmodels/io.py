@@ -142,10 +142,11 @@ def write_csv(path: str | Path, rows: Sequence[Mapping[str, Any]]) -> None:
         w = csv.DictWriter(fh, fieldnames=cols)
         w.writeheader()
         for r in rows:
-            w.writerow({k: _cell(r.get(k)) for k in cols})
+            w.writerow({k: csv_cell(r.get(k)) for k in cols})
 
 
-def _cell(v: Any) -> Any:
+def csv_cell(v: Any) -> Any:
+    """A CSV cell: floats with 10 significant digits, anything else as is."""
     if isinstance(v, float | np.floating):
         return f"{float(v):.10g}"
     return v

@@ -182,9 +182,7 @@ def run(study: Study | str, trials: int, seed: int = 0, *, scheduler: Any = None
         checkpoint.
     """
     if isinstance(study, str):
-        if study not in STUDIES:
-            raise ProblemError(f"study: unknown study {study!r} (built-in: {sorted(STUDIES)})")
-        study = STUDIES[study](**(params or {}))
+        study = _builtin(study, params or {})
     elif params:
         raise ProblemError("params: only for a built-in study given by name")
     if not callable(study):
@@ -422,6 +420,10 @@ STUDIES: dict[str, Callable[..., Study]] = {
 
 def study(name: str, **params: Any) -> Study:
     """A built-in study by name, e.g. ``study("plane-angle", n=100)``."""
+    return _builtin(name, params)
+
+
+def _builtin(name: str, params: Mapping[str, Any]) -> Study:
     if name not in STUDIES:
         raise ProblemError(f"study: unknown study {name!r} (built-in: {sorted(STUDIES)})")
     return STUDIES[name](**params)

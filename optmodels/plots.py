@@ -13,9 +13,9 @@ import numpy as np
 from optmodels.core import FloatArray
 
 
-def _save(fig: plt.Figure, path: Path) -> Path:
+def _save(fig: plt.Figure, path: Path, *, bbox: str | None = None) -> Path:
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    fig.savefig(path, dpi=110, bbox_inches=bbox)
     plt.close(fig)
     return path
 
@@ -309,7 +309,7 @@ def scaling(path: Path, rows: list[dict], *, title: str, size_label: str,
             ok = [r for r in rs if r["success"]]
             bad = [r for r in rs if not r["success"]]
             floor = fs[0] == "closed_form"
-            style = {"color": "k", "lw": 2.5, "ls": "--"} if floor else {
+            style = {"color": "k", "lw": 2.5, "ls": "--", "marker": "s", "ms": 4} if floor else {
                 "color": colors[fs], "lw": 1.2, "marker": "o", "ms": 3}
             label = "closed form" if floor else f"{fs[1]} ({fs[0]})"
             if ok:
@@ -333,8 +333,5 @@ def scaling(path: Path, rows: list[dict], *, title: str, size_label: str,
             if ll not in labels:
                 handles.append(hh)
                 labels.append(ll)
-    fig.tight_layout()
     fig.legend(handles, labels, loc="center left", bbox_to_anchor=(1.0, 0.5), fontsize=7)
-    fig.savefig(path, dpi=110, bbox_inches="tight")  # the legend sits right of the panels
-    plt.close(fig)
-    return path
+    return _save(fig, path, bbox="tight")  # the legend sits right of the panels

@@ -88,13 +88,12 @@ def _rel_max(a: np.ndarray, b: np.ndarray) -> float:
     return float(np.max(np.abs(np.asarray(a) - b))) / (scale if scale > 0 else 1.0)
 
 
-def _from_solution(sol: Any, x: Any, objective: float | None = None,
-                   violation: float | None = None) -> Outcome:
+def _from_solution(sol: Any, x: Any, objective: float | None = None) -> Outcome:
     return Outcome(
         ok=bool(sol.status.ok), status=sol.status.value,
         objective=float(sol.objective if objective is None else objective),
         x=x if sol.status.ok else None,
-        max_violation=float(sol.max_residual if violation is None else violation),
+        max_violation=float(sol.max_residual),
         build_time=float(sol.build_time or 0.0), solve_time=float(sol.solve_time or 0.0),
         iterations=sol.iterations, message=str(sol.message or "")[:300])
 
@@ -311,7 +310,7 @@ class BiasfieldAdapter(Adapter):
         else:
             sol = bf.solve(data["data"], box=data["box"], solver="CLARABEL",
                            formulation="reduced", **HIGH_OPTIONS["CLARABEL"])
-        return _from_solution(sol, sol.field, violation=_bf_violation(sol))
+        return _from_solution(sol, sol.field)
 
     def runs(self, instance: str) -> list[Run]:
         out = [Run("closed_form", "numpy")] if instance == "no-box" else []
@@ -325,17 +324,11 @@ class BiasfieldAdapter(Adapter):
         else:
             sol = bf.solve(data["data"], box=data["box"], solver=run.solver,
                            formulation=run.formulation, **options)  # type: ignore[arg-type]
-        return _from_solution(sol, sol.field, violation=_bf_violation(sol))
+        return _from_solution(sol, sol.field)
 
     def error(self, x: Any, ref: Any) -> float:
         a, b = np.asarray(x, float), np.asarray(ref, float)
         return float(np.max(np.abs(a - b).max(axis=(0, 1)) / np.abs(b).max(axis=(0, 1))))
-
-
-def _bf_violation(sol: Any) -> float:
-    if not sol.status.ok:
-        return float("nan")
-    return max((v for k, v in sol.residuals.items() if k != "dual_sign"), default=0.0)
 
 
 class AssignmentAdapter(Adapter):

@@ -23,7 +23,7 @@ import multiprocessing as mp
 import platform
 import time
 import traceback
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from importlib import metadata
 from pathlib import Path
@@ -32,7 +32,9 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
+from optmodels.io import csv_cell
 from solvers_cmp import cases as cs
+from solvers_cmp.report import cpu_name
 
 #: Fixed columns of ``results.csv`` (DESIGN.md, "Solver comparison"), in order.
 COLUMNS = ("problem", "instance", "size", "seed", "formulation", "solver", "settings",
@@ -218,31 +220,22 @@ class _InProcess:
 
 
 # ------------------------------------------------------------------------ versions
-_SOLVER_PACKAGES = {"CLARABEL": "clarabel", "OSQP": "osqp", "SCS": "scs", "HIGHS": "highspy",
-                    "SCIPY": "scipy", "numpy": "numpy", "scipy": "scipy", "PIQP": "piqp",
-                    "PROXQP": "proxsuite", "ECOS": "ecos", "QOCO": "qoco", "DAQP": "daqp",
-                    "SCIP": "pyscipopt", "CVXOPT": "cvxopt"}
+#: Non-CVXPY solver names of the adapters → package (CVXPY's come from
+#: :data:`optmodels.backends.cvxpy_backend.PIP_NAMES`; the rest are CasADi plugins).
+_OTHER_PACKAGES = {"numpy": "numpy", "scipy": "scipy", "SCIPY": "scipy"}
 
 
 def solver_version(solver: str) -> str:
     """Package and version behind a solver name (CasADi plugins: the casadi version)."""
     if solver == "python":
         return f"python {platform.python_version()}"
-    pkg = _SOLVER_PACKAGES.get(solver, "casadi")
+    from optmodels.backends.cvxpy_backend import PIP_NAMES
+
+    pkg = PIP_NAMES.get(solver) or _OTHER_PACKAGES.get(solver, "casadi")
     try:
         return f"{pkg} {metadata.version(pkg)}"
     except metadata.PackageNotFoundError:
         return pkg
-
-
-def cpu_name() -> str:
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or platform.machine()
 
 
 # ------------------------------------------------------------------------ the sweep
@@ -291,12 +284,17 @@ def _judge(row: dict[str, Any], prof: Profile) -> None:
     row["reason"] = "; ".join(reasons)
 
 
-def plan(problems: Sequence[str], sizes: Sequence[int] | None = None,
+Sizes = Sequence[int] | Mapping[str, Sequence[int]] | None
+
+
+def plan(problems: Sequence[str], sizes: Sizes = None,
          solvers: Sequence[str] | None = None, seeds: Sequence[int] = (0,),
          instances: Sequence[str] | None = None) -> list[tuple[str, Case, list[cs.Run]]]:
     """The sweep: (adapter path, case, runs) for every problem × instance × size × seed.
-    ``solvers`` filters runs by solver name (case-insensitive); the closed-form rows are
-    always kept (they are the floor of every plot)."""
+    ``sizes``: one list for every problem, or a list per problem name (missing names and
+    ``None``: the adapter's default sizes). ``solvers`` filters runs by solver name
+    (case-insensitive); the closed-form rows are always kept (they are the floor of every
+    plot)."""
     want = {s.lower() for s in solvers} if solvers else None
     out = []
     for p in problems:
@@ -308,13 +306,14 @@ def plan(problems: Sequence[str], sizes: Sequence[int] | None = None,
                 continue
             runs = [r for r in ad.runs(inst) if want is None or r.formulation == "closed_form"
                     or r.solver.lower() in want]
-            for size in (sizes or ad.sizes):
+            own = sizes.get(p) if isinstance(sizes, Mapping) else sizes
+            for size in (own or ad.sizes):
                 for seed in seeds:
                     out.append((path, Case(p, inst, int(size), int(seed)), runs))
     return out
 
 
-def run_sweep(problems: Sequence[str], out: Path, *, sizes: Sequence[int] | None = None,
+def run_sweep(problems: Sequence[str], out: Path, *, sizes: Sizes = None,
               solvers: Sequence[str] | None = None, profile: str = "default",
               seeds: Sequence[int] = (0,), instances: Sequence[str] | None = None,
               time_limit: float | None = None, isolate: bool = True,
@@ -387,7 +386,7 @@ def run_sweep(problems: Sequence[str], out: Path, *, sizes: Sequence[int] | None
                                             f"worker died (exit code {res})"
                                             if kind == "crashed" else str(res))})
                 _judge(row, prof)
-                writer.writerow({c: _cell(row.get(c)) for c in COLUMNS})
+                writer.writerow({c: csv_cell(row.get(c)) for c in COLUMNS})
                 fh.flush()
                 rows.append({c: row.get(c) for c in COLUMNS})
                 bar.update()
@@ -396,12 +395,6 @@ def run_sweep(problems: Sequence[str], out: Path, *, sizes: Sequence[int] | None
         fh.close()
         worker.stop()
     return rows
-
-
-def _cell(v: Any) -> Any:
-    if isinstance(v, float | np.floating):
-        return f"{float(v):.10g}"
-    return "" if v is None else v
 
 
 # ------------------------------------------------------------------------ metrics

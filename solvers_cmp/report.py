@@ -21,18 +21,21 @@ def environment() -> dict[str, Any]:
             versions[p] = metadata.version(p)
         except metadata.PackageNotFoundError:
             versions[p] = None
-    cpu = platform.processor() or platform.machine()
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
     import os
 
     return {"python": platform.python_version(), "platform": platform.platform(),
-            "cpu": cpu, "cores": os.cpu_count(), "packages": versions}
+            "cpu": cpu_name(), "cores": os.cpu_count(), "packages": versions}
+
+
+def cpu_name() -> str:
+    """The CPU's model name (/proc/cpuinfo), else what ``platform`` knows."""
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or platform.machine()
 
 
 def write_plane(out: Path, timing: list[dict[str, Any]], accuracy: list[dict[str, Any]],
@@ -229,7 +232,8 @@ def _failure_lines(rows: list[dict[str, Any]]) -> list[str]:
 
 def write_harness_report(out: Path, rows: list[dict[str, Any]], *, profile: str,
                          time_limit: float, error_tol: float, violation_tol: float,
-                         notes: dict[str, str] | None = None) -> str:
+                         notes: dict[str, str] | None = None,
+                         env: dict[str, Any] | None = None) -> str:
     """Write ``report.md``, one scaling plot per problem (``<problem>_scaling.png``) and
     ``summary.csv`` for a harness sweep; return the Markdown."""
     from optmodels import plots
@@ -239,7 +243,7 @@ def write_harness_report(out: Path, rows: list[dict[str, Any]], *, profile: str,
     out.mkdir(parents=True, exist_ok=True)
     summary = summarise(rows, time_limit)
     write_csv(out / "summary.csv", summary)
-    env = environment()
+    env = env or environment()
     problems = [p for p in cs.REGISTRY if any(r["problem"] == p for r in rows)]
     problems += sorted({r["problem"] for r in rows} - set(problems))
     md = [

@@ -1,15 +1,20 @@
 # Every target sets itself up: the first use creates .venv and installs the package.
+# `make test` / `make demo` / CI install the exact versions of requirements/lock.txt (the ones
+# a green run proved); `make test-latest` installs the newest releases the ranges in
+# pyproject.toml allow, into a separate .venv-latest, to see dependency drift coming.
 PYTHON ?= python3
 VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed-stamp
+LOCK   := requirements/lock.txt
+LATEST := .venv-latest
 
-.PHONY: demo test test-all lint compare clean
+.PHONY: demo test test-all test-latest lint compare lock clean
 
-$(STAMP): pyproject.toml
+$(STAMP): pyproject.toml $(LOCK)
 	$(PYTHON) -m venv $(VENV)
-	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e '.[test]'
+	$(BIN)/python -m pip install --quiet -c $(LOCK) pip
+	$(BIN)/python -m pip install --quiet -c $(LOCK) -e '.[test]'
 	touch $(STAMP)
 
 ## main job: the papers' examples and the default solver comparison, written to report/
@@ -26,6 +31,20 @@ test-all: $(STAMP)
 	$(BIN)/ruff check optmodels solvers_cmp tests
 	$(BIN)/python -m pytest -m ""
 
+## the same tests against the newest releases of every dependency (no lock)
+test-latest:
+	$(PYTHON) -m venv $(LATEST)
+	$(LATEST)/bin/python -m pip install --quiet --upgrade pip
+	$(LATEST)/bin/python -m pip install --quiet --upgrade --upgrade-strategy eager -e '.[test]'
+	$(LATEST)/bin/python -m pip freeze --exclude-editable > $(LATEST)/versions.txt
+	$(LATEST)/bin/ruff check optmodels solvers_cmp tests
+	$(LATEST)/bin/python -m pytest -p no:cacheprovider
+
+## rewrite the lock from the current .venv (after a green `make test` with newer versions)
+lock: $(STAMP)
+	{ sed -n '1,3p' $(LOCK); $(BIN)/python -m pip freeze --exclude-editable --all \
+	  | grep -v -e '^setuptools==' -e '^wheel=='; } > $(LOCK).new && mv $(LOCK).new $(LOCK)
+
 lint: $(STAMP)
 	$(BIN)/ruff check optmodels solvers_cmp tests
 	$(BIN)/ruff format --check optmodels solvers_cmp tests
@@ -34,4 +53,4 @@ compare: $(STAMP)
 	$(BIN)/optmodels compare --out report/compare
 
 clean:
-	rm -rf $(VENV) report .pytest_cache
+	rm -rf $(VENV) $(LATEST) report .pytest_cache

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import enum
 import time
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field, fields
 from typing import Any, Self
@@ -26,7 +26,12 @@ __all__ = [
     "SolverNotAvailable",
     "Status",
     "Timer",
+    "as_choice",
+    "as_count",
     "as_finite_array",
+    "as_number",
+    "as_positive",
+    "as_probability",
     "check_spd",
     "check_spd_stack",
 ]
@@ -212,9 +217,11 @@ def as_finite_array(
         Naming ``name``, if the value is not numeric, has the wrong number of dimensions
         or shape (``None`` in ``shape`` matches any length), or has NaN/inf entries.
     """
+    if np.iscomplexobj(value):
+        raise ProblemError(f"{name}: complex values are not accepted (give real numbers)")
     try:
         arr = np.asarray(value, dtype=float)
-    except (TypeError, ValueError) as exc:
+    except (TypeError, ValueError, OverflowError) as exc:
         raise ProblemError(f"{name}: not a numeric array ({exc})") from exc
     if ndim is not None:
         allowed = (ndim,) if isinstance(ndim, int) else ndim
@@ -297,3 +304,102 @@ def _index_text(name: str, mats: FloatArray, flat_index: int) -> str:
         return name
     idx = np.unravel_index(flat_index, mats.shape[:-2])
     return f"{name}[{', '.join(map(str, idx))}]"
+
+
+# --------------------------------------------------------------------------- scalars
+# One small set of scalar checks used by every entry point: a scalar argument of the wrong
+# type or value becomes a ProblemError naming the argument, never a raw TypeError from
+# float()/int(), a silent truncation (k=2.5 -> 2) or a NaN that propagates.
+
+
+def _scalar_text(value: Any) -> str:
+    text = repr(value)
+    return text if len(text) <= 60 else text[:57] + "..."
+
+
+def as_number(
+    name: str,
+    value: Any,
+    *,
+    low: float | None = None,
+    high: float | None = None,
+    low_open: bool = False,
+    high_open: bool = False,
+    allow_inf: bool = False,
+) -> float:
+    """A real scalar as ``float``, checked against ``[low, high]`` (open ends with
+    ``low_open``/``high_open``).
+
+    Booleans, strings, ``None``, complex numbers, arrays of size ≠ 1 and NaN are refused;
+    ±inf only with ``allow_inf``.
+
+    Raises
+    ------
+    ProblemError
+        Naming ``name`` and the value received.
+    """
+    if isinstance(value, bool | np.bool_) or value is None or isinstance(value, str | bytes):
+        raise ProblemError(f"{name}: expected a real number, got {_scalar_text(value)}")
+    if isinstance(value, complex | np.complexfloating):
+        raise ProblemError(f"{name}: expected a real number, got complex {value!r}")
+    if isinstance(value, np.ndarray):
+        if value.size != 1 or np.iscomplexobj(value):
+            raise ProblemError(f"{name}: expected a real number, got an array {value.shape}")
+        value = value.reshape(()).item()
+    try:
+        x = float(value)
+    except (TypeError, ValueError, OverflowError):
+        raise ProblemError(f"{name}: expected a real number, got {_scalar_text(value)}") from None
+    if np.isnan(x):
+        raise ProblemError(f"{name}: got NaN")
+    if np.isinf(x) and not allow_inf:
+        raise ProblemError(f"{name}: got {x} (must be finite)")
+    if low is not None and (x < low or (low_open and x == low)):
+        raise ProblemError(f"{name}: must be {'>' if low_open else '>='} {low:g}, got {x:g}")
+    if high is not None and (x > high or (high_open and x == high)):
+        raise ProblemError(f"{name}: must be {'<' if high_open else '<='} {high:g}, got {x:g}")
+    return x
+
+
+def as_positive(name: str, value: Any, *, allow_zero: bool = False,
+                allow_inf: bool = False) -> float:
+    """A scalar > 0 (≥ 0 with ``allow_zero``); see :func:`as_number`."""
+    return as_number(name, value, low=0.0, low_open=not allow_zero, allow_inf=allow_inf)
+
+
+def as_probability(name: str, value: Any, *, low_open: bool = False,
+                   high_open: bool = False) -> float:
+    """A probability in [0, 1] (ends excluded on request); see :func:`as_number`."""
+    return as_number(name, value, low=0.0, high=1.0, low_open=low_open, high_open=high_open)
+
+
+def as_count(name: str, value: Any, *, minimum: int = 0, maximum: int | None = None) -> int:
+    """A whole number ≥ ``minimum`` (and ≤ ``maximum``) as ``int``.
+
+    Integral floats (``3.0``) are accepted; ``2.5``, NaN, inf, booleans and strings are
+    refused rather than truncated.
+    """
+    if isinstance(value, bool | np.bool_) or value is None or isinstance(value, str | bytes):
+        raise ProblemError(f"{name}: expected a whole number, got {_scalar_text(value)}")
+    if isinstance(value, int | np.integer):
+        n = int(value)
+    else:
+        x = as_number(name, value)
+        if x != np.floor(x):
+            raise ProblemError(f"{name}: expected a whole number, got {x:g}")
+        n = int(x)
+    if n < minimum:
+        raise ProblemError(f"{name}: must be >= {minimum}, got {n}")
+    if maximum is not None and n > maximum:
+        raise ProblemError(f"{name}: must be <= {maximum}, got {n}")
+    return n
+
+
+def as_choice(name: str, value: Any, choices: Iterable[str]) -> str:
+    """One of ``choices`` (exact string match); the message lists them."""
+    options = tuple(choices)
+    if not isinstance(value, str) or value not in options:
+        raise ProblemError(
+            f"{name}: expected one of {', '.join(map(repr, options))}, got {_scalar_text(value)}"
+        )
+    return value

@@ -431,7 +431,8 @@ def adapter(name: str, path: str | None = None) -> Adapter:
 
     spec = path or REGISTRY.get(name)
     if spec is None:
-        raise ProblemError(f"problems: unknown problem {name!r} (known: {sorted(REGISTRY)})")
+        raise ProblemError(f"compare problems: unknown problem {name!r} "
+                           f"(known: {sorted(REGISTRY)})")
     mod, _, cls = spec.partition(":")
     return getattr(importlib.import_module(mod), cls)()
 

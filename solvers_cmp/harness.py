@@ -5,8 +5,16 @@ profile. Every run goes to a worker process (``isolate=True``, the default) with
 profile's time limit: a run that exceeds it, or crashes the interpreter (a solver
 segfault), is recorded as a failed row (``time_limit`` / ``crashed``) and the worker is
 restarted, so one bad run never stops a sweep. Rows are appended to ``results.csv`` as they
-finish; a rerun skips rows already there (same problem, instance, size, seed, formulation,
-solver, settings), so an interrupted sweep resumes where it stopped.
+finish (whole lines, flush + fsync); a rerun skips rows already there (same problem,
+instance, size, seed, formulation, solver, settings), so an interrupted sweep resumes where
+it stopped.
+
+Faults are handled as in :mod:`optmodels.montecarlo` (same helpers): the worker exits with
+its parent, even after a SIGKILL, and ignores SIGINT; Ctrl-C kills the worker, keeps the
+finished rows and raises :class:`optmodels.montecarlo.Interrupted`; a second sweep on the
+same folder gets a ``ProblemError`` (``results.csv.lock``); unreadable rows of
+``results.csv`` (a last row cut short by a kill, garbage) are moved to
+``results.csv.skipped``, logged, and run again.
 
 The worker builds each case's instance and its reference once (the closed form where the
 paper has one, else the best known solution, see :mod:`solvers_cmp.cases`), then each run
@@ -19,7 +27,9 @@ is measured against it: ``solution_error`` (adapter-defined, relative), ``object
 from __future__ import annotations
 
 import csv
+import io
 import multiprocessing as mp
+import os
 import platform
 import time
 import traceback
@@ -32,7 +42,9 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
+from optmodels.core import ProblemError, as_choice, as_count, as_positive
 from optmodels.io import csv_cell
+from optmodels.montecarlo import Interrupted, LineLog, guard_worker, report_skipped, sigint_ignored
 from solvers_cmp import cases as cs
 from solvers_cmp.report import cpu_name
 
@@ -126,14 +138,15 @@ def _execute(state: _State, path: str, case: Case, run: cs.Run,
     return row
 
 
-def _worker_loop(conn: Any, log: str | None = None) -> None:
+def _worker_loop(conn: Any, log: str | None = None, parent_pid: int | None = None) -> None:
+    if parent_pid is not None:  # exit with the parent (even a SIGKILLed one); no Ctrl-C
+        guard_worker(parent_pid)
     if log is not None:  # solver libraries print from C/C++: send fds 1 and 2 to the log
-        import os
-
         fd = os.open(log, os.O_WRONLY | os.O_CREAT | os.O_APPEND, 0o644)
         os.dup2(fd, 1)
         os.dup2(fd, 2)
     state = _State()
+    conn.send(("ready", None))  # start-up (imports) is not charged to the first run
     while True:
         try:
             msg = conn.recv()
@@ -150,6 +163,10 @@ def _worker_loop(conn: Any, log: str | None = None) -> None:
             conn.send(("error", tb[:400]))
 
 
+#: Seconds a new worker may take to start (spawn + imports) before its first run.
+_STARTUP_TIMEOUT = 120.0
+
+
 class Worker:
     """A child process running :func:`_worker_loop`, restarted after a crash/time-out."""
 
@@ -161,11 +178,17 @@ class Worker:
 
     def _start(self) -> None:
         parent, child = self._ctx.Pipe()
-        self._proc = self._ctx.Process(target=_worker_loop, args=(child, self._log),
-                                      daemon=True)
-        self._proc.start()
+        self._proc = self._ctx.Process(target=_worker_loop,
+                                       args=(child, self._log, os.getpid()), daemon=True)
+        with sigint_ignored():  # the child starts with SIGINT ignored
+            self._proc.start()
         child.close()
         self._conn = parent
+        try:  # wait for the child's start-up, so that it is not charged to a run
+            if parent.poll(_STARTUP_TIMEOUT):
+                parent.recv()
+        except (EOFError, OSError):
+            pass  # died at start-up: the call that follows reports it as crashed
 
     def call(self, kind: str, args: tuple[Any, ...], timeout: float) -> tuple[str, Any]:
         """Send one task; ``("ok", result)``, ``("error", message)``, ``("time_limit",
@@ -181,7 +204,12 @@ class Worker:
             self.stop(kill=True)
             return "time_limit", timeout
         try:
-            return self._conn.recv()
+            msg = self._conn.recv()
+            if msg[0] == "ready":  # a start-up slower than _STARTUP_TIMEOUT
+                msg = self._conn.recv() if self._conn.poll(timeout) else ("time_limit", timeout)
+                if msg[0] == "time_limit":
+                    self.stop(kill=True)
+            return msg
         except (EOFError, OSError):
             self._proc.join(5)
             code = self._proc.exitcode
@@ -189,16 +217,19 @@ class Worker:
             return "crashed", code
 
     def stop(self, kill: bool = False) -> None:
+        """Ask the worker to exit (``kill``: kill it now); a worker still busy after 2 s
+        is killed, so none outlives the sweep."""
         if self._proc is None:
             return
-        if kill:
-            self._proc.kill()
-        else:
+        if not kill:
             try:
                 self._conn.send(None)
             except (OSError, BrokenPipeError):
                 pass
-        self._proc.join(10)
+            self._proc.join(2)
+        if self._proc.is_alive():
+            self._proc.kill()
+            self._proc.join(2)
         self._proc = None
 
 
@@ -239,15 +270,74 @@ def solver_version(solver: str) -> str:
 
 
 # ------------------------------------------------------------------------ the sweep
+def _header_line() -> str:
+    return _csv_line(dict(zip(COLUMNS, COLUMNS, strict=True)))
+
+
+def _csv_line(row: Mapping[str, Any]) -> str:
+    """One CSV line, newlines in cells replaced by spaces (a row is always one line)."""
+    buf = io.StringIO()
+    cells = [csv_cell(row.get(c)) for c in COLUMNS]
+    cells = [" ".join(str(v).splitlines()) if isinstance(v, str) else v for v in cells]
+    csv.writer(buf, lineterminator="").writerow(cells)
+    return buf.getvalue()
+
+
+def _parse_line(raw: bytes) -> dict[str, Any] | None:
+    """A row of ``results.csv``, or None if the line is not a complete, readable row."""
+    try:
+        cells = next(csv.reader([raw.decode()]))
+        if len(cells) != len(COLUMNS):
+            return None
+        return {k: _parse(k, v) for k, v in zip(COLUMNS, cells, strict=True)}
+    except (UnicodeDecodeError, ValueError, csv.Error, StopIteration):
+        return None
+
+
+def _load_results(rl: LineLog) -> list[dict[str, Any]]:
+    """The readable rows of ``results.csv`` (held by ``rl``); writes the header of a new
+    or empty file and moves unreadable lines to ``results.csv.skipped`` (logged)."""
+    head = _header_line()
+    lines, tail = rl.read()
+    if not lines:
+        if tail and not (head + "\n").encode().startswith(tail):
+            raise ProblemError(f"{rl.what}: {rl.path} is not a results file of this harness "
+                               f"(no header); use another --out or delete it")
+        if tail:
+            rl.rewrite([], [])  # a header cut short by a crash: start afresh
+        rl.append([head])
+        return []
+    if lines[0].decode(errors="replace").strip() != head:
+        raise ProblemError(f"{rl.what}: {rl.path} has other columns than this harness "
+                           f"writes ({', '.join(COLUMNS)}); use another --out or delete it")
+    rows, keep, dropped = [], [head], []
+    for raw in lines[1:]:
+        if not raw.strip():
+            continue
+        row = _parse_line(raw)
+        if row is None:
+            dropped.append(raw)
+        else:
+            rows.append(row)
+            keep.append(raw.decode())
+    if dropped or tail:
+        moved = rl.rewrite(keep, dropped + ([tail] if tail else []))
+        report_skipped(rl.what, rl.path, len(dropped), len(tail), moved)
+    return rows
+
+
 def read_results(path: Path) -> list[dict[str, Any]]:
-    """Rows of an existing ``results.csv`` (numbers parsed), or [] if there is none."""
+    """Rows of an existing ``results.csv`` (numbers parsed), or [] if there is none.
+    Read-only: unreadable lines (a row cut short, garbage) are left out, not repaired."""
+    path = Path(path)
     if not path.exists():
         return []
-    rows = []
-    with path.open(newline="") as fh:
-        for r in csv.DictReader(fh):
-            rows.append({k: _parse(k, v) for k, v in r.items()})
-    return rows
+    if path.is_dir():
+        raise ProblemError(f"compare results: {path} is a directory, expected a file")
+    data = path.read_bytes()
+    lines = data[:data.rfind(b"\n") + 1].split(b"\n")[:-1]  # without a cut-short tail
+    rows = [_parse_line(raw) for raw in lines[1:] if raw.strip()]
+    return [r for r in rows if r is not None]
 
 
 def _parse(key: str, v: str) -> Any:
@@ -256,6 +346,8 @@ def _parse(key: str, v: str) -> Any:
     if key == "iterations":
         return int(float(v)) if v not in ("", "None") else None
     if key == "success":
+        if v not in ("True", "False"):
+            raise ValueError(f"success: {v!r}")
         return v == "True"
     if key in ("objective", "objective_gap", "solution_error", "max_violation",
                "build_time", "solve_time"):
@@ -287,6 +379,29 @@ def _judge(row: dict[str, Any], prof: Profile) -> None:
 Sizes = Sequence[int] | Mapping[str, Sequence[int]] | None
 
 
+def _names(what: str, v: Any) -> list[str] | None:
+    """A list of names from a list (or one string); None stays None."""
+    if v is None:
+        return None
+    items = [v] if isinstance(v, str) else v
+    if not isinstance(items, Sequence | set | frozenset) or not all(
+            isinstance(x, str) for x in items):
+        raise ProblemError(f"{what}: expected a list of names, got {v!r}"[:200])
+    items = [x.strip() for x in items if x.strip()]
+    if not items:
+        raise ProblemError(f"{what}: expected at least one name, got {v!r}")
+    return items
+
+
+def _counts(what: str, v: Any, minimum: int) -> list[int]:
+    if isinstance(v, str) or not isinstance(v, Sequence | range):
+        raise ProblemError(f"{what}: expected a list of whole numbers, got {v!r}"[:200])
+    out = [as_count(what, x, minimum=minimum) for x in v]
+    if not out:
+        raise ProblemError(f"{what}: expected at least one value, got {v!r}")
+    return out
+
+
 def plan(problems: Sequence[str], sizes: Sizes = None,
          solvers: Sequence[str] | None = None, seeds: Sequence[int] = (0,),
          instances: Sequence[str] | None = None) -> list[tuple[str, Case, list[cs.Run]]]:
@@ -294,12 +409,41 @@ def plan(problems: Sequence[str], sizes: Sizes = None,
     ``sizes``: one list for every problem, or a list per problem name (missing names and
     ``None``: the adapter's default sizes). ``solvers`` filters runs by solver name
     (case-insensitive); the closed-form rows are always kept (they are the floor of every
-    plot)."""
-    want = {s.lower() for s in solvers} if solvers else None
+    plot).
+
+    Raises
+    ------
+    ProblemError
+        An unknown problem, or a solver or instance name that none of the problems has
+        (the message lists the known ones), sizes < 1, seeds < 0.
+    """
+    problems = _names("compare problems", problems) or []
+    solvers = _names("compare solvers", solvers)
+    instances = _names("compare instances", instances)
+    seeds = _counts("compare seeds", seeds, 0)
+    if isinstance(sizes, Mapping):
+        sizes = {str(k): _counts(f"compare sizes[{k!r}]", v, 1) for k, v in sizes.items()
+                 if v is not None}
+    elif sizes is not None:
+        sizes = _counts("compare sizes", sizes, 1)
+    ads = {p: cs.adapter(p) for p in problems}  # ProblemError for an unknown problem
+    if instances:
+        known_inst = {i for ad in ads.values() for i in ad.instances}
+        bad = [i for i in instances if i not in known_inst]
+        if bad:
+            raise ProblemError(f"compare instances: unknown instance(s) {bad} of "
+                               f"{', '.join(problems)} (known: {sorted(known_inst)})")
+    want = {x.lower() for x in solvers} if solvers else None
+    if want is not None:
+        known = {r.solver for ad in ads.values() for inst in ad.instances
+                 if not instances or inst in instances for r in ad.runs(inst)}
+        bad = [x for x in solvers or () if x.lower() not in {k.lower() for k in known}]
+        if bad:
+            raise ProblemError(f"compare solvers: unknown solver(s) {bad} for "
+                               f"{', '.join(problems)} (available here: {sorted(known)})")
     out = []
-    for p in problems:
+    for p, ad in ads.items():
         path = cs.REGISTRY.get(p)
-        ad = cs.adapter(p)
         assert path is not None
         for inst in ad.instances:
             if instances and inst not in instances:
@@ -319,29 +463,53 @@ def run_sweep(problems: Sequence[str], out: Path, *, sizes: Sizes = None,
               time_limit: float | None = None, isolate: bool = True,
               progress: bool = False) -> list[dict[str, Any]]:
     """Run (or resume) a sweep; append rows to ``out/results.csv`` and return all rows of
-    this sweep (the finished ones read back included)."""
-    from optmodels.core import ProblemError
+    this sweep (the finished ones read back included).
 
-    if profile not in PROFILES:
-        raise ProblemError(f"profile: expected one of {sorted(PROFILES)}, got {profile!r}")
+    ``time_limit`` (s, > 0 and finite; default the profile's) bounds each run. The folder
+    is locked for the sweep: a second sweep on it gets a ``ProblemError``.
+
+    Raises
+    ------
+    ProblemError
+        Bad arguments (see :func:`plan`), ``out`` not a folder, ``results.csv`` of
+        another format, or in use by another sweep.
+    optmodels.montecarlo.Interrupted
+        Ctrl-C: the finished rows are in ``results.csv`` (rerun to resume) and in
+        ``exc.partial``.
+    """
+    profile = as_choice("compare profile", profile, sorted(PROFILES))
     prof = PROFILES[profile]
-    limit = float(time_limit or prof.time_limit)
-    if not limit > 0:
-        raise ProblemError(f"time_limit: must be positive, got {time_limit!r}")
-    out.mkdir(parents=True, exist_ok=True)
-    path = out / "results.csv"
-    existing = read_results(path)
-    done = {_key(r): r for r in existing}
+    limit = (prof.time_limit if time_limit is None
+             else as_positive("compare time_limit", time_limit))
     sweep = plan(problems, sizes, solvers, seeds, instances)
+    try:
+        out = Path(out)
+    except TypeError:
+        raise ProblemError(f"compare out: expected a folder path, got {out!r}") from None
+    if out.exists() and not out.is_dir():
+        raise ProblemError(f"compare out: {out} is a file, expected a folder")
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise ProblemError(f"compare out: cannot create {out} ({exc})") from None
+    path = out / "results.csv"
+    rl = LineLog(path, "compare results")
+    try:
+        done = {_key(r): r for r in _load_results(rl)}
+        return _sweep(rl, done, sweep, out, profile, prof, limit, isolate, progress)
+    finally:
+        rl.close()
+
+
+def _sweep(rl: LineLog, done: dict[tuple[Any, ...], dict[str, Any]],
+           sweep: list[tuple[str, Case, list[cs.Run]]], out: Path, profile: str,
+           prof: Profile, limit: float, isolate: bool, progress: bool
+           ) -> list[dict[str, Any]]:
     total = sum(len(runs) for _, _, runs in sweep)
     cpu = cpu_name()
     worker: Worker | _InProcess = Worker(out / "worker.log") if isolate else _InProcess()
-    new_file = not path.exists()
-    fh = path.open("a", newline="")
-    writer = csv.DictWriter(fh, fieldnames=COLUMNS)
-    if new_file:
-        writer.writeheader()
     rows: list[dict[str, Any]] = []
+    new = 0
     bar = tqdm(total=total, desc=f"compare ({profile})", disable=not progress)
     try:
         for ad_path, case, runs in sweep:
@@ -386,13 +554,17 @@ def run_sweep(problems: Sequence[str], out: Path, *, sizes: Sizes = None,
                                             f"worker died (exit code {res})"
                                             if kind == "crashed" else str(res))})
                 _judge(row, prof)
-                writer.writerow({c: csv_cell(row.get(c)) for c in COLUMNS})
-                fh.flush()
+                rl.append([_csv_line(row)])
+                new += 1
                 rows.append({c: row.get(c) for c in COLUMNS})
                 bar.update()
+    except KeyboardInterrupt:
+        worker.stop(kill=True)
+        raise Interrupted(f"compare: interrupted after {new} new run(s) of {total} "
+                          f"({len(rows)} rows of this sweep saved in {rl.path}); rerun the "
+                          f"same command to resume", rows) from None
     finally:
         bar.close()
-        fh.close()
         worker.stop()
     return rows
 

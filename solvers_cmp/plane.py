@@ -24,6 +24,7 @@ import numpy as np
 from tqdm import tqdm
 
 from optmodels import plane, scenarios
+from optmodels.core import ProblemError, as_count
 from solvers_cmp.common import repeat
 
 SETTINGS: dict[str, Callable[..., scenarios.ManeuverScenario]] = {
@@ -32,6 +33,15 @@ SETTINGS: dict[str, Callable[..., scenarios.ManeuverScenario]] = {
     "radar-edge-on": lambda n, rng: scenarios.radar_plane(n, rng, geometry="edge-on"),
 }
 METHODS = ("closed_form", "reduced", "full", "svd")
+
+
+def _sizes(where: str, sizes: Any) -> list[int]:
+    if isinstance(sizes, str | bytes) or not hasattr(sizes, "__iter__"):
+        raise ProblemError(f"{where} sizes: expected a list of whole numbers, got {sizes!r}")
+    out = [as_count(f"{where} sizes", n, minimum=4, maximum=10**7) for n in sizes]
+    if not out:
+        raise ProblemError(f"{where} sizes: empty")
+    return out
 
 
 def _data(sc: scenarios.ManeuverScenario) -> plane.PlaneData:
@@ -53,6 +63,9 @@ def _ml(data: plane.PlaneData) -> plane.PlaneSolution:
 def timing_rows(sizes: list[int], *, seed: int = 0, repeats: int = 5,
                 progress: bool = False) -> list[dict[str, Any]]:
     """One instance per (setting, N); every method timed ``repeats`` times."""
+    sizes = _sizes("solvers_cmp.plane.timing_rows", sizes)
+    seed = as_count("solvers_cmp.plane.timing_rows seed", seed)
+    repeats = as_count("solvers_cmp.plane.timing_rows repeats", repeats, minimum=1)
     rows: list[dict[str, Any]] = []
     cases = [(s, n) for s in SETTINGS for n in sizes]
     for setting, n in tqdm(cases, desc="plane timing", disable=not progress):
@@ -80,8 +93,13 @@ def timing_rows(sizes: list[int], *, seed: int = 0, repeats: int = 5,
     # reference per case: the best objective among the ML methods (closed form first)
     for setting, n in cases:
         case = [r for r in rows if r["setting"] == setting and r["size"] == n]
-        ml = [r for r in case if r["formulation"] != "svd" and r["status"] == "optimal"]
+        ok = ("optimal", "optimal_inaccurate")
+        ml = [r for r in case if r["formulation"] != "svd" and r["status"] in ok]
         cf = [r for r in ml if r["formulation"] == "closed_form"]
+        if not ml:  # no ML method succeeded: no reference, the rows say so
+            for r in case:
+                r["reference"], r["objective_gap"], r["solution_error"] = "", np.nan, np.nan
+            continue
         ref = cf[0] if cf else min(ml, key=lambda r: r["objective"])
         for r in case:
             r["reference"] = ref["formulation"]
@@ -95,6 +113,9 @@ def timing_rows(sizes: list[int], *, seed: int = 0, repeats: int = 5,
 def accuracy_rows(sizes: list[int], *, runs: int = 200, seed: int = 0,
                   progress: bool = False) -> list[dict[str, Any]]:
     """Monte Carlo angle RMSE of the ML and SVD planes, per (setting, N)."""
+    sizes = _sizes("solvers_cmp.plane.accuracy_rows", sizes)
+    runs = as_count("solvers_cmp.plane.accuracy_rows runs", runs, minimum=2)
+    seed = as_count("solvers_cmp.plane.accuracy_rows seed", seed)
     rows = []
     cases = [(s, n) for s in SETTINGS for n in sizes]
     for setting, n in tqdm(cases, desc="plane Monte Carlo", disable=not progress):
@@ -132,6 +153,9 @@ def benchmark(n: int = 10_000, repeats: int = 5, seed: int = 0) -> list[dict[str
     closed form under (1.4), and the 800-step sequential closed form; median of
     ``repeats`` runs each. The NLP cache is cleared before every full/reduced run so that
     each one pays the CasADi construction."""
+    n = as_count("solvers_cmp.plane.benchmark n", n, minimum=4, maximum=10**7)
+    repeats = as_count("solvers_cmp.plane.benchmark repeats", repeats, minimum=1)
+    seed = as_count("solvers_cmp.plane.benchmark seed", seed)
     rng = np.random.default_rng(seed)
     general = _data(scenarios.radar_plane(n, rng, geometry="broadside"))
     prop = _data(scenarios.two_source_plane(n, rng))

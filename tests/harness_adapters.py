@@ -1,17 +1,51 @@
 """A deliberately troublesome problem for the harness tests: one run sleeps past the time
 limit, one kills its interpreter, one raises; the others solve a 2-vector least-squares
-problem exactly (reference = the exact solution)."""
+problem exactly (reference = the exact solution). Also the small Monte Carlo studies of
+tests/test_montecarlo.py (here, so that worker processes import nothing heavy) and /proc
+helpers for the process tests."""
 
 from __future__ import annotations
 
 import os
 import signal
 import time
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from solvers_cmp.cases import Adapter, Outcome, Run
+
+
+@dataclass(frozen=True)
+class Slow:
+    """A study whose trials take ``pause`` seconds (to be killed midway)."""
+
+    pause: float = 0.02
+
+    def __call__(self, rng: np.random.Generator) -> dict[str, float]:
+        time.sleep(self.pause)
+        x = rng.normal(size=3)
+        return {"a": float(x[0]), "b": float(x @ x)}
+
+
+@dataclass(frozen=True)
+class Flaky:
+    """Raises when the trial's first uniform draw is below ``p``; else like :class:`Slow`."""
+
+    p: float = 0.1
+    pause: float = 0.0
+
+    def __call__(self, rng: np.random.Generator) -> dict[str, float]:
+        time.sleep(self.pause)
+        if rng.uniform() < self.p:
+            raise RuntimeError("trial exploded")
+        x = rng.normal(size=3)
+        return {"a": float(x[0]), "b": float(x @ x)}
+
+    @staticmethod
+    def summarise(v: dict[str, np.ndarray]) -> dict[str, float]:
+        return {"mean_b": float(np.mean(v["b"]))}
 
 
 class Trouble(Adapter):
@@ -39,3 +73,39 @@ class Trouble(Adapter):
             raise RuntimeError("solver library exploded")
         x = data + (1e-3 if run.solver == "sloppy" else 0.0)
         return Outcome(True, "optimal", 0.0, x, 0.0, 0.001, 0.002, 3)
+
+
+# ---------------------------------------------------------------- process helpers (Linux /proc)
+def children(pid: int) -> list[int]:
+    """PIDs whose parent is ``pid`` (from /proc/*/stat)."""
+    out = []
+    for d in os.listdir("/proc"):
+        if d.isdigit():
+            try:
+                stat = open(f"/proc/{d}/stat").read()
+            except OSError:
+                continue
+            if int(stat.rsplit(")", 1)[1].split()[1]) == pid:
+                out.append(int(d))
+    return out
+
+
+def alive(pids: list[int]) -> list[int]:
+    """Those of ``pids`` still running (a zombie nobody reaped counts as dead)."""
+    out = []
+    for p in pids:
+        try:
+            state = open(f"/proc/{p}/stat").read().rsplit(")", 1)[1].split()[0]
+        except OSError:
+            continue
+        if state != "Z":
+            out.append(p)
+    return out
+
+
+def wait_gone(pids: list[int], timeout: float) -> list[int]:
+    """Poll until none of ``pids`` runs, or ``timeout`` s; the survivors."""
+    deadline = time.monotonic() + timeout
+    while alive(pids) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    return alive(pids)

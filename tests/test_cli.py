@@ -1,9 +1,22 @@
-"""CLI round trips: what a user types, checked against the library's own answers."""
+"""CLI round trips: what a user types, checked against the library's own answers.
+
+Every command runs the INSTALLED console script (``.venv/bin/optmodels``, next to
+``sys.executable``) in a subprocess, as a user would: stdout must be exactly one JSON
+document with ``--json`` (a C library printing on fd 1 would break it), the exit status
+is checked (0 solved, 1 not OK, 2 bad input), and stderr never holds a traceback. The
+contract itself (malformed inputs, exit statuses) is in ``test_cli_contract.py``.
+"""
 
 from __future__ import annotations
 
 import json
+import os
+import subprocess
+import sys
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -11,19 +24,87 @@ import pytest
 from optmodels import cli, fusion, plane, scenarios, trajectories
 from optmodels.io import write_plane_csv
 
+#: the console script of this environment (pyproject's ``[project.scripts]``)
+OPTMODELS = Path(sys.executable).parent / "optmodels"
 
-def run_json(capsys: pytest.CaptureFixture[str], argv: list[str]) -> dict:
-    assert cli.main([*argv, "--json"]) == 0
-    return json.loads(capsys.readouterr().out)
+
+@dataclass
+class CliRun:
+    """One finished command: its argv, exit status, stdout and stderr."""
+
+    argv: list[str]
+    code: int
+    out: str
+    err: str
+
+    def json(self) -> Any:
+        """stdout as exactly one strict JSON document (``json.loads`` refuses trailing
+        text -- a solver banner before or after it -- and we refuse NaN/Infinity)."""
+        def no_constant(name: str) -> Any:
+            raise AssertionError(f"non-standard JSON constant {name} in {self.argv}")
+
+        try:
+            return json.loads(self.out, parse_constant=no_constant)
+        except json.JSONDecodeError as exc:
+            raise AssertionError(f"stdout of {self.argv} is not one JSON document ({exc}):\n"
+                                 f"{self.out[:2000]}\nstderr:\n{self.err[-2000:]}") from None
+
+    @property
+    def err_lines(self) -> list[str]:
+        return [line for line in self.err.splitlines() if line.strip()]
+
+
+def run_cli(*args: Any, expect: int | None = 0, cwd: Path | None = None,
+            timeout: float = 600) -> CliRun:
+    """Run ``optmodels ARGS``; assert no traceback and (unless ``expect`` is None) the
+    exit status."""
+    assert OPTMODELS.is_file(), f"console script not installed at {OPTMODELS}"
+    argv = [str(a) for a in args]
+    env = {**os.environ, "MPLBACKEND": "Agg", "PYTHONWARNINGS": "ignore"}
+    proc = subprocess.run([str(OPTMODELS), *argv], capture_output=True, text=True,
+                          cwd=cwd, timeout=timeout, env=env, check=False)
+    run = CliRun(argv, proc.returncode, proc.stdout, proc.stderr)
+    assert "Traceback" not in run.err, f"{argv}:\n{run.err[-3000:]}"
+    if expect is not None:
+        assert run.code == expect, f"{argv}: exit {run.code}, expected {expect}\n{run.err}"
+    return run
+
+
+def run_many(argvs: list[list[Any]], **kw: Any) -> list[CliRun]:
+    """Several independent commands at once (each costs ~2 s of imports)."""
+    with ThreadPoolExecutor(max_workers=max(2, min(4, os.cpu_count() or 2))) as ex:
+        return list(ex.map(lambda a: run_cli(*a, **kw), argvs))
+
+
+def run_json(*args: Any, expect: int = 0) -> dict:
+    """``optmodels ARGS --json``: the one JSON document on stdout."""
+    return run_cli(*args, "--json", expect=expect).json()
+
+
+def assert_error(run: CliRun, code: int, *fragments: str) -> str:
+    """Exit ``code``, exactly one line on stderr (``optmodels: error: ...``) containing
+    every fragment, and with --json the error document on stdout. Returns the line."""
+    assert run.code == code, f"{run.argv}: exit {run.code}, expected {code}\n{run.err}"
+    lines = run.err_lines
+    assert len(lines) == 1, f"{run.argv}: expected one line on stderr, got {lines}"
+    line = lines[0]
+    assert line.startswith("optmodels: error: "), line
+    for f in fragments:
+        assert f in line, f"{f!r} not in {line!r}"
+    if "--json" in run.argv:
+        doc = run.json()
+        assert doc["exit_code"] == code and doc["error"] in line
+    else:
+        assert run.out == ""
+    return line
 
 
 @pytest.mark.parametrize("formulation", ["full", "reduced", "closed-form"])
-def test_plane_fit_round_trip(tmp_path: Path, capsys, formulation: str) -> None:
+def test_plane_fit_round_trip(tmp_path: Path, formulation: str) -> None:
     sc = scenarios.paper_plane_example(1, duration=3.0)
     path = tmp_path / "track.csv"
     write_plane_csv(path, sc.points, t=sc.times)
-    res = run_json(capsys, ["plane", "fit", str(path), "--sigma2", "625",
-                            "--formulation", formulation])
+    res = run_json("plane", "fit", path, "--sigma2", "625", "--formulation", formulation)
     ref = plane.closed_form(plane.PlaneData(sc.points, 625 * np.eye(3)))
     assert res["status"] == "optimal"
     # CSV written with 17 significant digits: the file round trip is exact; the solvers
@@ -34,49 +115,57 @@ def test_plane_fit_round_trip(tmp_path: Path, capsys, formulation: str) -> None:
     assert res["planarity_test"]["planar"] is True
 
 
-def test_plane_fit_per_point_covariance_and_alpha2(tmp_path: Path, capsys) -> None:
+def test_plane_fit_per_point_covariance_and_alpha2(tmp_path: Path) -> None:
     sc = scenarios.radar_plane(60, 4, geometry="broadside")
     c = sc.cov
     path = tmp_path / "radar.csv"
     write_plane_csv(path, sc.points, cxx=c[:, 0, 0], cxy=c[:, 0, 1], cxz=c[:, 0, 2],
                     cyy=c[:, 1, 1], cyz=c[:, 1, 2], czz=c[:, 2, 2])
-    res = run_json(capsys, ["plane", "fit", str(path), "--formulation", "reduced"])
+    res = run_json("plane", "fit", path, "--formulation", "reduced")
     ref = plane.solve(plane.PlaneData(sc.points, sc.cov), "reduced")
     assert plane.angle_error(res["normal"], ref.normal) <= 1e-7
 
     sc2 = scenarios.two_source_plane(80, 5)
     path2 = tmp_path / "two.csv"
     write_plane_csv(path2, sc2.points, alpha2=sc2.alpha2)
-    res2 = run_json(capsys, ["plane", "fit", str(path2), "--cov", "100,0,0,100,0,100",
-                             "--formulation", "closed-form"])
+    res2 = run_json("plane", "fit", path2, "--cov", "100,0,0,100,0,100",
+                    "--formulation", "closed-form")
     ref2 = plane.closed_form(plane.PlaneData(sc2.points, 100 * np.eye(3), sc2.alpha2))
     assert plane.angle_error(res2["normal"], ref2.normal) <= 1e-12
 
 
-def test_plane_fit_errors_are_reported(tmp_path: Path, capsys) -> None:
+def test_plane_fit_errors_are_reported(tmp_path: Path) -> None:
     bad = tmp_path / "bad.csv"
     bad.write_text("x,y\n1,2\n")
-    assert cli.main(["plane", "fit", str(bad), "--sigma2", "1"]) == 2
-    assert "missing column(s) z" in capsys.readouterr().err
     ok = tmp_path / "ok.csv"
     write_plane_csv(ok, np.random.default_rng(0).normal(size=(10, 3)))
-    assert cli.main(["plane", "fit", str(ok)]) == 2
-    assert "--sigma2" in capsys.readouterr().err
-    assert cli.main(["plane", "fit", str(tmp_path / "none.csv"), "--sigma2", "1"]) == 2
-    assert "no such file" in capsys.readouterr().err
+    r_bad, r_nocov, r_none = run_many([
+        ["plane", "fit", bad, "--sigma2", "1"],
+        ["plane", "fit", ok],
+        ["plane", "fit", tmp_path / "none.csv", "--sigma2", "1", "--json"],
+    ], expect=None)
+    assert_error(r_bad, 2, "missing column(s) z")
+    assert_error(r_nocov, 2, "--sigma2")
+    assert_error(r_none, 2, "no such file")
 
 
-def test_plane_fit_text_output(tmp_path: Path, capsys) -> None:
+def test_plane_fit_text_output(tmp_path: Path) -> None:
     sc = scenarios.paper_plane_example(2, duration=2.0)
     path = tmp_path / "t.csv"
     write_plane_csv(path, sc.points)
-    assert cli.main(["plane", "fit", str(path), "--sigma2", "625"]) == 0
-    out = capsys.readouterr().out
+    out = run_cli("plane", "fit", path, "--sigma2", "625").out
     assert "normal" in out and "χ² test" in out and "paper (1.17)" in out
+    # the printed normal is the library's (9 decimals; the unit normal's sign is fixed
+    # by the library's convention, so compare up to sign)
+    ref = plane.solve(plane.PlaneData(sc.points, 625 * np.eye(3)))
+    line = next(x for x in out.splitlines() if "normal" in x)
+    printed = np.array([float(v) for v in line.split("(")[1].rstrip(")").split(",")])
+    assert min(np.abs(printed - ref.normal).max(), np.abs(printed + ref.normal).max()) < 1e-8
 
 
-def test_demo_plane_writes_report(tmp_path: Path, capsys) -> None:
-    res = run_json(capsys, ["demo", "plane", "--out", str(tmp_path), "--runs", "20"])
+def test_demo_plane_writes_report(tmp_path: Path) -> None:
+    res = run_json("demo", "plane", "--out", tmp_path, "--runs", "20")
+    assert res["failed"] == {}
     for f in ("fig1_trajectory.png", "fig2_statistic.png", "fig3_angle_error.png",
               "fig4_offset_error.png", "radius_bound.png", "report.md", "summary.json"):
         assert (tmp_path / "plane" / f).is_file()
@@ -98,13 +187,12 @@ def _write_traj_csv(path: Path, sc: scenarios.TrajectoryScenario, *, labels: lis
 
 
 @pytest.mark.parametrize("method", ["closed-form", "CLARABEL", "OSQP"])
-def test_trajectories_fit_round_trip(tmp_path: Path, capsys, method: str) -> None:
+def test_trajectories_fit_round_trip(tmp_path: Path, method: str) -> None:
     sc = scenarios.launcher_release(3, family="diverging")
     path = tmp_path / "objects.csv"
     labels = ["A", "B", "C", "D"]
     _write_traj_csv(path, sc, labels=labels, sigma2=True)
-    res = run_json(capsys, ["trajectories", "fit", str(path), "--family", "diverging",
-                            "--method", method])
+    res = run_json("trajectories", "fit", path, "--family", "diverging", "--method", method)
     ref = trajectories.closed_form(sc.data(), "diverging")
     assert res["status"] == "optimal" and res["objects"] == labels
     # repr() floats round-trip exactly; generic solvers agree to 1e-9 (test_trajectories)
@@ -116,7 +204,7 @@ def test_trajectories_fit_round_trip(tmp_path: Path, capsys, method: str) -> Non
         trajectories.family_test(sc.data(), "diverging").p_value, rel=1e-9)
 
 
-def test_trajectories_fit_custom_family_and_vector_values(tmp_path: Path, capsys) -> None:
+def test_trajectories_fit_custom_family_and_vector_values(tmp_path: Path) -> None:
     rng = np.random.default_rng(7)
     times = [np.sort(rng.uniform(0, 50, k)) for k in (8, 12, 10)]
     vel = rng.normal(size=(3, 2))
@@ -128,8 +216,8 @@ def test_trajectories_fit_custom_family_and_vector_values(tmp_path: Path, capsys
         for j, (t, v) in enumerate(zip(times, vals, strict=True)):
             for a, (x, y) in zip(t, v, strict=True):
                 fh.write(f"o{j},{float(a)!r},{float(x)!r},{float(y)!r}\n")
-    res = run_json(capsys, ["trajectories", "fit", str(path), "--family", "custom",
-                            "--shared-start", "o0,o2", "--sigma2", "0.01"])
+    res = run_json("trajectories", "fit", path, "--family", "custom",
+                   "--shared-start", "o0,o2", "--sigma2", "0.01")
     fam = trajectories.Family.custom(3, shared_start=[[0, 2]])
     ref = trajectories.closed_form(trajectories.TrajectoryData(times, vals, 0.01), fam)
     assert res["start_groups"] == [["o0", "o2"], ["o1"]]
@@ -137,35 +225,34 @@ def test_trajectories_fit_custom_family_and_vector_values(tmp_path: Path, capsys
     assert res["coordinates"] == ["x", "y"] and np.shape(res["covariance"]) == (2, 5, 5)
 
 
-def test_trajectories_fit_errors(tmp_path: Path, capsys) -> None:
+def test_trajectories_fit_errors(tmp_path: Path) -> None:
     bad = tmp_path / "bad.csv"
     bad.write_text("object,t,y\na,0,1\na,0,2\nb,0,1\nb,1,2\n")
-    assert cli.main(["trajectories", "fit", str(bad)]) == 2
-    assert "fewer than 2 distinct times" in capsys.readouterr().err
     nocol = tmp_path / "nocol.csv"
     nocol.write_text("id,t,y\na,0,1\n")
-    assert cli.main(["trajectories", "fit", str(nocol)]) == 2
-    assert "missing column 'object'" in capsys.readouterr().err
     ok = tmp_path / "ok.csv"
     ok.write_text("object,t,y\na,0,1\na,1,2\nb,0,1\nb,1,2\n")
-    assert cli.main(["trajectories", "fit", str(ok), "--family", "custom",
-                     "--shared-start", "a,z"]) == 2
-    assert "unknown object" in capsys.readouterr().err
+    r_bad, r_nocol, r_unknown = run_many([
+        ["trajectories", "fit", bad],
+        ["trajectories", "fit", nocol, "--json"],
+        ["trajectories", "fit", ok, "--family", "custom", "--shared-start", "a,z"],
+    ], expect=None)
+    assert_error(r_bad, 2, "fewer than 2 distinct times")
+    assert_error(r_nocol, 2, "missing column 'object'")
+    assert_error(r_unknown, 2, "unknown object")
 
 
-def test_trajectories_fit_text_output(tmp_path: Path, capsys) -> None:
+def test_trajectories_fit_text_output(tmp_path: Path) -> None:
     sc = scenarios.launcher_release(4, family="parallel")
     path = tmp_path / "p.csv"
     _write_traj_csv(path, sc, labels=["1", "2", "3", "4"])
-    assert cli.main(["trajectories", "fit", str(path), "--family", "parallel",
-                     "--sigma2", str(sc.sigma2)]) == 0
-    out = capsys.readouterr().out
+    out = run_cli("trajectories", "fit", path, "--family", "parallel",
+                  "--sigma2", repr(sc.sigma2)).out
     assert "velocity" in out and "vs independent lines" in out
 
 
-def test_demo_trajectories_writes_report(tmp_path: Path, capsys) -> None:
-    res = run_json(capsys, ["demo", "trajectories", "--out", str(tmp_path),
-                            "--trajectory-runs", "400"])
+def test_demo_trajectories_writes_report(tmp_path: Path) -> None:
+    res = run_json("demo", "trajectories", "--out", tmp_path, "--trajectory-runs", "400")
     for f in ("diverging_fits.png", "parallel_fits.png", "eta.png", "report.md",
               "summary.json"):
         assert (tmp_path / "trajectories" / f).is_file()
@@ -181,11 +268,19 @@ def test_demo_trajectories_writes_report(tmp_path: Path, capsys) -> None:
         assert abs(row["eta MC"] - row["eta formula"]) < 5 * row["eta MC avg se"] + 1e-12
 
 
-def test_fusion_weights_round_trip(tmp_path: Path, capsys) -> None:
+def test_fusion_weights_round_trip(tmp_path: Path) -> None:
     s1 = [[1.0, 0.2], [0.2, 2.0]]
     s2 = [[2.0, -0.3], [-0.3, 1.0]]
-    res = run_json(capsys, ["fusion", "weights", "--s1", json.dumps(s1), "--s2",
-                            json.dumps(s2), "--n", "30"])
+    np.save(tmp_path / "s1.npy", np.array(s1))
+    (tmp_path / "s2.json").write_text(json.dumps(s2))
+    r_inline, r_files, r_text = run_many([
+        ["fusion", "weights", "--s1", json.dumps(s1), "--s2", json.dumps(s2), "--n", "30",
+         "--json"],
+        ["fusion", "weights", "--s1", tmp_path / "s1.npy", "--s2", tmp_path / "s2.json",
+         "--n1", "10", "--n2", "50", "--mean", "known", "--json"],
+        ["fusion", "weights", "--s1", json.dumps(s1), "--s2", json.dumps(s2), "--n", "30"],
+    ])
+    res = r_inline.json()
     np.testing.assert_allclose(res["W"], fusion.weight_matrix(s1, s2), rtol=1e-15)
     p1, p2 = fusion.weight_jacobians(s1, s2)
     np.testing.assert_allclose(res["P1"], p1, rtol=1e-15)
@@ -193,34 +288,33 @@ def test_fusion_weights_round_trip(tmp_path: Path, capsys) -> None:
     np.testing.assert_allclose(res["cov_vec_W"],
                                fusion.weight_covariance(s1, s2, 30, 30, mean="sample"))
     # files (.npy and .json), separate sizes and the known-mean estimator
-    np.save(tmp_path / "s1.npy", np.array(s1))
-    (tmp_path / "s2.json").write_text(json.dumps(s2))
-    res = run_json(capsys, ["fusion", "weights", "--s1", str(tmp_path / "s1.npy"), "--s2",
-                            str(tmp_path / "s2.json"), "--n1", "10", "--n2", "50",
-                            "--mean", "known"])
+    res = r_files.json()
     np.testing.assert_allclose(res["cov_vec_W"],
                                fusion.weight_covariance(s1, s2, 10, 50, mean="known"))
-    assert cli.main(["fusion", "weights", "--s1", json.dumps(s1), "--s2", json.dumps(s2),
-                     "--n", "30"]) == 0
-    assert "std_W" in capsys.readouterr().out
+    assert "std_W" in r_text.out
 
 
-@pytest.mark.parametrize(("args", "flag"), [
+FUSION_ERRORS = [
     (["--s1", "[[1,0.5],[0,1]]", "--s2", "[[1,0],[0,1]]", "--n", "9"], "--s1"),
     (["--s1", "[[1,0],[0,1]]", "--s2", "[[1,0],[0,-1]]", "--n", "9"], "--s2"),
     (["--s1", "[[1,0],[0,1]]", "--s2", "[[1,0],[0,1]]", "--n", "2"], "--n"),
     (["--s1", "[[1,0],[0,1]]", "--s2", "[[1,0],[0,1]]", "--n1", "9", "--n2", "1"], "--n2"),
     (["--s1", "nonsense", "--s2", "[[1,0],[0,1]]", "--n", "9"], "--s1"),
     (["--s1", "[[1,0],[0,1]]", "--s2", "[[1,0],[0,1]]"], "--n"),
-])
-def test_fusion_weights_errors(capsys, args: list[str], flag: str) -> None:
-    assert cli.main(["fusion", "weights", *args]) == 2
-    assert f"{flag}:" in capsys.readouterr().err
+]
 
 
-def test_demo_fusion_writes_report(tmp_path: Path, capsys) -> None:
-    res = run_json(capsys, ["demo", "fusion", "--out", str(tmp_path), "--fusion-trials",
-                            "4000", "--fusion-positions", "3"])
+def test_fusion_weights_errors() -> None:
+    """Each bad input names the flag the user typed (grouped: one subprocess each)."""
+    runs = run_many([["fusion", "weights", *args] for args, _ in FUSION_ERRORS],
+                    expect=None)
+    for run, (_, flag) in zip(runs, FUSION_ERRORS, strict=True):
+        assert f"{flag}" in assert_error(run, 2), run.argv
+
+
+def test_demo_fusion_writes_report(tmp_path: Path) -> None:
+    res = run_json("demo", "fusion", "--out", tmp_path, "--fusion-trials", "4000",
+                   "--fusion-positions", "3")
     for f in ("maps.png", "positions.png", "vs_n.png", "report.md", "summary.json"):
         assert (tmp_path / "fusion" / f).is_file()
     summ = res["problems"]["fusion"]
@@ -239,19 +333,23 @@ def test_demo_fusion_writes_report(tmp_path: Path, capsys) -> None:
             assert row["max |lin/MC − 1| (diag)"] < 0.03 + 5 * row["MC se of a variance"]
 
 
-def test_fusion_weights_shared_snapshots(capsys) -> None:
+def test_fusion_weights_shared_snapshots() -> None:
     s1, s2, s12 = [[2.0, 0.3], [0.3, 1.0]], [[1.5, 0.0], [0.0, 2.0]], [[0.8, 0.1], [0.0, 0.6]]
-    res = run_json(capsys, ["fusion", "weights", "--s1", json.dumps(s1), "--s2",
-                            json.dumps(s2), "--s12", json.dumps(s12), "--n", "40"])
+    r_ok, r_bad = run_many([
+        ["fusion", "weights", "--s1", json.dumps(s1), "--s2", json.dumps(s2), "--s12",
+         json.dumps(s12), "--n", "40", "--json"],
+        ["fusion", "weights", "--s1", json.dumps(s1), "--s2", json.dumps(s2),
+         "--s12", "[[5,0],[0,5]]", "--n", "40"],
+    ], expect=None)
+    assert r_ok.code == 0
+    res = r_ok.json()
     np.testing.assert_allclose(res["cov_vec_W"], fusion.weight_covariance(
         s1, s2, 40, 40, mean="sample", s12=s12))
     assert res["shared_snapshots"] is True
-    assert cli.main(["fusion", "weights", "--s1", json.dumps(s1), "--s2", json.dumps(s2),
-                     "--s12", "[[5,0],[0,5]]", "--n", "40"]) == 2
-    assert "--s12:" in capsys.readouterr().err
+    assert_error(r_bad, 2, "--s12:")
 
 
-def test_biasfield_build_and_solve(tmp_path: Path, capsys) -> None:
+def test_biasfield_build_and_solve(tmp_path: Path) -> None:
     """Plots and radars as CSV → FieldData .npz → the field, equal to the library's."""
     import warnings
 
@@ -271,8 +369,8 @@ def test_biasfield_build_and_solve(tmp_path: Path, capsys) -> None:
         for t, k, g, a, o in zip(p.time, p.radar, p.range, p.azimuth, p.object, strict=True)]
     (tmp_path / "plots.csv").write_text("\n".join(lines) + "\n")
     npz = tmp_path / "fd.npz"
-    res = run_json(capsys, ["biasfield", "build", str(tmp_path / "plots.csv"), "--radars",
-                            str(tmp_path / "radars.csv"), "--cells", "40", "--out", str(npz)])
+    res = run_json("biasfield", "build", tmp_path / "plots.csv", "--radars",
+                   tmp_path / "radars.csv", "--cells", "40", "--out", npz)
     radars, _ = bf.read_radars(tmp_path / "radars.csv")
     plots, _ = bf.read_plots(tmp_path / "plots.csv", radars)
     with warnings.catch_warnings():
@@ -284,26 +382,36 @@ def test_biasfield_build_and_solve(tmp_path: Path, capsys) -> None:
     np.testing.assert_array_equal(fd.xi, ref.xi)
     assert (fd.adjacency != ref.adjacency).nnz == 0
     out = tmp_path / "out"
-    res = run_json(capsys, ["biasfield", "solve", str(npz), "--out", str(out)])
     cf = bf.closed_form(fd)
+    big = np.abs(cf.field).max(axis=(0, 1))
+    r_qp, r_box, r_lip, r_badbox, r_missing = run_many([
+        ["biasfield", "solve", npz, "--out", out, "--json"],
+        ["biasfield", "solve", npz, "--out", tmp_path / "box", "--json", "--box",
+         f"{1e-3 * big[0]},{np.rad2deg(1e-3 * big[1])}"],
+        ["biasfield", "solve", npz, "--out", tmp_path / "lip", "--lipschitz", "--json"],
+        ["biasfield", "solve", npz, "--box", "1", "--out", tmp_path / "x"],
+        ["biasfield", "solve", tmp_path / "missing.npz", "--out", tmp_path / "y"],
+    ], expect=None)
+    assert r_qp.code == 0 and r_qp.json()["status"] == "optimal"
     got = np.load(out / "field.npz")["field"]
     # Clarabel (tightened) vs the closed form: 1e-8 relative per component
     assert np.all(np.abs(got - cf.field).max(axis=(0, 1))
                   < 1e-8 * np.abs(cf.field).max(axis=(0, 1)))
     assert (out / "azimuth_map.png").is_file() and (out / "field.csv").is_file()
-    big = np.abs(cf.field).max(axis=(0, 1))
-    res = run_json(capsys, ["biasfield", "solve", str(npz), "--out", str(out), "--box",
-                            f"{1e-3 * big[0]},{np.rad2deg(1e-3 * big[1])}"])
+    # an infeasible box is a finished solve that is not OK: exit 1, the result on stdout
+    assert r_box.code == 1
+    res = r_box.json()
     assert res["status"] == "infeasible" and "cells" in res["message"]
-    res = run_json(capsys, ["biasfield", "solve", str(npz), "--out", str(out), "--lipschitz"])
+    assert not (tmp_path / "box" / "field.npz").exists()
+    assert r_lip.code == 0
+    res = r_lip.json()
     assert res["status"] == "optimal" and res["lipschitz"] > 0
-    assert cli.main(["biasfield", "solve", str(npz), "--box", "1"]) == 2
-    assert "--box" in capsys.readouterr().err
-    assert cli.main(["biasfield", "solve", str(tmp_path / "missing.npz")]) == 2
+    assert_error(r_badbox, 2, "--box")
+    assert_error(r_missing, 2, "missing.npz")
 
 
-def test_demo_biasfield_writes_report(tmp_path: Path, capsys) -> None:
-    res = run_json(capsys, ["demo", "biasfield", "--out", str(tmp_path)])
+def test_demo_biasfield_writes_report(tmp_path: Path) -> None:
+    res = run_json("demo", "biasfield", "--out", tmp_path)
     for f in ("azimuth_maps.png", "range_maps.png", "report.md", "summary.json"):
         assert (tmp_path / "biasfield" / f).is_file()
     summ = res["problems"]["biasfield"]
@@ -317,7 +425,7 @@ def test_demo_biasfield_writes_report(tmp_path: Path, capsys) -> None:
     assert base["constant"]["p-value"] > 1e-3 and base["smooth"]["p-value"] < 1e-6
 
 
-def test_assignment_cli(tmp_path: Path, capsys) -> None:
+def test_assignment_cli(tmp_path: Path) -> None:
     from optmodels import assignment as asg
 
     rng = np.random.default_rng(4)
@@ -328,31 +436,44 @@ def test_assignment_cli(tmp_path: Path, capsys) -> None:
             "volume": 9.0, "pd": 0.9, "rho": 0.3}
     path = tmp_path / "case.json"
     path.write_text(json.dumps(case))
-    res = run_json(capsys, ["assignment", "solve", str(path), "--k", "3"])
+    bad_pd, bad_field = tmp_path / "bad_pd.json", tmp_path / "bad_field.json"
+    bad_pd.write_text(json.dumps({**case, "pd": 1.5}))
+    bad_field.write_text(json.dumps({**case, "speed": 1}))
+    r_milp, r_bf, r_count, r_pd, r_field = run_many([
+        ["assignment", "solve", path, "--k", "3", "--json"],
+        ["assignment", "solve", path, "--method", "brute-force", "--json"],
+        ["assignment", "count", "3", "3", "--json"],
+        ["assignment", "solve", bad_pd],
+        ["assignment", "solve", bad_field, "--json"],
+    ], expect=None)
+    assert r_milp.code == 0
+    res = r_milp.json()  # the HiGHS banner, if any, is not on stdout
     ref = asg.brute_force(asg.AssignmentData(**case))
     assert res["status"] == "optimal"
     assert [tuple(b) for b in res["partition"]] == ref.partition
     assert res["assignment"] == list(ref.assignment)
     assert res["log_score"] == pytest.approx(ref.log_score, abs=1e-9)
     assert len(res["k_best"]) == 3 and res["hypotheses_total"] == 77
-    res = run_json(capsys, ["assignment", "solve", str(path), "--method", "brute-force"])
+    assert r_bf.code == 0
+    res = r_bf.json()
     assert res["log_score"] == pytest.approx(ref.log_score, abs=1e-12)
-    cnt = run_json(capsys, ["assignment", "count", "3", "3"])
+    assert r_count.code == 0
+    cnt = r_count.json()
     assert cnt["variants"] == 5 and cnt["total"] == asg.count_hypotheses(3, 3)
-    bad = tmp_path / "bad.json"
-    bad.write_text(json.dumps({**case, "pd": 1.5}))
-    assert cli.main(["assignment", "solve", str(bad)]) == 2
-    assert "pd" in capsys.readouterr().err
-    bad.write_text(json.dumps({**case, "speed": 1}))
-    assert cli.main(["assignment", "solve", str(bad)]) == 2
-    assert "unknown fields" in capsys.readouterr().err
+    assert_error(r_pd, 2, "pd")
+    assert_error(r_field, 2, "unknown fields")
 
 
-def test_demo_assignment_writes_report(tmp_path: Path, capsys, monkeypatch) -> None:
+def test_demo_assignment_writes_report(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                       monkeypatch: pytest.MonkeyPatch) -> None:
+    """In process (the separations are patched down to two): main() itself, its return
+    status and its one JSON document."""
     from optmodels.demo import assignment as demo_as
 
     monkeypatch.setattr(demo_as, "SEPARATIONS", (40.0, 400.0))
-    res = run_json(capsys, ["demo", "assignment", "--out", str(tmp_path)])
+    assert cli.main(["demo", "assignment", "--out", str(tmp_path), "--json"]) == 0
+    res = json.loads(capsys.readouterr().out)
+    assert res["failed"] == {}
     for f in ("association.png", "report.md", "summary.json"):
         assert (tmp_path / "assignment" / f).is_file()
     rows = {r["separation, m"]: r for r in res["problems"]["assignment"]["rows"]}

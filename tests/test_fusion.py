@@ -4,6 +4,8 @@ Cov(vec Ŵ) (10) against Monte Carlo."""
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 import pytest
 
@@ -361,3 +363,243 @@ def test_weight_covariance_with_shared_snapshots() -> None:
     assert np.max(np.abs(printed / mc - 1)) > 0.2
     with pytest.raises(ProblemError, match="n1 = n2"):
         fu.weight_covariance(s1, s2, n, n + 1, mean="sample", s12=s12)
+
+
+# ---------------------------------------------------------------- issue 14: trust
+def test_degenerate_geometry_is_refused_or_flagged() -> None:
+    """At a site the azimuth is undefined; on the line through the sites the bearings are
+    parallel (estimator 1 singular), beyond the sites Δr ≡ ±baseline (estimator 2 and the
+    joint information singular). Before: covariances at a site returned three all-NaN
+    matrices silently, on the baseline a raw LinAlgError."""
+    sys_ = fu.TwoSiteSystem.on_baseline(20e3)
+    for x in ([-10e3, 0.0], [0.0, 0.0], [30e3, 0.0], [0.0, 1e12]):
+        with pytest.raises(ProblemError, match=r"covariances x = \("):
+            sys_.covariances(x)
+    with pytest.raises(ProblemError, match="site A"):
+        sys_.covariances([-10e3, 0.0])
+    # beyond B two different positions give identical noise-free measurements (to
+    # round-off of 1e-16 × 4e4 m): the position along the line is not identifiable
+    np.testing.assert_allclose(sys_.measure([30e3, 0.0]), sys_.measure([50e3, 0.0]),
+                               atol=1e-9)
+    with pytest.raises(ProblemError, match=r"crb x = \(30000, 0\).*joint ML"):
+        sys_.crb([30e3, 0.0])
+    # between the sites the joint problem is regular: analytic CRB at the midpoint,
+    # J = [(0, −1/h), (0, 1/h), (−2, 0)] → diag(σ_Δr²/4, h²σ_az²/2) (round-off only)
+    h = 10e3
+    np.testing.assert_allclose(sys_.crb([0.0, 0.0]),
+                               np.diag([3.0**2 / 4, h**2 * 3e-3**2 / 2]), rtol=1e-12,
+                               atol=1e-12)
+    # far on the bisector the conditions grow ∝ ρ (estimator 1: 2ρ/b, estimator 2:
+    # 2e-3 ρ/m here): 1e9 m (2e6) is accepted, 1e12 m (2e9) is not
+    s1, s2, _ = sys_.covariances([0.0, 1e9])
+    assert np.all(np.isfinite(s1)) and np.all(np.isfinite(s2))
+    # on_degenerate="nan" flags the bad rows only (for maps)
+    pts = np.array([[8e3, 30e3], [30e3, 0.0], [-10e3, 0.0], [0.0, 0.0]])
+    s1, s2, s12 = sys_.covariances(pts, on_degenerate="nan")
+    ref = sys_.covariances(pts[0])
+    for got, want in zip((s1, s2, s12), ref, strict=True):
+        np.testing.assert_allclose(got[0], want, rtol=1e-12)
+    assert np.all(np.isnan(s1[1:])) and np.all(np.isnan(s12[1:]))
+    assert np.all(np.isfinite(s2[3]))  # estimator 2 is regular between the sites
+    crb = sys_.crb(pts, on_degenerate="nan")
+    assert np.all(np.isnan(crb[1:3])) and np.all(np.isfinite(crb[[0, 3]]))
+
+
+def test_joint_ml_at_a_degenerate_point_is_not_optimal() -> None:
+    """Noise-free z from a point beyond B: the ML set is the whole extension (Fisher
+    information singular), so no isolated optimum exists. Before: OPTIMAL. Now the
+    Newton-step check (infinite in CRB units) makes it ERROR with a NaN estimate."""
+    z = SYSTEM.measure(np.array([[30e3, 0.0]]))
+    for method in ("ipopt", "gauss_newton"):
+        sol = SYSTEM.joint_ml(z, method=method)  # type: ignore[arg-type]
+        assert sol.status is fu.Status.ERROR and np.all(np.isnan(sol.estimate))
+    with pytest.raises(ProblemError, match="x0"):
+        SYSTEM.joint_ml(SYSTEM.measure(POSITIONS), x0=SYSTEM.site_a)
+    with pytest.raises(ProblemError, match="x0"):
+        SYSTEM.joint_ml(SYSTEM.measure(POSITIONS), x0=np.zeros((3, 2)))
+    with pytest.raises(ProblemError, match="no measurements"):
+        SYSTEM.joint_ml(np.zeros((0, 3)))
+
+
+def test_solver_options_are_checked_by_name() -> None:
+    """Before: a raw CasADi RuntimeError. Now ProblemError naming the option, for unknown
+    names, wrong types and values IPOPT rejects only when first called."""
+    z = SYSTEM.measure(POSITIONS[:1])
+    with pytest.raises(ProblemError, match="'nonsense'"):
+        SYSTEM.joint_ml(z, options={"nonsense": 1})
+    with pytest.raises(ProblemError, match="'tol'"):
+        SYSTEM.joint_ml(z, options={"tol": "x"})
+    with pytest.raises(ProblemError, match="'mu_strategy'"):
+        SYSTEM.joint_ml(z, options={"max_iter": 50, "mu_strategy": "nope"})
+    with pytest.raises(ProblemError, match="options"):
+        SYSTEM.joint_ml(z, options=[("tol", 1e-8)])  # type: ignore[arg-type]
+    # valid options still solve: 0.1 m of the truth on noise-free data (IPOPT tol 1e-8)
+    sol = SYSTEM.joint_ml(z, options={"tol": 1e-8}).require_ok()
+    np.testing.assert_allclose(sol.estimate, POSITIONS[:1], atol=0.1)
+
+
+def test_nlp_status_tables() -> None:
+    import casadi as ca
+
+    from optmodels.backends.casadi_backend import (
+        SolverNotAvailable,
+        build_nlpsol,
+        nlp_status,
+        run_nlpsol,
+    )
+
+    st = fu.Status
+    assert nlp_status("ipopt", {"return_status": "Solve_Succeeded", "success": True}) is st.OPTIMAL
+    assert nlp_status("ipopt", {"return_status": "Brand_New_Code"}) is st.ERROR
+    # a table entry never overrides CasADi's failure flag
+    assert nlp_status("sqpmethod", {"return_status": "Solve_Succeeded",
+                                    "success": False}) is st.ERROR
+    assert nlp_status("fatrop", {"return_status": "0", "success": True,
+                                 "unified_return_status": "SOLVER_RET_SUCCESS"}) is st.OPTIMAL
+    assert nlp_status("fatrop", {"return_status": "7", "success": False,
+                                 "unified_return_status": "SOLVER_RET_LIMITED"}) \
+        is st.ITERATION_LIMIT
+    assert nlp_status("blocksqp", {"return_status": "?"}) is st.ERROR
+    # a real iteration cap of sqpmethod: ITERATION_LIMIT, not ERROR or OPTIMAL
+    v = ca.SX.sym("v", 2)
+    nlp = {"x": v, "f": (v[0] - 1) ** 4 + 10 * (v[1] - v[0] ** 2) ** 2, "g": v[0] + v[1] - 1}
+    res, _ = run_nlpsol(build_nlpsol(nlp, plugin="sqpmethod", options={"max_iter": 1}),
+                        x0=np.array([3.0, -2.0]), p=np.zeros(0))
+    assert res.status is st.ITERATION_LIMIT
+    with pytest.raises(ProblemError, match="'bogus'"):
+        build_nlpsol(nlp, plugin="sqpmethod", options={"bogus": 1})
+    with pytest.raises(SolverNotAvailable, match="ipotp"):
+        build_nlpsol(nlp, plugin="ipotp")
+
+
+def test_casadi_conic_bad_option_names_the_option() -> None:
+    """Before: a raw CasADi RuntimeError from inside CVXPY. casadi_qp now raises
+    ProblemError naming the option; cvxpy_backend either re-raises it or reports a failed
+    solve (Status.ERROR, NaN estimate) carrying that message -- never a traceback."""
+    try:
+        sol = fu.fuse([0.0, 0.0], np.eye(2), [1.0, 1.0], 2 * np.eye(2), method="cvxpy",
+                      solver="CASADI_OSQP", bogus=1)
+    except ProblemError as exc:
+        assert "'bogus'" in str(exc)
+    else:
+        assert sol.status is fu.Status.ERROR and "'bogus'" in sol.message
+        assert np.all(np.isnan(sol.estimate))
+
+
+@pytest.mark.parametrize("bad", [np.nan, np.inf, 2.5, "5", True, None])
+def test_scalar_arguments_are_checked(bad: object) -> None:
+    """Before: weight_covariance(n1=nan) raised ValueError, inf OverflowError,
+    on_baseline('x') ValueError, monte_carlo_weight(seed='x') TypeError. Counts refuse
+    all six values; real-valued arguments accept 2.5; seed=None is a valid seed."""
+    ok = np.eye(2)
+    counts: dict[str, Any] = {
+        "n1": lambda: fu.weight_covariance(ok, ok, bad, 5),
+        "n2": lambda: fu.monte_carlo_weight(ok, ok, 5, bad, trials=10),
+        "trials": lambda: fu.monte_carlo_weight(ok, ok, 5, 5, trials=bad),
+        "moments n": lambda: fu.sample_covariance_moments(ok, bad),
+        "sample trials": lambda: SYSTEM.sample(POSITIONS[0], bad, np.random.default_rng(0)),
+        "matrix m": lambda: fu.commutation_matrix(bad),
+        "mean": lambda: fu.weight_covariance(ok, ok, 5, 5, mean=bad),
+        "method": lambda: fu.fuse([0.0, 0.0], ok, [1.0, 1.0], ok, method=bad),
+        "weights_at": lambda: SYSTEM.fused(SYSTEM.measure(POSITIONS), weights_at=bad),
+    }
+    if bad is not None:
+        counts["seed"] = lambda: fu.monte_carlo_weight(ok, ok, 5, 5, trials=10, seed=bad)
+    reals: dict[str, Any] = {
+        "baseline": lambda: fu.TwoSiteSystem.on_baseline(bad),
+        "sigma_azimuth": lambda: fu.TwoSiteSystem.on_baseline(sigma_azimuth=bad),
+        "sigma_range_difference": lambda: fu.TwoSiteSystem.on_baseline(
+            sigma_range_difference=bad),
+    }
+    for arg, call in counts.items():
+        with pytest.raises(ProblemError, match=arg.split()[-1]):
+            call()
+    for arg, call in reals.items():
+        if bad == 2.5:
+            assert call().baseline > 0  # a valid real number
+        else:
+            with pytest.raises(ProblemError, match=arg):
+                call()
+
+
+def test_monte_carlo_weight_is_chunked_and_guarded(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Before: trials=1e9 ran for > 78 s without returning (one 1e9 × m × m draw). Now
+    trials·m² above MAX_MC_WORK is refused at once, and the draws are made in chunks:
+    forced here to 64·m² values, i.e. 313 chunks of 64 trials for 20 000 trials. The
+    chunked moments agree with (10) at n = 400 (first-order error ~1/n = 0.3 %) within
+    the Monte Carlo se of a variance √(2/T) = 1 % times 4, plus 1 %: 5 %."""
+    s1 = np.array([[1.0, 0.3], [0.3, 2.0]])
+    s2 = np.array([[2.0, -0.4], [-0.4, 1.0]])
+    with pytest.raises(ProblemError, match=r"trials.*above the limit"):
+        fu.monte_carlo_weight(s1, s2, 10, 10, trials=10**9)
+    with pytest.raises(ProblemError, match="dimension"):
+        fu.monte_carlo_weight(np.eye(fu.MAX_DIM + 1), np.eye(fu.MAX_DIM + 1), 40, 40,
+                              trials=10)
+    monkeypatch.setattr(fu, "MC_CHUNK", 64 * 4)
+    n, trials = 400, 20_000
+    mc = fu.monte_carlo_weight(s1, s2, n, n, trials=trials, seed=3, mean="sample")
+    lin = fu.weight_covariance(s1, s2, n, n, mean="sample")
+    assert mc.trials == trials
+    np.testing.assert_allclose(np.diag(mc.cov), np.diag(lin), rtol=0.05)
+    # E Ŵ = W + O(1/n): within 5 se of the mean plus the 1/n bias scale × sd
+    sd = np.sqrt(np.diag(mc.cov)).reshape(2, 2, order="F")
+    assert np.all(np.abs(mc.mean - fu.weight_matrix(s1, s2)) < 5 * sd / np.sqrt(trials)
+                  + sd / np.sqrt(n))
+
+
+def _exact_weight(s1: np.ndarray, s2: np.ndarray) -> np.ndarray:
+    """W = S1(S1 + S2)⁻¹ in exact rational arithmetic (2 × 2), from the float inputs."""
+    from fractions import Fraction as Fr
+
+    a = [[Fr(float(s1[i, j])) for j in range(2)] for i in range(2)]
+    s = [[a[i][j] + Fr(float(s2[i, j])) for j in range(2)] for i in range(2)]
+    det = s[0][0] * s[1][1] - s[0][1] * s[1][0]
+    inv = [[s[1][1] / det, -s[0][1] / det], [-s[1][0] / det, s[0][0] / det]]
+    return np.array([[float(sum(a[i][k] * inv[k][j] for k in range(2))) for j in range(2)]
+                     for i in range(2)])
+
+
+def test_fuse_closed_form_is_rechecked_against_its_conditioning() -> None:
+    """S1, S2 sharing a near-null direction (eigenvalues 1, c): S1 + S2 has condition
+    ~1/c. Against W in exact arithmetic, the closed form's error grows like cond·eps
+    (measured 4e-8 at c = 1e-9, 3.7e-6 at 1e-11); before, every case was OPTIMAL
+    (gradient residual ≤ 3.2e-7). Now the forward error bound (valid: ≥ the true error)
+    gives OPTIMAL, OPTIMAL_INACCURATE, ERROR, and weight_matrix refuses the last.
+    S1 + S2 well conditioned while S1, S2 are not (opposite rotations): OPTIMAL, exact."""
+    th = 0.3
+    rot = np.array([[np.cos(th), -np.sin(th)], [np.sin(th), np.cos(th)]])
+    a1, a2 = np.array([1.0, 2.0]), np.array([2.0, 3.0])
+    expect = {1e-9: fu.Status.OPTIMAL, 1e-11: fu.Status.OPTIMAL_INACCURATE,
+              1e-13: fu.Status.ERROR}
+    for c, status in expect.items():
+        s1 = rot @ np.diag([1.0, c]) @ rot.T
+        s2 = rot @ np.diag([2.0, 3 * c]) @ rot.T
+        s1, s2 = 0.5 * (s1 + s1.T), 0.5 * (s2 + s2.T)
+        sol = fu.fuse(a1, s1, a2, s2)
+        assert sol.status is status
+        w_true = _exact_weight(s1, s2)
+        if sol.ok:
+            true_err = np.max(np.abs(sol.W - w_true)) / np.max(np.abs(w_true))
+            assert true_err <= sol.residuals["weight_error"]
+            est_true = a1 + w_true @ (a2 - a1)
+            assert np.max(np.abs(sol.estimate - est_true)) / 3.0 <= \
+                sol.residuals["estimate_error"]
+        else:
+            assert np.all(np.isnan(sol.estimate))
+            with pytest.raises(ProblemError, match="ill-conditioned"):
+                fu.weight_matrix(s1, s2)
+    # S1 = S2 nearly singular: W = I/2 exactly, computed W off by 1.8e-3 (before: OPTIMAL)
+    s = np.array([[1.0, 1.0], [1.0, 1.0 + 1e-13]])
+    assert fu.fuse([0.0, 0.0], s, [1.0, 1.0], s).status is fu.Status.ERROR
+    for c in (1e-6, 1e-13):
+        s1 = rot @ np.diag([1.0, c]) @ rot.T
+        s2 = rot.T @ np.diag([1.0, c]) @ rot
+        s1, s2 = 0.5 * (s1 + s1.T), 0.5 * (s2 + s2.T)
+        for method in ("closed_form", "cvxpy"):
+            sol = fu.fuse(a1, s1, a2, s2, method=method)  # type: ignore[arg-type]
+            assert sol.status is fu.Status.OPTIMAL
+            # exact W; 1e-8 covers Clarabel's relative tolerance on the O(1) problem
+            np.testing.assert_allclose(sol.estimate, a1 + _exact_weight(s1, s2) @ (a2 - a1),
+                                       rtol=1e-8)
+    with pytest.raises(ProblemError, match=r"S2.*positive definite"):
+        fu.fuse(a1, np.eye(2), a2, np.diag([1.0, -1e-3]))

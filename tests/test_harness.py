@@ -5,6 +5,11 @@ from __future__ import annotations
 
 import csv
 import json
+import os
+import signal
+import subprocess
+import sys
+import time
 from pathlib import Path
 
 import cvxpy as cp
@@ -17,8 +22,13 @@ from optmodels.backends.casadi_backend import nlp_plugins
 from optmodels.backends.casadi_qp import CasadiConic, casadi_qp_plugins
 from optmodels.backends.common import probe_in_child
 from optmodels.cli import main
+from optmodels.core import ProblemError
+from optmodels.montecarlo import LineLog
 from solvers_cmp import cases as cs
 from solvers_cmp import harness, report
+from tests.harness_adapters import children, wait_gone
+
+ROOT = Path(__file__).resolve().parents[1]
 
 
 @pytest.fixture()
@@ -178,3 +188,136 @@ def test_probe_survives_a_crashing_plugin() -> None:
     res = probe_in_child(script, ["a", "bad", "c"])
     assert res["a"] == "ok" and res["c"] == "ok"
     assert res["bad"].startswith("crashed")
+
+
+# ------------------------------------------------------------------------ faults
+def _traj_sweep(out: Path) -> list[dict[str, object]]:
+    return harness.run_sweep(["trajectories"], out, sizes=[10], solvers=["CLARABEL"],
+                             instances=["parallel"], isolate=False)
+
+
+def test_cut_short_and_garbage_rows_are_rerun(tmp_path: Path,
+                                              caplog: pytest.LogCaptureFixture) -> None:
+    first = _traj_sweep(tmp_path)
+    assert len(first) == 3
+    path = tmp_path / "results.csv"
+    text = path.read_text()
+    lines = text.splitlines()
+    # a kill in the middle of the last row, after a garbage line
+    path.write_text("\n".join(lines[:-1]) + "\nnot,a,row\n" + lines[-1][:25])
+    with caplog.at_level("WARNING", logger="optmodels"):
+        again = _traj_sweep(tmp_path)
+    assert "skipped 1 unreadable line and a last line cut short (25 bytes)" in caplog.text
+    assert (tmp_path / "results.csv.skipped").read_text().splitlines() == [
+        "not,a,row", lines[-1][:25]]
+    rows = _csv_rows(path)
+    assert len(rows) == 3 and list(rows[0]) == list(harness.COLUMNS)
+    # the lost row was run again: same solver on the same data, round-off apart
+    key = ("formulation", "solver")
+    old = {tuple(r[k] for k in key): r for r in first}
+    for r in again:
+        assert r["success"]
+        assert r["solution_error"] == pytest.approx(old[tuple(r[k] for k in key)]
+                                                    ["solution_error"], abs=1e-12)
+    assert harness.read_results(path) == [harness._parse_line(line.encode())
+                                          for line in path.read_text().splitlines()[1:]]
+
+
+def test_empty_results_file_and_foreign_csv(tmp_path: Path) -> None:
+    (tmp_path / "results.csv").write_text("")  # a crash right after creating it
+    assert len(_traj_sweep(tmp_path)) == 3 and len(_csv_rows(tmp_path / "results.csv")) == 3
+    other = tmp_path / "other"
+    other.mkdir()
+    (other / "results.csv").write_text("a,b\n1,2\n")
+    with pytest.raises(ProblemError, match="other columns"):
+        _traj_sweep(other)
+    assert (other / "results.csv").read_text() == "a,b\n1,2\n"
+
+
+def test_second_sweep_on_one_folder_is_refused(tmp_path: Path) -> None:
+    with LineLog(tmp_path / "results.csv", "holder"):
+        with pytest.raises(ProblemError, match="in use by another process"):
+            _traj_sweep(tmp_path)
+    assert len(_traj_sweep(tmp_path)) == 3  # released with its holder
+
+
+@pytest.mark.parametrize("kwargs, match", [
+    ({"solvers": ["NOSUCH"]}, "unknown solver.*NOSUCH"),
+    ({"instances": ["bogus"]}, "unknown instance.*bogus"),
+    ({"problems": ["nope"]}, "unknown problem"),
+    ({"problems": []}, "at least one"),
+    ({"time_limit": 0}, "time_limit"), ({"time_limit": -1.0}, "time_limit"),
+    ({"time_limit": float("nan")}, "time_limit"), ({"time_limit": float("inf")}, "time_limit"),
+    ({"sizes": [0]}, "sizes"), ({"sizes": [2.5]}, "sizes"), ({"seeds": [-1]}, "seeds"),
+    ({"profile": "extreme"}, "profile"), ({"out": "FILE"}, "is a file"),
+])
+def test_bad_sweep_arguments(tmp_path: Path, kwargs: dict[str, object], match: str) -> None:
+    args: dict[str, object] = {"problems": ["trajectories"], "out": tmp_path / "o",
+                               "sizes": [10], "isolate": False, **kwargs}
+    if args["out"] == "FILE":
+        args["out"] = tmp_path / "f"
+        (tmp_path / "f").write_text("x")
+    with pytest.raises(ProblemError, match=match):
+        harness.run_sweep(args.pop("problems"), args.pop("out"), **args)  # type: ignore[arg-type]
+    assert not (tmp_path / "o" / "results.csv").exists()  # refused before any work
+
+
+_TROUBLE = ("import sys\n"
+            "from solvers_cmp import cases as cs, harness\n"
+            "cs.register('trouble', 'tests.harness_adapters:Trouble')\n"
+            "try:\n"
+            "    harness.run_sweep(['trouble'], __import__('pathlib').Path({out!r}), "
+            "time_limit=30.0)\n"
+            "except KeyboardInterrupt as exc:  # what the CLI does: one line, exit 130\n"
+            "    print(f'optmodels: {{exc}}', file=sys.stderr)\n"
+            "    sys.exit(130)\n")
+
+
+def _start_trouble(out: Path) -> subprocess.Popen[str]:
+    """A sweep of 'trouble' in a child interpreter, stopped in the 60 s 'sleep' run (the
+    fourth): returns once numpy, crash and ok are in results.csv."""
+    proc = subprocess.Popen([sys.executable, "-c", _TROUBLE.format(out=str(out))],
+                            cwd=ROOT, env={**os.environ, "PYTHONPATH": str(ROOT)},
+                            start_new_session=True, stderr=subprocess.PIPE, text=True)
+    path, deadline = out / "results.csv", time.monotonic() + 120
+    while not (path.exists() and len(path.read_text().splitlines()) >= 4):
+        if proc.poll() is not None or time.monotonic() > deadline:
+            proc.kill()
+            pytest.fail(f"the sweep did not reach its 4th run: {proc.communicate()[1]}")
+        time.sleep(0.05)
+    return proc
+
+
+def test_harness_worker_dies_with_a_killed_parent(tmp_path: Path) -> None:
+    proc = _start_trouble(tmp_path)
+    kids = children(proc.pid)
+    assert kids  # the worker, asleep in the 'sleep' run
+    os.kill(proc.pid, signal.SIGKILL)
+    proc.wait(30)
+    assert wait_gone(kids, 10.0) == [], "the worker outlived its SIGKILLed parent"
+
+
+def test_harness_ctrl_c_keeps_rows_and_resumes(tmp_path: Path, trouble: None) -> None:
+    proc = _start_trouble(tmp_path / "a")
+    kids = children(proc.pid)
+    t0 = time.monotonic()
+    os.killpg(proc.pid, signal.SIGINT)
+    try:
+        err = proc.communicate(timeout=10)[1]
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+    took = time.monotonic() - t0
+    assert proc.returncode == 130 and took < 2.0, (proc.returncode, took, err)
+    assert len(err.splitlines()) == 1 and "compare: interrupted" in err, err
+    assert wait_gone(kids, 5.0) == []
+    kept = _csv_rows(tmp_path / "a" / "results.csv")
+    assert [r["solver"] for r in kept] == ["numpy", "crash", "ok"]
+    resumed = harness.run_sweep(["trouble"], tmp_path / "a", time_limit=1.0)
+    fresh = harness.run_sweep(["trouble"], tmp_path / "b", time_limit=1.0)
+    def outcome(r: dict[str, object]) -> tuple[object, ...]:
+        # errors: 0 or 5e-4 exactly (x = data [+ 1e-3]), or NaN; the CSV keeps 10 digits
+        return r["solver"], r["status"], r["success"], f"{r['solution_error']:.6g}"
+
+    assert [outcome(r) for r in resumed] == [outcome(r) for r in fresh]
+    assert len(_csv_rows(tmp_path / "a" / "results.csv")) == 6

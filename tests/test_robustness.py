@@ -19,8 +19,10 @@ from typing import Any
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, event, given, settings
+from hypothesis import HealthCheck, given, settings
+from hypothesis import event as _hypothesis_event
 from hypothesis import strategies as st
+from hypothesis.control import currently_in_test_context
 
 from optmodels import assignment as asg
 from optmodels import biasfield as bf
@@ -79,6 +81,13 @@ def covariances(draw: st.DrawFn, m: int, count: int | None = None) -> np.ndarray
         c[0, 0, 0] = draw(BAD)
     c = c * draw(SCALES)
     return c[0] if count is None else c
+
+
+def event(text: str) -> None:
+    """Hypothesis's ``event`` inside a property; nothing when ``accept`` serves a plain
+    (parametrized) test."""
+    if currently_in_test_context():
+        _hypothesis_event(text)
 
 
 def accept(fn: Callable[[], Any], tol: float = RES_TOL, scale: float = 1.0) -> None:

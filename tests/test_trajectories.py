@@ -429,3 +429,316 @@ def test_bad_family_and_unidentifiable_data() -> None:
         tr.solve(far, "diverging")
     with pytest.raises(ProblemError, match="formulation"):
         tr.solve(data, "diverging", formulation="dual")  # type: ignore[arg-type]
+
+
+# --------------------------------------------------------------------------- issue 14: any input
+#: POSIX-like clock offset (s). Times below lie on a 1/1024 s grid, so t + SHIFT is exact in
+#: float64 (41 significant bits): the shifted data are the same numbers, and any difference
+#: in the estimates is the package's own rounding.
+SHIFT = 1.7e9
+
+
+def grid_data(seed: int, *, q: int = 5, offset: float = 0.0, epoch: float = 0.0,
+              d: int | None = None) -> tr.TrajectoryData:
+    rng = np.random.default_rng(seed)
+    times = [np.round(rng.uniform(0, 100, rng.integers(3, 41)) * 1024) / 1024 for _ in range(q)]
+    shape = (q,) if d is None else (q, d)
+    y0, v = rng.normal(0, 10, shape), rng.normal(0, 2, shape)
+    vals = [y0[j] + np.multiply.outer(t, v[j]) + rng.normal(0, 1, (t.size, *shape[1:]))
+            for j, t in enumerate(times)]
+    return tr.TrajectoryData([t + offset for t in times], vals, 1.0, epoch=epoch)
+
+
+METHODS = [("closed_form", None)] + [(s, f) for s in SOLVERS if s != "SCS"
+                                      for f in ("constrained", "reduced")]
+
+
+def _fit(data: tr.TrajectoryData, fam: tr.Family | str, method: str, form: str | None
+         ) -> tr.TrajectorySolution:
+    if method == "closed_form":
+        return tr.closed_form(data, fam)
+    return tr.solve(data, fam, solver=method, formulation=form)  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize(("method", "form"), METHODS)
+@pytest.mark.parametrize("family", [*FAMILIES, "custom2"])
+def test_shifted_clock_gives_the_same_estimates(family: str, method: str,
+                                                form: str | None) -> None:
+    """Issue 14: the same data on a clock shifted by 1.7e9 s (times and epoch) give the same
+    θ and Ψ to 1e-9 relative. Before: closed_form(parallel) returned velocity 3.18 against
+    2.50 (optimal), solve refused the data as singular."""
+    fam: tr.Family | str = (tr.Family.custom(5, shared_start=[[0, 1], [3, 4]],
+                                             shared_velocity=[[0, 1, 2]])
+                            if family == "custom2" else _family(family, 5))
+    a = grid_data(7, epoch=12.5)
+    b = grid_data(7, offset=SHIFT, epoch=12.5 + SHIFT)
+    sa, sb = _fit(a, fam, method, form).require_ok(), _fit(b, fam, method, form).require_ok()
+    assert sa.status is sb.status is Status.OPTIMAL
+    assert rel_err(sb.velocity, sa.velocity) < 1e-9
+    assert rel_err(sb.start, sa.start) < 1e-9
+    np.testing.assert_allclose(sb.covariance, sa.covariance, rtol=1e-9, atol=0)
+    assert sb.objective == pytest.approx(sa.objective, rel=1e-9)
+    if family != "independent" and method == "closed_form":
+        ta, tb = tr.family_test(a, fam), tr.family_test(b, fam)
+        assert tb.statistic == pytest.approx(ta.statistic, rel=1e-9, abs=1e-12)
+
+
+@pytest.mark.parametrize(("method", "form"), METHODS)
+@pytest.mark.parametrize("family", ["parallel", "independent", "shared_velocity"])
+def test_velocities_do_not_depend_on_the_epoch(family: str, method: str,
+                                               form: str | None) -> None:
+    """Without a shared start the velocities are origin-free: data at t ≈ 1.7e9 s with
+    epoch 0 (POSIX time, the CLI default) give the velocities of the same data at t ≈ 0, and
+    the starts move by −V·1.7e9 with Ψ transformed accordingly (Var(y0) ≈ T²Var(V))."""
+    fam = (tr.Family.custom(5, shared_velocity=[[0, 1, 2], [3, 4]])
+           if family == "shared_velocity" else family)
+    a, b = grid_data(3), grid_data(3, offset=SHIFT)
+    sa, sb = _fit(a, fam, method, form), _fit(b, fam, method, form)
+    assert sa.status is sb.status is Status.OPTIMAL
+    assert rel_err(sb.velocity, sa.velocity) < 1e-9
+    assert rel_err(sb.start, sa.start - sa.velocity * SHIFT) < 1e-9
+    # Ψ of (y0_j, V_j) moves with the Jacobian [[1, -T], [0, 1]]
+    f = tr.resolve_family(fam, 5)
+    jac = np.eye(f.n_params)
+    for g in f.start_groups:
+        jac[f.start_index[g[0]], f.velocity_index[g[0]]] = -SHIFT
+    np.testing.assert_allclose(sb.covariance, jac @ sa.covariance @ jac.T, rtol=1e-8, atol=0)
+    assert np.all(np.isfinite(sb.std)) and np.all(sb.std > 0)
+
+
+def _exact_normal_equations(data: tr.TrajectoryData, fam: tr.Family | str) -> np.ndarray:
+    """θ from the normal equations (3) in exact rational arithmetic (the float inputs are
+    exact rationals; the columns t − epoch are formed exactly)."""
+    from fractions import Fraction as Fr
+
+    f = tr.resolve_family(fam, data.n_objects)
+    r = f.n_params
+    rows = []
+    for i in range(data.n_measurements):
+        row = [Fr(0)] * r
+        j = data.obj[i]
+        row[f.start_index[j]] += 1
+        row[f.velocity_index[j]] += Fr(float(data.raw_t[i])) - Fr(data.epoch)
+        rows.append(row)
+    y = [Fr(float(v)) for v in data.y[:, 0]]
+    m = [[sum(x[a] * x[b] for x in rows) for b in range(r)] for a in range(r)]
+    rhs = [sum(x[a] * yi for x, yi in zip(rows, y, strict=True)) for a in range(r)]
+    for c in range(r):  # Gauss-Jordan, exact
+        piv = next(k for k in range(c, r) if m[k][c] != 0)
+        m[c], m[piv], rhs[c], rhs[piv] = m[piv], m[c], rhs[piv], rhs[c]
+        for k in range(r):
+            if k != c and m[k][c] != 0:
+                fac = m[k][c] / m[c][c]
+                m[k] = [m[k][i] - fac * m[c][i] for i in range(r)]
+                rhs[k] -= fac * rhs[c]
+    return np.array([float(rhs[c] / m[c][c]) for c in range(r)])
+
+
+@pytest.mark.parametrize("epoch", [0.0, SHIFT - 3600.0, -1e12])
+@pytest.mark.parametrize("family", ["diverging", "custom"])
+def test_shared_start_far_from_the_data_against_exact_arithmetic(family: str,
+                                                                 epoch: float) -> None:
+    """A shared start at an epoch far from the data (the lines meet there: a different,
+    rigid hypothesis) is computed to ~1e-16 (measured ≤ 8e-16) against exact rationals;
+    1e-10 leaves room for other BLAS. Before: 2-5 sigma off with status optimal."""
+    data = grid_data(5, q=5, offset=SHIFT, epoch=epoch)
+    fam = _family(family, 5)
+    exact = _exact_normal_equations(data, fam)
+    cf = tr.closed_form(data, fam)
+    assert cf.ok
+    assert np.max(np.abs(cf.theta - exact) / np.abs(exact)) < 1e-10
+    for solver in SOLVERS[:2]:
+        g = tr.solve(data, fam, solver=solver)
+        if g.ok:
+            # the re-check is the exact distance to the optimum, relative to max(|θ|, σ):
+            # an OK status must mean what it says
+            ns = len(g.family.start_groups)
+            size = np.r_[np.full(ns, np.max(np.abs(exact[:ns]))),
+                         np.full(exact.size - ns, np.max(np.abs(exact[ns:])))]
+            err = float(np.max(np.abs(g.theta - exact) / np.maximum(size, cf.std)))
+            limit = 1e-6 if g.status is Status.OPTIMAL else 1e-3
+            assert err < limit, (solver, g.status, err)
+            # above its rounding floor (~cond·eps, measured ≤ 1e-11 here) the stationarity
+            # is that distance
+            if err > 1e-9:
+                assert g.residuals["stationarity"] == pytest.approx(err, rel=0.05)
+            else:
+                assert g.residuals["stationarity"] < 1e-9
+
+
+@pytest.mark.parametrize("offset", [1e10, 1e12])
+def test_nan_std_never_with_an_ok_status(offset: float) -> None:
+    """Before: at t ≈ 1e10 s the closed form's std was NaN with status optimal. Now the
+    velocities equal those of the unshifted data (1e-9; the integer times shift exactly)
+    and the standard deviations are finite, positive and transformed correctly."""
+    rng = np.random.default_rng(0)
+    t = np.arange(100.0)
+    vals = [10 + 2.0 * t + rng.normal(0, 1, 100), 10 + 3.0 * t + rng.normal(0, 1, 100)]
+    ref = tr.closed_form(tr.TrajectoryData([t, t], vals), "independent")
+    for family in ("diverging", "parallel", "independent"):
+        for method in ("closed_form", SOLVERS[0]):
+            data = tr.TrajectoryData([t + offset, t + offset], vals)
+            sol = _fit(data, family, method, "constrained")
+            if sol.ok:
+                assert np.all(np.isfinite(sol.std)) and np.all(sol.std > 0)
+            if family == "independent":
+                # at 1e12 s float64 resolves a 29 s spread to eps·1e12/29 = 7.7e-6 only
+                assert sol.status is (Status.OPTIMAL if offset < 1e11
+                                      else Status.OPTIMAL_INACCURATE)
+                assert rel_err(sol.velocity, ref.velocity) < 1e-9
+                # the velocities' σ are origin-free; the starts' are the extrapolation's
+                np.testing.assert_allclose(sol.std[2:], ref.std[2:], rtol=1e-9)
+                np.testing.assert_allclose(sol.std[:2], ref.std[2:] * offset, rtol=1e-6)
+
+
+@pytest.mark.parametrize("method", ["closed_form", "CLARABEL"])
+def test_epoch_too_far_is_downgraded_then_refused(method: str) -> None:
+    """The start at an epoch 1e14 s from the data is an extrapolation whose float64 rounding
+    moves the line at the data by eps·|V|·1e14·√N ≈ 0.4 σ: OPTIMAL_INACCURATE, velocities
+    still right; at 1e16 s (≈ 40 σ) the epoch is refused."""
+    base = grid_data(2, q=3)
+    ref = tr.closed_form(base, "parallel")
+    far = tr.TrajectoryData(base.times, base.values, epoch=-1e14)
+    sol = _fit(far, "parallel", method, "constrained")
+    assert sol.status is Status.OPTIMAL_INACCURATE
+    assert "far from the data" in sol.message
+    assert 1e-2 < sol.info["extrapolation"] < 1.0
+    assert rel_err(sol.velocity, ref.velocity) < 1e-9
+    with pytest.raises(ProblemError, match="epoch"):
+        _fit(tr.TrajectoryData(base.times, base.values, epoch=-1e16), "parallel", method,
+             "constrained")
+
+
+def test_times_unresolved_by_float64_are_downgraded_or_refused() -> None:
+    """eps·|t|/std(t): 10 times 0.01 s apart at 1.7e9 s are resolved to 1.3e-5 only
+    (OPTIMAL_INACCURATE, velocity within that of the exact answer), 1e-6 s apart not at
+    all (ProblemError)."""
+    t = np.arange(10.0)
+    vals = [1.0 + 2.0 * t * 0.01, 3.0 - t * 0.01]
+    coarse = tr.TrajectoryData([SHIFT + 0.01 * t] * 2, vals, epoch=SHIFT)
+    sol = tr.closed_form(coarse, "independent")
+    assert sol.status is Status.OPTIMAL_INACCURATE
+    assert 1e-6 < sol.info["time_resolution"] < 1e-3
+    # noise-free lines: the exact velocities are 2 and -1 (up to the times' rounding)
+    assert rel_err(sol.velocity, np.array([2.0, -1.0])) < 10 * sol.info["time_resolution"]
+    with pytest.raises(ProblemError, match="singular"):
+        tr.closed_form(tr.TrajectoryData([SHIFT + 1e-6 * t] * 2, vals), "independent")
+
+
+def test_closed_form_recheck_measures_the_distance_to_the_optimum() -> None:
+    """The closed form ends in a re-check: the misprinted (13) gives status ERROR (numbers
+    kept, on request), and its stationarity is exactly the relative distance to the true
+    optimum, max |θ_printed − θ| / max(|θ| of its kind, σ) (the quadratic's Newton step is
+    exact; 1e-6 relative covers rounding)."""
+    data = random_data(32, q=4)
+    good = tr.closed_form(data, "parallel")
+    bad = tr.closed_form(data, "parallel", printed=True)
+    assert good.status is Status.OPTIMAL and good.residuals["stationarity"] < 1e-12
+    assert bad.status is Status.ERROR and not bad.ok
+    size = np.r_[np.full(4, np.max(np.abs(bad.theta[:4]))), abs(bad.theta[4])]
+    expect = float(np.max(np.abs(bad.theta - good.theta) / np.maximum(size, good.std)))
+    assert bad.residuals["stationarity"] == pytest.approx(expect, rel=1e-6)
+    with pytest.raises(SolveError):
+        bad.require_ok()
+
+
+def test_family_test_on_noise_free_data() -> None:
+    """Before: ZeroDivisionError. With σ² estimated and lines that fit exactly the F test
+    is undefined (0/0): ProblemError saying so. With σ² known, Λ = 0 to rounding."""
+    t = [np.arange(6.0), np.arange(1.0, 9.0)]
+    data = tr.TrajectoryData(t, [2.0 * t[0], -1.0 * t[1]])
+    with pytest.raises(ProblemError, match="F test is undefined"):
+        tr.family_test(data, "diverging", sigma2="estimated")
+    known = tr.family_test(data, "diverging")
+    assert known.statistic < 1e-20 and not known.reject
+    assert known.p_value == pytest.approx(1.0, abs=1e-9)
+
+
+def _scalar_calls() -> list[tuple[str, object]]:
+    data = random_data(0, q=3)
+    t, v = data.times, data.values
+    return [
+        ("epoch", lambda: tr.TrajectoryData(t, v, epoch="abc")),
+        ("epoch", lambda: tr.TrajectoryData(t, v, epoch=None)),
+        ("epoch", lambda: tr.TrajectoryData(t, v, epoch=np.nan)),
+        ("epoch", lambda: tr.TrajectoryData(t, v, epoch=True)),
+        ("epoch", lambda: tr.TrajectoryData(t, v, epoch=1 + 1j)),
+        ("sigma2", lambda: tr.TrajectoryData(t, v, sigma2="abc")),
+        ("sigma2", lambda: tr.TrajectoryData(t, v, sigma2=True)),
+        ("sigma2", lambda: tr.TrajectoryData(t, v, sigma2=np.inf)),
+        ("times", lambda: tr.TrajectoryData(5.0, v)),  # type: ignore[arg-type]
+        ("level", lambda: tr.family_test(data, level="0.9")),
+        ("level", lambda: tr.family_test(data, level=1.0)),
+        ("level", lambda: tr.family_test(data, level=np.nan)),
+        ("sigma2", lambda: tr.family_test(data, sigma2="unknown")),
+        ("sigma2", lambda: tr.family_test(data, sigma2=1.0)),
+        ("solver", lambda: tr.solve(data, solver=3)),
+        ("formulation", lambda: tr.solve(data, formulation=None)),
+        ("printed", lambda: tr.closed_form(data, "parallel", printed="yes")),
+        ("q", lambda: tr.Family.custom(2.5)),
+        ("q", lambda: tr.Family.diverging("3")),
+        ("shared_start", lambda: tr.Family.custom(3, shared_start=[[0, 1.5]])),
+        ("shared_start", lambda: tr.Family.custom(3, shared_start=[0, 1])),
+        ("family", lambda: tr.closed_form(data, tr.Family("x", 3, ((0, 1),), ((0,), (1,),
+                                                                              (2,))))),
+        ("n", lambda: tr.eta(2.5)),
+        ("q", lambda: tr.eta(5, q="2")),
+        ("q", lambda: tr.eta0(0)),
+        ("dt", lambda: tr.independent_variances(5, dt="x")),
+        ("sigma2", lambda: tr.independent_variances(5, sigma2=-1.0)),
+        ("dt", lambda: tr.paper_covariance("diverging", 3, np.nan)),
+        ("family", lambda: tr.paper_covariance("converging", 3)),
+        ("printed", lambda: tr.paper_covariance("parallel", 3, printed=1)),
+        ("q", lambda: scenarios.launcher_release(0, q=2.5)),
+        ("sigma", lambda: scenarios.launcher_release(0, sigma=-1.0)),
+        ("family", lambda: scenarios.launcher_release(0, family="custom")),
+        ("seed", lambda: scenarios.launcher_release("abc")),
+        ("n", lambda: scenarios.equally_spaced(0, n=3.5)),
+        ("dt", lambda: scenarios.equally_spaced(0, dt=0.0)),
+        ("sigma2", lambda: scenarios.equally_spaced(0, sigma2="1")),
+    ]
+
+
+@pytest.mark.parametrize("case", range(len(_scalar_calls())))
+def test_scalar_arguments_give_problem_error(case: int) -> None:
+    name, call = _scalar_calls()[case]
+    with pytest.raises(ProblemError, match=name):
+        call()  # type: ignore[operator]
+
+
+@pytest.mark.parametrize(("times", "values", "sigma2", "match"), [
+    ([[0.0, 1.0, 2.0]], [[0.0, 1.0 + 1j, 1.0]], 1.0, "complex"),
+    ([[0.0, 1.0 + 0j, 2.0]], [[0.0, 1.0, 1.0]], 1.0, "complex"),
+    ([[0.0, 1.0, 2.0]], [[0.0, 1.0, 1.0]], [[1.0, 1.0 + 2j, 1.0]], "complex"),
+    ([[0.0, 1.0, 2.0]], [[0.0, 1.0, 1.0]], 1.0 + 2j, "complex"),
+    ([[0.0, np.inf, 2.0]], [[0.0, 1.0, 1.0]], 1.0, "infinite"),
+    ([[0.0, 1.0, 2.0]], [[0.0, -np.inf, 1.0]], 1.0, "infinite"),
+    ([[0.0, 1.0, 2.0]], [[0.0, 1.0, 1.0]], [[1.0, np.nan, 1.0]], "NaN"),
+    ([[0.0, 1.0, 2e100]], [[0.0, 1.0, 1.0]], 1.0, "above 1e"),
+    ([[0.0, 1.0, 2.0]], [[0.0, 1.0, -2e100]], 1.0, "above 1e"),
+    ([[0.0, 1.0, 2.0]], [[0.0, 1.0, 1.0]], 1e101, "positive"),
+    ([[0.0, 1.0, 2.0]], [[0.0, 1.0, 1.0]], [["a", "b", "c"]], "numeric"),
+])
+def test_bad_numbers_give_problem_error(times: list, values: list, sigma2: object,
+                                        match: str) -> None:
+    with pytest.raises(ProblemError, match=match):
+        tr.TrajectoryData(times, values, sigma2)  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize("scale", [1e-45, 1e-15, 1e15, 1e45])
+def test_large_and_small_magnitudes(scale: float) -> None:
+    """Times and values multiplied by c (σ² by c²): velocities unchanged, starts and σ
+    scaled by c, status optimal, to 1e-12 relative (power-of-ten scalings round once)."""
+    base = random_data(4, q=3)
+    data = tr.TrajectoryData([scale * np.asarray(t) for t in base.times],
+                             [scale * np.asarray(v) for v in base.values], scale**2)
+    for family in ("diverging", "parallel"):
+        a, b = tr.closed_form(base, family), tr.closed_form(data, family)
+        assert b.status is Status.OPTIMAL
+        assert rel_err(b.velocity, a.velocity) < 1e-12
+        assert rel_err(b.start, scale * a.start) < 1e-12
+        assert rel_err(b.std, a.std * np.r_[np.full(len(b.family.start_groups), scale),
+                                            np.ones(b.theta.size - len(b.family.start_groups))]
+                       ) < 1e-12
+        g = tr.solve(data, family)
+        assert g.status is Status.OPTIMAL and rel_err(g.theta, b.theta) < 1e-9

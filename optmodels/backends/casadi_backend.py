@@ -3,14 +3,27 @@
 Problem modules build their NLP once per structure (data enter as parameters ``p``) and
 cache it, so that Monte Carlo and sequential runs pay the symbolic construction only once;
 :func:`build_nlpsol` times that construction and :func:`run_nlpsol` one solve.
-The status table :data:`IPOPT_STATUS` covers every IPOPT ``ApplicationReturnStatus``;
-an unknown string maps to ``Status.ERROR``.
+Status tables: :data:`IPOPT_STATUS` covers every IPOPT ``ApplicationReturnStatus``,
+:data:`SQP_STATUS` every ``return_status`` of CasADi's sqpmethod and feasiblesqpmethod, and
+:data:`UNIFIED_STATUS` CasADi's plugin-independent ``unified_return_status`` (used for
+every other plugin: fatrop, blocksqp, ...). An unknown string maps to ``Status.ERROR``, and
+no plugin's result is OPTIMAL unless CasADi's own ``success`` flag is set.
+
+Options are checked when the solver is built: an unknown option, a value of the wrong type
+or a value the plugin rejects (IPOPT checks values at its first call: a probe solve of a
+one-variable NLP finds those) raises :class:`~optmodels.core.ProblemError` naming the
+option, never a raw CasADi ``RuntimeError``. An unknown plugin name raises
+:class:`~optmodels.core.SolverNotAvailable`.
 """
 
 from __future__ import annotations
 
 import functools
+import os
+import sys
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import Any
 
@@ -18,10 +31,11 @@ import casadi as ca
 import numpy as np
 
 from optmodels.backends.common import BackendResult, probe_in_child
-from optmodels.core import Status
+from optmodels.core import ProblemError, SolverNotAvailable, Status
 
-__all__ = ["IPOPT_STATUS", "NLP_PLUGINS", "NLP_PLUGIN_DEFAULTS", "BuiltNlp", "build_nlpsol",
-           "nlp_plugins", "probe_nlp_plugins", "run_nlpsol"]
+__all__ = ["IPOPT_STATUS", "NLP_PLUGINS", "NLP_PLUGIN_DEFAULTS", "SQP_STATUS", "UNIFIED_STATUS",
+           "BuiltNlp", "build_nlpsol", "check_options", "nlp_plugins", "nlp_status",
+           "probe_nlp_plugins", "run_nlpsol"]
 
 #: CasADi NLP plugins the comparison tries, in report order (commercial ones left out).
 NLP_PLUGINS = ("ipopt", "sqpmethod", "feasiblesqpmethod", "blocksqp", "fatrop")
@@ -100,6 +114,52 @@ IPOPT_STATUS: dict[str, Status] = {
     "Internal_Error": Status.ERROR,
 }
 
+#: ``return_status`` of CasADi's sqpmethod and feasiblesqpmethod (every string in their
+#: 3.8 sources). Their precision limit, Search_Direction_Becomes_Too_Small, is an ERROR
+#: here as for IPOPT; a problem module may accept the point after its own NumPy check.
+SQP_STATUS: dict[str, Status] = {
+    "Solve_Succeeded": Status.OPTIMAL,
+    "Maximum_Iterations_Exceeded": Status.ITERATION_LIMIT,
+    "Search_Direction_Becomes_Too_Small": Status.ERROR,
+    "Trust_Region_Radius_Becomes_Too_Small": Status.ERROR,
+    "Non_Regular_Sensitivities": Status.ERROR,
+    "No_Feasible_Initialization": Status.ERROR,
+    "User_Requested_Stop": Status.ERROR,
+}
+
+#: CasADi's plugin-independent ``unified_return_status`` (``casadi_types.hpp``).
+UNIFIED_STATUS: dict[str, Status] = {
+    "SOLVER_RET_SUCCESS": Status.OPTIMAL,
+    "SOLVER_RET_LIMITED": Status.ITERATION_LIMIT,
+    "SOLVER_RET_INFEASIBLE": Status.INFEASIBLE,
+    "SOLVER_RET_NAN": Status.ERROR,
+    "SOLVER_RET_EXCEPTION": Status.ERROR,
+    "SOLVER_RET_UNKNOWN": Status.ERROR,
+}
+
+_PLUGIN_STATUS: dict[str, dict[str, Status]] = {
+    "ipopt": IPOPT_STATUS, "sqpmethod": SQP_STATUS, "feasiblesqpmethod": SQP_STATUS,
+}
+
+
+def nlp_status(plugin: str, stats: dict[str, Any]) -> Status:
+    """:class:`Status` of a finished ``nlpsol`` call from its ``stats()``.
+
+    The plugin's own table (:data:`IPOPT_STATUS`, :data:`SQP_STATUS`) decides for the
+    strings it lists; any other plugin, or a string its table lacks, goes through
+    :data:`UNIFIED_STATUS`; anything still unknown is ERROR. OPTIMAL additionally needs
+    CasADi's ``success`` flag (a table entry never overrides a reported failure).
+    """
+    code = str(stats.get("return_status", "unknown"))
+    table = _PLUGIN_STATUS.get(plugin, {})
+    if code in table:
+        status = table[code]
+    else:
+        status = UNIFIED_STATUS.get(str(stats.get("unified_return_status", "")), Status.ERROR)
+    if status == Status.OPTIMAL and not stats.get("success", False):
+        return Status.ERROR
+    return status
+
 #: IPOPT defaults used by optmodels: quiet, and tight enough that the original-form
 #: residuals come out at round-off level on problems scaled to O(1). (1e-12 was tried:
 #: IPOPT then often ends at its precision limit, Search_Direction_Becomes_Too_Small.)
@@ -124,16 +184,129 @@ class BuiltNlp:
 def build_nlpsol(
     nlp: dict[str, Any], *, plugin: str = "ipopt", options: dict[str, Any] | None = None
 ) -> BuiltNlp:
-    """Build ``ca.nlpsol`` for ``nlp`` (keys x, f, g, p) with quiet IPOPT defaults."""
+    """Build ``ca.nlpsol`` for ``nlp`` (keys x, f, g, p) with quiet defaults.
+
+    ``options`` go to IPOPT itself for ``plugin="ipopt"`` (merged over
+    :data:`IPOPT_DEFAULTS`), to CasADi's plugin options otherwise (over
+    :data:`NLP_PLUGIN_DEFAULTS`).
+
+    Raises
+    ------
+    SolverNotAvailable
+        ``plugin`` is not a CasADi NLP plugin that loads here.
+    ProblemError
+        ``options`` is not a dictionary with string keys, or an option is unknown to the
+        plugin, has the wrong type or a value the plugin rejects; the message names the
+        option and quotes CasADi/IPOPT.
+    """
+    plugin = _check_plugin(plugin)
+    user = check_options(options)
+    opts = _plugin_options(plugin, user)
+    t0 = time.perf_counter()
+    try:
+        with _quiet_fds():  # a refused option is in the exception; IPOPT also prints it
+            solver = ca.nlpsol("optmodels_nlp", plugin, nlp, opts)
+    except RuntimeError as exc:
+        raise _option_error(plugin, user, exc) from None
+    build_time = time.perf_counter() - t0
+    if plugin == "ipopt" and user:
+        # IPOPT checks option values only when it is first called: a probe solve
+        # (one-variable NLP, about a millisecond) finds a rejected value now.
+        bad = _probe_options(plugin, user)
+        if bad is not None:
+            raise _option_error(plugin, user, RuntimeError(bad))
+    return BuiltNlp(solver=solver, build_time=build_time, plugin=plugin)
+
+
+def _check_plugin(plugin: Any) -> str:
+    if not isinstance(plugin, str):
+        raise ProblemError(f"plugin: expected a CasADi NLP plugin name (str), got {plugin!r}")
+    if not ca.has_nlpsol(plugin):
+        raise SolverNotAvailable(f"plugin: CasADi NLP plugin {plugin!r} does not load here "
+                                 f"(plugins tried by optmodels: {', '.join(NLP_PLUGINS)})")
+    return plugin
+
+
+def check_options(options: Any) -> dict[str, Any]:
+    """``options`` as a dict with string keys (None → {}); ProblemError otherwise."""
+    if options is None:
+        return {}
+    if not isinstance(options, dict):
+        raise ProblemError(f"options: expected a dict of solver options, got "
+                           f"{type(options).__name__}")
+    bad = [k for k in options if not isinstance(k, str)]
+    if bad:
+        raise ProblemError(f"options: option names must be strings, got {bad[0]!r}")
+    return dict(options)
+
+
+def _plugin_options(plugin: str, user: dict[str, Any]) -> dict[str, Any]:
     opts: dict[str, Any] = {"print_time": False}
     if plugin == "ipopt":
-        opts["ipopt"] = {**IPOPT_DEFAULTS, **(options or {})}
+        opts["ipopt"] = {**IPOPT_DEFAULTS, **user}
     else:
         opts.update(NLP_PLUGIN_DEFAULTS.get(plugin, {}))
-        opts.update(options or {})
-    t0 = time.perf_counter()
-    solver = ca.nlpsol("optmodels_nlp", plugin, nlp, opts)
-    return BuiltNlp(solver=solver, build_time=time.perf_counter() - t0, plugin=plugin)
+        opts.update(user)
+    return opts
+
+
+@contextmanager
+def _quiet_fds() -> Iterator[None]:
+    """Silence the C-level stdout/stderr (IPOPT prints its option errors there)."""
+    try:
+        sys.stdout.flush()
+        sys.stderr.flush()
+        saved = [os.dup(1), os.dup(2)]
+    except (OSError, ValueError, AttributeError):  # no real file descriptors
+        yield
+        return
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    try:
+        os.dup2(devnull, 1)
+        os.dup2(devnull, 2)
+        yield
+    finally:
+        os.dup2(saved[0], 1)
+        os.dup2(saved[1], 2)
+        for fd in (*saved, devnull):
+            os.close(fd)
+
+
+def _probe_options(plugin: str, user: dict[str, Any]) -> str | None:
+    """Build and (for IPOPT) run min x² with ``user`` options; the CasADi/IPOPT complaint,
+    or None if the options are accepted."""
+    x = ca.SX.sym("x")
+    probe = {"x": x, "f": x * x, "g": x}
+    code = None
+    try:
+        with _quiet_fds():
+            solver = ca.nlpsol("optmodels_probe", plugin, probe, _plugin_options(plugin, user))
+            if plugin == "ipopt":
+                solver(x0=1.0, lbg=-10.0, ubg=10.0)
+                code = solver.stats().get("return_status")
+            del solver  # IPOPT may print while the solver is destroyed: still silenced
+            if plugin == "ipopt" and code == "Invalid_Option":
+                return "IPOPT returned Invalid_Option"
+    except RuntimeError as exc:
+        return str(exc)
+    return None
+
+
+def _casadi_reason(text: str) -> str:
+    lines = [ln.strip() for ln in str(text).splitlines() if ln.strip()]
+    return (lines[-1] if lines else str(text))[:200]
+
+
+def _option_error(plugin: str, user: dict[str, Any], exc: RuntimeError) -> ProblemError:
+    """Find the option CasADi refused (each alone in a probe build) and name it."""
+    for key, value in user.items():
+        why = _probe_options(plugin, {key: value})
+        if why is not None:
+            return ProblemError(f"options[{key!r}] = {value!r}: rejected by the CasADi "
+                                f"{plugin} plugin ({_casadi_reason(why)})")
+    what = f"options {user!r}" if user else "its defaults"
+    return ProblemError(f"CasADi {plugin} plugin could not be built with {what} "
+                        f"({_casadi_reason(str(exc))})")
 
 
 def run_nlpsol(
@@ -165,9 +338,7 @@ def run_nlpsol(
     wall = time.perf_counter() - t0
     stats = built.solver.stats()
     code = str(stats.get("return_status", "unknown"))
-    status = IPOPT_STATUS.get(code, Status.ERROR) if built.plugin == "ipopt" else (
-        Status.OPTIMAL if stats.get("success", False) else Status.ERROR
-    )
+    status = nlp_status(built.plugin, stats)
     iters = stats.get("iter_count")
     x = np.asarray(out["x"], dtype=float).ravel()
     return (

@@ -22,11 +22,13 @@ import casadi as ca
 import cvxpy.settings as s
 import numpy as np
 import scipy.sparse as sp
+from cvxpy.error import SolverError
 from cvxpy.reductions.solution import Solution, failure_solution
 from cvxpy.reductions.solvers import utilities
 from cvxpy.reductions.solvers.qp_solvers.qp_solver import QpSolver
 
 from optmodels.backends.common import probe_in_child
+from optmodels.core import ProblemError
 
 __all__ = [
     "CANDIDATE_PLUGINS",
@@ -77,11 +79,37 @@ def _solve_qp(plugin: str, p: Any, q: np.ndarray, a: Any, lba: np.ndarray, uba: 
     # CasADi wants the full symmetric Hessian; CVXPY's P is symmetric already.
     am = _csc_to_dm(a)
     opts = {**_QUIET.get(plugin, {}), "error_on_fail": False, **options}
-    solver = ca.conic("optmodels_qp", plugin, {"h": h.sparsity(), "a": am.sparsity()}, opts)
+    sparsity = {"h": h.sparsity(), "a": am.sparsity()}
+    try:
+        solver = ca.conic("optmodels_qp", plugin, sparsity, opts)
+    except RuntimeError as exc:
+        raise _option_error(plugin, options, sparsity, exc) from None
     t0 = time.perf_counter()
-    out = solver(h=h, g=q, a=am, lba=lba, uba=uba)
+    try:
+        out = solver(h=h, g=q, a=am, lba=lba, uba=uba)
+    except RuntimeError as exc:  # evaluation failure inside the plugin: a solver failure
+        raise SolverError(f"CasADi conic plugin {plugin}: {_reason(str(exc))}") from None
     wall = time.perf_counter() - t0
     return out, solver.stats(), wall
+
+
+def _reason(text: str) -> str:
+    lines = [ln.strip() for ln in text.splitlines() if ln.strip()]
+    return (lines[-1] if lines else text)[:200]
+
+
+def _option_error(plugin: str, options: dict[str, Any], sparsity: dict[str, Any],
+                  exc: RuntimeError) -> ProblemError:
+    """Name the option ``ca.conic`` refused (each user option alone in a probe build)."""
+    for key, value in options.items():
+        try:
+            ca.conic("optmodels_probe", plugin, sparsity,
+                     {**_QUIET.get(plugin, {}), "error_on_fail": False, key: value})
+        except RuntimeError as one:
+            return ProblemError(f"solver option {key!r} = {value!r}: rejected by the CasADi "
+                                f"conic plugin {plugin} ({_reason(str(one))})")
+    return ProblemError(f"CasADi conic plugin {plugin} could not be built with options "
+                        f"{options!r} ({_reason(str(exc))})")
 
 
 class CasadiConic(QpSolver):
@@ -95,9 +123,11 @@ class CasadiConic(QpSolver):
     Notes
     -----
     Solver options passed to ``problem.solve(solver=CasadiConic(...), **opts)`` go to the
-    plugin unchanged (CasADi's own option dictionary). The status is CasADi's ``success``
-    flag: OPTIMAL when set, SOLVER_ERROR otherwise; callers re-check the solution against
-    the original problem in NumPy anyway.
+    plugin unchanged (CasADi's own option dictionary); one the plugin refuses raises
+    :class:`~optmodels.core.ProblemError` naming it. The status is CasADi's ``success``
+    flag: OPTIMAL when set; otherwise :data:`FAILURE_STATUS` of the unified return status
+    (infeasible), SOLVER_ERROR for anything else. Callers re-check the
+    solution against the original problem in NumPy anyway.
     """
 
     MIP_CAPABLE = False
@@ -135,7 +165,8 @@ class CasadiConic(QpSolver):
             attr[s.NUM_ITERS] = int(iters)
         x = np.asarray(out["x"], dtype=float).ravel()
         if not stats.get("success", False) or not np.all(np.isfinite(x)):
-            return failure_solution(s.SOLVER_ERROR, attr)
+            unified = str(stats.get("unified_return_status", ""))
+            return failure_solution(FAILURE_STATUS.get(unified, s.SOLVER_ERROR), attr)
         opt_val = float(out["cost"]) + inverse_data[s.OFFSET]
         primal = {inverse_data[self.VAR_ID]: x}
         # CasADi's λ_a (∇f + Aᵀλ = 0) has CVXPY's sign convention for these rows as is.
@@ -147,6 +178,13 @@ class CasadiConic(QpSolver):
                                            inverse_data[self.NEQ_CONSTR])
         return Solution(s.OPTIMAL, opt_val, primal, duals, attr)
 
+
+#: CasADi's ``unified_return_status`` of a failed conic call → CVXPY status. Every other
+#: failure, an unknown code included, is SOLVER_ERROR (an iteration limit too: CVXPY's
+#: USER_LIMIT expects a primal point to unpack); success needs CasADi's ``success`` flag.
+FAILURE_STATUS: dict[str, str] = {
+    "SOLVER_RET_INFEASIBLE": s.INFEASIBLE,
+}
 
 #: Plugins left out on purpose, with the reason (shown in the comparison report).
 EXCLUDED: dict[str, str] = {

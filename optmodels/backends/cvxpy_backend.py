@@ -2,10 +2,17 @@
 
 The status table :data:`CVXPY_STATUS` maps every status string CVXPY defines; anything
 else (a solver exception included) becomes ``Status.ERROR`` with the message kept.
+
+INFEASIBLE and UNBOUNDED are reported only with the solver's certificate: CVXPY's
+``infeasible_inaccurate`` / ``unbounded_inaccurate`` (the solver stopped, e.g. at its
+iteration limit, with an unconverged certificate; SCS at 2 iterations says so of feasible,
+bounded problems) map to ``Status.ERROR``. A solver option the solver rejects (unknown
+name or bad value) is bad input: :class:`~optmodels.core.ProblemError` naming the option.
 """
 
 from __future__ import annotations
 
+import re
 import time
 import warnings
 from typing import Any
@@ -14,7 +21,7 @@ import cvxpy as cp
 
 from optmodels.backends.casadi_qp import CasadiConic, casadi_qp_plugins, plugin_of, probe_plugins
 from optmodels.backends.common import BackendResult
-from optmodels.core import SolverNotAvailable, Status
+from optmodels.core import OptModelsError, ProblemError, SolverNotAvailable, Status
 
 __all__ = ["CVXPY_STATUS", "available_solvers", "require_solver", "solve_problem"]
 
@@ -22,12 +29,17 @@ CVXPY_STATUS: dict[str, Status] = {
     cp.OPTIMAL: Status.OPTIMAL,
     cp.OPTIMAL_INACCURATE: Status.OPTIMAL_INACCURATE,
     cp.INFEASIBLE: Status.INFEASIBLE,
-    cp.INFEASIBLE_INACCURATE: Status.INFEASIBLE,
+    # no certificate: never INFEASIBLE / UNBOUNDED (see the module docstring)
+    cp.INFEASIBLE_INACCURATE: Status.ERROR,
     cp.UNBOUNDED: Status.UNBOUNDED,
-    cp.UNBOUNDED_INACCURATE: Status.UNBOUNDED,
+    cp.UNBOUNDED_INACCURATE: Status.ERROR,
     cp.USER_LIMIT: Status.ITERATION_LIMIT,
     cp.SOLVER_ERROR: Status.ERROR,
 }
+
+#: The statuses mapped to ERROR because the solver's claim has no certificate.
+UNCERTIFIED: dict[str, str] = {cp.INFEASIBLE_INACCURATE: "infeasible",
+                               cp.UNBOUNDED_INACCURATE: "unbounded"}
 
 #: pip package that provides each CVXPY solver interface, for the install hint.
 PIP_NAMES: dict[str, str] = {
@@ -56,6 +68,9 @@ def require_solver(name: str) -> str:
     ``CASADI_<PLUGIN>`` names a CasADi conic plugin driven through CVXPY
     (:class:`optmodels.backends.casadi_qp.CasadiConic`): QPs only.
     """
+    if not isinstance(name, str):
+        raise ProblemError(f"solver: expected a solver name (str), got {type(name).__name__} "
+                           f"{name!r:.60}")
     key = name.upper()
     plugin = plugin_of(key)
     if plugin is not None:
@@ -82,7 +97,17 @@ def solve_problem(
     ``build_time`` is the wall time of ``problem.solve`` minus the solver's own reported
     solve time (CVXPY canonicalisation, matrix stuffing and unpacking); ``solve_time`` is
     the solver's reported time, or the wall time when the solver reports none. A solver
-    exception is caught and reported as ``Status.ERROR``, never re-raised as a solution.
+    exception is caught and reported as ``Status.ERROR``, never re-raised as a solution;
+    ``infeasible_inaccurate`` / ``unbounded_inaccurate`` are ``Status.ERROR`` too (no
+    certificate).
+
+    Raises
+    ------
+    ProblemError
+        If the solver rejects one of ``options`` (an unknown name, or a value of the wrong
+        type or range), naming the option.
+    SolverNotAvailable
+        If ``solver`` is not installed.
     """
     name = require_solver(solver)
     plugin = plugin_of(name)
@@ -92,11 +117,22 @@ def solve_problem(
         with warnings.catch_warnings():
             # CVXPY warns "Solution may be inaccurate"; the status below says so.
             warnings.filterwarnings("ignore", message="Solution may be inaccurate")
+            # scipy.optimize.linprog (CVXPY's SCIPY) only warns about unknown options
+            warnings.filterwarnings("error", message="Unrecognized options")
             problem.solve(solver=target, verbose=verbose, **options)
-    except (cp.error.SolverError, ValueError, ArithmeticError) as exc:
+    except OptModelsError:
+        raise
+    except (cp.error.SolverError, ValueError, ArithmeticError, TypeError, RuntimeError,
+            Warning) as exc:
         # SolverError: CVXPY's own; ValueError/ArithmeticError: raised by a solver's Python
         # interface on a problem it cannot take (e.g. SCS with no constraint rows). The
-        # inputs were validated before, so this is the solver's failure, reported as such.
+        # inputs were validated before, so this is the solver's failure, reported as such --
+        # unless it is one of the caller's options that the solver refused (Clarabel, SCS:
+        # TypeError; OSQP: SolverError; HiGHS: ValueError; CasADi plugins: RuntimeError).
+        bad = _rejected_options(exc, options)
+        if bad:
+            raise ProblemError(f"solver {name}: option {', '.join(map(repr, bad))} rejected "
+                               f"by the solver ({_short(exc)})") from None
         wall = time.perf_counter() - t0
         return BackendResult(
             status=Status.ERROR,
@@ -113,7 +149,13 @@ def solve_problem(
         solve_time = wall
     iters = stats.num_iters if stats is not None else None
     extra = getattr(stats, "extra_stats", None)
-    status = CVXPY_STATUS.get(str(problem.status), Status.ERROR)
+    raw = str(problem.status)
+    status = CVXPY_STATUS.get(raw, Status.ERROR)
+    message = raw
+    if raw in UNCERTIFIED:
+        message = (f"{raw}: the solver claimed the problem {UNCERTIFIED[raw]} without a "
+                   "certificate (stopped before it converged); not reported as "
+                   f"{UNCERTIFIED[raw]}")
     value = problem.value
     objective = float(value) if value is not None and status.ok else float("nan")
     return BackendResult(
@@ -122,10 +164,32 @@ def solve_problem(
         build_time=max(wall - solve_time, 0.0),
         solve_time=float(solve_time),
         iterations=int(iters) if iters is not None else None,
-        message=str(problem.status),
+        message=message,
         objective=objective,
         info=_extra_info(extra),
     )
+
+
+def _short(exc: BaseException, limit: int = 300) -> str:
+    text = " ".join(str(exc).split())
+    return text if len(text) <= limit else text[:limit - 3] + "..."
+
+
+def _rejected_options(exc: BaseException, options: dict[str, Any]) -> list[str]:
+    """The caller's options a solver exception is about: those named in its message; all
+    of them for a TypeError (the interfaces raise it for an unknown keyword or a value of
+    the wrong type) or a message about options/settings. Empty: not an option problem."""
+    if not options:
+        return []
+    text = str(exc)
+    named = [k for k in options if re.search(rf"(?<![A-Za-z0-9_]){re.escape(k)}(?![A-Za-z0-9_])",
+                                             text)]
+    if named:
+        return named
+    if isinstance(exc, TypeError) or re.search(r"option|setting|keyword|argument", text,
+                                                re.IGNORECASE):
+        return list(options)
+    return []
 
 
 def _extra_info(extra: Any) -> dict[str, Any]:

@@ -30,8 +30,8 @@ from scipy import linalg, stats
 
 from optmodels.biasfield.data import PlotTable, RadarSet
 from optmodels.biasfield.geometry import to_polar
-from optmodels.biasfield.tracks import _knots, _pieces, polyline_normal, whiten
-from optmodels.core import FloatArray, ProblemError
+from optmodels.biasfield.tracks import _check_tables, _knots, _pieces, polyline_normal, whiten
+from optmodels.core import FloatArray, ProblemError, as_positive
 
 __all__ = ["BaselineResult", "azimuth_bias_baseline"]
 
@@ -61,10 +61,19 @@ def azimuth_bias_baseline(plots: PlotTable, radars: RadarSet, *,
                           objects: Sequence[int] | None = None, knot_spacing: float = 20.0,
                           max_gap: float | None = None) -> BaselineResult:
     """GLS estimate of a constant azimuth bias per radar, (2)-(4), from the plots of
-    ``objects`` (default: all with an id) that are seen by at least two radars."""
+    ``objects`` (default: all with an id) that are seen by at least two radars.
+    ``knot_spacing`` and ``max_gap`` (default: ``knot_spacing``) in seconds."""
+    fn = "biasfield.azimuth_bias_baseline"
+    knot_spacing = as_positive(f"{fn} knot_spacing (s)", knot_spacing)
+    gap = knot_spacing if max_gap is None else as_positive(f"{fn} max_gap (s)", max_gap)
+    if objects is not None:
+        obj = np.asarray(objects)
+        if obj.ndim != 1 or (obj.size and not np.issubdtype(obj.dtype, np.integer)):
+            raise ProblemError(f"{fn} objects: expected a list of integer object ids, got "
+                               f"{obj.dtype} {obj.shape}")
+    _check_tables(fn, plots, radars)
     plots.check(radars)
     m = radars.m
-    gap = float(knot_spacing if max_gap is None else max_gap)
     z_all = plots.cartesian(radars)
     vinv_all = np.empty((len(plots), 2, 2))
     dcol = np.empty((len(plots), 2))

@@ -30,12 +30,23 @@ import numpy as np
 from numpy.typing import ArrayLike
 from scipy import sparse
 from scipy.cluster.vq import kmeans2
-from scipy.spatial import Delaunay, cKDTree
+from scipy.spatial import Delaunay, QhullError, cKDTree
 
 from optmodels.biasfield.data import PlotTable, RadarSet
 from optmodels.biasfield.geometry import polar_jacobian, to_polar, wrap_angle
-from optmodels.biasfield.tracks import TrackFit, fit_tracks
-from optmodels.core import MAX_MAGNITUDE, FloatArray, ProblemError, as_finite_array, check_spd
+from optmodels.biasfield.tracks import TrackFit, _check_tables, fit_tracks
+from optmodels.core import (
+    MAX_MAGNITUDE,
+    FloatArray,
+    ProblemError,
+    as_choice,
+    as_count,
+    as_finite_array,
+    as_positive,
+    check_spd,
+    check_spd_stack,
+)
+from optmodels.io import read_npz
 
 __all__ = ["FieldData", "build_field_data", "laplacian", "neighbours", "place_centers",
            "synthetic_field_data", "uncertainty_sets"]
@@ -84,7 +95,12 @@ class FieldData:
         check_spd("P", p)
         self.P = p
         if self.xi_cov is not None:
-            self.xi_cov = as_finite_array("xi_cov", self.xi_cov, shape=(k, m, 2, 2))
+            cov = as_finite_array("biasfield.FieldData xi_cov", self.xi_cov, shape=(k, m, 2, 2),
+                                  max_abs=MAX_MAGNITUDE)
+            # covariances of the averaged positions: symmetric positive definite (an
+            # indefinite one was accepted before)
+            check_spd_stack("biasfield.FieldData xi_cov", cov)
+            self.xi_cov = cov
 
     @property
     def m(self) -> int:
@@ -102,25 +118,29 @@ class FieldData:
                   "P": self.P}
         if self.xi_cov is not None:
             arrays["xi_cov"] = self.xi_cov
-        np.savez_compressed(path, **arrays)  # type: ignore[arg-type]
+        if not isinstance(path, str | Path):
+            raise ProblemError(f"biasfield.FieldData.save path: expected a file name, got "
+                               f"{type(path).__name__}")
+        try:
+            np.savez_compressed(path, **arrays)  # type: ignore[arg-type]
+        except OSError as exc:
+            raise ProblemError(f"biasfield.FieldData.save path: cannot write {path} ({exc})"
+                               ) from None
 
     @classmethod
     def load(cls, path: str | Path) -> FieldData:
         """Read an ``.npz`` written by :meth:`save` (or by hand with the same keys; the
         neighbours as ``edges`` (E, 2) or a dense ``adjacency`` (K, K))."""
-        p = Path(path)
-        if not p.is_file():
-            raise ProblemError(f"{p}: no such file")
-        try:
-            with np.load(p, allow_pickle=False) as z:
-                d = {k: z[k] for k in z.files}
-        except (OSError, ValueError) as exc:
-            raise ProblemError(f"{p}: not a readable .npz ({exc})") from None
-        missing = {"radars", "centers", "xi", "P"} - set(d)
-        if missing or not ({"edges", "adjacency"} & set(d)):
-            raise ProblemError(f"{p}: missing arrays {sorted(missing) or ['edges']}")
+        if not isinstance(path, str | Path):
+            raise ProblemError(f"biasfield.FieldData.load path: expected a file name, got "
+                               f"{type(path).__name__}")
+        d = read_npz(path, what="FieldData .npz", required=("radars", "centers", "xi", "P"),
+                     one_of=("edges", "adjacency"))
         adj = d["edges"] if "edges" in d else d["adjacency"]
-        return cls(d["radars"], d["centers"], d["xi"], adj, d["P"], d.get("xi_cov"))
+        try:
+            return cls(d["radars"], d["centers"], d["xi"], adj, d["P"], d.get("xi_cov"))
+        except ProblemError as exc:
+            raise ProblemError(f"{path}: {exc}") from None
 
 
 def _as_adjacency(adj: Any, k: int) -> sparse.csr_matrix:
@@ -153,10 +173,17 @@ def place_centers(points: ArrayLike, count: int, *, method: Literal["kmeans", "g
                   seed: int | np.random.Generator = 0) -> FloatArray:
     """Cell centres: k-means of ``points`` (traffic concentrations) or a square grid of about
     ``count`` nodes over their bounding box."""
-    pts = as_finite_array("points", points, ndim=2)
-    if pts.shape[0] < count or count < 2:
-        raise ProblemError(f"count: need 2 ≤ count ≤ number of points ({pts.shape[0]}), "
+    fn = "biasfield.place_centers"
+    pts = as_finite_array(f"{fn} points", points, ndim=2, max_abs=MAX_MAGNITUDE)
+    if pts.shape[1] != 2:
+        raise ProblemError(f"{fn} points: expected (N, 2) positions (m), got {pts.shape}")
+    count = as_count(f"{fn} count", count, minimum=2)
+    method = as_choice(f"{fn} method", method, ("kmeans", "grid"))  # type: ignore[assignment]
+    if pts.shape[0] < count:
+        raise ProblemError(f"{fn} count: need 2 ≤ count ≤ number of points ({pts.shape[0]}), "
                            f"got {count}")
+    if not isinstance(seed, np.random.Generator):
+        seed = as_count(f"{fn} seed", seed)
     if method == "kmeans":
         rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
         scale = pts.std(axis=0)
@@ -176,31 +203,37 @@ def neighbours(centers: ArrayLike, *, method: Literal["delaunay", "radius"] = "d
                radius: float | None = None) -> sparse.csr_matrix:
     """Symmetric 0/1 adjacency c(x, y) (sparse): Delaunay edges, or all pairs within
     ``radius``."""
-    c = as_finite_array("centers", centers, ndim=2)
+    fn = "biasfield.neighbours"
+    c = as_finite_array(f"{fn} centers", centers, ndim=2, max_abs=MAX_MAGNITUDE)
+    if c.shape[1] != 2:
+        raise ProblemError(f"{fn} centers: expected (K, 2) positions (m), got {c.shape}")
     k = c.shape[0]
+    method = as_choice(f"{fn} method", method, ("delaunay", "radius"))  # type: ignore[assignment]
     if method == "delaunay":
         if k < 3:
             pairs = np.array([[0, 1]]) if k == 2 else np.zeros((0, 2), dtype=int)
         else:
-            simp = Delaunay(c).simplices
+            try:
+                simp = Delaunay(c).simplices
+            except QhullError as exc:  # collinear / coincident centres
+                raise ProblemError(f"{fn} centers: no Delaunay triangulation (the centres are "
+                                   f"collinear or coincide: {str(exc).splitlines()[0]}); use "
+                                   "method='radius'") from None
             pairs = np.vstack([simp[:, [0, 1]], simp[:, [1, 2]], simp[:, [0, 2]]])
-    elif method == "radius":
-        if radius is None or not radius > 0:
-            raise ProblemError(f"radius: need a positive radius, got {radius}")
-        pairs = cKDTree(c).query_pairs(radius, output_type="ndarray")
     else:
-        raise ProblemError(f"method: expected 'delaunay' or 'radius', got {method!r}")
+        r = as_positive(f"{fn} radius (m)", radius)
+        pairs = cKDTree(c).query_pairs(r, output_type="ndarray")
     return _as_adjacency(np.asarray(pairs, dtype=np.int64).reshape(-1, 2), k) if k != 2 \
         else _as_adjacency(np.array([[0, 1], [1, 0]]), 2)
 
 
 def laplacian(centers: ArrayLike, adjacency: ArrayLike) -> sparse.csr_matrix:
     """Q of (9): Q_ij = −a_ij, Q_ii = Σ_j a_ij, a_ij = c_ij/‖x_i − x_j‖² (sparse)."""
-    c = as_finite_array("centers", centers, ndim=2)
-    adj = sparse.coo_matrix(adjacency if sparse.issparse(adjacency) else np.asarray(adjacency))
+    c = as_finite_array("biasfield.laplacian centers", centers, ndim=2, max_abs=MAX_MAGNITUDE)
+    adj = sparse.coo_matrix(_as_adjacency(adjacency, c.shape[0]))
     d2 = np.sum((c[adj.row] - c[adj.col]) ** 2, axis=1)
     if np.any(d2 == 0):
-        raise ProblemError("centers: two neighbouring centres coincide")
+        raise ProblemError("biasfield.laplacian centers: two neighbouring centres coincide")
     a = sparse.csr_matrix((1.0 / d2, (adj.row, adj.col)), shape=adj.shape)
     return (sparse.diags(np.asarray(a.sum(axis=1)).ravel()) - a).tocsr()
 
@@ -212,13 +245,13 @@ def uncertainty_sets(data: FieldData, *, space: Literal["polar", "cartesian"] = 
 
     ``space="cartesian"``: the exact sets S_ξ̂ of section 3 in the shift space,
     s = [ξ̂_i(k) − ξ̂_(k)]_i + [I; …; I] η_k (a common shift per cell is free)."""
+    space = as_choice("biasfield.uncertainty_sets space", space,  # type: ignore[assignment]
+                      ("polar", "cartesian"))
     m, k = data.m, data.k
     mean = data.xi.mean(axis=1)  # ξ̂_(k)
     if space == "cartesian":
         s0 = (data.xi - mean[:, None, :]).reshape(-1)
         return s0, sparse.block_diag([np.tile(np.eye(2), (m, 1))] * k, format="csr")
-    if space != "polar":
-        raise ProblemError(f"space: expected 'polar' or 'cartesian', got {space!r}")
     phi0 = np.empty((k, m, 2))
     blocks = []
     for i in range(m):
@@ -259,7 +292,24 @@ def build_field_data(plots: PlotTable, radars: RadarSet, *, cells: int | ArrayLi
     object seen by all m radars are dropped with a warning (counted in the diagnostics).
     Samples within ``exclude_radius`` of any radar are not used: the paper's neighbourhoods
     B_i, where the field is not smooth and the linearisation of p_i fails.
+
+    Units: ``cell_radius``, ``neighbour_radius``, ``exclude_radius`` in metres;
+    ``knot_spacing``, ``sample_step`` in seconds.
     """
+    fn = "biasfield.build_field_data"
+    if np.ndim(cells) == 0:
+        cells = as_count(f"{fn} cells", cells, minimum=2)
+    if cell_radius is not None:
+        cell_radius = as_positive(f"{fn} cell_radius (m)", cell_radius)
+    knot_spacing = as_positive(f"{fn} knot_spacing (s)", knot_spacing)
+    sample_step = as_positive(f"{fn} sample_step (s)", sample_step)
+    neighbour_method = as_choice(f"{fn} neighbour_method",  # type: ignore[assignment]
+                                 neighbour_method, ("delaunay", "radius"))
+    if neighbour_method == "radius":
+        neighbour_radius = as_positive(f"{fn} neighbour_radius (m)", neighbour_radius)
+    exclude_radius = as_positive(f"{fn} exclude_radius (m)", exclude_radius, allow_zero=True)
+    seed = as_count(f"{fn} seed", seed)
+    _check_tables(fn, plots, radars)
     fits, dropped = fit_tracks(plots, radars, knot_spacing=knot_spacing)
     diag = Diagnostics(dropped_plots=dict(dropped.counts), fits=fits)
     m = radars.m
@@ -300,7 +350,10 @@ def build_field_data(plots: PlotTable, radars: RadarSet, *, cells: int | ArrayLi
     if np.ndim(cells) == 0:
         centers = place_centers(pos_all, int(cells), seed=seed)  # type: ignore[arg-type]
     else:
-        centers = as_finite_array("cells", cells, ndim=2)
+        centers = as_finite_array(f"{fn} cells", cells, ndim=2, max_abs=MAX_MAGNITUDE)
+        if centers.shape[1] != 2 or centers.shape[0] < 2:
+            raise ProblemError(f"{fn} cells: expected (K, 2) centres (m) with K ≥ 2, got "
+                               f"{centers.shape}")
     tree = cKDTree(centers)
     if cell_radius is None:
         nn = tree.query(centers, k=2)[0][:, 1]
@@ -350,8 +403,12 @@ def build_field_data(plots: PlotTable, radars: RadarSet, *, cells: int | ArrayLi
                                         1 / radars.sigma_azimuth[i] ** 2])
                                for i in range(m)]).toarray()
     else:
-        p = np.asarray(P, dtype=float)
+        p = as_finite_array(f"{fn} P", P, ndim=2, max_abs=MAX_MAGNITUDE)
     return FieldData(radars.sites, centers, xi, adj, p, xi_cov), diag
+
+
+#: Size guard of :func:`synthetic_field_data` (memory grows as cells × radars).
+MAX_SYNTHETIC_CELLS = 1_000_000
 
 
 def synthetic_field_data(seed: int | np.random.Generator, *, cells: int = 200,
@@ -366,18 +423,35 @@ def synthetic_field_data(seed: int | np.random.Generator, *, cells: int = 200,
     from optmodels.biasfield.fields import BiasField
     from optmodels.biasfield.geometry import shift_from_bias
 
-    rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
+    fn = "biasfield.synthetic_field_data"
+    rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(
+        as_count(f"{fn} seed", seed))
+    cells = as_count(f"{fn} cells", cells, minimum=3, maximum=MAX_SYNTHETIC_CELLS)
+    region = as_positive(f"{fn} region (m)", region)
+    noise = as_positive(f"{fn} noise (m)", noise, allow_zero=True)
+    exclude_radius = as_positive(f"{fn} exclude_radius (m)", exclude_radius, allow_zero=True)
     s = (np.array([[-90e3, -60e3], [100e3, -70e3], [80e3, 110e3], [-70e3, 90e3]])
-         if sites is None else as_finite_array("sites", sites, ndim=2))
+         if sites is None else as_finite_array(f"{fn} sites", sites, ndim=2,
+                                               max_abs=MAX_MAGNITUDE))
+    if s.shape[1] != 2 or s.shape[0] < 2:
+        raise ProblemError(f"{fn} sites: expected (m, 2) with m ≥ 2, got {s.shape}")
     m = s.shape[0]
+    if fields is not None and len(fields) != m:
+        raise ProblemError(f"{fn} fields: expected {m} fields (one per radar), got "
+                           f"{len(fields)}")
     flist = fields or [BiasField.smooth(rng, center=np.zeros(2), scale=region,
                                         range_amplitude=150.0, azimuth_amplitude=np.deg2rad(0.3))
                        for _ in range(m)]
     pts: list[FloatArray] = []
-    while sum(len(p) for p in pts) < cells:
+    for _ in range(1000):
         cand = rng.uniform(-region, region, (2 * cells, 2))
         near = np.min(np.linalg.norm(cand[:, None] - s[None], axis=2), axis=1)
         pts.append(cand[near > exclude_radius])
+        if sum(len(p) for p in pts) >= cells:
+            break
+    else:
+        raise ProblemError(f"{fn} exclude_radius: no room for cells in the region (±{region:g} "
+                           f"m) outside {exclude_radius:g} m of the radars")
     x = np.vstack(pts)[:cells]
     truth = np.stack([flist[i](x) for i in range(m)], axis=1)
     xi = np.stack([x + shift_from_bias(x, s[i], truth[:, i]) for i in range(m)], axis=1)

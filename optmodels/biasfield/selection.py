@@ -17,12 +17,17 @@ minus sign; with (10)'s "+Φ¹η" the minimiser needs it). Solved by a sparse Ch
 factorisation (scipy ``splu``) of the 2K × 2K matrix.
 
 The Lipschitz class: the smallest L with ‖f(x_i) − f(x_j)‖_P ≤ L‖x_i − x_j‖ on neighbour
-pairs, an SOCP over the same sets (:func:`solve_lipschitz`).
+pairs, an SOCP over the same sets (:func:`solve_lipschitz`), solved with φ eliminated and
+re-checked through the solver's dual certificate (:func:`lipschitz_residuals`).
+
+Every result, the closed form included, is re-checked in NumPy and its status set by
+:func:`optmodels.core.verified_status`; the conditioning of Φ¹ᵀRΦ¹ enters as κ₁·ε.
 """
 
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any, Literal
 
@@ -42,12 +47,17 @@ from optmodels.core import (  # noqa: F401 -- the tolerances are documented here
     ProblemError,
     Solution,
     Status,
+    as_choice,
+    as_count,
+    as_finite_array,
+    as_positive,
     timed,
     verified_status,
 )
 
 __all__ = ["FieldSolution", "Identifiability", "box_feasibility", "closed_form", "edge_factor",
-           "identifiability", "kkt_residuals", "objective", "solve", "solve_lipschitz"]
+           "identifiability", "kkt_residuals", "lipschitz_residuals", "objective", "solve",
+           "solve_lipschitz"]
 
 #: Default solver options: tight enough for the 1e-8 agreement with the closed form.
 SOLVER_DEFAULTS: dict[str, dict[str, Any]] = {
@@ -89,7 +99,10 @@ class FieldSolution(Solution):
     def max_residual(self) -> float:
         """Largest KKT/feasibility residual; ``residuals["dual_sign"]`` (the share of
         box multipliers with a sign off, a diagnostic) is not a residual and is left out."""
-        return max((v for k, v in self.residuals.items() if k != "dual_sign"), default=0.0)
+        vals = [float(v) for k, v in self.residuals.items() if k != "dual_sign"]
+        if any(np.isnan(v) for v in vals):
+            return float("nan")
+        return max(vals, default=0.0)
 
 
 # ----------------------------------------------------------------------------- pieces
@@ -107,6 +120,9 @@ def _edges(data: FieldData) -> tuple[np.ndarray, np.ndarray, FloatArray]:
 
 def _check_graph(data: FieldData) -> tuple[int, np.ndarray]:
     """Connected components of the neighbour graph; isolated cells are refused."""
+    if not isinstance(data, FieldData):
+        raise ProblemError(f"biasfield data: expected a FieldData (biasfield.build_field_data "
+                           f"or FieldData(...)), got {type(data).__name__}")
     n, labels = csgraph.connected_components(data.adjacency, directed=False)
     sizes = np.bincount(labels)
     lonely = np.flatnonzero(sizes[labels] == 1)
@@ -136,9 +152,14 @@ def edge_factor(data: FieldData) -> sparse.csr_matrix:
 
 
 def objective(data: FieldData, phi: ArrayLike) -> float:
-    """J(φ) = φᵀ(Q ⊗ P)φ (9) (half the paper's sum over ordered pairs, see errata)."""
+    """J(φ) = φᵀ(Q ⊗ P)φ (9) (half the paper's sum over ordered pairs, see errata);
+    ``phi`` (2mK,) cell by cell, radar by radar, [range m, azimuth rad]."""
     g = edge_factor(data)
-    v = g @ np.asarray(phi, dtype=float)
+    return _objective(g, as_finite_array("biasfield.objective phi", phi, shape=(g.shape[1],)))
+
+
+def _objective(g: sparse.csr_matrix, phi: FloatArray) -> float:
+    v = g @ phi
     return float(v @ v)
 
 
@@ -147,13 +168,51 @@ def _r_matrix(data: FieldData) -> sparse.csr_matrix:
                        format="csr")
 
 
-def _box(data: FieldData, box: tuple[float, float] | None) -> FloatArray | None:
+def _box(data: FieldData, box: Sequence[float] | None, where: str = "biasfield.solve"
+         ) -> FloatArray | None:
+    """The box (8) as bounds on φ (2mK,): ``box`` = (K1 range bound, m; K2 azimuth bound,
+    rad), two positive finite numbers, or None."""
+    if not isinstance(data, FieldData):
+        raise ProblemError(f"{where} data: expected a FieldData, got {type(data).__name__}")
     if box is None:
         return None
-    k1, k2 = (float(b) for b in box)
-    if not (k1 > 0 and k2 > 0) or not np.isfinite([k1, k2]).all():
-        raise ProblemError(f"box: need positive finite bounds (K1 m, K2 rad), got {box}")
+    if isinstance(box, str | bytes) or np.ndim(box) != 1 or np.size(box) != 2:
+        raise ProblemError(f"{where} box: expected a pair (K1 range bound in m, K2 azimuth "
+                           f"bound in rad), got {box!r:.80}")
+    k1 = as_positive(f"{where} box[0] (K1, range bound, m)", box[0])
+    k2 = as_positive(f"{where} box[1] (K2, azimuth bound, rad)", box[1])
     return np.tile([k1, k2], data.m * data.k)
+
+
+def _solver_name(where: str, solver: Any) -> str:
+    if not isinstance(solver, str) or not solver:
+        raise ProblemError(f"{where} solver: expected a CVXPY solver name, got {solver!r:.60}")
+    return solver
+
+
+def _condition(h: sparse.spmatrix, lu: Any = None) -> float:
+    """1-norm condition number of the SPD 2K × 2K matrix H = Φ¹ᵀRΦ¹ (Hager/Higham
+    estimate of ‖H⁻¹‖₁, t = 1: a few solves with its sparse factorisation ``lu``, computed
+    here if not given; inf if H is singular)."""
+    hc = sparse.csc_matrix(h)
+    if lu is None:
+        try:
+            lu = splinalg.splu(hc)
+        except RuntimeError:
+            return float("inf")
+    op = splinalg.LinearOperator(hc.shape, matvec=lu.solve, matmat=lu.solve,
+                                 rmatvec=lambda v: lu.solve(v, trans="T"),
+                                 rmatmat=lambda v: lu.solve(v, trans="T"), dtype=float)
+    with np.errstate(all="ignore"):
+        kappa = float(splinalg.norm(hc, 1)) * float(splinalg.onenormest(op, t=1))
+    return kappa if np.isfinite(kappa) else float("inf")
+
+
+def _conditioning_residual(kappa: float) -> float:
+    """κ·ε: the relative error of η that no method avoids in double precision (a backward
+    stable solve of H η = −b has forward error about κ(H)·ε); it enters the re-check like a
+    residual, so H with κ > 4.5e9 gives OPTIMAL_INACCURATE and κ > 4.5e12 ERROR."""
+    return float(kappa * np.finfo(float).eps)
 
 
 def _finish(data: FieldData, sets: Sets, phi: FloatArray, eta: FloatArray,
@@ -172,7 +231,7 @@ def _finish(data: FieldData, sets: Sets, phi: FloatArray, eta: FloatArray,
         active[phi >= bound - tol] = 1
         active[phi <= -bound + tol] = -1
     dual = np.zeros(phi.size) if duals is None else duals
-    return FieldSolution(objective=objective(data, phi), residuals=res,
+    return FieldSolution(objective=_objective(edge_factor(data), phi), residuals=res,
                          field=phi.reshape(k, m, 2), phi=phi, eta=eta.reshape(k, 2),
                          active=active.reshape(k, m, 2), duals=dual.reshape(k, m, 2),
                          lipschitz=lipschitz, **common)
@@ -183,7 +242,16 @@ def closed_form(data: FieldData) -> FieldSolution:
     """(11) with sparse linear algebra: η* = −(Φ¹ᵀRΦ¹)⁻¹Φ¹ᵀRΦ⁰, φ* = Φ⁰ + Φ¹η*.
 
     A neighbour graph in several components is solved as one (J and the sets decouple, so
-    this is the per-component solution); ``info["components"]`` gives their number."""
+    this is the per-component solution); ``info["components"]`` gives their number.
+
+    The result is re-checked in NumPy against the original problem (9)-(10) like a generic
+    solve: ``residuals["set"]`` (φ on the sets), ``["stationarity"]`` (Φ¹ᵀRφ relative to
+    Φ¹ᵀRΦ⁰, the gradient at η = 0) and ``["conditioning"]`` = κ₁(Φ¹ᵀRΦ¹)·ε (the
+    double-precision error floor of η; ``info["condition"]`` gives κ₁). The status follows
+    :func:`optmodels.core.verified_status`: above :data:`VERIFY_TOL` OPTIMAL_INACCURATE,
+    above :data:`REJECT_TOL` ERROR without a field (an ill-determined field is refused,
+    not returned).
+    """
     n_comp, _ = _check_graph(data)
     with timed() as tm:
         phi0, phi1 = uncertainty_sets(data)
@@ -191,19 +259,30 @@ def closed_form(data: FieldData) -> FieldSolution:
         a = (phi1.T @ r @ phi1).tocsc()
         b = phi1.T @ (r @ phi0)
         try:
-            eta = -splinalg.splu(a).solve(b)
+            lu = splinalg.splu(a)
         except RuntimeError as exc:  # exactly singular
-            raise ProblemError(f"data: Φ1ᵀRΦ1 is singular ({exc}); the field is not "
-                               "identifiable on these cells") from None
+            raise ProblemError(f"biasfield.closed_form data: Φ1ᵀRΦ1 is singular ({exc}); the "
+                               "field is not identifiable on these cells") from None
+        with np.errstate(all="ignore"):
+            eta = -lu.solve(b)
         phi = phi0 + phi1 @ eta
     common = {"status": Status.OPTIMAL, "method": "closed_form", "solve_time": tm.elapsed,
               "message": "(11), sign corrected"}
+    if not (np.all(np.isfinite(phi)) and np.all(np.isfinite(eta))):
+        nan = np.full(phi0.size, np.nan)
+        common.update(status=Status.ERROR, message="(11): the solve overflowed (non-finite "
+                      "field); Φ1ᵀRΦ1 is numerically singular")
+        return _finish(data, (phi0, phi1), nan, np.full(phi1.shape[1], np.nan), common,
+                       None, None)
     sol = _finish(data, (phi0, phi1), phi, eta, common, None, None)
     sol.info["components"] = n_comp
     grad = phi1.T @ (r @ phi)
     sol.residuals["stationarity"] = float(np.max(np.abs(grad))) / max(
         float(np.max(np.abs(b))), 1e-300)
-    return sol
+    kappa = _condition(a, lu)
+    sol.info["condition"] = kappa
+    sol.residuals["conditioning"] = _conditioning_residual(kappa)
+    return _verify(sol)
 
 
 # ----------------------------------------------------------------------------- QP
@@ -230,14 +309,19 @@ def solve(data: FieldData, *, box: tuple[float, float] | None = None,
 
     Box infeasibility is diagnosed cell by cell (:func:`box_feasibility`) and reported as
     INFEASIBLE with the offending cells in ``message``; a solver failure is never returned
-    as a field. KKT residuals are re-computed in NumPy (:func:`kkt_residuals`) and a
-    claimed optimum failing them is downgraded (:data:`VERIFY_TOL`, :data:`REJECT_TOL`).
+    as a field. KKT residuals are re-computed in NumPy (:func:`kkt_residuals`), with the
+    conditioning term κ₁(Φ¹ᵀRΦ¹)·ε of :func:`closed_form` (an upper bound for the reduced
+    Hessian of any active set; one extra sparse factorisation), and a claimed optimum
+    failing them is downgraded (:data:`VERIFY_TOL`, :data:`REJECT_TOL`). ``box`` = (K1 m,
+    K2 rad), two positive numbers; a solver option the solver rejects is a
+    :class:`ProblemError` naming it.
     """
+    fn = "biasfield.solve"
     n_comp, _ = _check_graph(data)
-    if formulation not in ("constrained", "reduced"):
-        raise ProblemError(f"formulation: expected 'constrained' or 'reduced', got "
-                           f"{formulation!r}")
-    bound = _box(data, box)
+    formulation = as_choice(f"{fn} formulation", formulation,  # type: ignore[assignment]
+                            ("constrained", "reduced"))
+    solver = _solver_name(fn, solver)
+    bound = _box(data, box, fn)
     method = f"cvxpy:{solver}:{formulation}"
     sets = uncertainty_sets(data)
     phi0, phi1 = sets
@@ -272,7 +356,7 @@ def solve(data: FieldData, *, box: tuple[float, float] | None = None,
         box_cons = [u <= bound / sc, -u <= bound / sc] if bound is not None else []
         prob = cp.Problem(cp.Minimize(obj), cons + box_cons)
     opts = {**SOLVER_DEFAULTS.get(solver.upper(), {}), **options}
-    res = solve_problem(prob, solver, **opts)
+    res = _run(fn, prob, solver, opts)
     common = res.common()
     common["build_time"] += tb.elapsed
     common["method"] = method
@@ -290,24 +374,41 @@ def solve(data: FieldData, *, box: tuple[float, float] | None = None,
     sol = _finish(data, sets, phi, et, common, bound, duals)
     sol.info["components"] = n_comp
     sol.residuals.update(kkt_residuals(data, sol, box, sets=sets))
+    kappa = _condition(phi1.T @ _r_matrix(data) @ phi1)
+    sol.info["condition"] = kappa
+    sol.residuals["conditioning"] = _conditioning_residual(kappa)
     return _verify(sol)
 
 
+def _run(where: str, prob: cp.Problem, solver: str, opts: dict[str, Any]) -> Any:
+    """:func:`solve_problem`, with a rejected option named as this function's argument."""
+    try:
+        return solve_problem(prob, solver, **opts)
+    except ProblemError as exc:
+        raise ProblemError(f"{where} options: {exc}") from None
+
+
 def _verify(sol: FieldSolution) -> FieldSolution:
-    """A claimed optimum whose NumPy-recomputed KKT residual (stationarity, box violation,
-    complementarity) exceeds VERIFY_TOL is reported OPTIMAL_INACCURATE, above REJECT_TOL
+    """A claimed optimum whose NumPy-recomputed residual (KKT: stationarity, box violation,
+    complementarity; or the Lipschitz SOCP's certificate; conditioning) exceeds VERIFY_TOL
+    is reported OPTIMAL_INACCURATE, above REJECT_TOL
     ERROR (without a field): :func:`optmodels.core.verified_status`."""
     worst = sol.max_residual
     new = verified_status(sol.status, worst)
     if new == sol.status:
         return sol
     sol.status = new
+    which = max((k for k in sol.residuals if k != "dual_sign"),
+                key=lambda k: -np.inf if np.isnan(sol.residuals[k]) else sol.residuals[k],
+                default="residual")
     if new == Status.ERROR:
-        sol.message += f"; KKT residual {worst:.1e} fails the NumPy check"
+        sol.message += f"; {which} residual {worst:.1e} fails the NumPy check"
         sol.field = np.full_like(sol.field, np.nan)
         sol.phi = np.full_like(sol.phi, np.nan)
+        sol.eta = np.full_like(sol.eta, np.nan)
+        sol.lipschitz = None if sol.lipschitz is None else float("nan")
     else:
-        sol.message += f"; KKT residual {worst:.1e} (NumPy check)"
+        sol.message += f"; {which} residual {worst:.1e} (NumPy check)"
     return sol
 
 
@@ -326,7 +427,7 @@ def kkt_residuals(data: FieldData, sol: FieldSolution,
     g0 = phi1.T @ (2 * (r @ phi0))  # the gradient at η = 0: the problem's own scale
     scale = max(float(np.max(np.abs(g0))), float(np.max(np.abs(g2))), 1e-300)
     out = {"stationarity": float(np.max(np.abs(g1 + g2))) / scale}
-    bound = _box(data, box)
+    bound = _box(data, box, "biasfield.kkt_residuals")
     if bound is not None:
         slack = bound - np.abs(sol.phi)
         # interior-point duals of inactive bounds are tiny but not exactly 0: allow 1e-7
@@ -348,8 +449,10 @@ def box_feasibility(data: FieldData, box: tuple[float, float], *,
     feasible (a bounded polygon -- two radars at different sites give two independent
     directions -- has its vertices among them); all cells are checked at once.
     Returns the indices of the infeasible cells."""
-    bound = _box(data, box)
-    assert bound is not None
+    bound = _box(data, box, "biasfield.box_feasibility")
+    if bound is None:
+        raise ProblemError("biasfield.box_feasibility box: expected a pair (K1 m, K2 rad), "
+                           "got None")
     phi0, phi1 = uncertainty_sets(data) if sets is None else sets
     k, m2 = data.k, 2 * data.m
     a = _cell_blocks(phi1, k, m2)
@@ -382,59 +485,196 @@ def _cell_blocks(phi1: sparse.csr_matrix, k: int, m2: int) -> FloatArray:
 # ----------------------------------------------------------------------------- Lipschitz
 def solve_lipschitz(data: FieldData, *, box: tuple[float, float] | None = None,
                     solver: str = "CLARABEL", cap: float | None = None,
+                    formulation: Literal["constrained", "reduced"] = "reduced",
                     **options: Any) -> FieldSolution:
-    """The field of smallest Lipschitz constant on neighbour pairs:
+    r"""The field of smallest Lipschitz constant on neighbour pairs:
 
     min L  s.t.  ‖Lᵀ_P(f(x̌_i) − f(x̌_j))‖ ≤ L‖x̌_i − x̌_j‖ (all neighbour pairs),
-                 φ = Φ⁰ + Φ¹η  [, box (8)],
+                 φ = Φ⁰ + Φ¹η (10)  [, box (8)],
 
-    an SOCP (Clarabel / SCS). ``cap`` adds L ≤ cap (used by the minimality test: a cap
-    below the optimum must make the problem infeasible). The solution's ``lipschitz`` is
-    re-computed from the returned field.
+    an SOCP (Clarabel / SCS), one second-order cone of dimension 2m + 1 per edge.
+    ``formulation="reduced"`` (default) eliminates φ = Φ⁰ + Φ¹η: the variables are η (2K)
+    and L, and Clarabel's KKT factorisation stays sparse (K = 5000: ~4 s);
+    ``"constrained"`` keeps φ and the 2mK equalities as written (K = 5000: ~90 s, the
+    same optimum). ``cap`` (> 0, the units of L: √(F-norm²)/m) adds L ≤ cap (used by the
+    minimality test: a cap below the optimum must make the problem infeasible).
+    ``box`` = (K1 m, K2 rad) as in :func:`solve`; a box that misses a cell's set is a
+    :class:`ProblemError` (proved cell by cell, :func:`box_feasibility`).
+
+    The solution's ``lipschitz`` is computed in NumPy from the returned field, and the
+    claimed optimum is re-checked against the problem (:func:`lipschitz_residuals`):
+    ``set`` and ``box`` (the field on the sets), ``lipschitz`` (the field's L above the
+    solver's), and the solver's dual certificate -- ``dual_stationarity``, ``dual_cone``
+    and ``gap`` (the field's L minus the dual bound, which is a lower bound on the minimum
+    L); all relative to the problem's own scale (the largest jump ratio at η = 0). Then
+    :func:`optmodels.core.verified_status`: above VERIFY_TOL OPTIMAL_INACCURATE, above
+    REJECT_TOL ERROR without a field. An INFEASIBLE status only comes with the solver's
+    certificate (see :mod:`optmodels.backends.cvxpy_backend`).
     """
-    _check_graph(data)
-    bound = _box(data, box)
+    fn = "biasfield.solve_lipschitz"
+    n_comp, _ = _check_graph(data)
+    formulation = as_choice(f"{fn} formulation", formulation,  # type: ignore[assignment]
+                            ("constrained", "reduced"))
+    solver = _solver_name(fn, solver)
+    bound = _box(data, box, fn)
+    cap_v = None if cap is None else as_positive(f"{fn} cap", cap)
+    method = f"cvxpy:{solver}:lipschitz:{formulation}"
     sets = uncertainty_sets(data)
     phi0, phi1 = sets
     if bound is not None:
         bad = box_feasibility(data, box, sets=sets)  # type: ignore[arg-type]
         if bad.size:
-            raise ProblemError(f"box: the box misses the uncertainty sets of cells "
+            raise ProblemError(f"{fn} box: the box misses the uncertainty sets of cells "
                                f"{bad[:20].tolist()}")
-    sc = _scales(data, phi0)
+    prob_data = _lipschitz_data(data, sets)
+    sc, u0, bmat, dmat, dist, ref, lip0 = (prob_data[k] for k in (
+        "sc", "u0", "bmat", "dmat", "dist", "ref", "lip0"))
     m2 = 2 * data.m
-    _, _, d2 = _edges(data)
-    dist = np.sqrt(d2)
-    jump = _edge_difference(data, np.ones(dist.size))  # Lᵀ(f_i − f_j) per edge
     with timed() as tb:
-        u = cp.Variable(phi0.size)
         eta = cp.Variable(phi1.shape[1])
-        lip = cp.Variable(nonneg=True)
-        ref = float(np.median(dist))
-        cons = [u == phi0 / sc + (sparse.diags(1 / sc) @ phi1) @ eta]
-        # the same in scaled units
-        dmat = (jump @ sparse.diags(sc)).tocsr()
-        lip0 = float(np.max(np.linalg.norm((dmat @ (phi0 / sc)).reshape(-1, m2), axis=1)
-                            / dist)) * ref or 1.0
-        dexpr = cp.reshape(dmat @ u, (dist.size, m2), order="C") / lip0
-        cons.append(cp.SOC(cp.multiply(lip, dist / ref), dexpr, axis=1))
-        if bound is not None:
-            cons += [u <= bound / sc, -u <= bound / sc]
-        if cap is not None:
-            cons.append(lip <= cap * ref / lip0)
-        prob = cp.Problem(cp.Minimize(lip), cons)
+        lip = cp.Variable()
+        cons: list[Any] = []
+        if formulation == "constrained":
+            u: Any = cp.Variable(phi0.size)
+            cons.append(u == u0 + bmat @ eta)
+            w = (dmat / lip0) @ u
+        else:
+            u = u0 + bmat @ eta
+            w = prob_data["db"] @ eta + prob_data["c"]
+        soc = cp.SOC(lip * (dist / ref), cp.reshape(w, (dist.size, m2), order="C"), axis=1)
+        cons.append(soc)
+        box_cons = [u <= bound / sc, -u <= bound / sc] if bound is not None else []
+        cap_cons = [lip <= cap_v * ref / lip0] if cap_v is not None else []
+        prob = cp.Problem(cp.Minimize(lip), cons + box_cons + cap_cons)
     # the SOCP is solved to the solvers' own default accuracy (Clarabel's 1e-10 gap of the
-    # QP defaults ends "inaccurate" here; L is re-computed from the field below anyway)
-    res = solve_problem(prob, solver, **{**SOCP_DEFAULTS.get(solver.upper(), {}), **options})
+    # QP defaults ends "inaccurate" here); the certificate is re-checked below anyway
+    res = _run(fn, prob, solver, {**SOCP_DEFAULTS.get(solver.upper(), {}), **options})
     common = res.common()
     common["build_time"] += tb.elapsed
-    if not res.status.ok or u.value is None:
+    common["method"] = method
+    if not res.status.ok or eta.value is None:
         nan = np.full(phi0.size, np.nan)
         return _finish(data, sets, nan, np.full(phi1.shape[1], np.nan), common, bound, None)
-    phi = np.asarray(u.value) * sc
-    jumps = np.linalg.norm((jump @ phi).reshape(-1, m2), axis=1) / dist
-    return _finish(data, sets, phi, np.asarray(eta.value), common, bound, None,
-                   lipschitz=float(np.max(jumps)))
+    et = np.asarray(eta.value, dtype=float) * sc[0]
+    phi = phi0 + phi1 @ et if formulation == "reduced" else np.asarray(u.value) * sc
+    jumps = np.linalg.norm((prob_data["jump"] @ phi).reshape(-1, m2), axis=1) / dist
+    sol = _finish(data, sets, phi, et, common, bound, None, lipschitz=float(np.max(jumps)))
+    sol.info["components"] = n_comp
+    duals = {"soc": soc.dual_value,
+             "upper": box_cons[0].dual_value if box_cons else None,
+             "lower": box_cons[1].dual_value if box_cons else None,
+             "cap": cap_cons[0].dual_value if cap_cons else None}
+    sol.info["solver_lipschitz"] = float(lip.value) * lip0 / ref if lip.value is not None \
+        else float("nan")
+    sol.info["duals"] = duals  # the solver's multipliers: the certificate checked below
+    sol.residuals.update(lipschitz_residuals(data, sol, duals, box=box, cap=cap_v,
+                                             sets=sets, prob_data=prob_data))
+    return _verify(sol)
+
+
+def _lipschitz_data(data: FieldData, sets: Sets) -> dict[str, Any]:
+    """The scaled SOCP's matrices: φ = sc·u, u = u0 + B η̃ (η = sc_range·η̃); the jump of
+    edge e is D_e u (= Lᵀ(f_i − f_j)); cone e: (ℓ d_e/ref, (D_e u)/lip0) with L = ℓ·lip0/ref,
+    lip0 the largest jump ratio at η = 0 times ref = median edge length."""
+    phi0, phi1 = sets
+    sc = _scales(data, phi0)
+    m2 = 2 * data.m
+    dist = np.sqrt(_edges(data)[2])
+    jump = _edge_difference(data, np.ones(dist.size))  # Lᵀ(f_i − f_j) per edge
+    dmat = (jump @ sparse.diags(sc)).tocsr()
+    u0 = phi0 / sc
+    bmat = (sparse.diags(1 / sc) @ phi1 * sc[0]).tocsr()
+    ref = float(np.median(dist))
+    lip0 = float(np.max(np.linalg.norm((dmat @ u0).reshape(-1, m2), axis=1) / dist)) * ref
+    if not (np.isfinite(lip0) and lip0 > 0):
+        lip0 = 1.0
+    return {"sc": sc, "u0": u0, "bmat": bmat, "dmat": dmat, "dist": dist, "ref": ref,
+            "lip0": lip0, "jump": jump, "db": (dmat @ bmat).tocsr() / lip0,
+            "c": dmat @ u0 / lip0}
+
+
+def lipschitz_residuals(data: FieldData, sol: FieldSolution, duals: dict[str, Any], *,
+                        box: tuple[float, float] | None = None, cap: float | None = None,
+                        sets: Sets | None = None,
+                        prob_data: dict[str, Any] | None = None) -> dict[str, float]:
+    r"""Re-check of a Lipschitz SOCP solution against the problem, in NumPy.
+
+    In the scaled variables of :func:`solve_lipschitz` (φ = sc·u, u = u0 + Bη̃, cone e:
+    (ℓ d_e/ref, w_e = D̃_e u)), the Lagrangian with the solver's multipliers (λ_e, μ_e) of
+    the cones, α, β ≥ 0 of the box u ≤ b, −u ≤ b and γ ≥ 0 of ℓ ≤ cap gives the dual
+
+    .. math::
+        g = -\sum_e \mu_e^T w_e(0) + \alpha^T(u_0 - b) - \beta^T(u_0 + b) - \gamma\,cap,
+        \quad \sum_e \lambda_e d_e/ref - \gamma = 1,\quad
+        -\tilde D^T\mu + B^T(\alpha - \beta) = 0 \ (\text{in } \tilde B\text{-space}),
+        \quad \|\mu_e\| \le \lambda_e,
+
+    and weak duality makes g a lower bound on the minimum ℓ. Returned, each in units of ℓ
+    (the problem's own scale: ℓ = 1 at η = 0), i.e. what the error can change in the bound
+    at the returned point: ``dual_stationarity`` = |1 − Σλ_e d_e/ref + γ|·ℓ + |r_η|ᵀ|η̃|
+    (r_η the residual of the η equation), ``dual_cone`` = Σ_e max(‖μ_e‖ − λ_e, 0)·‖s_e‖
+    plus the negative parts of α, β, γ times their slacks, ``gap`` = |ℓ(field) − g| and
+    ``lipschitz`` = max(ℓ(field) − ℓ(solver), 0) (the Lipschitz inequalities at the
+    solver's L), where ℓ(field) comes from ``sol.lipschitz`` (the returned field's L).
+    Missing duals give NaN (not verifiable: an ERROR)."""
+    sets = uncertainty_sets(data) if sets is None else sets
+    pd_ = _lipschitz_data(data, sets) if prob_data is None else prob_data
+    bound = _box(data, box, "biasfield.lipschitz_residuals")
+    ref, lip0, dist = pd_["ref"], pd_["lip0"], pd_["dist"]
+    m2 = 2 * data.m
+    nan = float("nan")
+    ell = float(sol.lipschitz) * ref / lip0 if sol.lipschitz is not None else nan
+    ell_solver = float(sol.info.get("solver_lipschitz", nan)) * ref / lip0
+    out = {"lipschitz": max(ell - ell_solver, 0.0) if np.isfinite(ell_solver) else nan}
+    soc = duals.get("soc")
+    if soc is None or soc[0] is None or soc[1] is None:
+        out.update(dual_stationarity=nan, dual_cone=nan, gap=nan)
+        return out
+    lam = np.asarray(soc[0], dtype=float).reshape(-1)
+    mu = np.asarray(soc[1], dtype=float).reshape(-1, m2)
+    db, c, bmat = pd_["db"], pd_["c"], pd_["bmat"]
+    alpha = beta = None
+    if bound is not None:
+        if duals.get("upper") is None or duals.get("lower") is None:
+            out.update(dual_stationarity=nan, dual_cone=nan, gap=nan)
+            return out
+        alpha = np.asarray(duals["upper"], dtype=float).reshape(-1)
+        beta = np.asarray(duals["lower"], dtype=float).reshape(-1)
+    gamma = 0.0
+    if cap is not None:
+        if duals.get("cap") is None:
+            out.update(dual_stationarity=nan, dual_cone=nan, gap=nan)
+            return out
+        gamma = float(np.asarray(duals["cap"], dtype=float).reshape(-1)[0])
+    mu_flat = mu.reshape(-1)
+    grad = -(db.T @ mu_flat)
+    if alpha is not None and beta is not None:
+        grad = grad + bmat.T @ (alpha - beta)
+    stat_ell = 1.0 - float(lam @ dist) / ref + gamma
+    # each residual is weighted by what it can change in the bound g at the returned point
+    # (the Lagrangian is affine in (ℓ, η̃): a stationarity error r moves it by rᵀx), so all
+    # are in units of ℓ, i.e. relative to ℓ(η = 0) = 1
+    eta_s = np.asarray(sol.eta, dtype=float).reshape(-1) / pd_["sc"][0]
+    out["dual_stationarity"] = abs(stat_ell) * abs(ell) + float(np.abs(grad) @ np.abs(eta_s))
+    u = np.asarray(sol.phi, dtype=float) / pd_["sc"]
+    w = (pd_["dmat"] @ u).reshape(-1, m2) / lip0
+    s_norm = np.hypot(ell * dist / ref, np.linalg.norm(w, axis=1))
+    cone = float(np.maximum(np.linalg.norm(mu, axis=1) - lam, 0.0) @ s_norm)
+    if alpha is not None and beta is not None and bound is not None:
+        b = bound / pd_["sc"]
+        cone += float(np.maximum(-alpha, 0.0) @ np.abs(b - u))
+        cone += float(np.maximum(-beta, 0.0) @ np.abs(b + u))
+    if cap is not None:
+        cone += max(-gamma, 0.0) * abs(float(cap) * ref / lip0 - ell)
+    out["dual_cone"] = cone
+    g = -float(mu_flat @ c)
+    if alpha is not None and beta is not None and bound is not None:
+        b = bound / pd_["sc"]
+        g += float(alpha @ (pd_["u0"] - b)) - float(beta @ (pd_["u0"] + b))
+    if cap is not None:
+        g -= gamma * float(cap) * ref / lip0
+    out["gap"] = abs(ell - g)
+    return out
 
 
 @dataclass(frozen=True)
@@ -456,10 +696,15 @@ class Identifiability:
 def identifiability(data: FieldData, *, batch: int = 512) -> Identifiability:
     """Condition of Φ¹ᵀRΦ¹ (sparse eigenvalues) and the per-cell spread from the diagonal
     blocks of its inverse (one sparse factorisation, solved in batches of columns)."""
+    batch = as_count("biasfield.identifiability batch", batch, minimum=1)
     _check_graph(data)
     _, phi1 = uncertainty_sets(data)
     h = (phi1.T @ _r_matrix(data) @ phi1).tocsc()
-    lu = splinalg.splu(h)
+    try:
+        lu = splinalg.splu(h)
+    except RuntimeError as exc:
+        raise ProblemError(f"biasfield.identifiability data: Φ1ᵀRΦ1 is singular ({exc}); "
+                           "the field is not identifiable on these cells") from None
     n = h.shape[0]
     diag = np.empty((n // 2, 2, 2))
     for start in range(0, n, batch):

@@ -27,14 +27,27 @@ from numpy.typing import ArrayLike
 from scipy import linalg
 
 from optmodels.biasfield.data import PlotTable, RadarSet
-from optmodels.core import FloatArray, ProblemError
+from optmodels.core import (
+    MAX_MAGNITUDE,
+    FloatArray,
+    ProblemError,
+    as_count,
+    as_finite_array,
+    as_positive,
+)
 
 __all__ = ["ResidualCheck", "TrackFit", "fit_tracks", "hat_basis", "residual_check"]
 
 
 def hat_basis(t: ArrayLike, knots: FloatArray) -> FloatArray:
-    """(T, K) hat-function values h_k(t) of the polyline with these knots (t inside)."""
-    tt = np.asarray(t, dtype=float)
+    """(T, K) hat-function values h_k(t) of the polyline with these knots (t inside;
+    knots strictly increasing, s)."""
+    tt = as_finite_array("biasfield.hat_basis t", t, ndim=(0, 1),
+                         max_abs=MAX_MAGNITUDE).reshape(-1)
+    knots = as_finite_array("biasfield.hat_basis knots", knots, ndim=1, max_abs=MAX_MAGNITUDE)
+    if knots.size < 2 or np.any(np.diff(knots) <= 0):
+        raise ProblemError("biasfield.hat_basis knots: need ≥ 2 strictly increasing knots, "
+                           f"got {knots.size}")
     k = np.clip(np.searchsorted(knots, tt, side="right") - 1, 0, len(knots) - 2)
     u = (tt - knots[k]) / (knots[k + 1] - knots[k])
     out = np.zeros((tt.size, len(knots)))
@@ -105,6 +118,16 @@ class Dropped:
         return sum(self.counts.values())
 
 
+def _check_tables(where: str, plots: object, radars: object) -> None:
+    """``plots`` a :class:`PlotTable` and ``radars`` a :class:`RadarSet`, or ProblemError."""
+    if not isinstance(plots, PlotTable):
+        raise ProblemError(f"{where} plots: expected a PlotTable (see biasfield.read_plots), "
+                           f"got {type(plots).__name__}")
+    if not isinstance(radars, RadarSet):
+        raise ProblemError(f"{where} radars: expected a RadarSet (see biasfield.read_radars), "
+                           f"got {type(radars).__name__}")
+
+
 def _pieces(t: FloatArray, max_gap: float) -> list[np.ndarray]:
     cuts = np.flatnonzero(np.diff(t) > max_gap) + 1
     return np.split(np.arange(t.size), cuts)
@@ -121,9 +144,11 @@ def fit_tracks(plots: PlotTable, radars: RadarSet, *, knot_spacing: float = 20.0
     support holds no plot are removed (the polyline then spans the gap linearly). Returns
     the fits and the dropped-plot counts.
     """
-    if not knot_spacing > 0:
-        raise ProblemError(f"knot_spacing: need a positive duration, got {knot_spacing}")
-    gap = float(knot_spacing if max_gap is None else max_gap)
+    fn = "biasfield.fit_tracks"
+    knot_spacing = as_positive(f"{fn} knot_spacing (s)", knot_spacing)
+    gap = knot_spacing if max_gap is None else as_positive(f"{fn} max_gap (s)", max_gap)
+    min_redundancy = as_count(f"{fn} min_redundancy", min_redundancy)
+    _check_tables(fn, plots, radars)
     plots.check(radars)
     z_all = plots.cartesian(radars)
     dropped = Dropped()
@@ -232,6 +257,10 @@ class ResidualCheck:
 def residual_check(fits: list[TrackFit], m: int) -> ResidualCheck:
     """Pool the whitened residuals of ``fits`` per radar (0..m−1)."""
     from scipy import stats
+
+    m = as_count("biasfield.residual_check m", m, minimum=1)
+    if not all(isinstance(f, TrackFit) for f in fits):
+        raise ProblemError("biasfield.residual_check fits: expected a list of TrackFit")
 
     mean = np.full((m, 2), np.nan)
     cov = np.full((m, 2, 2), np.nan)

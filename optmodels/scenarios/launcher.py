@@ -18,7 +18,7 @@ from typing import Literal
 
 import numpy as np
 
-from optmodels.core import FloatArray, ProblemError
+from optmodels.core import FloatArray, ProblemError, as_choice, as_count, as_positive
 from optmodels.trajectories import TrajectoryData
 
 __all__ = ["TrajectoryScenario", "equally_spaced", "launcher_release"]
@@ -47,8 +47,15 @@ class TrajectoryScenario:
         return TrajectoryData(self.times, self.values, self.sigma2)
 
 
-def _rng(seed: int | np.random.Generator | None) -> np.random.Generator:
-    return seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
+def _rng(seed: int | np.random.Generator | None, where: str) -> np.random.Generator:
+    if isinstance(seed, np.random.Generator):
+        return seed
+    if isinstance(seed, int | np.integer | float | str | bytes | bool | np.bool_):
+        seed = as_count(f"{where} seed", seed)
+    try:
+        return np.random.default_rng(seed)
+    except (TypeError, ValueError) as exc:
+        raise ProblemError(f"{where} seed: not usable as a seed ({exc})") from None
 
 
 def _measure(rng: np.random.Generator, times: list[FloatArray], start: FloatArray,
@@ -67,10 +74,20 @@ def launcher_release(seed: int | np.random.Generator | None = None, *,
     after release for 10-30 minutes at 10 s intervals, with gaps (unequal N_j and times).
     Parallel: the same objects spaced 2-20 km apart, all drifting at 1.5 m/s.
     ``sigma`` (m) is the along-track measurement error.
+
+    Raises
+    ------
+    ProblemError
+        ``q`` not a whole number ≥ 2, ``sigma`` not positive, an unknown ``family``, a
+        seed that is neither a Generator, None nor a whole number.
     """
+    where = "scenarios.launcher_release"
+    q = as_count(f"{where} q", q)
     if q < 2:
-        raise ProblemError(f"q: a family needs at least 2 objects, got {q}")
-    rng = _rng(seed)
+        raise ProblemError(f"{where} q: a family needs at least 2 objects, got {q}")
+    family = as_choice(f"{where} family", family, ("diverging", "parallel"))  # type: ignore
+    sigma = as_positive(f"{where} sigma", sigma)
+    rng = _rng(seed, where)
     times = []
     for _ in range(q):
         first = rng.uniform(60.0, 200.0)
@@ -85,7 +102,7 @@ def launcher_release(seed: int | np.random.Generator | None = None, *,
     elif family == "parallel":
         start = np.cumsum(rng.uniform(2e3, 20e3, q))
         velocity = np.full(q, 1.5)
-    else:
+    else:  # pragma: no cover - as_choice above
         raise ProblemError(f"family: expected 'diverging' or 'parallel', got {family!r}")
     s2 = sigma * sigma
     return TrajectoryScenario(times, _measure(rng, times, start, velocity, s2), start,
@@ -96,10 +113,22 @@ def equally_spaced(seed: int | np.random.Generator | None = None, *, n: int = 10
                    q: int = 2, dt: float = 1.0, family: str = "diverging",
                    sigma2: float = 1.0) -> TrajectoryScenario:
     """The paper's setting of (15)-(20): ``Q`` objects measured together at
-    ``t_i = (i − 1)·dt``, ``i = 1..N`` (the first measurement at the common start)."""
-    if n < 2 or q < 1:
-        raise ProblemError(f"n, q: need n >= 2 and q >= 1, got n = {n}, q = {q}")
-    rng = _rng(seed)
+    ``t_i = (i − 1)·dt``, ``i = 1..N`` (the first measurement at the common start).
+    ``dt`` in s, ``sigma2`` in m².
+
+    Raises
+    ------
+    ProblemError
+        ``n`` < 2 or ``q`` < 1 or not whole numbers, ``dt`` or ``sigma2`` not positive, an
+        unknown ``family``.
+    """
+    where = "scenarios.equally_spaced"
+    n = as_count(f"{where} n", n, minimum=2)
+    q = as_count(f"{where} q", q, minimum=1)
+    dt = as_positive(f"{where} dt", dt)
+    sigma2 = as_positive(f"{where} sigma2", sigma2)
+    family = as_choice(f"{where} family", family, ("diverging", "parallel", "independent"))
+    rng = _rng(seed, where)
     t = dt * np.arange(n, dtype=float)
     times = [t.copy() for _ in range(q)]
     if family == "diverging":

@@ -10,7 +10,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from optmodels.core import FloatArray, ProblemError
+from optmodels.core import (
+    FloatArray,
+    ProblemError,
+    as_choice,
+    as_count,
+    as_finite_array,
+    as_number,
+    as_positive,
+)
 
 __all__ = [
     "PAPER_RADIUS",
@@ -51,8 +59,18 @@ class ManeuverScenario:
     offset: float
 
 
-def _rng(seed: int | np.random.Generator) -> np.random.Generator:
-    return seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
+def _rng(seed: int | np.random.Generator, where: str = "scenarios") -> np.random.Generator:
+    """A Generator as given, or seeded from a whole number >= 0 (or a sequence of them)."""
+    if isinstance(seed, np.random.Generator):
+        return seed
+    if isinstance(seed, bool | np.bool_ | float | str | bytes) or seed is None:
+        raise ProblemError(f"{where} seed: expected a whole number >= 0 or a "
+                           f"numpy.random.Generator, got {seed!r}")
+    try:
+        return np.random.default_rng(seed)
+    except (TypeError, ValueError) as exc:
+        raise ProblemError(f"{where} seed: expected a whole number >= 0 or a "
+                           f"numpy.random.Generator, got {seed!r} ({exc})") from None
 
 
 def paper_plane_example(
@@ -74,12 +92,19 @@ def paper_plane_example(
     (times 0.01 ... 10 s, N = 1000). True plane ``n = (0, 1, 0)``, ``a = 0``. ``phase``
     (rad) is the position on the circle at t = 0, measured in the x-z plane from +x.
     """
-    if radius <= 0 or speed <= 0 or rate_hz <= 0 or duration <= 0 or sigma2 <= 0:
-        raise ProblemError(
-            "radius, speed, rate_hz, duration and sigma2 must be > 0 "
-            f"(got {radius}, {speed}, {rate_hz}, {duration}, {sigma2})"
-        )
-    rng = _rng(seed)
+    w = "scenarios.paper_plane_example"
+    radius = as_positive(f"{w} radius", radius)
+    speed = as_positive(f"{w} speed", speed)
+    center_distance = as_number(f"{w} center_distance", center_distance, low=0.0)
+    elevation_deg = as_number(f"{w} elevation_deg", elevation_deg, low=-90.0, high=90.0)
+    sigma2 = as_positive(f"{w} sigma2", sigma2)
+    rate_hz = as_positive(f"{w} rate_hz", rate_hz)
+    duration = as_positive(f"{w} duration", duration)
+    phase = as_number(f"{w} phase", phase)
+    if round(rate_hz * duration) < 3 or rate_hz * duration > 1e8:
+        raise ProblemError(f"{w} rate_hz, duration: {rate_hz:g} Hz for {duration:g} s gives "
+                           f"{round(rate_hz * duration)} samples; need 3 ... 1e8")
+    rng = _rng(seed, w)
     eps = np.deg2rad(elevation_deg)
     centre = np.array([center_distance * np.cos(eps), 0.0, center_distance * np.sin(eps)])
     n = round(rate_hz * duration)
@@ -111,8 +136,17 @@ def two_source_plane(
 ) -> ManeuverScenario:
     """Setting (a) of the comparison: two sources whose error variances differ by
     ``ratio2`` (α² ∈ {1, ratio2}, the motivation of (1.4)); isotropic errors of std
-    ``sigma`` for the good source. Points alternate between the sources."""
-    rng = _rng(seed)
+    ``sigma`` (m) for the good source on a square patch ``extent`` (m) wide, the plane
+    tilted by ``tilt_deg`` from horizontal at ``offset`` (m). Points alternate between the
+    sources."""
+    w = "scenarios.two_source_plane"
+    n = as_count(f"{w} n", n, minimum=3, maximum=10**8)
+    sigma = as_positive(f"{w} sigma", sigma)
+    ratio2 = as_positive(f"{w} ratio2", ratio2)
+    extent = as_positive(f"{w} extent", extent)
+    tilt_deg = as_number(f"{w} tilt_deg", tilt_deg)
+    offset = as_number(f"{w} offset", offset)
+    rng = _rng(seed, w)
     t = np.deg2rad(tilt_deg)
     normal = np.array([np.sin(t), 0.0, np.cos(t)])
     truth = _plane_patch(rng, n, normal, offset, extent)
@@ -130,9 +164,18 @@ def radar_covariances(
     """Cartesian error covariances (N, 3, 3) of a radar at ``site`` measuring range,
     azimuth and elevation with independent errors: ``J diag(σ_r², σ_az², σ_el²) J^T`` with
     ``J`` the Jacobian of the spherical-to-Cartesian map (azimuth clockwise from North,
-    ENU axes)."""
-    d = np.asarray(points, dtype=float) - np.asarray(site, dtype=float)
+    ENU axes). Points (m), standard deviations in m and rad."""
+    w = "scenarios.radar_covariances"
+    pts = as_finite_array(f"{w} points", points, shape=(None, 3), max_abs=1e100)
+    st = as_finite_array(f"{w} site", site, shape=(3,), max_abs=1e100)
+    s_r = as_positive(f"{w} sigma_range", sigma_range)
+    s_az = as_positive(f"{w} sigma_az", sigma_az)
+    s_el = as_positive(f"{w} sigma_el", sigma_el)
+    d = pts - st
     r = np.linalg.norm(d, axis=1)
+    if np.any(r == 0):
+        raise ProblemError(f"{w} points: {int(np.sum(r == 0))} coincide with the site "
+                           "(azimuth and elevation undefined)")
     az = np.arctan2(d[:, 0], d[:, 1])
     el = np.arcsin(d[:, 2] / r)
     caz, saz = np.cos(az), np.sin(az)
@@ -142,7 +185,7 @@ def radar_covariances(
     jac[:, :, 0] = np.column_stack([ce * saz, ce * caz, se])
     jac[:, :, 1] = np.column_stack([r * ce * caz, -r * ce * saz, np.zeros_like(r)])
     jac[:, :, 2] = np.column_stack([-r * se * saz, -r * se * caz, r * ce])
-    s = np.array([sigma_range, sigma_az, sigma_el]) ** 2
+    s = np.array([s_r, s_az, s_el]) ** 2
     return np.einsum("nij,j,nkj->nik", jac, s, jac)
 
 
@@ -159,7 +202,14 @@ def radar_plane(
     ``geometry="edge-on"``: the radar's line of sight lies in the plane, so the normal
     is measured only by the imprecise angles.
     """
-    rng = _rng(seed)
+    w = "scenarios.radar_plane"
+    n = as_count(f"{w} n", n, minimum=3, maximum=10**8)
+    sigma_range = as_positive(f"{w} sigma_range", sigma_range)
+    sigma_angle = as_positive(f"{w} sigma_angle", sigma_angle)
+    r_min = as_positive(f"{w} r_min", r_min)
+    r_max = as_number(f"{w} r_max", r_max, low=r_min, low_open=True)
+    geometry = as_choice(f"{w} geometry", geometry, ("broadside", "edge-on"))
+    rng = _rng(seed, w)
     rc = 0.5 * (r_min + r_max)
     span = r_max - r_min
     centre = np.array([0.0, rc, 3000.0])

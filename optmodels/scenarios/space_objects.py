@@ -16,9 +16,14 @@ import numpy as np
 from scipy.sparse import csgraph
 from scipy.spatial.distance import pdist, squareform
 
-from optmodels.core import FloatArray, ProblemError
+from optmodels.core import FloatArray, ProblemError, as_count, as_positive, as_probability
 
-__all__ = ["Session", "SpaceScenario", "space_objects"]
+__all__ = ["MAX_CLUTTER", "MAX_OBJECTS", "MAX_SESSIONS", "Session", "SpaceScenario",
+           "space_objects"]
+
+#: Size guards: objects (the pairwise distances are Q × Q per session), sessions, and the
+#: mean number of clutter measurements per session.
+MAX_OBJECTS, MAX_SESSIONS, MAX_CLUTTER = 5000, 100_000, 1e5
 
 
 @dataclass(frozen=True)
@@ -51,10 +56,45 @@ def space_objects(seed: int | np.random.Generator, *, q: int = 4, sessions: int 
                   sigma: float = 30.0, pd: float = 0.9, clutter: float = 2.0,
                   dt: float = 60.0, window: float = 2000.0) -> SpaceScenario:
     """Q objects released in a line with spacing ``separation`` (m) and relative drifts of
-    ±0.2 m/s, observed every ``dt`` s with noise σ = ``sigma`` m per axis."""
-    rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
-    if q < 1 or sessions < 1:
-        raise ProblemError("q, sessions: need at least one object and one session")
+    ±0.2 m/s, observed every ``dt`` s with noise σ = ``sigma`` m per axis.
+
+    Parameters
+    ----------
+    seed : int or numpy.random.Generator
+    q, sessions : int
+        Objects (1..:data:`MAX_OBJECTS`) and sessions (1..:data:`MAX_SESSIONS`).
+    separation, resolution, sigma, dt, window : float
+        Metres, metres, metres, seconds, metres; positive and finite.
+    pd : float
+        Detection probability in [0, 1].
+    clutter : float
+        Mean clutter count per session, in [0, :data:`MAX_CLUTTER`].
+
+    Raises
+    ------
+    ProblemError
+        Naming the argument, for a wrong type or value.
+    """
+    w = "scenarios.space_objects"
+    if isinstance(seed, np.random.Generator):
+        rng = seed
+    else:
+        try:
+            rng = np.random.default_rng(seed)
+        except (TypeError, ValueError) as exc:
+            raise ProblemError(f"{w} seed: expected an integer seed or a numpy Generator, "
+                               f"got {seed!r} ({exc})") from None
+    q = as_count(f"{w} q", q, minimum=1, maximum=MAX_OBJECTS)
+    sessions = as_count(f"{w} sessions", sessions, minimum=1, maximum=MAX_SESSIONS)
+    separation = as_positive(f"{w} separation", separation)
+    resolution = as_positive(f"{w} resolution", resolution)
+    sigma = as_positive(f"{w} sigma", sigma)
+    pd = as_probability(f"{w} pd", pd)
+    clutter = as_positive(f"{w} clutter", clutter, allow_zero=True)
+    if clutter > MAX_CLUTTER:
+        raise ProblemError(f"{w} clutter: must be <= {MAX_CLUTTER:g}, got {clutter:g}")
+    dt = as_positive(f"{w} dt", dt)
+    window = as_positive(f"{w} window", window)
     pos0 = np.column_stack([np.arange(q) * separation, rng.normal(0, 0.1 * separation, q)])
     vel = np.column_stack([np.full(q, 7000.0), np.zeros(q)]) + rng.uniform(-0.2, 0.2, (q, 2))
     x0 = np.hstack([pos0, vel])

@@ -1179,8 +1179,9 @@ def main(argv: Sequence[str] | None = None) -> int:
                 with contextlib.redirect_stdout(_Lines(buf)):
                     args.printer(result)
                 text = "".join(buf)
-        except KeyboardInterrupt:
-            code, message = EXIT_INTERRUPTED, "interrupted"
+        except KeyboardInterrupt as exc:
+            # montecarlo.Interrupted says what was saved and where
+            code, message = EXIT_INTERRUPTED, str(exc) or "interrupted"
         except (ProblemError, SolverNotAvailable) as exc:
             code, message = EXIT_INPUT, str(exc)
         except SolveError as exc:

@@ -137,7 +137,9 @@ def test_time_limit_is_not_optimal() -> None:
     what stopped it)."""
     d = case(np.random.default_rng(2), 12, 14, spread=10.0)
     s = asg.solve(d, time_limit=1e-3)
-    assert s.status is not Status.OPTIMAL or s.mip_gap == 0
+    # finished within the limit: OPTIMAL only at a closed gap, i.e. round-off of the
+    # objective (mip_abs_gap 1e-12 on |score| ~ 10, see the brute-force test)
+    assert s.status is not Status.OPTIMAL or s.mip_gap * max(abs(s.log_score), 1.0) <= 2e-12
     hard = dense_scene(30, 1.0)  # 70 000 binaries unpruned: HiGHS needs 1-3 s at zero gap
     stopped = asg.solve(hard, prune=False, time_limit=0.05)
     assert stopped.status is Status.ITERATION_LIMIT and not stopped.ok

@@ -410,6 +410,16 @@ def read_trajectory_csv(path: str | os.PathLike[str]) -> dict[str, Any]:
 _ZIP_MAGIC = (b"PK\x03\x04", b"PK\x05\x06")  # a local file header; an empty archive
 
 
+def _file_head(path: str | os.PathLike[str], what: str, size: int = 6) -> tuple[Path, bytes]:
+    """The checked input path and its first ``size`` bytes (the format's magic)."""
+    p = input_file(path, what=what)
+    try:
+        with p.open("rb") as fh:
+            return p, fh.read(size)
+    except OSError as exc:
+        raise ProblemError(f"{p}: cannot read the {what} ({exc.strerror or exc})") from None
+
+
 def read_npz(path: str | os.PathLike[str], *, what: str = ".npz archive",
              required: Iterable[str] = (), one_of: Iterable[str] = ()) -> dict[str, np.ndarray]:
     """All arrays of a NumPy ``.npz`` archive (pickles refused), checked for keys.
@@ -432,12 +442,7 @@ def read_npz(path: str | os.PathLike[str], *, what: str = ".npz archive",
         that is not a ZIP archive (a text file renamed, a single ``.npy``); a truncated or
         corrupt archive (bad CRC, cut short); object (pickled) arrays; missing keys.
     """
-    p = input_file(path, what=what)
-    try:
-        with p.open("rb") as fh:
-            head = fh.read(6)
-    except OSError as exc:
-        raise ProblemError(f"{p}: cannot read the {what} ({exc.strerror or exc})") from None
+    p, head = _file_head(path, what)
     if not head:
         raise ProblemError(f"{p}: empty file (expected a {what})")
     if not head.startswith(_ZIP_MAGIC):
@@ -501,12 +506,7 @@ def read_npy(path: str | os.PathLike[str], *, what: str = ".npy array") -> np.nd
         Naming the file: the path problems of :func:`input_file`; not an ``.npy`` (an
         ``.npz`` or a text file renamed); truncated or corrupt; object (pickled) arrays.
     """
-    p = input_file(path, what=what)
-    try:
-        with p.open("rb") as fh:
-            head = fh.read(6)
-    except OSError as exc:
-        raise ProblemError(f"{p}: cannot read the {what} ({exc.strerror or exc})") from None
+    p, head = _file_head(path, what)
     if not head.startswith(b"\x93NUMPY"):
         kind = ("an .npz archive" if head.startswith(_ZIP_MAGIC) else
                 "an empty file" if not head else "not a NumPy .npy file")

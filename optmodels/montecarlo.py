@@ -215,6 +215,31 @@ class LineLog:
         cut = data.rfind(b"\n") + 1
         return data[:cut].split(b"\n")[:-1], data[cut:]
 
+    def open_with_header(self, head: str, foreign: str) -> tuple[list[bytes], bytes]:
+        """The file's lines after ensuring it starts with a header: a new or empty file,
+        or one whose header a crash cut short, is (re)started with ``head`` and gives
+        ``([], b"")``; a file with no header line is refused with ``foreign`` (what it is
+        not, e.g. "a Monte Carlo checkpoint"). Otherwise :meth:`read`'s lines and tail."""
+        lines, tail = self.read()
+        if lines:
+            return lines, tail
+        if tail and not (head + "\n").encode().startswith(tail):
+            raise ProblemError(f"{self.what}: {self.path} is not {foreign} (no header "
+                               "line); use another path or delete it")
+        if tail:
+            self.rewrite([], [])  # a header cut short by a crash: start afresh
+        self.append([head])
+        return [], b""
+
+    def keep(self, keep: list[str], dropped: list[bytes], tail: bytes) -> int:
+        """After parsing: if any line was unreadable (or the last cut short), rewrite the
+        file with the ``keep`` lines, move the rest to ``PATH.skipped`` and say so
+        (:func:`report_skipped`). Returns the number of lines skipped."""
+        if dropped or tail:
+            moved = self.rewrite(keep, dropped + ([tail] if tail else []))
+            report_skipped(self.what, self.path, len(dropped), len(tail), moved)
+        return len(dropped) + bool(tail)
+
     def rewrite(self, lines: list[str], dropped: list[bytes]) -> Path:
         """Replace the file by ``lines`` (atomically: a temporary file, fsync, rename);
         append ``dropped`` to ``PATH.skipped``, which is returned."""
@@ -342,14 +367,8 @@ def _load_checkpoint(ck: LineLog, header: dict[str, Any]
     """Finished and failed trials recorded in the checkpoint, and the number of lines
     skipped. Writes the header of a new (or empty) file; repairs a damaged one."""
     head_line = json.dumps(header)
-    lines, tail = ck.read()
+    lines, tail = ck.open_with_header(head_line, "a Monte Carlo checkpoint")
     if not lines:
-        if tail and not (head_line + "\n").encode().startswith(tail):
-            raise ProblemError(f"{ck.what}: {ck.path} is not a Monte Carlo checkpoint "
-                               f"(no header line); use another path or delete it")
-        if tail:
-            ck.rewrite([], [])  # a header cut short by a crash: start afresh
-        ck.append([head_line])
         return {}, {}, 0
     try:
         head = json.loads(lines[0])
@@ -386,11 +405,9 @@ def _load_checkpoint(ck: LineLog, header: dict[str, Any]
             dropped.append(raw)
             continue
         keep.append(raw.decode())
-    if dropped or tail:
-        moved = ck.rewrite(keep, dropped + ([tail] if tail else []))
-        report_skipped(ck.what, ck.path, len(dropped), len(tail), moved)
+    skipped = ck.keep(keep, dropped, tail)
     failed = {i: m for i, m in failed.items() if i not in done}
-    return done, failed, len(dropped) + bool(tail)
+    return done, failed, skipped
 
 
 def _chunks(todo: list[int], size: int) -> list[list[int]]:

@@ -26,19 +26,22 @@ BRUTE_LIMIT = 200_000
 
 
 def instance(q: int, n: int, seed: int, gate: float | None, *,
-             rho: float = 0.05, merges: bool = True) -> asg.AssignmentData:
-    """Q objects in a square whose side grows like √Q (constant density, so some are
+             rho: float = 0.05, merges: bool = True, side_factor: float = 3.0,
+             max_group_size: int | None = None) -> asg.AssignmentData:
+    """Q objects in a square of side ``side_factor``·√Q (constant density, so some are
     closer than the measurement noise), the first min(N, Q) measurements on objects (a
-    merged mean for one close pair), the rest uniform clutter."""
+    merged mean for one close pair), the rest uniform clutter. Groups up to
+    ``max_group_size`` objects (no limit by default; 1 without ``merges``)."""
     rng = np.random.default_rng([seed, q, n])
-    side = 3.0 * np.sqrt(q)
+    side = side_factor * np.sqrt(q)
     means = rng.uniform(0, side, (q, 2))
     covs = np.stack([np.eye(2) * rng.uniform(0.1, 0.5) for _ in range(q)])
     meas = rng.uniform(0, side, (n, 2))
     k = min(n, q)
     meas[:k] = means[:k] + rng.normal(0, 0.5, (k, 2))
     return asg.AssignmentData(means, covs, meas, 0.25 * np.eye(2), side**2, 0.9, rho,
-                              max_group_size=None if merges else 1, group_gate=gate)
+                              max_group_size=max_group_size if merges else 1,
+                              group_gate=gate)
 
 
 def rows(cases: tuple[tuple[int, int, float | None], ...] = CASES, *, seed: int = 0,

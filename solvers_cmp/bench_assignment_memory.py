@@ -51,16 +51,8 @@ if cap > 0:
     resource.setrlimit(resource.RLIMIT_AS, (cap, cap))
 q, side_factor, gate, mgs, prune = json.loads(sys.argv[1])
 from optmodels import assignment as asg
-n = q + q // 8 + 1
-rng = np.random.default_rng([0, q, n])
-side = side_factor * np.sqrt(q)
-means = rng.uniform(0, side, (q, 2))
-covs = np.stack([np.eye(2) * rng.uniform(0.1, 0.5) for _ in range(q)])
-meas = rng.uniform(0, side, (n, 2))
-k = min(n, q)
-meas[:k] = means[:k] + rng.normal(0, 0.5, (k, 2))
-data = asg.AssignmentData(means, covs, meas, 0.25 * np.eye(2), side**2, 0.9, 0.05,
-                          max_group_size=mgs, group_gate=gate)
+from solvers_cmp.assignment import instance
+data = instance(q, q + q // 8 + 1, 0, gate, side_factor=side_factor, max_group_size=mgs)
 out = {}
 t0 = time.perf_counter()
 try:

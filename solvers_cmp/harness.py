@@ -44,7 +44,7 @@ from tqdm import tqdm
 
 from optmodels.core import ProblemError, as_choice, as_count, as_positive
 from optmodels.io import csv_cell
-from optmodels.montecarlo import Interrupted, LineLog, guard_worker, report_skipped, sigint_ignored
+from optmodels.montecarlo import Interrupted, LineLog, guard_worker, sigint_ignored
 from solvers_cmp import cases as cs
 from solvers_cmp.report import cpu_name
 
@@ -298,14 +298,8 @@ def _load_results(rl: LineLog) -> list[dict[str, Any]]:
     """The readable rows of ``results.csv`` (held by ``rl``); writes the header of a new
     or empty file and moves unreadable lines to ``results.csv.skipped`` (logged)."""
     head = _header_line()
-    lines, tail = rl.read()
+    lines, tail = rl.open_with_header(head, "a results file of this harness")
     if not lines:
-        if tail and not (head + "\n").encode().startswith(tail):
-            raise ProblemError(f"{rl.what}: {rl.path} is not a results file of this harness "
-                               f"(no header); use another --out or delete it")
-        if tail:
-            rl.rewrite([], [])  # a header cut short by a crash: start afresh
-        rl.append([head])
         return []
     if lines[0].decode(errors="replace").strip() != head:
         raise ProblemError(f"{rl.what}: {rl.path} has other columns than this harness "
@@ -320,9 +314,7 @@ def _load_results(rl: LineLog) -> list[dict[str, Any]]:
         else:
             rows.append(row)
             keep.append(raw.decode())
-    if dropped or tail:
-        moved = rl.rewrite(keep, dropped + ([tail] if tail else []))
-        report_skipped(rl.what, rl.path, len(dropped), len(tail), moved)
+    rl.keep(keep, dropped, tail)
     return rows
 
 

@@ -109,3 +109,19 @@ def wait_gone(pids: list[int], timeout: float) -> list[int]:
     while alive(pids) and time.monotonic() < deadline:
         time.sleep(0.05)
     return alive(pids)
+
+
+def interrupt(proc: Any) -> tuple[str, str, float]:
+    """Ctrl-C as a terminal sends it (SIGINT to the whole process group of ``proc``, a
+    ``subprocess.Popen`` started with ``start_new_session=True``); waits up to 10 s and
+    SIGKILLs a process that did not stop. Returns stdout, stderr and the seconds it took."""
+    import signal
+
+    t0 = time.monotonic()
+    os.killpg(proc.pid, signal.SIGINT)
+    try:
+        out, err = proc.communicate(timeout=10)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+    return out or "", err or "", time.monotonic() - t0

@@ -14,6 +14,7 @@ import pytest
 from optmodels import ProblemError
 from optmodels import assignment as asg
 from optmodels.core import REJECT_TOL, VERIFY_TOL, SolveError, Status
+from solvers_cmp.assignment import instance
 
 
 def case(rng: np.random.Generator, q: int, n: int, *, spread: float = 3.0,
@@ -29,19 +30,11 @@ def case(rng: np.random.Generator, q: int, n: int, *, spread: float = 3.0,
 
 
 def dense_scene(q: int, side_factor: float, *, gate: float | None = 3.0,
-                **kw) -> asg.AssignmentData:
+                max_group_size: int | None = None) -> asg.AssignmentData:
     """The comparison's scene (solvers_cmp.assignment.instance) with a chosen density:
     Q objects in a square of side ``side_factor``·√Q, N = Q + Q//8 + 1."""
-    n = q + q // 8 + 1
-    rng = np.random.default_rng([0, q, n])
-    side = side_factor * np.sqrt(q)
-    means = rng.uniform(0, side, (q, 2))
-    covs = np.stack([np.eye(2) * rng.uniform(0.1, 0.5) for _ in range(q)])
-    meas = rng.uniform(0, side, (n, 2))
-    k = min(n, q)
-    meas[:k] = means[:k] + rng.normal(0, 0.5, (k, 2))
-    return asg.AssignmentData(means, covs, meas, 0.25 * np.eye(2), side**2, 0.9, 0.05,
-                              group_gate=gate, **kw)
+    return instance(q, q + q // 8 + 1, 0, gate, side_factor=side_factor,
+                    max_group_size=max_group_size)
 
 
 def test_counts() -> None:

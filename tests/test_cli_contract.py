@@ -281,12 +281,11 @@ def test_ctrl_c_of_the_console_script_saves_and_resumes(tmp_path: Path) -> None:
     worker left; the rerun resumes from the checkpoint and its means equal an
     uninterrupted in-process run of the same study (trials are seeded per index, so
     bit-identical per trial; the means to 1e-12 relative for the summation order)."""
-    import signal
     import subprocess
     import time
 
     from optmodels import montecarlo as mc
-    from tests.harness_adapters import alive, children
+    from tests.harness_adapters import children, interrupt, wait_gone
     from tests.test_cli import OPTMODELS, run_cli
 
     ckpt = tmp_path / "eta.jsonl"
@@ -302,15 +301,12 @@ def test_ctrl_c_of_the_console_script_saves_and_resumes(tmp_path: Path) -> None:
         time.sleep(0.05)
     assert len(ckpt.read_text().splitlines()) >= 3, "the study never checkpointed"
     workers = children(proc.pid)
-    t0 = time.monotonic()
-    os.killpg(proc.pid, signal.SIGINT)
-    out, err = proc.communicate(timeout=30)
-    took = time.monotonic() - t0
+    out, err, took = interrupt(proc)
     assert proc.returncode == 130 and took < 2.0, (proc.returncode, took, err)
     lines = [ln for ln in err.splitlines() if ln.strip()]
     assert len(lines) == 1 and "interrupted after" in lines[0], err
     assert "Traceback" not in err and json.loads(out)["exit_code"] == 130
-    assert not alive(workers), "a worker outlived the interrupted study"
+    assert wait_gone(workers, 5.0) == [], "a worker outlived the interrupted study"
     done = len(ckpt.read_text().splitlines())
     assert done < 21, "the study finished before the interrupt: nothing was tested"
     again = json.loads(run_cli("montecarlo", "trajectories-eta", *trials,

@@ -26,7 +26,7 @@ from optmodels.core import ProblemError
 from optmodels.montecarlo import LineLog
 from solvers_cmp import cases as cs
 from solvers_cmp import harness, report
-from tests.harness_adapters import children, wait_gone
+from tests.harness_adapters import children, interrupt, wait_gone
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -300,14 +300,7 @@ def test_harness_worker_dies_with_a_killed_parent(tmp_path: Path) -> None:
 def test_harness_ctrl_c_keeps_rows_and_resumes(tmp_path: Path, trouble: None) -> None:
     proc = _start_trouble(tmp_path / "a")
     kids = children(proc.pid)
-    t0 = time.monotonic()
-    os.killpg(proc.pid, signal.SIGINT)
-    try:
-        err = proc.communicate(timeout=10)[1]
-    finally:
-        if proc.poll() is None:
-            os.killpg(proc.pid, signal.SIGKILL)
-    took = time.monotonic() - t0
+    _, err, took = interrupt(proc)  # SIGINT to the whole group, as a terminal does
     assert proc.returncode == 130 and took < 2.0, (proc.returncode, took, err)
     assert len(err.splitlines()) == 1 and "compare: interrupted" in err, err
     assert wait_gone(kids, 5.0) == []

@@ -18,7 +18,7 @@ import pytest
 from optmodels import montecarlo as mc
 from optmodels import trajectories as tr
 from optmodels.core import ProblemError
-from tests.harness_adapters import Flaky, Slow, children, wait_gone
+from tests.harness_adapters import Flaky, Slow, children, interrupt, wait_gone
 
 ROOT = Path(__file__).resolve().parents[1]
 ENV = {**os.environ, "PYTHONPATH": str(ROOT)}
@@ -247,14 +247,7 @@ def test_ctrl_c_saves_and_exits_in_one_line(tmp_path: Path) -> None:
     proc = _start(code)
     _wait_lines(proc, ckpt, 4)
     kids = children(proc.pid)
-    t0 = time.monotonic()
-    os.killpg(proc.pid, signal.SIGINT)  # the whole group, as a terminal does
-    try:
-        err = proc.communicate(timeout=10)[1]
-    finally:
-        if proc.poll() is None:
-            os.killpg(proc.pid, signal.SIGKILL)
-    took = time.monotonic() - t0
+    _, err, took = interrupt(proc)  # SIGINT to the whole group, as a terminal does
     assert proc.returncode == 130 and took < 2.0, (proc.returncode, took, err)
     assert len(err.splitlines()) == 1 and "interrupted after" in err, err
     assert wait_gone(kids, 5.0) == []

@@ -293,6 +293,18 @@ def _scales(data: FieldData, phi0: FloatArray) -> FloatArray:
     return np.tile(s, data.m * data.k)
 
 
+def _arguments(fn: str, data: FieldData, formulation: Any, solver: Any, box: Any
+               ) -> tuple[int, Any, str, Any, Any]:
+    """The checked arguments common to :func:`solve` and :func:`solve_lipschitz`: the
+    number of graph components, the formulation, the solver's name, the box bound and the
+    uncertainty sets (10)."""
+    n_comp, _ = _check_graph(data)
+    formulation = as_choice(f"{fn} formulation", formulation, ("constrained", "reduced"))
+    solver = _solver_name(fn, solver)
+    bound = _box(data, box, fn)
+    return n_comp, formulation, solver, bound, uncertainty_sets(data)
+
+
 def solve(data: FieldData, *, box: tuple[float, float] | None = None,
           solver: str = "CLARABEL", formulation: Literal["constrained", "reduced"] = "reduced",
           **options: Any) -> FieldSolution:
@@ -317,13 +329,8 @@ def solve(data: FieldData, *, box: tuple[float, float] | None = None,
     :class:`ProblemError` naming it.
     """
     fn = "biasfield.solve"
-    n_comp, _ = _check_graph(data)
-    formulation = as_choice(f"{fn} formulation", formulation,  # type: ignore[assignment]
-                            ("constrained", "reduced"))
-    solver = _solver_name(fn, solver)
-    bound = _box(data, box, fn)
+    n_comp, formulation, solver, bound, sets = _arguments(fn, data, formulation, solver, box)
     method = f"cvxpy:{solver}:{formulation}"
-    sets = uncertainty_sets(data)
     phi0, phi1 = sets
     if bound is not None:
         bad = box_feasibility(data, box, sets=sets)  # type: ignore[arg-type]
@@ -512,14 +519,9 @@ def solve_lipschitz(data: FieldData, *, box: tuple[float, float] | None = None,
     certificate (see :mod:`optmodels.backends.cvxpy_backend`).
     """
     fn = "biasfield.solve_lipschitz"
-    n_comp, _ = _check_graph(data)
-    formulation = as_choice(f"{fn} formulation", formulation,  # type: ignore[assignment]
-                            ("constrained", "reduced"))
-    solver = _solver_name(fn, solver)
-    bound = _box(data, box, fn)
+    n_comp, formulation, solver, bound, sets = _arguments(fn, data, formulation, solver, box)
     cap_v = None if cap is None else as_positive(f"{fn} cap", cap)
     method = f"cvxpy:{solver}:lipschitz:{formulation}"
-    sets = uncertainty_sets(data)
     phi0, phi1 = sets
     if bound is not None:
         bad = box_feasibility(data, box, sets=sets)  # type: ignore[arg-type]

@@ -13,6 +13,8 @@ import pytest
 
 from optmodels import ProblemError
 from optmodels import assignment as asg
+from optmodels.assignment import data as asg_data
+from optmodels.assignment import milp as asg_milp
 from optmodels.core import REJECT_TOL, VERIFY_TOL, SolveError, Status
 from solvers_cmp.assignment import instance
 
@@ -245,7 +247,7 @@ def test_size_guards_refuse_before_allocating(monkeypatch: pytest.MonkeyPatch) -
         asg.solve(dense)  # at the default limit
     assert "max_group_size" in str(err.value) and str(asg.MAX_CANDIDATE_GROUPS) in str(
         err.value)
-    monkeypatch.setattr(asg, "MAX_CANDIDATE_GROUPS", 2000)  # same path, quicker to trace
+    monkeypatch.setattr(asg_data, "MAX_CANDIDATE_GROUPS", 2000)  # same path, quicker to trace
     for data in (dense, dense_scene(200, 3.0, gate=None)):
         tracemalloc.start()
         with pytest.raises(ProblemError, match="candidate groups"):
@@ -256,7 +258,7 @@ def test_size_guards_refuse_before_allocating(monkeypatch: pytest.MonkeyPatch) -
     # the model-column guard, checked after pruning and before the build
     d = dense_scene(30, 1.5)
     n_groups = len(asg.candidate_groups(d))
-    monkeypatch.setattr(asg, "MAX_MODEL_COLUMNS", n_groups * d.n // 2)
+    monkeypatch.setattr(asg_milp, "MAX_MODEL_COLUMNS", n_groups * d.n // 2)
     with pytest.raises(ProblemError, match="prune=False"):
         asg.solve(d, prune=False)
     assert asg.solve(d).status is Status.OPTIMAL  # pruned, it fits
@@ -393,7 +395,7 @@ def _perturbed(monkeypatch: pytest.MonkeyPatch, *, objective: float = 0.0,
                point: Callable[[np.ndarray], np.ndarray] | None = None,
                gap: float | None = None) -> None:
     """Make the back-end return a perturbed objective or point (a faulty solver)."""
-    real = asg.solve_problem
+    real = asg_milp.solve_problem
 
     def fake(prob, solver, **kw):  # type: ignore[no-untyped-def]
         res = real(prob, solver, **kw)
@@ -403,7 +405,7 @@ def _perturbed(monkeypatch: pytest.MonkeyPatch, *, objective: float = 0.0,
         info = dict(res.info) if gap is None else {**res.info, "mip_gap": gap}
         return dataclasses.replace(res, objective=res.objective * (1 + objective), info=info)
 
-    monkeypatch.setattr(asg, "solve_problem", fake)
+    monkeypatch.setattr(asg_milp, "solve_problem", fake)
 
 
 def test_milp_answer_is_rechecked(monkeypatch: pytest.MonkeyPatch) -> None:

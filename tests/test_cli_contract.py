@@ -17,6 +17,7 @@ import numpy as np
 import pytest
 
 from optmodels import cli
+from optmodels.cli.problems import assignment as cli_assignment
 from optmodels.core import SolveError
 from optmodels.io import write_plane_csv
 from tests.test_cli import assert_error, run_many
@@ -192,7 +193,7 @@ def test_ok_runs_exit_0_and_agree_with_the_library(files: dict[str, Path], tmp_p
 # ------------------------------------------------------------- in-process paths
 def _patch_command(monkeypatch: pytest.MonkeyPatch, func: Any) -> None:
     """Make ``optmodels assignment count`` run ``func`` (the parser is built per call)."""
-    monkeypatch.setattr(cli, "_assignment_count", func)
+    monkeypatch.setattr(cli_assignment, "_assignment_count", func)
 
 
 def test_c_level_stdout_goes_to_stderr(monkeypatch: pytest.MonkeyPatch,
@@ -215,7 +216,7 @@ def test_c_level_stdout_goes_to_stderr(monkeypatch: pytest.MonkeyPatch,
     for text in ("banner via fd 1", "banner via printf", "python print during"):
         assert text in cap.err and text not in cap.out
     # the human output too: only the printer's text on stdout
-    monkeypatch.setattr(cli, "_print_assignment_count", lambda res: print("RESULT"))
+    monkeypatch.setattr(cli_assignment, "_print_assignment_count", lambda res: print("RESULT"))
     assert cli.main(["assignment", "count", "1", "0"]) == 0
     cap = capfd.readouterr()
     assert cap.out == "RESULT\n" and "banner via printf" in cap.err

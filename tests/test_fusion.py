@@ -11,6 +11,7 @@ import pytest
 
 from optmodels import ProblemError
 from optmodels import fusion as fu
+from optmodels.fusion import sampling as fu_sampling
 
 
 def spd(rng: np.random.Generator, m: int, floor: float = 0.5) -> np.ndarray:
@@ -535,7 +536,7 @@ def test_monte_carlo_weight_is_chunked_and_guarded(monkeypatch: pytest.MonkeyPat
     with pytest.raises(ProblemError, match="dimension"):
         fu.monte_carlo_weight(np.eye(fu.MAX_DIM + 1), np.eye(fu.MAX_DIM + 1), 40, 40,
                               trials=10)
-    monkeypatch.setattr(fu, "MC_CHUNK", 64 * 4)
+    monkeypatch.setattr(fu_sampling, "MC_CHUNK", 64 * 4)
     n, trials = 400, 20_000
     mc = fu.monte_carlo_weight(s1, s2, n, n, trials=trials, seed=3, mean="sample")
     lin = fu.weight_covariance(s1, s2, n, n, mean="sample")

@@ -2,6 +2,13 @@
 and the smoothest field on them (part 2).
 
 Paper: ``shared/papers/001_d6b2428a10e192f8.txt``. Errata: ``docs/errata.md``.
+
+Part 1: ``data`` (plot tables, radar sites), ``geometry`` (polar maps), ``ingest`` (files),
+``tracks`` (track fits), ``baseline``, ``cells`` (cells and the uncertainty sets (10)),
+``fields`` (bias field models). Part 2 (section 4; entry point ``selection``): ``problem``
+(the original problem (8)-(10), :class:`FieldSolution`), ``selection`` (closed form (11),
+the QP (9)-(10)), ``lipschitz`` (the Lipschitz class), ``verify`` (the NumPy re-checks),
+``identifiability``.
 """
 
 from optmodels.biasfield.baseline import BaselineResult, azimuth_bias_baseline
@@ -25,12 +32,9 @@ from optmodels.biasfield.geometry import (
     wrap_angle,
 )
 from optmodels.biasfield.ingest import read_plots, read_radars, read_tracks
-from optmodels.biasfield.selection import (
-    FieldSolution,
-    closed_form,
-    solve,
-    solve_lipschitz,
-)
+from optmodels.biasfield.lipschitz import solve_lipschitz
+from optmodels.biasfield.problem import FieldSolution
+from optmodels.biasfield.selection import closed_form, solve
 from optmodels.biasfield.tracks import (
     ResidualCheck,
     TrackFit,

@@ -1,0 +1,341 @@
+r"""The problem of paper 004 in NumPy: the data, the model (5), (8) of a hypothesis
+H = (π, γ) of (13)-(14), its score (13), the result type, and every NumPy check of an
+answer against them (the MILP point's re-check :func:`_recheck` included).
+
+Model (the paper leaves the group likelihood and the prior open; this is the default):
+
+* object j predicted N(m_j, K_j); a measurement of it is N(x; m_j, K_j + K1) -- (5);
+* an unresolved group S (|S| ≥ 2) gives one measurement at the members' mean:
+  N(x; mean_{j∈S} m_j, Σ_{j∈S}K_j/|S|² + K1);
+* background (clutter): 1/Δx -- (8);
+* hypothesis H = (π, γ): every measurement goes to exactly one block of π or to the
+  background, every block gets at most one measurement;
+* ln P(H) = (Q − |π|) ln ρ + Σ_{S∈π}[d_S ln P_D + (1 − d_S) ln(1 − P_D)];
+* score(H) = ln P(H) + Σ_i ln φ_{i,γ(i)}; the MAP hypothesis maximises it.
+
+Holds: :class:`AssignmentData`, :func:`candidate_groups` (the size guard
+:data:`MAX_CANDIDATE_GROUPS`), :func:`block_log_prior`, :func:`log_likelihoods`,
+:func:`score`, the validators :func:`_as_partition` / :func:`_as_assignment`,
+:class:`AssignmentSolution`, :func:`_canonical` and :func:`_recheck`.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import scipy.sparse as sps
+from scipy.special import comb
+
+from optmodels.core import (
+    FloatArray,
+    ProblemError,
+    Solution,
+    as_count,
+    as_finite_array,
+    as_positive,
+    as_probability,
+    check_spd,
+    check_spd_stack,
+)
+
+Partition = list[tuple[int, ...]]
+
+
+#: Size guards (documented in the README). Candidate groups (z_S columns) enumerated at
+#: most; beyond it the gate/max_group_size must be tightened. The count is checked while
+#: the cliques grow, before anything of that size is allocated.
+MAX_CANDIDATE_GROUPS = 100_000
+
+
+# ----------------------------------------------------------------------------- data
+@dataclass
+class AssignmentData:
+    """Predictions ``means`` (Q, d), ``covs`` (Q, d, d); ``measurements`` (N, d) with noise
+    ``meas_cov`` (d, d); surveillance ``volume`` Δx (m^d); detection probability ``pd`` ∈
+    (0, 1); per-merge prior factor ``rho`` ∈ (0, 1]; candidate groups limited by
+    ``max_group_size`` (default: all sizes) and ``group_gate`` (members pairwise within
+    this Mahalanobis distance of each other's predictions, under K_i + K_j; default: no
+    gate). Units SI: means and measurements in m (or the sensor's own units, the same
+    for all), covariances in their square, Δx in m^d.
+
+    Your own model: ``log_likelihood(data, S)`` → (N,) ln φ_iS for block S (replaces the
+    Gaussian default), and ``block_log_prior(S, detected)`` → the block's share of ln P(H)
+    (default (|S| − 1) ln ρ + ln P_D or ln(1 − P_D)). The prior must decompose over blocks
+    for the MILP to stay linear. With a custom prior only the background-dominance pruning
+    is applied (the others rely on the default prior's form)."""
+
+    means: FloatArray
+    covs: FloatArray
+    measurements: FloatArray
+    meas_cov: FloatArray
+    volume: float
+    pd: float
+    rho: float
+    max_group_size: int | None = None
+    group_gate: float | None = None
+    log_likelihood: Callable[[AssignmentData, tuple[int, ...]], FloatArray] | None = None
+    block_log_prior: Callable[[tuple[int, ...], bool], float] | None = None
+
+    def __post_init__(self) -> None:
+        w = "assignment.AssignmentData"
+        self.means = as_finite_array(f"{w} means", self.means, ndim=2)
+        q, d = self.means.shape
+        if q < 1 or d < 1:
+            raise ProblemError(f"{w} means: need at least one object with at least one "
+                               f"coordinate, got shape {self.means.shape}")
+        self.covs = as_finite_array(f"{w} covs", self.covs, shape=(q, d, d))
+        check_spd_stack(f"{w} covs", self.covs)
+        meas = self.measurements
+        if meas is not None and not isinstance(meas, str) and np.size(meas) == 0:
+            meas = np.zeros((0, d))
+        self.measurements = as_finite_array(f"{w} measurements", meas, ndim=2)
+        if self.measurements.shape[1] != d:
+            raise ProblemError(f"{w} measurements: expected (N, {d}) like means, got "
+                               f"{self.measurements.shape}")
+        self.meas_cov = as_finite_array(f"{w} meas_cov", self.meas_cov, shape=(d, d))
+        check_spd(f"{w} meas_cov", self.meas_cov)
+        self.pd = as_probability(f"{w} pd", self.pd, low_open=True, high_open=True)
+        # Δx (m^d, SI) enters through its logarithm: positive and finite. ρ is the prior
+        # factor of one merge, P(H) ∝ ρ^(Q − |π|): in (0, 1] (ρ > 1 would make merged
+        # variants a priori more likely than the resolved one)
+        self.volume = as_positive(f"{w} volume", self.volume)
+        self.rho = as_probability(f"{w} rho", self.rho, low_open=True)
+        if self.max_group_size is not None:
+            self.max_group_size = as_count(f"{w} max_group_size", self.max_group_size,
+                                           minimum=1)
+        if self.group_gate is not None:
+            self.group_gate = as_positive(f"{w} group_gate", self.group_gate, allow_inf=True)
+        for name in ("log_likelihood", "block_log_prior"):
+            if getattr(self, name) is not None and not callable(getattr(self, name)):
+                raise ProblemError(f"{w} {name}: expected a callable or None, got "
+                                   f"{type(getattr(self, name)).__name__}")
+
+    @property
+    def q(self) -> int:
+        return int(self.means.shape[0])
+
+    @property
+    def n(self) -> int:
+        return int(self.measurements.shape[0])
+
+
+# ----------------------------------------------------------------------------- likelihoods
+def _logpdf(x: FloatArray, mean: FloatArray, cov: FloatArray) -> FloatArray:
+    """ln N(x_i; mean, cov) for all rows of x (computed in logs; never log 0)."""
+    chol = np.linalg.cholesky(cov)
+    z = np.linalg.solve(chol, (x - mean).T)
+    d = x.shape[1]
+    return -0.5 * np.sum(z**2, axis=0) - np.sum(np.log(np.diag(chol))) - 0.5 * d * math.log(
+        2 * math.pi)
+
+
+def candidate_groups(data: AssignmentData, *,
+                     limit: int | None = None) -> list[tuple[int, ...]]:
+    """Singletons and the groups allowed by ``max_group_size`` and ``group_gate`` (cliques
+    of the gate graph: members pairwise within the gate under K_i + K_j), in
+    lexicographic order by size.
+
+    Raises
+    ------
+    ProblemError
+        If there are more than ``limit`` (default :data:`MAX_CANDIDATE_GROUPS`): refused
+        while the cliques grow (or, without a gate, from the count Σ_s C(Q, s)), before
+        the list or any model of that size is built.
+    """
+    limit = MAX_CANDIDATE_GROUPS if limit is None else as_count(
+        "assignment.candidate_groups limit", limit, minimum=1)
+    q = data.q
+    size = q if data.max_group_size is None else min(q, int(data.max_group_size))
+
+    def refuse(count: str) -> ProblemError:
+        return ProblemError(
+            f"assignment: {count} candidate groups (Q = {q}, max_group_size = "
+            f"{data.max_group_size}, group_gate = {data.group_gate}), above the limit "
+            f"{limit}; tighten group_gate or lower max_group_size (merges of more than a "
+            f"few objects are rarely plausible)")
+
+    gated = data.group_gate is not None and np.isfinite(data.group_gate)
+    if not gated:
+        total = sum(int(comb(q, k, exact=True)) for k in range(1, size + 1))
+        if total > limit:
+            raise refuse(f"{total:.3g}")
+    ok = np.ones((q, q), dtype=bool)
+    if gated and size >= 2:
+        gate2 = float(data.group_gate) ** 2
+        for i in range(q - 1):  # Mahalanobis distance to the later objects, one batch
+            dm = data.means[i + 1:] - data.means[i]
+            s = data.covs[i + 1:] + data.covs[i]
+            d2 = np.einsum("kd,kd->k", dm, np.linalg.solve(s, dm[..., None])[..., 0])
+            ok[i, i + 1:] = ok[i + 1:, i] = d2 <= gate2
+    out: list[tuple[int, ...]] = [(j,) for j in range(q)]
+    # grow cliques of the gate graph in lexicographic order; each carries the mask of the
+    # objects adjacent to all its members
+    frontier: list[tuple[tuple[int, ...], np.ndarray]] = [((j,), ok[j]) for j in range(q)]
+    for _ in range(2, size + 1):
+        nxt: list[tuple[tuple[int, ...], np.ndarray]] = []
+        for g, common in frontier:
+            for j in np.flatnonzero(common[g[-1] + 1:]) + g[-1] + 1:
+                nxt.append(((*g, int(j)), common & ok[j]))
+            if len(out) + len(nxt) > limit:
+                raise refuse(f"more than {limit}")
+        out.extend(g for g, _ in nxt)
+        frontier = nxt
+        if not frontier:
+            break
+    return out
+
+
+def block_log_prior(data: AssignmentData, group: tuple[int, ...], detected: bool) -> float:
+    """A block's share of ln P(H): the user's ``block_log_prior`` or the default
+    (|S| − 1) ln ρ + (ln P_D if detected else ln(1 − P_D))."""
+    if data.block_log_prior is not None:
+        v = float(data.block_log_prior(tuple(group), bool(detected)))
+        if not np.isfinite(v):
+            raise ProblemError(f"block_log_prior: non-finite value for {group}, {detected}")
+        return v
+    return (len(group) - 1) * math.log(data.rho) + (
+        math.log(data.pd) if detected else math.log1p(-data.pd))
+
+
+def log_likelihoods(data: AssignmentData, groups: Sequence[tuple[int, ...]]) -> FloatArray:
+    """ln φ_iS (N, len(groups)): the user's ``log_likelihood`` or the default model."""
+    out = np.empty((data.n, len(groups)))
+    if data.log_likelihood is not None:
+        for c, g in enumerate(groups):
+            try:
+                v = np.asarray(data.log_likelihood(data, tuple(g)), dtype=float)
+            except (TypeError, ValueError) as exc:
+                raise ProblemError(f"log_likelihood: not a numeric array for block {g} "
+                                   f"({exc})") from None
+            if v.shape != (data.n,) or np.any(np.isnan(v)) or np.any(v == np.inf):
+                raise ProblemError(f"log_likelihood: expected {data.n} finite log values "
+                                   f"(or −inf) for block {g}, got shape {v.shape}")
+            out[:, c] = v
+        return out
+    for c, g in enumerate(groups):
+        idx = list(g)
+        mean = data.means[idx].mean(axis=0)
+        cov = data.covs[idx].sum(axis=0) / len(idx) ** 2 + data.meas_cov
+        out[:, c] = _logpdf(data.measurements, mean, cov) if data.n else []
+    return out
+
+
+def score(data: AssignmentData, partition: Partition, assignment: Sequence[int],
+          loglik: dict[tuple[int, ...], FloatArray] | None = None) -> float:
+    """score(H) of a hypothesis: ``assignment[i]`` indexes ``partition`` or is −1."""
+    blocks = _as_partition("assignment.score partition", partition, data.q)
+    a = _as_assignment("assignment.score assignment", assignment, data.n, len(blocks))
+    used = [k for k in a if k >= 0]
+    ll = loglik if loglik is not None else dict(zip(blocks, log_likelihoods(data, blocks).T,
+                                                    strict=True))
+    s = sum(block_log_prior(data, b, k in used) for k, b in enumerate(blocks))
+    for i, k in enumerate(a):
+        s += float(ll[blocks[k]][i]) if k >= 0 else -math.log(data.volume)
+    return s
+
+
+def _as_partition(name: str, partition: Any, q: int) -> Partition:
+    """``partition`` as sorted tuples of object indices that cover 0..Q−1 exactly once."""
+    try:
+        blocks = [tuple(sorted(as_count(f"{name} entry", j, maximum=q - 1) for j in b))
+                  for b in partition]
+    except TypeError:
+        raise ProblemError(f"{name}: expected a list of blocks (lists of object "
+                           f"indices), got {type(partition).__name__}") from None
+    if any(not b for b in blocks) or sorted(j for b in blocks for j in b) != list(range(q)):
+        raise ProblemError(f"{name}: must cover every object 0..{q - 1} exactly once "
+                           f"with non-empty blocks")
+    return blocks
+
+
+def _as_assignment(name: str, assignment: Any, n: int, blocks: int) -> list[int]:
+    """``assignment`` as N block indices or −1, no block twice."""
+    try:
+        a = [as_count(f"{name} entry", k, minimum=-1, maximum=blocks - 1) for k in assignment]
+    except TypeError:
+        raise ProblemError(f"{name}: expected one block index or −1 per measurement") from None
+    if len(a) != n:
+        raise ProblemError(f"{name}: one entry per measurement ({n}), got {len(a)}")
+    used = [k for k in a if k >= 0]
+    if len(used) != len(set(used)):
+        raise ProblemError(f"{name}: a block received more than one measurement")
+    return a
+
+
+# ----------------------------------------------------------------------------- solutions
+@dataclass
+class AssignmentSolution(Solution):
+    """``partition`` (sorted list of sorted tuples), ``assignment`` (N,) index into
+    ``partition`` or −1 (background), ``log_score``, ``mip_gap`` reached."""
+
+    partition: Partition = field(default_factory=list)
+    assignment: np.ndarray = field(default_factory=lambda: np.empty(0, dtype=int))
+    log_score: float = float("nan")
+    mip_gap: float | None = None
+
+
+def _canonical(partition: Sequence[Sequence[int]], assignment: Sequence[int]
+               ) -> tuple[Partition, np.ndarray]:
+    blocks = [tuple(sorted(b)) for b in partition]
+    order = sorted(range(len(blocks)), key=lambda k: blocks[k])
+    new_index = {old: new for new, old in enumerate(order)}
+    return [blocks[k] for k in order], np.array([new_index[k] if k >= 0 else -1
+                                                 for k in assignment], dtype=int)
+
+
+# ----------------------------------------------------------------------------- re-check
+def _recheck(data: AssignmentData, groups: list[tuple[int, ...]], keep: np.ndarray,
+             x: FloatArray, a_eq: sps.csr_matrix, a_ub: sps.csr_matrix, b_ub: FloatArray,
+             solver_objective: float, exclude: Sequence[AssignmentSolution],
+             fixed: Partition | None) -> tuple[Partition, np.ndarray, float,
+                                               dict[str, float], str]:
+    """Re-check the solver's point against the original problem, in NumPy.
+
+    Returns the rounded hypothesis, its recomputed score (13) and the residuals: the
+    integrality of x, the constraint rows at x (exact cover, one source per measurement,
+    ≤ 1 measurement per block, the no-good cuts), and the relative difference between
+    the solver's objective and the recomputed score. A rounded point that is not a valid
+    hypothesis (or repeats an excluded one) gives an infinite residual and a message.
+    """
+    n_g, n_k = len(groups), len(keep)
+    xr = np.round(x)
+    res = {"integrality": float(np.max(np.abs(x - xr), initial=0.0))}
+    eq = a_eq @ x - 1.0
+    res["exact_cover"] = float(np.max(np.abs(eq[:data.q]), initial=0.0))
+    res["one_source"] = float(np.max(np.abs(eq[data.q:]), initial=0.0))
+    ub = a_ub @ x - b_ub
+    res["block_capacity"] = float(np.max(np.maximum(ub[:n_g], 0.0), initial=0.0))
+    res["no_good_cuts"] = float(np.max(np.maximum(ub[n_g:], 0.0), initial=0.0))
+    z_on = np.flatnonzero(xr[:n_g] > 0.5)
+    part = [groups[c] for c in z_on]
+    where = {g: k for k, g in enumerate(part)}
+    assign = np.full(data.n, -1)
+    why = ""
+    for v, (i, c) in zip(xr[n_g:n_g + n_k], keep, strict=True):
+        if v > 0.5:
+            if groups[c] not in where or assign[i] >= 0:
+                why = "γ assigns a measurement twice or to a block that is off"
+            else:
+                assign[i] = where[groups[c]]
+    s = math.nan
+    if not why:
+        try:
+            part, assign = _canonical(part, assign)
+            s = score(data, part, assign)
+        except ProblemError as exc:
+            why = f"the rounded point is not a hypothesis ({exc})"
+    if not why and any(h.partition == part and list(h.assignment) == list(assign)
+                       for h in exclude):
+        why = "the solver returned an excluded hypothesis"
+    if not why and fixed is not None and part != sorted(fixed):
+        why = "the solver changed the fixed partition"
+    if why or not np.isfinite(s):
+        res["objective"] = math.inf
+        return part, assign, s, res, why or "the recomputed score is not finite"
+    res["objective"] = (abs(solver_objective - s) / max(1.0, abs(s))
+                        if np.isfinite(solver_objective) else math.inf)
+    return part, assign, s, res, ""

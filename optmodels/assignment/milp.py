@@ -1,0 +1,292 @@
+r"""The joint MAP hypothesis of (13)-(14) as one sparse MILP (CVXPY; HiGHS by default):
+exact pruning, the model, the solve and its re-check (:func:`~optmodels.assignment.data._recheck`).
+
+MILP (binary z_S per candidate group, γ_iS, γ_i0):
+
+.. math::
+    \max\ \sum_S z_S\,[(|S|-1)\ln\rho + \ln(1-P_D)]
+          + \sum_{i,S}\gamma_{iS}\,[\ln\varphi_{iS} + \ln P_D - \ln(1-P_D)]
+          - \sum_i \gamma_{i0}\ln\Delta x
+
+subject to Σ_{S∋j} z_S = 1 (exact cover), Σ_i γ_iS ≤ z_S, Σ_S γ_iS + γ_i0 = 1 (the
+equality (2) omits). Since Σ_S z_S |S| = Q, the first sum is exactly (Q − |π|)ln ρ plus
+|π| ln(1 − P_D). Exact pruning: a γ_iS whose gain ln φ_iS + ln P_D − ln(1 − P_D) does not
+exceed the background's −ln Δx can be replaced by γ_i0 without lowering the score, so it
+is never needed for a MAP hypothesis and is not created.
+
+Holds: :func:`solve`, the dominance pruning :func:`_prune`, the sparse model
+:func:`_build_model` and the size guards :data:`MAX_LIKELIHOOD_ENTRIES`,
+:data:`MAX_MODEL_COLUMNS`; each solver's options are in :mod:`optmodels.assignment.solvers`.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from typing import Any
+
+import cvxpy as cp
+import numpy as np
+import scipy.sparse as sps
+
+from optmodels.assignment.data import (
+    AssignmentData,
+    AssignmentSolution,
+    Partition,
+    _as_partition,
+    _recheck,
+    block_log_prior,
+    candidate_groups,
+    log_likelihoods,
+)
+from optmodels.assignment.solvers import _as_solver, _silence_highs_banner, _solver_options
+from optmodels.backends.cvxpy_backend import solve_problem
+from optmodels.core import (
+    VERIFY_TOL,
+    FloatArray,
+    ProblemError,
+    Status,
+    as_number,
+    as_positive,
+    timed,
+    verified_status,
+)
+
+#: Entries of the ln φ_iS table (N × candidate groups, 8 bytes each: 160 MB at the limit).
+MAX_LIKELIHOOD_ENTRIES = 20_000_000
+#: Binary columns of the MILP (z_S + γ_iS + γ_i0) after pruning; about 1 kB of peak memory
+#: each in CVXPY + HiGHS (measured, ``solvers_cmp/bench_assignment_memory.py``).
+MAX_MODEL_COLUMNS = 1_000_000
+
+
+# ----------------------------------------------------------------------------- MILP
+def _prune(data: AssignmentData, groups: list[tuple[int, ...]], gain: FloatArray,
+           usable: np.ndarray) -> tuple[list[tuple[int, ...]], FloatArray, np.ndarray]:
+    """Exact dominance pruning of merged groups (never removes a MAP hypothesis).
+
+    2. Measurement i on a merged group S is dominated if splitting S into singletons, giving
+       i to its best member and leaving the others undetected, scores at least as much:
+       (|S| − 1) ln ρ + gain_iS ≤ max_{j∈S} gain_ij + (|S| − 1) ln(1 − P_D); or if peeling
+       one member j off (i on S ∖ {j}, {j} undetected) does: gain_iS + ln ρ ≤
+       gain_{i,S∖j} + ln(1 − P_D). The swaps are always feasible (S's members are used
+       nowhere else), so γ_iS is never needed.
+    3. A merged group left without any measurement can only be undetected; if
+       ρ ≤ 1 − P_D, its singletons (undetected) score at least as much
+       (|S| ln(1 − P_D) ≥ (|S| − 1) ln ρ + ln(1 − P_D)), so z_S is never needed.
+    """
+    lr, l1 = math.log(data.rho), math.log1p(-data.pd)
+    index = {g: c for c, g in enumerate(groups)}
+    single = {g[0]: c for c, g in enumerate(groups) if len(g) == 1}
+    keep_g = np.ones(len(groups), dtype=bool)
+    for c, g in enumerate(groups):
+        if len(g) == 1:
+            continue
+        best_member = np.max(gain[:, [single[j] for j in g]], axis=1)
+        dominated = (len(g) - 1) * lr + gain[:, c] <= best_member + (len(g) - 1) * l1
+        # 2'. peel one member j: S \ {j} keeps i, {j} undetected. S \ {j} is a candidate
+        # too (subsets of a gated clique are cliques, sizes only shrink)
+        for j in g:
+            rest = index.get(tuple(x for x in g if x != j))
+            if rest is not None:
+                dominated |= gain[:, c] + lr <= gain[:, rest] + l1
+        usable[:, c] &= ~dominated
+        if not usable[:, c].any() and lr <= l1:
+            keep_g[c] = False
+    idx = np.flatnonzero(keep_g)
+    return [groups[c] for c in idx], gain[:, idx], usable[:, idx]
+
+
+def _build_model(data: AssignmentData, groups: list[tuple[int, ...]], gain: FloatArray,
+                 keep: np.ndarray, exclude: Sequence[AssignmentSolution],
+                 fixed: bool) -> tuple[FloatArray, sps.csr_matrix, sps.csr_matrix,
+                                       FloatArray]:
+    """The MILP in one vector x = (z_S, γ_iS for the kept pairs, γ_i0): objective c and
+    sparse constraints A_eq x = 1, A_ub x ≤ b_ub (every matrix has O(columns) nonzeros).
+
+    Rows of A_eq: exact cover (Q), each measurement once (N). Rows of A_ub: each block at
+    most one measurement, Σ_i γ_iS − z_S ≤ 0 (G); one no-good cut per excluded hypothesis:
+    Σ_{x ∈ on(H)} x ≤ |on(H)| − 1 over H's blocks and its N measurement choices (a
+    feasible point with all of them on equals H, by the equalities, so this removes H and
+    nothing else; it has |π| + N nonzeros instead of a dense row).
+    """
+    q, n, n_g, n_k = data.q, data.n, len(groups), len(keep)
+    bg = -math.log(data.volume)
+    g_cost = np.array([block_log_prior(data, g, False) for g in groups])
+    c = np.concatenate([g_cost, gain[keep[:, 0], keep[:, 1]] if n_k else [],
+                        np.full(n, bg)])
+    cols = n_g + n_k + n
+    member_r = [j for g in groups for j in g]
+    member_c = [c_ for c_, g in enumerate(groups) for _ in g]
+    rows = np.concatenate([member_r, q + keep[:, 0], q + np.arange(n)]).astype(int)
+    colx = np.concatenate([member_c, n_g + np.arange(n_k), n_g + n_k + np.arange(n)])
+    a_eq = sps.csr_matrix((np.ones(len(rows)), (rows, colx.astype(int))), shape=(q + n, cols))
+    ub_r = [np.arange(n_g), keep[:, 1]]
+    ub_c = [np.arange(n_g), n_g + np.arange(n_k)]
+    ub_v = [-np.ones(n_g), np.ones(n_k)]
+    b_ub = [np.zeros(n_g)]
+    index = {g: k for k, g in enumerate(groups)}
+    pair = {(int(i), int(k)): n_g + m for m, (i, k) in enumerate(keep)}
+    for r, h in enumerate(exclude):
+        if any(b not in index for b in h.partition):
+            continue  # a block that is not a column here: H is not in this model anyway
+        on = [index[b] for b in h.partition]
+        for i, k in enumerate(h.assignment):
+            if k >= 0:
+                col = pair.get((i, index[h.partition[k]]))
+                if col is None:  # that pair is not in the model: H is excluded already
+                    on = []
+                    break
+                on.append(col)
+            else:
+                on.append(n_g + n_k + i)
+        if not on:
+            continue
+        ub_r.append(np.full(len(on), n_g + r))
+        ub_c.append(np.array(on))
+        ub_v.append(np.ones(len(on)))
+        b_ub.append(np.array([len(on) - 1.0]))
+    b = np.concatenate(b_ub)
+    a_ub = sps.csr_matrix((np.concatenate(ub_v), (np.concatenate(ub_r).astype(int),
+                                                  np.concatenate(ub_c).astype(int))),
+                          shape=(len(b), cols))
+    if fixed:  # z_S = 1 for the given blocks (implied by the cover; stated for clarity)
+        a_ub = sps.vstack([a_ub, -sps.eye(n_g, cols, format="csr")], format="csr")
+        b = np.concatenate([b, -np.ones(n_g)])
+    return c, a_eq, a_ub, b
+
+
+def solve(data: AssignmentData, *, solver: str = "HIGHS", mip_gap: float = 0.0,
+          time_limit: float | None = None, fixed_partition: Partition | None = None,
+          prune: bool = True, exclude: Sequence[AssignmentSolution] = (),
+          **options: Any) -> AssignmentSolution:
+    """The joint MAP hypothesis of (13)-(14) as one MILP (CVXPY; HiGHS by default).
+
+    Parameters
+    ----------
+    data : AssignmentData
+    solver : str
+        A CVXPY MILP solver (:data:`MILP_SOLVERS`; HIGHS, SCIPY, SCIP, ...). A continuous
+        solver (CLARABEL, OSQP, ...) is refused with :class:`ProblemError`.
+    mip_gap : float
+        Relative MIP gap in [0, 1) to stop at; 0 (default) proves optimality. A solution
+        with a reached gap above :data:`~optmodels.core.VERIFY_TOL` (relative to
+        max(1, |score|)) is OPTIMAL_INACCURATE, never OPTIMAL.
+    time_limit : float, optional
+        Seconds, positive and finite (None: no limit). A solve stopped by it is
+        ITERATION_LIMIT (with the gap reached in the message), never returned as a
+        solution.
+    fixed_partition : list of tuples, optional
+        Solve one unresolved variant (the per-variant problem of (14)).
+    prune : bool
+        Exact dominance pruning (module docstring). ``False`` keeps every variable (needed
+        when hypotheses other than the MAP matter, as in :func:`k_best`).
+    exclude : sequence of AssignmentSolution
+        Hypotheses to exclude, one sparse no-good cut each.
+    **options
+        Passed to the solver (its own names; ``verbose=True`` shows its log).
+
+    Returns
+    -------
+    AssignmentSolution
+        The hypothesis, re-checked in NumPy (:func:`_recheck`): integrality, every
+        constraint row, a valid partition and assignment, and the recomputed score (13)
+        against the solver's objective; ``residuals`` holds them and the status is
+        downgraded or refused by :func:`~optmodels.core.verified_status`.
+
+    Raises
+    ------
+    ProblemError
+        Bad arguments, or a model above the size guards :data:`MAX_CANDIDATE_GROUPS`,
+        :data:`MAX_LIKELIHOOD_ENTRIES`, :data:`MAX_MODEL_COLUMNS` (checked before the
+        model is allocated).
+    """
+    w = "assignment.solve"
+    if not isinstance(data, AssignmentData):
+        raise ProblemError(f"{w} data: expected AssignmentData, got {type(data).__name__}")
+    key = _as_solver(w, solver)
+    gap = as_number(f"{w} mip_gap", mip_gap, low=0.0, high=1.0, high_open=True)
+    limit = None if time_limit is None else as_positive(f"{w} time_limit", time_limit)
+    if not isinstance(prune, bool | np.bool_):
+        raise ProblemError(f"{w} prune: expected True or False, got {prune!r}")
+    if isinstance(exclude, AssignmentSolution) or not all(
+            isinstance(h, AssignmentSolution) for h in exclude):
+        raise ProblemError(f"{w} exclude: expected a sequence of AssignmentSolution")
+    fixed = None
+    if fixed_partition is not None:
+        fixed = _as_partition(f"{w} fixed_partition", fixed_partition, data.q)
+        groups = sorted(set(fixed))
+    else:
+        groups = candidate_groups(data)
+    q, n = data.q, data.n
+    if n * len(groups) > MAX_LIKELIHOOD_ENTRIES:
+        raise ProblemError(f"{w}: N × candidate groups = {n} × {len(groups)} likelihoods, "
+                           f"above the limit {MAX_LIKELIHOOD_ENTRIES:.0e}; tighten "
+                           f"group_gate or lower max_group_size")
+    with timed() as tb:
+        ll = log_likelihoods(data, groups)
+        bonus = np.array([block_log_prior(data, g, True) - block_log_prior(data, g, False)
+                          for g in groups])
+        bg = -math.log(data.volume)
+        gain = ll + bonus
+        if prune:
+            usable = gain > bg  # exact pruning 1 (module docstring)
+            if fixed is None and data.block_log_prior is None:
+                groups, gain, usable = _prune(data, groups, gain, usable)
+        else:
+            usable = np.isfinite(gain)  # a user's −inf likelihood: impossible, no variable
+        keep = np.argwhere(usable).reshape(-1, 2)
+        columns = len(groups) + len(keep) + n
+        if columns > MAX_MODEL_COLUMNS:
+            raise ProblemError(
+                f"{w}: {columns} binary columns ({len(groups)} groups, {len(keep)} "
+                f"measurement-group pairs), above the limit {MAX_MODEL_COLUMNS:.0e}"
+                + ("; prune=False keeps every pair" if not prune else "")
+                + "; tighten group_gate or lower max_group_size")
+        c, a_eq, a_ub, b_ub = _build_model(data, groups, gain, keep, exclude,
+                                           fixed is not None)
+        x = cp.Variable(columns, boolean=True)
+        cons = [a_eq @ x == np.ones(q + n)]
+        if a_ub.shape[0]:
+            cons.append(a_ub @ x <= b_ub)
+        prob = cp.Problem(cp.Maximize(c @ x), cons)
+    if key == "HIGHS":
+        _silence_highs_banner()
+    opts = _solver_options(w, key, gap, limit, bool(options.get("verbose", False)))
+    res = solve_problem(prob, key, **{**opts, **options})
+    common = res.common()
+    common["build_time"] += tb.elapsed
+    gap_reached = res.info.get("mip_gap")
+    info = dict(res.info, candidate_groups=len(groups), assignment_variables=len(keep))
+    if not res.status.ok or x.value is None:
+        msg = common.pop("message")
+        if gap_reached is not None and np.isfinite(gap_reached):
+            msg += f"; MIP gap reached {gap_reached:.3g}"
+        if res.status.ok:  # OK without a point: not a solution
+            common["status"] = Status.ERROR
+        return AssignmentSolution(objective=float("nan"), message=msg, mip_gap=gap_reached,
+                                  info=info, **common)
+    xv = np.asarray(x.value, dtype=float).reshape(-1)
+    part, assign, s, resid, why = _recheck(data, groups, keep, xv, a_eq, a_ub, b_ub,
+                                           float(res.objective), exclude, fixed)
+    status = verified_status(res.status, max(resid.values()))
+    message = common.pop("message")
+    common.pop("status")
+    if why:
+        message += f"; re-check failed: {why}"
+    elif not status.ok:
+        message += f"; re-check failed: residuals {resid}"
+    if status.ok and gap_reached is not None and np.isfinite(gap_reached):
+        # HiGHS' gap is relative to |incumbent|; judge it relative to max(1, |score|)
+        scaled = gap_reached * abs(s) / max(1.0, abs(s))
+        if scaled > VERIFY_TOL and status is Status.OPTIMAL:
+            status = Status.OPTIMAL_INACCURATE
+            message += f"; stopped at MIP gap {gap_reached:.3g} (not proven optimal)"
+    if not status.ok:
+        return AssignmentSolution(status=status, objective=float("nan"), message=message,
+                                  mip_gap=gap_reached, residuals=resid,
+                                  info=dict(info, rejected_partition=part,
+                                            rejected_assignment=assign), **common)
+    return AssignmentSolution(status=status, objective=s, partition=part, assignment=assign,
+                              log_score=s, message=message,
+                              mip_gap=gap_reached if gap_reached is not None else gap,
+                              residuals=resid, info=info, **common)

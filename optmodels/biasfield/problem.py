@@ -1,0 +1,224 @@
+r"""The original problem of section 4 (paper 001, (8)-(10)) and what every method shares.
+
+The solution type :class:`FieldSolution`; the objective (9) J(φ) = φᵀ(Q ⊗ P)φ written as
+‖Gφ‖² with the sparse edge-difference factor G (:func:`edge_factor`, :func:`objective`)
+and R = Q ⊗ P itself (``_r_matrix``); the box (8) as bounds on φ (``_box``); the checks of
+the arguments common to the solves (``_check_graph``, ``_arguments``); the per-component
+scaling the solvers see (``_scales``, and the scaled Lipschitz SOCP's matrices
+``_lipschitz_data``, shared by its solve and its certificate check); the solver call
+(``_run``) and the result packer (``_finish``: φ on the sets (10), the box's active set).
+
+Used by :mod:`~optmodels.biasfield.selection` (closed form (11), QP),
+:mod:`~optmodels.biasfield.lipschitz`, :mod:`~optmodels.biasfield.verify` and
+:mod:`~optmodels.biasfield.identifiability`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import cvxpy as cp
+import numpy as np
+from numpy.typing import ArrayLike
+from scipy import sparse
+from scipy.sparse import csgraph
+
+from optmodels.backends.cvxpy_backend import solve_problem
+from optmodels.biasfield.cells import FieldData, laplacian, uncertainty_sets
+from optmodels.core import (
+    FloatArray,
+    ProblemError,
+    Solution,
+    as_choice,
+    as_finite_array,
+    as_positive,
+)
+
+__all__ = ["FieldSolution", "Sets", "edge_factor", "objective"]
+
+
+#: (Φ⁰, Φ¹) of (10), computed once per solve and handed to the helpers below.
+Sets = tuple[FloatArray, sparse.csr_matrix]
+
+
+@dataclass
+class FieldSolution(Solution):
+    """A field on the cells: ``field`` (K, m, 2) = [range, azimuth] bias per cell and radar,
+    ``phi`` (2mK,), ``eta`` (K, 2); ``active`` (K, m, 2) box constraints at their bound
+    (+1 upper, −1 lower, 0 free); ``duals`` (K, m, 2) their multipliers (≥ 0, signed like
+    ``active``); ``lipschitz`` L for :func:`~optmodels.biasfield.lipschitz.solve_lipschitz`."""
+
+    field: FloatArray = dataclasses.field(default_factory=lambda: np.empty(0))
+    phi: FloatArray = dataclasses.field(default_factory=lambda: np.empty(0))
+    eta: FloatArray = dataclasses.field(default_factory=lambda: np.empty(0))
+    active: np.ndarray = dataclasses.field(default_factory=lambda: np.empty(0))
+    duals: FloatArray = dataclasses.field(default_factory=lambda: np.empty(0))
+    lipschitz: float | None = None
+
+    @property
+    def max_residual(self) -> float:
+        """Largest KKT/feasibility residual; ``residuals["dual_sign"]`` (the share of
+        box multipliers with a sign off, a diagnostic) is not a residual and is left out."""
+        vals = [float(v) for k, v in self.residuals.items() if k != "dual_sign"]
+        if any(np.isnan(v) for v in vals):
+            return float("nan")
+        return max(vals, default=0.0)
+
+
+# ----------------------------------------------------------------------------- pieces
+def _p_full(data: FieldData) -> FloatArray:
+    m = data.m
+    return np.kron(np.eye(m), data.P) if data.P.shape == (2, 2) else data.P
+
+
+def _edges(data: FieldData) -> tuple[np.ndarray, np.ndarray, FloatArray]:
+    upper = sparse.triu(data.adjacency, k=1).tocoo()
+    i, j = upper.row, upper.col
+    d2 = np.sum((data.centers[i] - data.centers[j]) ** 2, axis=1)
+    return i, j, d2
+
+
+def _check_graph(data: FieldData) -> tuple[int, np.ndarray]:
+    """Connected components of the neighbour graph; isolated cells are refused."""
+    if not isinstance(data, FieldData):
+        raise ProblemError(f"biasfield data: expected a FieldData (biasfield.build_field_data "
+                           f"or FieldData(...)), got {type(data).__name__}")
+    n, labels = csgraph.connected_components(data.adjacency, directed=False)
+    sizes = np.bincount(labels)
+    lonely = np.flatnonzero(sizes[labels] == 1)
+    if lonely.size:
+        raise ProblemError(f"adjacency: cells {lonely[:10].tolist()} have no neighbour; their "
+                           "field is not determined by the smoothness criterion (add edges "
+                           "or drop them)")
+    return int(n), labels
+
+
+def _edge_difference(data: FieldData, weights: FloatArray) -> sparse.csr_matrix:
+    """Rows weights_e · Lᵀ(f(x̌_i) − f(x̌_j)) for every neighbour pair e = (i < j), P = LLᵀ:
+    (2m·E × 2mK)."""
+    i, j, _ = _edges(data)
+    e = np.arange(i.size)
+    diff = sparse.csr_matrix((np.concatenate([weights, -weights]),
+                              (np.concatenate([e, e]), np.concatenate([i, j]))),
+                             shape=(i.size, data.k))
+    lt = np.linalg.cholesky(_p_full(data)).T
+    return sparse.kron(diff, sparse.csr_matrix(lt), format="csr")
+
+
+def edge_factor(data: FieldData) -> sparse.csr_matrix:
+    """Sparse G (2m·E × 2mK) with GᵀG = Q ⊗ P: for each neighbour pair (i < j) the rows
+    √a_ij Lᵀ(f(x̌_i) − f(x̌_j)), a_ij = 1/‖x̌_i − x̌_j‖², P = LLᵀ."""
+    return _edge_difference(data, 1.0 / np.sqrt(_edges(data)[2]))
+
+
+def objective(data: FieldData, phi: ArrayLike) -> float:
+    """J(φ) = φᵀ(Q ⊗ P)φ (9) (half the paper's sum over ordered pairs, see errata);
+    ``phi`` (2mK,) cell by cell, radar by radar, [range m, azimuth rad]."""
+    g = edge_factor(data)
+    return _objective(g, as_finite_array("biasfield.objective phi", phi, shape=(g.shape[1],)))
+
+
+def _objective(g: sparse.csr_matrix, phi: FloatArray) -> float:
+    v = g @ phi
+    return float(v @ v)
+
+
+def _r_matrix(data: FieldData) -> sparse.csr_matrix:
+    return sparse.kron(laplacian(data.centers, data.adjacency), sparse.csr_matrix(_p_full(data)),
+                       format="csr")
+
+
+def _box(data: FieldData, box: Sequence[float] | None, where: str = "biasfield.solve"
+         ) -> FloatArray | None:
+    """The box (8) as bounds on φ (2mK,): ``box`` = (K1 range bound, m; K2 azimuth bound,
+    rad), two positive finite numbers, or None."""
+    if not isinstance(data, FieldData):
+        raise ProblemError(f"{where} data: expected a FieldData, got {type(data).__name__}")
+    if box is None:
+        return None
+    if isinstance(box, str | bytes) or np.ndim(box) != 1 or np.size(box) != 2:
+        raise ProblemError(f"{where} box: expected a pair (K1 range bound in m, K2 azimuth "
+                           f"bound in rad), got {box!r:.80}")
+    k1 = as_positive(f"{where} box[0] (K1, range bound, m)", box[0])
+    k2 = as_positive(f"{where} box[1] (K2, azimuth bound, rad)", box[1])
+    return np.tile([k1, k2], data.m * data.k)
+
+
+def _solver_name(where: str, solver: Any) -> str:
+    if not isinstance(solver, str) or not solver:
+        raise ProblemError(f"{where} solver: expected a CVXPY solver name, got {solver!r:.60}")
+    return solver
+
+
+# ----------------------------------------------------------------------------- solves
+def _scales(data: FieldData, phi0: FloatArray) -> FloatArray:
+    """Per-component scale of φ (range, azimuth) so that the solver sees O(1) numbers."""
+    v = np.abs(phi0.reshape(-1, 2))
+    s = np.array([max(float(np.median(v[:, 0])), 1e-9), max(float(np.median(v[:, 1])), 1e-15)])
+    return np.tile(s, data.m * data.k)
+
+
+def _arguments(fn: str, data: FieldData, formulation: Any, solver: Any, box: Any
+               ) -> tuple[int, Any, str, Any, Any]:
+    """The checked arguments common to :func:`~optmodels.biasfield.selection.solve` and
+    :func:`~optmodels.biasfield.lipschitz.solve_lipschitz`: the number of graph components,
+    the formulation, the solver's name, the box bound and the uncertainty sets (10)."""
+    n_comp, _ = _check_graph(data)
+    formulation = as_choice(f"{fn} formulation", formulation, ("constrained", "reduced"))
+    solver = _solver_name(fn, solver)
+    bound = _box(data, box, fn)
+    return n_comp, formulation, solver, bound, uncertainty_sets(data)
+
+
+def _run(where: str, prob: cp.Problem, solver: str, opts: dict[str, Any]) -> Any:
+    """:func:`solve_problem`, with a rejected option named as this function's argument."""
+    try:
+        return solve_problem(prob, solver, **opts)
+    except ProblemError as exc:
+        raise ProblemError(f"{where} options: {exc}") from None
+
+
+def _finish(data: FieldData, sets: Sets, phi: FloatArray, eta: FloatArray,
+            common: dict[str, Any],
+            bound: FloatArray | None, duals: FloatArray | None,
+            lipschitz: float | None = None) -> FieldSolution:
+    k, m = data.k, data.m
+    phi0, phi1 = sets
+    res: dict[str, float] = {}
+    scale = max(float(np.max(np.abs(phi0))), 1e-300)
+    res["set"] = float(np.max(np.abs(phi - phi0 - phi1 @ eta))) / scale
+    active = np.zeros(phi.size, dtype=np.int8)
+    if bound is not None:
+        res["box"] = float(np.max(np.maximum(np.abs(phi) - bound, 0.0) / bound))
+        tol = 1e-6 * bound
+        active[phi >= bound - tol] = 1
+        active[phi <= -bound + tol] = -1
+    dual = np.zeros(phi.size) if duals is None else duals
+    return FieldSolution(objective=_objective(edge_factor(data), phi), residuals=res,
+                         field=phi.reshape(k, m, 2), phi=phi, eta=eta.reshape(k, 2),
+                         active=active.reshape(k, m, 2), duals=dual.reshape(k, m, 2),
+                         lipschitz=lipschitz, **common)
+
+
+def _lipschitz_data(data: FieldData, sets: Sets) -> dict[str, Any]:
+    """The scaled SOCP's matrices: φ = sc·u, u = u0 + B η̃ (η = sc_range·η̃); the jump of
+    edge e is D_e u (= Lᵀ(f_i − f_j)); cone e: (ℓ d_e/ref, (D_e u)/lip0) with L = ℓ·lip0/ref,
+    lip0 the largest jump ratio at η = 0 times ref = median edge length."""
+    phi0, phi1 = sets
+    sc = _scales(data, phi0)
+    m2 = 2 * data.m
+    dist = np.sqrt(_edges(data)[2])
+    jump = _edge_difference(data, np.ones(dist.size))  # Lᵀ(f_i − f_j) per edge
+    dmat = (jump @ sparse.diags(sc)).tocsr()
+    u0 = phi0 / sc
+    bmat = (sparse.diags(1 / sc) @ phi1 * sc[0]).tocsr()
+    ref = float(np.median(dist))
+    lip0 = float(np.max(np.linalg.norm((dmat @ u0).reshape(-1, m2), axis=1) / dist)) * ref
+    if not (np.isfinite(lip0) and lip0 > 0):
+        lip0 = 1.0
+    return {"sc": sc, "u0": u0, "bmat": bmat, "dmat": dmat, "dist": dist, "ref": ref,
+            "lip0": lip0, "jump": jump, "db": (dmat @ bmat).tocsr() / lip0,
+            "c": dmat @ u0 / lip0}

@@ -1,0 +1,247 @@
+"""The command line's contract (README, "Command line"; :mod:`optmodels.cli`'s
+docstring): the exit statuses and the mapping of an exception to one of them, the
+``_reading`` wrapper at input boundaries, the output-path checks, the fd-1 redirect that
+keeps stdout for the result alone, strict JSON printing, and the argparse class whose
+usage errors are one line (with ``--json``, also the error document).
+
+Every verb's handler returns an :data:`Outcome`; :func:`_execute` runs it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import ctypes
+import json
+import math
+import os
+import sys
+import traceback
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any, NoReturn
+
+import numpy as np
+
+from optmodels.core import OptModelsError, ProblemError, SolveError, SolverNotAvailable
+from optmodels.io import json_default
+
+#: Exit statuses (:mod:`optmodels.cli`'s docstring).
+EXIT_OK, EXIT_NOT_OK, EXIT_INPUT, EXIT_INTERNAL, EXIT_INTERRUPTED = 0, 1, 2, 3, 130
+
+#: What every handler returns: the result document and whether it is OK (exit 0 or 1).
+Outcome = tuple[dict[str, Any], bool]
+
+_OK_STATUSES = ("optimal", "optimal_inaccurate")
+
+
+# ------------------------------------------------------------------ input boundaries
+@contextlib.contextmanager
+def _reading(label: str) -> Iterator[None]:
+    """Errors raised while reading or validating the user's input are the user's: a raw
+    exception from a reader or a data constructor (``float(None)``, a ragged list, a file
+    that is not UTF-8, ...) becomes one :class:`ProblemError` naming ``label`` (the file
+    or the flag), i.e. exit 2 instead of a traceback."""
+    try:
+        yield
+    except OptModelsError:
+        raise
+    except UnicodeDecodeError as exc:
+        raise ProblemError(f"{label}: not UTF-8 text (byte {exc.start}: {exc.reason}); "
+                           "save it as UTF-8") from exc
+    except json.JSONDecodeError as exc:
+        raise ProblemError(f"{label}: not valid JSON ({exc})") from exc
+    except OSError as exc:
+        raise ProblemError(f"{label}: {exc.strerror or exc}") from exc
+    except (ValueError, TypeError, KeyError, IndexError, ArithmeticError,
+            np.linalg.LinAlgError) as exc:
+        raise ProblemError(f"{label}: {type(exc).__name__}: {exc}") from exc
+
+
+def _out_dir(flag: str, path: str | Path) -> Path:
+    """``--out FOLDER``: created if missing; refused (exit 2) before any work is done if
+    it, or a parent, is an existing file."""
+    from optmodels.io import output_dir
+
+    try:
+        return output_dir(path, name=flag)
+    except ProblemError as exc:
+        raise ProblemError(f"{flag}: {exc}") from None
+
+
+def _out_file(flag: str, path: str | Path) -> Path:
+    """``--out FILE``: missing parent folders are created; an existing directory (or a
+    parent that is a file) is refused before any work is done."""
+    from optmodels.io import output_file
+
+    try:
+        return output_file(path, name=flag)
+    except ProblemError as exc:
+        raise ProblemError(f"{flag}: {exc}") from None
+
+
+# ---------------------------------------------------------- stdout, JSON, errors
+def _flush_c_stdio() -> None:
+    """Flush the C library's stdio buffers (a solver's ``printf`` to a pipe sits there
+    until exit, after fd 1 is back on stdout)."""
+    try:
+        ctypes.CDLL(None).fflush(None)
+    except (OSError, AttributeError, TypeError):  # no libc symbols (non-POSIX)
+        pass
+
+
+@contextlib.contextmanager
+def _stdout_to_stderr() -> Iterator[None]:
+    """While the work runs, every write to stdout -- Python's, a C library's (HiGHS prints
+    its banner on fd 1), a child process's -- goes to stderr: fd 1 points at fd 2 and
+    ``sys.stdout`` is ``sys.stderr``. Both are restored on the way out, so the result
+    alone is printed on stdout."""
+    for stream in (sys.stdout, sys.__stdout__, sys.stderr):
+        with contextlib.suppress(Exception):
+            if stream is not None:
+                stream.flush()
+    saved: int | None = None
+    try:
+        saved = os.dup(1)
+        os.dup2(2, 1)
+    except OSError:  # no fd 1/2 (embedded interpreter): Python-level redirection only
+        if saved is not None:
+            os.close(saved)
+        saved = None
+    try:
+        with contextlib.redirect_stdout(sys.stderr):
+            yield
+    finally:
+        for stream in (sys.__stdout__, sys.stderr):
+            with contextlib.suppress(Exception):
+                if stream is not None:
+                    stream.flush()
+        _flush_c_stdio()
+        if saved is not None:
+            os.dup2(saved, 1)
+            os.close(saved)
+
+
+def _jsonable(value: Any) -> Any:
+    """NaN/±inf -> None (strict JSON has no such numbers); containers recursively."""
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, dict):
+        return {k: _jsonable(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_jsonable(v) for v in value]
+    return value
+
+
+def _dumps(obj: Any) -> str:
+    """One strict JSON document (NumPy arrays and scalars as lists and numbers)."""
+    plain = json.loads(json.dumps(obj, default=json_default))
+    return json.dumps(_jsonable(plain), indent=2, allow_nan=False)
+
+
+def _emit(text: str) -> None:
+    """Write the result on stdout (a closed pipe, ``| head``, is not an error)."""
+    try:
+        sys.stdout.write(text if text.endswith("\n") else text + "\n")
+        sys.stdout.flush()
+    except BrokenPipeError:
+        with contextlib.suppress(OSError):
+            devnull = os.open(os.devnull, os.O_WRONLY)
+            os.dup2(devnull, sys.stdout.fileno())
+
+
+def _fail(args: argparse.Namespace | None, code: int, message: str) -> int:
+    """One line on stderr (and with --json the error document on stdout); the code."""
+    line = " ".join(message.split())  # a message never spans lines
+    print(f"optmodels: error: {line}", file=sys.stderr, flush=True)
+    if args is not None and getattr(args, "json", False):
+        _emit(_dumps({"error": line, "exit_code": code}))
+    return code
+
+
+def _execute(args: argparse.Namespace) -> int:
+    """Run the parsed command (``args.func``) with stdout sent to stderr, then print its
+    result alone on stdout (``args.printer``'s text, or with ``--json`` one JSON
+    document); an exception becomes its exit status and one line on stderr. Returns the
+    exit status (:mod:`optmodels.cli`'s docstring)."""
+    debug = bool(getattr(args, "debug", False))
+    text, ok, code, message = "", False, EXIT_OK, ""
+    result: dict[str, Any] = {}
+    with _stdout_to_stderr():
+        try:
+            result, ok = args.func(args)
+            if args.json:
+                text = _dumps(result)
+            else:
+                buf: list[str] = []
+                with contextlib.redirect_stdout(_Lines(buf)):
+                    args.printer(result)
+                text = "".join(buf)
+        except KeyboardInterrupt as exc:
+            # montecarlo.Interrupted says what was saved and where
+            code, message = EXIT_INTERRUPTED, str(exc) or "interrupted"
+        except (ProblemError, SolverNotAvailable) as exc:
+            code, message = EXIT_INPUT, str(exc)
+        except SolveError as exc:
+            code, message = EXIT_NOT_OK, f"not solved: {exc}"
+        except OptModelsError as exc:
+            code, message = EXIT_NOT_OK, str(exc)
+        except OSError as exc:  # the environment: a file, a folder, a network address
+            name = f"{exc.filename}: " if getattr(exc, "filename", None) else ""
+            code, message = EXIT_INPUT, f"{name}{exc.strerror or exc}"
+        except Exception as exc:  # a bug: one line, the traceback on request
+            if debug:
+                traceback.print_exc()
+            code = EXIT_INTERNAL
+            message = f"internal error: {type(exc).__name__}: {exc}" + (
+                "" if debug else " (rerun with --debug for the traceback)")
+    if code != EXIT_OK:
+        return _fail(args, code, message)
+    _emit(text)
+    if not ok:
+        status = result.get("status")
+        what = f"status {status}" if status else "some part failed (see the output)"
+        extra = f" ({result['message']})" if status and result.get("message") else ""
+        print(f"optmodels: not OK: {what}{extra}", file=sys.stderr, flush=True)
+    return EXIT_OK if ok else EXIT_NOT_OK
+
+
+class _Lines:
+    """A minimal text sink collecting what a printer writes (printed in one go)."""
+
+    def __init__(self, buf: list[str]) -> None:
+        self.buf = buf
+
+    def write(self, text: str) -> int:
+        self.buf.append(text)
+        return len(text)
+
+    def flush(self) -> None:
+        pass
+
+
+# --------------------------------------------------------------------------- parser
+class _Parser(argparse.ArgumentParser):
+    """argparse with one-line errors: ``optmodels plane fit: error: argument --sigma2:
+    must be > 0, got -1 (see optmodels plane fit --help)``, exit 2."""
+
+    #: set by :func:`main` when ``--json`` is on the command line: the usage error is
+    #: then also the one JSON document on stdout
+    json_errors = False
+
+    def error(self, message: str) -> NoReturn:
+        line = " ".join(f"{self.prog}: {message}".split())
+        if _Parser.json_errors:
+            _emit(_dumps({"error": line, "exit_code": EXIT_INPUT}))
+        self.exit(EXIT_INPUT, f"optmodels: error: {line} (see {self.prog} --help)\n")
+
+
+def _leaf(sub: Any, name: str, help_: str) -> argparse.ArgumentParser:
+    """A command parser with the common flags --json and --debug."""
+    p = sub.add_parser(name, help=help_)
+    p.add_argument("--json", action="store_true",
+                   help="print exactly one JSON document on stdout")
+    p.add_argument("--debug", action="store_true", default=argparse.SUPPRESS,
+                   help="show the traceback of an internal error")
+    return p
+

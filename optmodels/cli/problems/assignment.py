@@ -1,0 +1,149 @@
+"""``optmodels assignment solve`` (the MAP hypothesis of paper 004 for a CASE.json: one
+MILP, enumeration (13)-(14), or the linear assignment without merges; the k best with
+marginals) and ``optmodels assignment count`` (the number of hypotheses (14)); and the
+assignment part of ``optmodels demo`` and ``optmodels compare --details``."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+from typing import Any
+
+from optmodels.cli.args import _count, _positive
+from optmodels.cli.contract import _OK_STATUSES, Outcome, _leaf, _reading
+from optmodels.core import ProblemError
+
+#: This problem's line in the demo's report/index.md.
+DEMO_TITLE = ("- [Joint assignment with unresolved groups (paper 004)]"
+              "(assignment/report.md): MAP by one MILP vs resolved-only "
+              "association, closely spaced space objects")
+
+
+_CASE_FIELDS = ("means", "covs", "measurements", "meas_cov", "volume", "pd", "rho",
+                "max_group_size", "group_gate")
+
+
+def _read_case(path_text: str) -> dict[str, Any]:
+    """``CASE.json``: a JSON object with the :class:`AssignmentData` fields."""
+    from optmodels.io import read_text
+
+    with _reading(path_text):
+        text = read_text(path_text, what="JSON assignment case", name="case")
+        try:
+            case = json.loads(text)
+        except json.JSONDecodeError as exc:
+            raise ProblemError(f"{path_text}: not valid JSON ({exc})") from None
+    if not isinstance(case, dict):
+        raise ProblemError(f"{path_text}: expected a JSON object with the fields "
+                           f"{', '.join(_CASE_FIELDS[:7])}, got a JSON "
+                           f"{type(case).__name__.replace('NoneType', 'null')}")
+    unknown = sorted(set(case) - set(_CASE_FIELDS))
+    if unknown:
+        raise ProblemError(f"{path_text}: unknown fields {unknown} (expected {_CASE_FIELDS})")
+    missing = sorted(set(_CASE_FIELDS[:7]) - set(case))
+    if missing:
+        raise ProblemError(f"{path_text}: missing fields {missing}")
+    return case
+
+
+def _assignment_solve(args: argparse.Namespace) -> Outcome:
+    from optmodels import assignment as asg
+
+    case = _read_case(args.case)
+    with _reading(args.case):
+        data = asg.AssignmentData(**case)
+    total = asg.count_hypotheses(data.q, data.n)
+    if args.method == "milp":
+        sol = asg.solve(data, solver=args.solver, time_limit=args.time_limit)
+    elif args.method == "brute-force":
+        if total > 10_000_000:
+            raise ProblemError(f"--method brute-force: {total:.3g} hypotheses (more than "
+                               "10⁷); use milp")
+        sol = asg.brute_force(data)
+    else:
+        sol = asg.linear_assignment(data)
+    res: dict[str, Any] = {"status": sol.status.value, "method": sol.method,
+                           "message": sol.message, "partition": sol.partition,
+                           "assignment": sol.assignment, "log_score": sol.log_score,
+                           "mip_gap": sol.mip_gap, "solve_time": sol.solve_time,
+                           "build_time": sol.build_time, "hypotheses_total": total}
+    if args.k and sol.ok:
+        kb = asg.k_best(data, args.k, solver=args.solver)
+        res["k_best"] = [{"partition": h.partition, "assignment": h.assignment,
+                          "log_score": h.log_score} for h in kb.hypotheses]
+        res["marginals"] = [{("background" if not k else ",".join(map(str, k))): v
+                             for k, v in b.items()} for b in kb.beta]
+        res["neglected_mass_bound"] = kb.neglected
+    return res, sol.ok
+
+
+def _print_assignment_solve(res: dict[str, Any]) -> None:
+    print(f"{res['method']}: {res['status']} ({res['message']}); log score "
+          f"{res['log_score']:.6f}; {res['hypotheses_total']} hypotheses in total")
+    if res["status"] not in _OK_STATUSES:
+        return
+    blocks = ["+".join(map(str, b)) for b in res["partition"]]
+    print("blocks: " + ", ".join(blocks))
+    for i, a in enumerate(res["assignment"]):
+        print(f"  measurement {i}: {'background' if a < 0 else blocks[a]}")
+    if "k_best" in res:
+        print(f"{len(res['k_best'])} best hypotheses; neglected mass ≤ "
+              f"{res['neglected_mass_bound']:.3g} of the listed")
+
+
+def _assignment_count(args: argparse.Namespace) -> Outcome:
+    from optmodels import assignment as asg
+
+    per = asg.count_per_variant(args.q, args.n)
+    return {"q": args.q, "n": args.n, "total": asg.count_hypotheses(args.q, args.n),
+            "variants": sum(v[0] for v in per.values()),
+            "per_blocks": {b: {"variants": v[0], "hypotheses_each": v[1]}
+                           for b, v in per.items()}}, True
+
+
+def _print_assignment_count(res: dict[str, Any]) -> None:
+    print(f"Q = {res['q']} objects, N = {res['n']} measurements: {res['variants']} unresolved "
+          f"variants, {res['total']} hypotheses")
+    for b, v in res["per_blocks"].items():
+        print(f"  {b} blocks: {v['variants']} variants × {v['hypotheses_each']} hypotheses")
+
+
+def run_demo(out: Path, args: argparse.Namespace, progress: bool) -> dict[str, Any]:
+    """``optmodels demo``: the closely spaced space objects of paper 004 in
+    ``out/assignment``."""
+    from optmodels.demo import run_assignment_demo
+
+    return run_assignment_demo(out / "assignment", seed=args.seed, progress=progress)
+
+
+def run_details(out: Path, *, sizes: list[int], runs: int, repeats: int, seed: int,
+                progress: bool) -> tuple[str, dict[str, Any]]:
+    """``optmodels compare --details``: :mod:`solvers_cmp.assignment`'s rows; the report
+    section and the result entry."""
+    from solvers_cmp import assignment as cmp_as
+    from solvers_cmp import report
+
+    rows = cmp_as.rows(seed=seed, repeats=max(1, min(repeats, 3)), progress=progress)
+    md = report.write_assignment(out, rows)
+    return md, {"results": rows}
+
+
+def register(sub: Any) -> None:
+    """Add ``optmodels assignment solve`` and ``count`` to the top-level sub-commands
+    ``sub``."""
+    positive, count0, count1 = _positive(), _count(0), _count(1)
+    asp = sub.add_parser("assignment", help="joint assignment with merges (paper 004)")
+    asub = asp.add_subparsers(dest="verb", required=True)
+    aso = _leaf(asub, "solve", "the MAP hypothesis of a CASE.json")
+    aso.add_argument("case", help="JSON with means, covs, measurements, meas_cov, volume, pd, "
+                                  "rho [, max_group_size, group_gate]")
+    aso.add_argument("--method", choices=("milp", "brute-force", "linear"), default="milp")
+    aso.add_argument("--solver", default="HIGHS", help="MILP solver (HIGHS, SCIP, ...)")
+    aso.add_argument("--time-limit", type=positive, help="MILP time limit, s (> 0)")
+    aso.add_argument("--k", type=count0, default=0, help="also list the k best and marginals")
+    aso.set_defaults(func=_assignment_solve, printer=_print_assignment_solve)
+    aco = _leaf(asub, "count", "number of hypotheses (14) for Q objects, N marks")
+    aco.add_argument("q", type=count1, help="objects Q (>= 1)")
+    aco.add_argument("n", type=count0, help="measurements N (>= 0)")
+    aco.set_defaults(func=_assignment_count, printer=_print_assignment_count)

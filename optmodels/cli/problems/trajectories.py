@@ -1,0 +1,160 @@
+"""``optmodels trajectories fit``: a family of dependent lines of paper 002 (shared start,
+shared velocity, or a custom grouping) fitted to a CSV of measurements, by the closed forms
+(8)-(9), (12)-(13) or a CVXPY solver, with the family test against independent lines; and
+the trajectories part of ``optmodels demo`` and ``optmodels compare --details``."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from scipy import stats
+
+from optmodels import trajectories
+from optmodels.cli.args import _finite, _level, _positive
+from optmodels.cli.contract import _OK_STATUSES, Outcome, _leaf, _reading
+from optmodels.core import ProblemError
+
+#: This problem's line in the demo's report/index.md.
+DEMO_TITLE = ("- [Dependent linear trajectories (paper 002)]"
+              "(trajectories/report.md): launcher and parallel scenarios, η "
+              "against Monte Carlo")
+
+
+def _trajectories_fit(args: argparse.Namespace) -> Outcome:
+    from optmodels.io import read_trajectory_csv
+
+    with _reading(str(args.file)):
+        cols = read_trajectory_csv(args.file)
+        labels = cols["objects"]
+        if cols["sigma2"] is not None:
+            if args.sigma2 is not None:
+                raise ProblemError("--sigma2: the file has a sigma2 column already")
+            sigma2: Any = cols["sigma2"]
+        else:
+            sigma2 = 1.0 if args.sigma2 is None else args.sigma2
+        data = trajectories.TrajectoryData(cols["times"], cols["values"], sigma2,
+                                           epoch=args.epoch)
+    q = data.n_objects
+    if args.family == "custom":
+        index = {lab: k for k, lab in enumerate(labels)}
+
+        def groups(specs: list[str] | None, flag: str) -> list[list[int]]:
+            out = []
+            for spec in specs or []:
+                names = [x.strip() for x in spec.split(",") if x.strip()]
+                unknown = [x for x in names if x not in index]
+                if unknown:
+                    raise ProblemError(f"{flag}: unknown object(s) {unknown} (have {labels})")
+                out.append([index[x] for x in names])
+            return out
+
+        family: Any = trajectories.Family.custom(
+            q, shared_start=groups(args.shared_start, "--shared-start"),
+            shared_velocity=groups(args.shared_velocity, "--shared-velocity"))
+    else:
+        if args.shared_start or args.shared_velocity:
+            raise ProblemError("--shared-start/--shared-velocity need --family custom")
+        family = args.family
+    if args.method == "closed-form":
+        sol = trajectories.closed_form(data, family)
+    else:
+        sol = trajectories.solve(data, family, formulation=args.formulation, solver=args.method)
+    fam = sol.family
+    if fam is None:  # every trajectories solution carries its family
+        raise RuntimeError("trajectories: the solution carries no family")
+    std = sol.std
+    out: dict[str, Any] = {
+        "file": str(args.file), "objects": labels, "coordinates": cols["coordinates"],
+        "n_measurements": data.counts.tolist(), "family": fam.name,
+        "start_groups": [[labels[i] for i in g] for g in fam.start_groups],
+        "velocity_groups": [[labels[i] for i in g] for g in fam.velocity_groups],
+        "epoch": args.epoch, "status": sol.status.value, "method": sol.method,
+        "theta": sol.theta, "theta_std": std, "covariance": sol.covariance,
+        "start": {lab: sol.start[k] for k, lab in enumerate(labels)},
+        "velocity": {lab: sol.velocity[k] for k, lab in enumerate(labels)},
+        "objective": sol.objective, "dof": sol.dof,
+        "fit_p_value": float(stats.chi2.sf(sol.objective, sol.dof))
+        if sol.dof > 0 and sol.ok else None,
+        "residuals": sol.residuals, "build_time": sol.build_time,
+        "solve_time": sol.solve_time, "iterations": sol.iterations, "message": sol.message,
+    }
+    if sol.ok and fam.n_constraints > 0:
+        out["family_test"] = trajectories.family_test(
+            data, fam, level=args.level,
+            sigma2="estimated" if args.sigma2_unknown else "known").to_dict()
+    return out, sol.ok
+
+
+def _print_trajectories_fit(res: dict[str, Any]) -> None:
+    print(f"{res['file']}: Q = {len(res['objects'])}, N = {res['n_measurements']}, "
+          f"family {res['family']}, {res['method']} -> {res['status']}")
+    if res["status"] not in _OK_STATUSES:
+        print(f"  {res['message']}")
+        return
+    for lab in res["objects"]:
+        print(f"  {lab}: start = {np.round(res['start'][lab], 6)}, "
+              f"velocity = {np.round(res['velocity'][lab], 6)}")
+    print(f"  θ std = {np.round(res['theta_std'], 6).tolist()}")
+    pv = res["fit_p_value"]
+    print(f"  χ² = {res['objective']:.6g} on {res['dof']} dof"
+          + (f" (p = {pv:.3g})" if pv is not None else ""))
+    t = res.get("family_test")
+    if t:
+        verdict = "REJECTED" if t["reject"] else "not rejected"
+        print(f"  vs independent lines: statistic {t['statistic']:.4g}, dof {t['dof']}, "
+              f"p = {t['p_value']:.3g} -> {res['family']} {verdict} at level {t['level']}")
+
+
+def run_demo(out: Path, args: argparse.Namespace, progress: bool) -> dict[str, Any]:
+    """``optmodels demo``: the launcher and parallel scenarios of paper 002 and the η
+    table in ``out/trajectories``."""
+    from optmodels.demo import run_trajectories_demo
+
+    return run_trajectories_demo(
+        out / "trajectories", runs=args.trajectory_runs, seed=args.seed,
+        progress=progress)
+
+
+def run_details(out: Path, *, sizes: list[int], runs: int, repeats: int, seed: int,
+                progress: bool) -> tuple[str, dict[str, Any]]:
+    """``optmodels compare --details``: :mod:`solvers_cmp.trajectories`' rows and
+    benchmark; the report section and the result entry."""
+    from solvers_cmp import report
+    from solvers_cmp import trajectories as cmp_traj
+
+    rows = cmp_traj.rows(seed=seed, repeats=max(1, min(repeats, 3)), progress=progress)
+    bench = cmp_traj.benchmark(repeats=repeats, seed=seed)
+    md = report.write_trajectories(out, rows, bench)
+    return md, {"results": rows, "benchmark": bench}
+
+
+def register(sub: Any) -> None:
+    """Add ``optmodels trajectories fit`` to the top-level sub-commands ``sub``."""
+    positive = _positive()
+    trj = sub.add_parser("trajectories", help="dependent linear trajectories (paper 002)")
+    tsub = trj.add_subparsers(dest="verb", required=True)
+    tfit = _leaf(tsub, "fit", "fit a family of lines to a CSV of measurements")
+    tfit.add_argument("file", type=Path,
+                      help="CSV with object,t,y or object,t,x,y[,z] [,sigma2]")
+    tfit.add_argument("--family", default="diverging",
+                      choices=("diverging", "parallel", "independent", "custom"))
+    tfit.add_argument("--shared-start", action="append", metavar="A,B,..",
+                      help="custom family: objects sharing a start (repeatable)")
+    tfit.add_argument("--shared-velocity", action="append", metavar="A,B,..",
+                      help="custom family: objects sharing a velocity (repeatable)")
+    tfit.add_argument("--sigma2", type=positive,
+                      help="error variance, (unit of y)² (default 1)")
+    tfit.add_argument("--sigma2-unknown", action="store_true",
+                      help="family test with σ² estimated (F test) instead of known (χ²)")
+    tfit.add_argument("--epoch", type=_finite(), default=0.0,
+                      help="time at which the start is defined, s (default 0)")
+    tfit.add_argument("--method", default="closed-form",
+                      help="closed-form (default) or a CVXPY solver: CLARABEL, OSQP, SCS, ...")
+    tfit.add_argument("--formulation", choices=("constrained", "reduced"),
+                      default="constrained", help="generic formulation (with --method SOLVER)")
+    tfit.add_argument("--level", type=_level(), default=0.95,
+                      help="family test level, in (0, 1)")
+    tfit.set_defaults(func=_trajectories_fit, printer=_print_trajectories_fit)

@@ -1,0 +1,127 @@
+r"""Fusion of two estimates and the accuracy of its weight matrix (paper 003, Kulyavets et al.).
+
+Paper: ``shared/papers/003_081094e0fa70fc4e.txt``, equations (1)-(14).
+
+Problem as posed
+----------------
+Two independent measurers estimate the same state :math:`\alpha \in R^m`:
+:math:`\hat a_\mu` with error covariance :math:`S_\mu = C_\mu^{-1}` (:math:`C_\mu` the
+precision). The fused estimate (1)-(2) is the weighted least-squares solution
+
+.. math::
+    \hat a_p = \arg\min_\alpha \sum_\mu (\alpha - \hat a_\mu)^T C_\mu (\alpha - \hat a_\mu)
+             = \hat a_1 + W(\hat a_2 - \hat a_1),\qquad
+    W = (C_1 + C_2)^{-1} C_2 = I - C_p^{-1} C_1 \;(6) = S_1 (S_1 + S_2)^{-1}.
+
+When :math:`S_\mu` are replaced by sample covariances :math:`\hat S_\mu` of :math:`n_\mu`
+snapshots (3), :math:`\hat W` is random. The paper linearises :math:`\mathrm{vec}\,\hat W`
+in :math:`\mathrm{vec}\,\hat S_\mu` (7)-(8) with the Jacobians (13)-(14)
+
+.. math::
+    \partial W/\partial (S_1)_{ij} = (I - W) E_{ij} C_1 W,\qquad
+    \partial W/\partial (S_2)_{ij} = -W E_{ij} C_2 (I - W),
+
+i.e. :math:`P_1 = (C_1W)^T \otimes (I - W)`, :math:`P_2 = -(C_2(I-W))^T \otimes W` with
+``vec`` stacking columns, and propagates the Wishart moments (4)-(5) of :math:`\hat S_\mu`
+through them (10).
+
+Entry points: :func:`weight_matrix`, :func:`fuse` (closed form or CVXPY),
+:func:`weight_jacobians` (closed form (13)-(14) or CasADi AD), :func:`sample_covariance_moments`
+((4)-(5), known or sample mean), :func:`weight_covariance` ((10)) and
+:func:`monte_carlo_weight`. Errata: ``docs/errata.md``.
+
+Layout (one idea per module; each imports only :mod:`optmodels.core`,
+:mod:`optmodels.backends` and this package):
+
+* :mod:`~optmodels.fusion.inputs`: argument checks (S_μ, n, ``mean``, the size guard);
+* :mod:`~optmodels.fusion.verify`: the NumPy re-check (forward error bounds, the WLS
+  objective (1), the status gate);
+* :mod:`~optmodels.fusion.weights`: W (2), (6), the correlated W, the fused covariance;
+* :mod:`~optmodels.fusion.estimate`: :func:`fuse` (1)-(2), closed form or CVXPY;
+* :mod:`~optmodels.fusion.accuracy`: the Jacobians (13)-(14), the moments (4)-(5), (10);
+* :mod:`~optmodels.fusion.sampling`: the Monte Carlo law of Ŵ and Ŵ from snapshots;
+* :mod:`~optmodels.fusion.two_site`: the two-site system (geometry, estimators,
+  covariances, CRB, fusion of its estimators);
+* :mod:`~optmodels.fusion.two_site_ml`: its joint ML (CasADi/IPOPT NLP and cache,
+  Gauss-Newton).
+
+Private helpers and constants of the former single module are re-exported here too (tests
+and callers may use ``fusion.MAX_DIM``, ``fusion.Status``); to patch a constant such as
+``MC_CHUNK``, patch the submodule that reads it (:mod:`optmodels.fusion.sampling`).
+"""
+
+from optmodels.core import MAX_MAGNITUDE as MAX_MAGNITUDE
+from optmodels.core import REJECT_TOL as REJECT_TOL
+from optmodels.core import VERIFY_TOL as VERIFY_TOL
+from optmodels.core import FloatArray as FloatArray
+from optmodels.core import ProblemError as ProblemError
+from optmodels.core import Solution as Solution
+from optmodels.core import Status as Status
+from optmodels.fusion.accuracy import _jacobians as _jacobians
+from optmodels.fusion.accuracy import _moments as _moments
+from optmodels.fusion.accuracy import (
+    commutation_matrix,
+    sample_covariance_moments,
+    weight_covariance,
+    weight_jacobians,
+)
+from optmodels.fusion.estimate import FusionSolution, fuse
+from optmodels.fusion.estimate import _fuse_correlated as _fuse_correlated
+from optmodels.fusion.inputs import MAX_DIM as MAX_DIM
+from optmodels.fusion.inputs import MeanKind as MeanKind
+from optmodels.fusion.inputs import _check_mean as _check_mean
+from optmodels.fusion.inputs import _check_n as _check_n
+from optmodels.fusion.inputs import _cov as _cov
+from optmodels.fusion.inputs import _dim_guard as _dim_guard
+from optmodels.fusion.inputs import _pair as _pair
+from optmodels.fusion.inputs import _vec as _vec
+from optmodels.fusion.inputs import _where as _where
+from optmodels.fusion.sampling import MAX_MC_WORK as MAX_MC_WORK
+from optmodels.fusion.sampling import MC_CHUNK as MC_CHUNK
+from optmodels.fusion.sampling import WeightMonteCarlo as WeightMonteCarlo
+from optmodels.fusion.sampling import _rng as _rng
+from optmodels.fusion.sampling import monte_carlo_weight, weight_from_samples
+from optmodels.fusion.two_site import GEOMETRY_COND as GEOMETRY_COND
+from optmodels.fusion.two_site import MEASUREMENTS as MEASUREMENTS
+from optmodels.fusion.two_site import TwoSiteSystem
+from optmodels.fusion.two_site import _at as _at
+from optmodels.fusion.two_site import _first_index as _first_index
+from optmodels.fusion.two_site import _xy as _xy
+from optmodels.fusion.two_site_ml import _JOINT_CACHE as _JOINT_CACHE
+from optmodels.fusion.two_site_ml import JointMLSolution, clear_joint_cache
+from optmodels.fusion.two_site_ml import _joint_nlp as _joint_nlp
+from optmodels.fusion.two_site_ml import _newton_step as _newton_step
+from optmodels.fusion.verify import _EPS as _EPS
+from optmodels.fusion.verify import _bounded_error as _bounded_error
+from optmodels.fusion.verify import _combination_bound as _combination_bound
+from optmodels.fusion.verify import _refuse_inaccurate as _refuse_inaccurate
+from optmodels.fusion.verify import _verify as _verify
+from optmodels.fusion.verify import _weight_bound as _weight_bound
+from optmodels.fusion.verify import _weight_error as _weight_error
+from optmodels.fusion.verify import _wls_objective as _wls_objective
+from optmodels.fusion.weights import PINV_RTOL as PINV_RTOL
+from optmodels.fusion.weights import _correlated_weight as _correlated_weight
+from optmodels.fusion.weights import _cross as _cross
+from optmodels.fusion.weights import _weight as _weight
+from optmodels.fusion.weights import (
+    fused_covariance,
+    weight_matrix,
+    weight_matrix_correlated,
+)
+
+__all__ = [
+    "FusionSolution",
+    "JointMLSolution",
+    "TwoSiteSystem",
+    "clear_joint_cache",
+    "commutation_matrix",
+    "fuse",
+    "fused_covariance",
+    "monte_carlo_weight",
+    "sample_covariance_moments",
+    "weight_covariance",
+    "weight_from_samples",
+    "weight_jacobians",
+    "weight_matrix",
+    "weight_matrix_correlated",
+]

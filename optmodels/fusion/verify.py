@@ -1,0 +1,91 @@
+"""NumPy re-check of the fusion answers (paper 003): forward error bounds of the weight W
+(2), (6) (and of the correlated W) from the residual of W(S1 + S2) = S1 and the
+conditioning (LAPACK xGERFS style, componentwise), of the fused estimate (1), the WLS
+objective (1) itself, and the status gate :func:`_verify` (via
+:func:`optmodels.core.verified_status`); :func:`_refuse_inaccurate` for functions that
+return a bare matrix."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from optmodels.core import REJECT_TOL, FloatArray, ProblemError, Status, verified_status
+
+_EPS = float(np.finfo(float).eps)
+
+
+def _bounded_error(mat: FloatArray, sol: FloatArray, rhs: FloatArray, inv: FloatArray
+                   ) -> FloatArray:
+    """LAPACK-style (xGERFS) forward error bound of a computed ``sol`` of
+    ``mat @ sol = rhs``: |inv| (|r| + γ(|mat||sol| + |rhs|)) elementwise, r the residual,
+    γ = (m + 2) eps, ``inv`` the (pseudo-)inverse of ``mat``. Componentwise, so a
+    badly scaled but well-conditioned system (diagonal S) is not penalised."""
+    gamma = (mat.shape[0] + 2) * _EPS
+    r = rhs - mat @ sol
+    return np.abs(inv) @ (np.abs(r) + gamma * (np.abs(mat) @ np.abs(sol) + np.abs(rhs)))
+
+
+def _weight_bound(w: FloatArray, mat: FloatArray, rhs: FloatArray,
+                  inv: FloatArray | None = None) -> FloatArray:
+    """Elementwise forward error bound |δW| of W solving W·mat = rhs (mat symmetric, i.e.
+    mat·Wᵀ = rhsᵀ): S1 + S2 and S1 for the paper's W (2), D and S1 − S12 for the
+    correlated one (``inv`` = D⁺ there); inf where W is not finite."""
+    if not np.all(np.isfinite(w)):
+        return np.full_like(w, np.inf)
+    if inv is None:
+        inv = np.linalg.inv(mat)
+    return _bounded_error(mat, w.T, rhs.T, inv).T
+
+
+def _weight_error(w: FloatArray, mat: FloatArray, rhs: FloatArray,
+                  inv: FloatArray | None = None) -> float:
+    """Relative forward error bound max|δW| / max|W| (see :func:`_weight_bound`)."""
+    err = _weight_bound(w, mat, rhs, inv)
+    return float(np.max(err) / max(float(np.max(np.abs(w))), np.finfo(float).tiny))
+
+
+def _combination_bound(w: FloatArray, dw: FloatArray, x1: FloatArray, x2: FloatArray
+                       ) -> FloatArray:
+    """Elementwise error bound of a1 + W(a2 − a1) given |δW| ≤ dw: dw|a2 − a1| plus the
+    round-off of the product and the sum."""
+    spread = np.abs(x2 - x1)
+    return dw @ spread + (x1.size + 2) * _EPS * (np.abs(x1) + np.abs(w) @ spread)
+
+
+def _refuse_inaccurate(fn: str, err: float, what: str) -> None:
+    """Functions that return a bare matrix cannot downgrade a status: refuse instead."""
+    if not np.isfinite(err) or err > REJECT_TOL:
+        raise ProblemError(f"fusion.{fn}: {what} is too ill-conditioned: the result's "
+                           f"relative forward error bound {err:.2g} exceeds {REJECT_TOL:g} "
+                           "(NumPy re-check)")
+
+
+def _wls_objective(x: FloatArray, a1: FloatArray, c1: FloatArray, a2: FloatArray,
+                   c2: FloatArray) -> float:
+    d1, d2 = x - a1, x - a2
+    return float(d1 @ c1 @ d1 + d2 @ c2 @ d2)
+
+
+def _verify(common: dict[str, Any], residuals: dict[str, float], est: FloatArray,
+            w: FloatArray, cov: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """A solver's (or a closed form's) 'optimal' is not taken on trust:
+    :func:`optmodels.core.verified_status` with the largest NumPy-recomputed residual.
+    A result that is not OK keeps no estimate (NaN), and no W/covariance if W failed."""
+    worst_key = max(residuals, key=lambda k: -1.0 if np.isnan(residuals[k])
+                    else residuals[k])
+    worst = residuals[worst_key]
+    if any(np.isnan(v) for v in residuals.values()):
+        worst = float("nan")
+    new = verified_status(common["status"], worst)
+    if new != common["status"]:
+        verdict = "fails the NumPy check" if new == Status.ERROR else "(NumPy check)"
+        common["status"] = new
+        common["message"] = f"{common.get('message', '')}; {worst_key} " \
+            f"{worst:.1e} {verdict}"
+    if not new.ok:
+        est = np.full_like(est, np.nan)
+        if not residuals["weight_error"] <= REJECT_TOL:
+            w, cov = np.full_like(w, np.nan), np.full_like(cov, np.nan)
+    return est, w, cov

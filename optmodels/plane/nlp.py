@@ -1,0 +1,344 @@
+r"""Generic formulations of the plane problem in CasADi, and the multistart solve.
+
+``"full"``: the original problem (1.2)-(1.3) in all 3N + 4 unknowns; ``"reduced"``:
+(1.12)-(1.13) in ``(n, a)``, valid for general :math:`D_i`. Both are built once per
+structure (a FIFO cache of built NLPs; the data enter as parameters) and solved by
+:func:`solve` from up to three starts along the principal axes of the scaled data, every
+run re-checked by :mod:`optmodels.plane.verify`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Literal
+
+import casadi as ca
+import numpy as np
+from numpy.typing import ArrayLike
+
+from optmodels.backends.casadi_backend import BuiltNlp, build_nlpsol, run_nlpsol
+from optmodels.core import (
+    VERIFY_TOL,
+    FloatArray,
+    ProblemError,
+    SolverNotAvailable,
+    Status,
+    as_choice,
+    as_count,
+    as_finite_array,
+    timed,
+)
+from optmodels.plane.data import PlaneData, PlaneSolution, _oblique_projection, _weighted_offset
+from optmodels.plane.verify import _finish, _profile_check
+
+Formulation = Literal["full", "reduced"]
+
+#: Upper-triangle index pairs of a symmetric 3x3 matrix, the order used for parameters.
+_IU = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))
+
+
+@dataclass(frozen=True)
+class _Scaled:
+    r"""Data moved to the unweighted centroid and scaled to unit RMS spread.
+
+    Translation and scaling map planes to planes and leave (1.2) unchanged when the
+    covariances are scaled with the points, so IPOPT sees well-scaled numbers whatever the
+    units or the distance from the origin; the plane is mapped back exactly:
+    :math:`\langle n, y\rangle = b` with :math:`y = (x - c)/s` is
+    :math:`\langle n, x\rangle = s b + \langle n, c\rangle`.
+    """
+
+    center: FloatArray
+    scale: float
+    points: FloatArray  # (N, 3) scaled
+    covs: FloatArray  # (N, 3, 3) scaled
+
+    @classmethod
+    def of(cls, data: PlaneData) -> _Scaled:
+        c = data.points.mean(axis=0)
+        y = data.points - c
+        s = float(np.sqrt(np.mean(np.sum(y * y, axis=1))))
+        return cls(center=c, scale=s, points=y / s, covs=data.covs / s**2)
+
+
+def _upper(mats: FloatArray) -> FloatArray:
+    """(N, 3, 3) symmetric → (6, N) upper-triangle entries in :data:`_IU` order."""
+    return np.stack([mats[:, j, k] for j, k in _IU])
+
+
+def _full_problem(n: int) -> dict[str, Any]:
+    """(1.2)-(1.3) as a CasADi NLP with the data as parameters.
+
+    Unknowns: ``vec(X)`` (3N, columns x_i), ``n`` (3), ``a``. Parameters: ``vec(X*)``
+    (3N) and the upper triangles of :math:`D_i^{-1}` (6N).
+    """
+    x = ca.MX.sym("x", 3, n)
+    nv = ca.MX.sym("n", 3)
+    a = ca.MX.sym("a")
+    p_pts = ca.MX.sym("xs", 3, n)
+    p_w = ca.MX.sym("Dinv", 6, n)
+    e = x - p_pts
+    f = 0
+    for r, (j, k) in enumerate(_IU):
+        f = f + (1.0 if j == k else 2.0) * ca.dot(p_w[r, :], e[j, :] * e[k, :])
+    g = ca.vertcat((ca.mtimes(nv.T, x) - a).T, ca.dot(nv, nv) - 1.0)
+    return {
+        "x": ca.vertcat(ca.vec(x), nv, a),
+        "f": f / n,  # (1.2) / N: an O(1) objective, so IPOPT's tolerances are meaningful
+        "g": g,
+        "p": ca.vertcat(ca.vec(p_pts), ca.vec(p_w)),
+    }
+
+
+def _reduced_problem(n: int) -> dict[str, Any]:
+    """(1.12)-(1.13) as a CasADi NLP in (n, a) with the data as parameters.
+
+    Parameters: ``vec(X*)`` (3N) and the upper triangles of :math:`D_i` (6N).
+    """
+    nv = ca.MX.sym("n", 3)
+    a = ca.MX.sym("a")
+    p_pts = ca.MX.sym("xs", 3, n)
+    p_d = ca.MX.sym("D", 6, n)
+    resid = a - ca.mtimes(nv.T, p_pts)
+    den = 0
+    for r, (j, k) in enumerate(_IU):
+        den = den + (1.0 if j == k else 2.0) * nv[j] * nv[k] * p_d[r, :]
+    return {
+        "x": ca.vertcat(nv, a),
+        "f": ca.sum2(resid * resid / den) / n,  # (1.12) / N, O(1) as above
+        "g": ca.dot(nv, nv) - 1.0,
+        "p": ca.vertcat(ca.vec(p_pts), ca.vec(p_d)),
+    }
+
+
+_NLP_CACHE: dict[tuple[Any, ...], BuiltNlp] = {}
+_NLP_CACHE_SIZE = 8
+
+
+def _get_nlp(
+    formulation: Formulation, n: int, options: dict[str, Any] | None, plugin: str = "ipopt"
+) -> tuple[BuiltNlp, bool]:
+    """Built NLP for this structure, and whether it was built by this call.
+
+    The symbolic construction does not depend on the data values, so Monte Carlo and
+    sequential runs pay it once per (formulation, N, options).
+    """
+    key = (formulation, n, plugin, repr(sorted((options or {}).items())))
+    if key in _NLP_CACHE:
+        return _NLP_CACHE[key], False
+    problem = _full_problem(n) if formulation == "full" else _reduced_problem(n)
+    built = build_nlpsol(problem, plugin=plugin, options=options)
+    if len(_NLP_CACHE) >= _NLP_CACHE_SIZE:
+        _NLP_CACHE.pop(next(iter(_NLP_CACHE)))
+    _NLP_CACHE[key] = built
+    return built, True
+
+
+#: A stationary point whose smallest profile curvature is below -1e-6 of the largest is a
+#: saddle or a maximum of (1.12)-(1.13), not a solution (finite-difference accuracy of the
+#: relative curvature is ~1e-8).
+_SADDLE_RTOL = 1e-6
+
+
+def clear_nlp_cache() -> None:
+    """Forget the built CasADi NLPs (the next solve pays the construction again; used by
+    benchmarks that measure cold build + solve)."""
+    _NLP_CACHE.clear()
+
+
+def _principal_axes(points: FloatArray) -> FloatArray:
+    """Rows: unit axes of the unweighted scatter, smallest variance first."""
+    y = points - points.mean(axis=0)
+    _, vecs = np.linalg.eigh(y.T @ y)
+    return vecs.T
+
+
+def solve(
+    data: PlaneData,
+    formulation: Formulation = "full",
+    *,
+    starts: int | Literal["auto"] = "auto",
+    initial_normal: ArrayLike | None = None,
+    ipopt_options: dict[str, Any] | None = None,
+    plugin: str = "ipopt",
+    plugin_options: dict[str, Any] | None = None,
+) -> PlaneSolution:
+    """Solve the ML plane problem generically with CasADi + IPOPT (or another NLP plugin).
+
+    Parameters
+    ----------
+    data : PlaneData
+    formulation : {"full", "reduced"}
+        ``"full"``: the original problem (1.2)-(1.3) in all 3N + 4 unknowns.
+        ``"reduced"``: (1.12)-(1.13) in (n, a), valid for general :math:`D_i`.
+    starts : "auto" or int 1..3
+        Starts along the principal axes of the *unweighted* scatter (smallest variance
+        first); the best KKT point is kept. Never started from the closed form.
+        ``"auto"`` (default): under (1.4), the first axis, then the other two only if it
+        failed or fails the second-order check (``info["min_curvature"] <= 0``: not a
+        local minimum of the profile :math:`\\Phi(n) = \\min_a \\varphi(a, n)` on the
+        sphere); for general :math:`D_i` all three.
+    initial_normal : array_like (3,), optional
+        Start from this normal instead (a single start, e.g. a warm start in a sequence).
+    ipopt_options : dict, optional
+        Extra IPOPT options (defaults: ``tol = constr_viol_tol = 1e-10``).
+    plugin : str
+        CasADi ``nlpsol`` plugin: ``"ipopt"`` (default) or another that loads here, e.g.
+        ``"sqpmethod"``, ``"blocksqp"``, ``"feasiblesqpmethod"`` (see
+        :data:`optmodels.backends.casadi_backend.NLP_PLUGINS`). Every result is re-checked
+        against (1.3) in NumPy whatever the plugin.
+    plugin_options : dict, optional
+        Options for a plugin other than IPOPT (CasADi's option dictionary).
+
+    Returns
+    -------
+    PlaneSolution
+        The best successful start. If no start succeeded, the status is not OK (and
+        ``require_ok()`` raises). ``build_time`` is the CasADi construction when it
+        happened in this call (``info["cached_build"]`` says whether it was reused);
+        ``info["start_objectives"]`` lists each start's value of (1.2).
+
+    Notes
+    -----
+    What is guaranteed: each successful run is a KKT point of the chosen formulation to
+    IPOPT's tolerance, re-checked against (1.3) in ``residuals``. Under (1.4) every local
+    minimum of the Rayleigh quotient (1.15) is global (its other stationary points, the
+    other generalized eigenvectors, are a saddle and a maximum), so any run that reaches a
+    local minimum is the global ML plane. A run that stops on a saddle or maximum (a start
+    exactly on one, e.g. a principal axis when ``D`` is isotropic) is caught by the
+    second-order check, and the remaining starts are tried. For general :math:`D_i`
+    (1.12) can have spurious local minima (seen in tests: a strict local minimum with
+    (1.2) four orders of magnitude above the global one), so all three starts are run;
+    this is a heuristic, not a global guarantee -- compare ``info["start_objectives"]``.
+
+    Every run ends in a NumPy re-check against (1.2)-(1.3) (``info["verification"]``):
+    the residuals of (1.3), the Newton step of the profile :math:`\\Phi` on the sphere
+    (analytic gradient, finite-difference Hessian; an estimate in rad of the normal's
+    error, inf when the curvature does not clear its round-off floor, e.g. nearly collinear
+    points) and, for ``"full"``, the distance of the solver's :math:`x_i` from (1.8) in
+    noise standard deviations; then :func:`optmodels.core.verified_status`. A stationary
+    point with negative curvature (saddle or maximum) is reported as ERROR.
+    """
+    if not isinstance(data, PlaneData):
+        raise ProblemError(f"plane.solve data: expected a PlaneData, got {type(data).__name__}")
+    formulation = as_choice("plane.solve formulation", formulation,  # type: ignore[assignment]
+                            ("full", "reduced"))
+    auto = isinstance(starts, str) and starts == "auto"
+    if not auto:
+        if isinstance(starts, str):
+            raise ProblemError(f"plane.solve starts: expected 'auto', 1, 2 or 3, got {starts!r}")
+        starts = as_count("plane.solve starts", starts, minimum=1, maximum=3)
+    if not isinstance(plugin, str) or not plugin:
+        raise ProblemError(f"plane.solve plugin: expected a CasADi nlpsol name, got {plugin!r}")
+    for name, opts in (("ipopt_options", ipopt_options), ("plugin_options", plugin_options)):
+        if opts is not None and (not isinstance(opts, dict)
+                                 or not all(isinstance(k, str) for k in opts)):
+            raise ProblemError(f"plane.solve {name}: expected a dict with str keys or None, "
+                               f"got {type(opts).__name__}")
+    sc = _Scaled.of(data)
+    n_pts = data.n_points
+    if initial_normal is not None:
+        n0 = as_finite_array("plane.solve initial_normal", initial_normal, shape=(3,))
+        if not np.linalg.norm(n0) > 0:
+            raise ProblemError("plane.solve initial_normal: must be non-zero")
+        start_normals = [n0 / np.linalg.norm(n0)]
+    else:
+        start_normals = list(_principal_axes(sc.points)[: 3 if auto else int(starts)])
+
+    with timed() as t_prep:
+        try:
+            if plugin == "ipopt":
+                built, fresh = _get_nlp(formulation, n_pts, ipopt_options)
+            else:
+                built, fresh = _get_nlp(formulation, n_pts, plugin_options, plugin)
+        except RuntimeError as exc:  # CasADi: unknown plugin/option, missing library
+            raise SolverNotAvailable(
+                f"plugin: CasADi nlpsol {plugin!r} could not be built for the plane NLP: "
+                f"{str(exc).splitlines()[0][:200]}") from exc
+        if formulation == "full":
+            params = np.concatenate(
+                [sc.points.T.ravel(order="F"), _upper(np.linalg.inv(sc.covs)).ravel(order="F")]
+            )
+        else:
+            params = np.concatenate(
+                [sc.points.T.ravel(order="F"), _upper(sc.covs).ravel(order="F")]
+            )
+    build_time = t_prep.elapsed  # includes the construction when it happened here
+
+    best: PlaneSolution | None = None
+    first_fail: PlaneSolution | None = None
+    start_objs: list[float] = []
+    start_status: list[str] = []
+    total_solve = 0.0
+    total_iter = 0
+    method = f"casadi:{plugin}:{formulation}"
+    curvature = float("nan")
+    for nv0 in start_normals:
+        if auto and data.proportional and len(start_objs) == 1 and best is not None \
+                and curvature > 0:
+            # Under (1.4) a local minimum of Φ on the sphere is the global one.
+            break
+        # Start plane (nv0, b0): b0 and the x_i are the best ones *for that plane* --
+        # the weighted offset and the oblique projections (1.8), not orthogonal ones,
+        # which under anisotropic D_i start far from optimal and cost IPOPT dozens of
+        # iterations. This uses only the start plane, never the closed-form solution.
+        b0 = _weighted_offset(sc.points, sc.covs, nv0)[2]
+        if formulation == "full":
+            x_start = _oblique_projection(sc.points, sc.covs, nv0, b0)
+            x0 = np.concatenate([x_start.T.ravel(order="F"), nv0, [b0]])
+        else:
+            x0 = np.concatenate([nv0, [b0]])
+        res, xopt = run_nlpsol(built, x0=x0, p=params)
+        total_solve += res.solve_time
+        total_iter += res.iterations or 0
+        k = 3 * n_pts if formulation == "full" else 0
+        normal, b = xopt[k : k + 3], float(xopt[k + 3])
+        # The solver's own normal (not renormalised), so that a violated ‖n‖ = 1 shows in
+        # the residuals; "full" reports its own x_i, "reduced" projects by (1.8).
+        offset = b * sc.scale + float(normal @ sc.center)
+        x_scaled = xopt[:k].reshape(n_pts, 3) if formulation == "full" else None
+        proj = None
+        if x_scaled is not None and np.all(np.isfinite(xopt)):
+            proj = x_scaled * sc.scale + sc.center
+        status = res.status
+        message = res.message
+        curv_i, step_i = float("nan"), float("inf")
+        if np.all(np.isfinite(normal)) and np.linalg.norm(normal) > 0:
+            chk = _profile_check(sc.points, sc.covs, normal / np.linalg.norm(normal))
+            curv_i, step_i = float(chk.curvature[0]), float(chk.step[0])
+            if res.message == "Search_Direction_Becomes_Too_Small" and step_i <= VERIFY_TOL:
+                # IPOPT's precision limit: accept only a point verified independently
+                # (the re-check in _finish then applies to it like to any other).
+                status = Status.OPTIMAL_INACCURATE
+                message += f" (KKT point verified: Newton step {step_i:.1e} rad, " \
+                    f"curvature {curv_i:.2f})"
+            if status.ok and curv_i < -_SADDLE_RTOL:
+                status = Status.ERROR
+                message += f"; not a minimum of (1.12)-(1.13): profile curvature {curv_i:.2g}" \
+                    " (a saddle or maximum)"
+        sol = _finish(data, normal, offset, status=status, method=method,
+                      stationarity=step_i, message=message, projected=proj,
+                      info={"min_curvature": curv_i})
+        start_objs.append(sol.objective)
+        start_status.append(res.message)
+        if sol.ok and (best is None or sol.objective < best.objective):
+            best = sol
+            curvature = curv_i
+        elif not sol.ok and first_fail is None:
+            first_fail = sol
+    out = best if best is not None else first_fail
+    assert out is not None
+    verification = out.info.get("verification", {})
+    curvature = float(out.info.get("min_curvature", float("nan")))
+    out.build_time = build_time
+    out.solve_time = total_solve
+    out.iterations = total_iter
+    out.info = {
+        "start_objectives": start_objs,
+        "start_status": start_status,
+        "starts": len(start_objs),
+        "min_curvature": curvature,
+        "cached_build": not fresh,
+        "verification": verification,
+    }
+    return out

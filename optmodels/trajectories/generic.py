@@ -1,0 +1,207 @@
+"""The generic solve of paper 002's least squares (1): a CVXPY model, either the ``Q``
+lines with the family's equality constraints (``"constrained"``) or the unconstrained
+problem in θ with the design matrix (``"reduced"``), in centred, scaled units, with
+:data:`SOLVER_DEFAULTS`; the answer is re-checked in NumPy (:mod:`.verify`).
+"""
+
+from __future__ import annotations
+
+from typing import Any, Literal
+
+import cvxpy as cp
+import numpy as np
+import scipy.sparse as sp
+
+from optmodels.backends.cvxpy_backend import solve_problem
+from optmodels.core import FloatArray, ProblemError, Status, as_choice, timed
+from optmodels.trajectories.data import Family, FamilyName, TrajectoryData, resolve_family
+from optmodels.trajectories.fits import _anchors, _fit
+from optmodels.trajectories.moments import _stats
+from optmodels.trajectories.solution import TrajectorySolution, _nan_solution, _package
+from optmodels.trajectories.verify import (
+    REJECT_TOL,
+    VERIFY_TOL,
+    _downgrade,
+    _line_residuals,
+    _recheck,
+)
+
+#: Default solver options. The QP has equality constraints only, so OSQP's polishing step
+#: (one solve of the KKT system once ADMM has converged) lands on the exact solution
+#: (~1e-15 relative) already from eps = 1e-6; asking ADMM itself for 1e-10 costs 12 525
+#: iterations (22 s) on the parallel family with Q = 100 × 1000 points, for nothing. Every
+#: generic solution is verified afterwards (:data:`VERIFY_TOL`), so a failed polish shows.
+SOLVER_DEFAULTS: dict[str, dict[str, Any]] = {
+    "OSQP": {"eps_abs": 1e-6, "eps_rel": 1e-6, "polishing": True, "max_iter": 200_000},
+    "CLARABEL": {"tol_gap_abs": 1e-12, "tol_gap_rel": 1e-12, "tol_feas": 1e-12},
+    "SCS": {"eps_abs": 1e-9, "eps_rel": 1e-9, "max_iters": 200_000},
+}
+
+
+# --------------------------------------------------------------------------- generic solve
+def _cvxpy_problem(data: TrajectoryData, fam: Family, formulation: str
+                   ) -> tuple[cp.Problem, Any]:
+    """The CVXPY model in centred, scaled units, and a function mapping the solved
+    variables to (θ (R, d), lines (p, v, u, dt) or None).
+
+    Each object's line is parametrised by its position at its own mean time T0_j
+    (coordinate 0's weights) and its velocity -- the same lines, so the same problem; the
+    shared-start equalities are written at the epoch (p_j − u_jV_j = p_k − u_kV_k), or as
+    p_j − p_k = (T0_j − T0_k)V when the two objects also share the velocity. Times are
+    divided by ts = max |t − T0_j|, values shifted by each object's mean and divided by
+    their spread, weights by their mean, objective by N d: O(1) numbers for the solvers'
+    tolerances (first-order solvers such as OSQP/SCS need it)."""
+    st = _stats(data)
+    n, q, d = data.n_measurements, data.n_objects, data.dim
+    si, vi = fam.start_index, fam.velocity_index
+    tau0 = st.tau[:, 0]
+    u0 = st.u[:, 0]
+    dt0 = (st.tbar[:, 0] - st.tbar[0, 0]) + (st.tcorr[:, 0] - st.tcorr[0, 0])
+    sw = np.sqrt(data.w / np.mean(data.w) / (n * d))
+    ts = float(np.max(np.abs(tau0))) or 1.0
+    if formulation == "constrained":
+        off = st.p                                          # (Q, d)
+        yo = data.y - off[data.obj]
+        ys = max(float(np.max(np.abs(yo))), float(np.max(np.abs(off - off[0]))),
+                 float(np.max(np.abs(st.vhat))) * ts) or 1.0
+        sel0 = sp.csr_matrix((np.ones(n), (np.arange(n), data.obj)), shape=(n, q))
+        sel1 = sp.csr_matrix((tau0 / ts, (np.arange(n), data.obj)), shape=(n, q))
+        pv = cp.Variable((q, d), name="position")
+        v = cp.Variable((q, d), name="velocity")
+        cons = []
+        for g in fam.velocity_groups:
+            if len(g) > 1:
+                cons.append(v[list(g[1:])] == np.ones((len(g) - 1, 1)) @ v[[g[0]]])
+        for g in fam.start_groups:
+            r = g[0]
+            for j in g[1:]:
+                const = (off[j] - off[r]) / ys
+                if vi[j] == vi[r]:
+                    cons.append(pv[j] - pv[r] + const == ((dt0[j] - dt0[r]) / ts) * v[r])
+                else:
+                    cons.append(pv[j] - pv[r] + const == (u0[j] / ts) * v[j]
+                                - (u0[r] / ts) * v[r])
+        obj = cp.sum_squares(cp.multiply(sw, yo / ys - sel0 @ pv - sel1 @ v))
+
+        def back_c() -> tuple[FloatArray, Any]:
+            pl = np.asarray(pv.value) * ys + off
+            vl = np.asarray(v.value) * ys / ts
+            vel = np.vstack([vl[list(g)].mean(axis=0) for g in fam.velocity_groups])
+            vj = vel[vi - len(fam.start_groups)]
+            s = pl - vj * u0[:, None]
+            theta = np.vstack([[s[list(g)].mean(axis=0) for g in fam.start_groups], vel])
+            return theta, (pl, vl, u0[:, None], dt0)
+
+        return cp.Problem(cp.Minimize(obj), cons), back_c
+    if formulation == "reduced":
+        # (1): the unconstrained least squares in θ, anchored parameters (see _anchors)
+        lever, a = _anchors(st, fam, 0)
+        col = lever[data.obj] + tau0
+        tsr = float(np.max(np.abs(col))) or 1.0
+        ns = len(fam.start_groups)
+        grp_off = np.vstack([[np.mean(st.p[list(g)], axis=0)] for g in fam.start_groups])
+        yo = data.y - grp_off[si[data.obj]]
+        ys = float(np.max(np.abs(yo))) or 1.0
+        rows = np.concatenate([np.arange(n), np.arange(n)])
+        cols = np.concatenate([si[data.obj], vi[data.obj]])
+        am = sp.csr_matrix((np.concatenate([np.ones(n), col / tsr]), (rows, cols)),
+                           shape=(n, fam.n_params))
+        th = cp.Variable((fam.n_params, d), name="theta")
+        obj = cp.sum_squares(cp.multiply(sw, yo / ys - am @ th))
+
+        def back_r() -> tuple[FloatArray, Any]:
+            thc = np.asarray(th.value) * ys
+            thc[ns:] /= tsr
+            thc[:ns] += grp_off
+            for gi, g in enumerate(fam.start_groups):
+                if a[gi] != 0.0:
+                    thc[gi] -= a[gi] * thc[vi[g[0]]]
+            return thc, None
+
+        return cp.Problem(cp.Minimize(obj)), back_r
+    raise ProblemError(f"formulation: expected 'constrained' or 'reduced', got {formulation!r}")
+
+
+def solve(data: TrajectoryData, family: FamilyName | Family = "diverging", *,
+          formulation: Literal["constrained", "reduced"] = "constrained",
+          solver: str | None = None, **solver_options: Any) -> TrajectorySolution:
+    """Least squares of the family, written as is and solved by a CVXPY solver.
+
+    Parameters
+    ----------
+    data : TrajectoryData
+    family : "diverging", "parallel", "independent" or a :class:`Family`
+    formulation : {"constrained", "reduced"}
+        ``"constrained"``: the original problem -- ``Q`` lines (2Q·d variables, each line
+        by its position at its object's mean time and its velocity) with the family's
+        equality constraints; ``"reduced"``: (1) in θ with the design matrix A (starts of
+        groups whose objects share a velocity taken at the group's mean time, then moved
+        to the epoch).
+    solver : str, optional
+        Any installed CVXPY QP/conic solver; default Clarabel.
+    **solver_options
+        Passed to the solver, over :data:`SOLVER_DEFAULTS` (an option the solver rejects
+        is a ProblemError).
+
+    Returns
+    -------
+    TrajectorySolution
+        ``covariance`` is Ψ (14) at the data's design; ``residuals`` are the equality
+        violations of the solver's lines and the stationarity (relative distance to the
+        exact optimum), re-computed in NumPy in centred times. A claimed optimum above
+        :data:`VERIFY_TOL` becomes OPTIMAL_INACCURATE (≤ :data:`REJECT_TOL`) or ERROR; a
+        failed solve keeps its status and carries NaN estimates.
+
+    Raises
+    ------
+    ProblemError
+        Bad arguments, a numerically singular design, an epoch too far from the data.
+    """
+    fam = resolve_family(family, data.n_objects)
+    form = as_choice("trajectories.solve formulation", formulation, ("constrained", "reduced"))
+    if solver is None:
+        name = "CLARABEL"
+    elif isinstance(solver, str):
+        name = solver.upper()
+    else:
+        raise ProblemError(f"trajectories.solve solver: expected a solver name (str), got "
+                           f"{type(solver).__name__}")
+    opts = {**SOLVER_DEFAULTS.get(name, {}), **solver_options}
+    with timed() as tb:
+        fit = _fit(data, fam)
+        prob, back = _cvxpy_problem(data, fam, form)
+    res = solve_problem(prob, name, **opts)
+    common = res.common()
+    common["build_time"] += tb.elapsed
+    common["method"] = f"{res.method} ({form})"
+    first = prob.variables()[0]
+    if not res.status.ok or first.value is None:
+        return _nan_solution(data, fam, fit, {}, common, None)
+    theta, lines = back()
+    if not np.all(np.isfinite(theta)):
+        common["message"] += "; the solver returned non-finite values"
+        return _nan_solution(data, fam, fit, {}, common, None)
+    obj, stat, diag = _recheck(data, fam, fit, theta)
+    std = np.sqrt(np.diagonal(fit.cov, axis1=1, axis2=2)).T
+    residuals = ({"shared_start": 0.0, "shared_velocity": 0.0} if lines is None
+                 else _line_residuals(_stats(data), fam, *lines, std))
+    residuals["stationarity"] = stat
+    status = common["status"]
+    worst_key = max(residuals, key=residuals.__getitem__)
+    worst = residuals[worst_key]
+    if not np.isfinite(worst) or worst > VERIFY_TOL:
+        note = f"; verification failed: {worst_key} = {worst:.2e} > {VERIFY_TOL:g}"
+        common["message"] += note
+        if status is Status.OPTIMAL and worst <= REJECT_TOL:
+            common["status"] = Status.OPTIMAL_INACCURATE
+        else:
+            return _nan_solution(data, fam, fit, residuals, common, theta)
+    common["status"], note = _downgrade(data, common["status"], diag)
+    if note:
+        common["message"] += "; " + note
+    sol = _package(data, fam, fit, theta, residuals, obj, common)
+    sol.info.update(diag)
+    if lines is not None:
+        sol.info["lines"] = {"position": lines[0], "velocity": lines[1],
+                             "at_time": (lines[2][:, 0] + data.epoch)}
+    return sol

@@ -10,10 +10,10 @@ from __future__ import annotations
 
 import enum
 import time
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from contextlib import contextmanager
 from dataclasses import dataclass, field, fields
-from typing import Any, Self
+from typing import Any, Self, TypeVar
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -26,14 +26,19 @@ __all__ = [
     "SolverNotAvailable",
     "Status",
     "Timer",
+    "Verdict",
     "as_choice",
     "as_count",
     "as_finite_array",
+    "as_instance",
     "as_number",
     "as_positive",
     "as_probability",
     "check_spd",
     "check_spd_stack",
+    "failure",
+    "finish",
+    "gate",
 ]
 
 FloatArray = NDArray[np.float64]
@@ -94,6 +99,100 @@ def verified_status(status: Status, worst: float) -> Status:
     if worst > VERIFY_TOL and status == Status.OPTIMAL:
         return Status.OPTIMAL_INACCURATE
     return status
+
+
+# --------------------------------------------------------------------------- the gate
+@dataclass(frozen=True)
+class Verdict:
+    """What :func:`gate` decided: the status ``before`` and after the re-check, the largest
+    residual ``worst`` (NaN if any residual is NaN) and its name ``key``."""
+
+    status: Status
+    before: Status
+    worst: float
+    key: str
+
+    @property
+    def changed(self) -> bool:
+        return self.status != self.before
+
+    @property
+    def rejected(self) -> bool:
+        """A claimed solution refused by the re-check (OK before, ERROR after)."""
+        return self.before.ok and self.status == Status.ERROR
+
+
+def _worst(residuals: Mapping[str, float], ignore: Iterable[str]) -> tuple[str, float]:
+    """Name and value of the largest residual; NaN ranks lowest for the name but makes the
+    value NaN (an unknown residual is not a small one)."""
+    skip = set(ignore)
+    vals = {k: float(v) for k, v in residuals.items() if k not in skip}
+    if not vals:
+        return "residual", 0.0
+    key = max(vals, key=lambda k: -np.inf if np.isnan(vals[k]) else vals[k])
+    worst = float("nan") if any(np.isnan(v) for v in vals.values()) else vals[key]
+    return key, worst
+
+
+def gate(status: Status, residuals: Mapping[str, float], *, ignore: Iterable[str] = (),
+         strict: bool = False) -> Verdict:
+    """The one verification gate: the status of a claimed solution after the NumPy re-check
+    whose residuals (dimensionless, by name) are ``residuals``.
+
+    :func:`verified_status` of the largest residual (names in ``ignore`` are diagnostics,
+    not residuals): ERROR if it is NaN, infinite or above :data:`REJECT_TOL`, OPTIMAL →
+    OPTIMAL_INACCURATE above :data:`VERIFY_TOL`. With ``strict`` a solver's own
+    OPTIMAL_INACCURATE above VERIFY_TOL is refused too (an inexact claim that also fails
+    the check is not a solution). A status that was not OK stays as it is.
+    """
+    key, worst = _worst(residuals, ignore)
+    new = verified_status(status, worst)
+    if strict and new == Status.OPTIMAL_INACCURATE and status == Status.OPTIMAL_INACCURATE \
+            and worst > VERIFY_TOL:
+        new = Status.ERROR
+    return Verdict(status=new, before=status, worst=worst, key=key)
+
+
+S = TypeVar("S", bound="Solution")
+
+
+def finish(solution: S, checks: Mapping[str, float] | None = None, *,
+           ignore: Iterable[str] = (), strict: bool = False,
+           reject: Callable[[S], S | None] | None = None,
+           note: Callable[[Verdict], str] | None = None) -> S:
+    """End of every solve and closed form: :func:`gate` on ``checks`` (default: the
+    solution's own ``residuals``), the status set on ``solution``, and, if the gate changed
+    it, ``note(verdict)`` appended to the message (default: "<key> <worst> fails the NumPy
+    check" / "(NumPy check)"). A result that is not OK after the gate (refused by it, or
+    not OK from the solver) is replaced by the problem's failure form: ``reject(solution)``
+    (mutates it, or returns the replacement; without ``reject`` the numbers stay, for
+    diagnosis, under a status that is not OK). Returns the solution."""
+    verdict = gate(solution.status, solution.residuals if checks is None else checks,
+                   ignore=ignore, strict=strict)
+    solution.status = verdict.status
+    if verdict.changed:
+        text = (note or _default_note)(verdict)
+        if text:
+            solution.message = f"{solution.message}; {text}" if solution.message else text
+    if not verdict.status.ok and reject is not None:
+        out = reject(solution)
+        if out is not None:
+            solution = out
+    return solution
+
+
+def _default_note(v: Verdict) -> str:
+    return (f"{v.key} residual {v.worst:.1e} fails the NumPy check" if v.status == Status.ERROR
+            else f"{v.key} residual {v.worst:.1e} (NumPy check)")
+
+
+def failure(cls: type[S], method: str, message: str, *, status: Status = Status.ERROR,
+            **fields: Any) -> S:
+    """The one failure constructor: a ``cls`` solution with no estimate (objective NaN,
+    the estimate fields at their NaN/empty defaults unless given in ``fields``) and a
+    status that is not OK (an OK ``status`` becomes ERROR)."""
+    return cls(status=status if not status.ok else Status.ERROR, objective=float("nan"),
+               method=method, message=message, **fields)
 
 
 @dataclass
@@ -402,4 +501,12 @@ def as_choice(name: str, value: Any, choices: Iterable[str]) -> str:
         raise ProblemError(
             f"{name}: expected one of {', '.join(map(repr, options))}, got {_scalar_text(value)}"
         )
+    return value
+
+
+def as_instance(name: str, value: Any, cls: type) -> Any:
+    """``value`` if it is a ``cls`` (the problem's data object), else a ProblemError naming
+    ``name`` and the type received (instead of an AttributeError deep inside)."""
+    if not isinstance(value, cls):
+        raise ProblemError(f"{name}: expected a {cls.__name__}, got {type(value).__name__}")
     return value

@@ -394,30 +394,39 @@ class AssignmentAdapter(Adapter):
         return 0.0 if x == ref else 1.0
 
 
-#: High-accuracy options per solver (the ``high`` profile). Keys are the solvers' own.
-HIGH_OPTIONS: dict[str, dict[str, Any]] = {
-    "CLARABEL": {"tol_gap_abs": 1e-12, "tol_gap_rel": 1e-12, "tol_feas": 1e-12,
-                 "tol_ktratio": 1e-10},
-    "OSQP": {"eps_abs": 1e-10, "eps_rel": 1e-10, "max_iter": 200_000, "polishing": True},
-    "SCS": {"eps_abs": 1e-10, "eps_rel": 1e-10, "max_iters": 200_000},
-    "HIGHS": {"primal_feasibility_tolerance": 1e-10, "dual_feasibility_tolerance": 1e-10},
-    "CASADI_OSQP": {"osqp": {"eps_abs": 1e-10, "eps_rel": 1e-10, "max_iter": 200_000,
-                             "polish": True, "verbose": False}},
-    "CASADI_PROXQP": {"proxqp": {"eps_abs": 1e-10}},
-    "ipopt": {"tol": 1e-12, "constr_viol_tol": 1e-12},
-    "sqpmethod": {"tol_pr": 1e-12, "tol_du": 1e-12},
-    "feasiblesqpmethod": {"tol_pr": 1e-12, "tol_du": 1e-12},
-}
+#: High-accuracy options per solver (the ``high`` profile): the back-end's table
+#: :data:`optmodels.backends.profiles.HIGH_OPTIONS` (the same object). Keys are the solvers' own.
+HIGH_OPTIONS: dict[str, dict[str, Any]] = importlib.import_module(
+    "optmodels.backends.profiles").HIGH_OPTIONS
 
 
-#: Registered adapters: problem name → "module:Class".
-REGISTRY: dict[str, str] = {
-    "plane": "solvers_cmp.cases:PlaneAdapter",
-    "trajectories": "solvers_cmp.cases:TrajectoriesAdapter",
-    "fusion": "solvers_cmp.cases:FusionAdapter",
-    "biasfield": "solvers_cmp.cases:BiasfieldAdapter",
-    "assignment": "solvers_cmp.cases:AssignmentAdapter",
-}
+def _adapter_path(problem: str) -> str | None:
+    """Where the adapter of a registered problem is, found by the problem's name: a class
+    of this module whose ``name`` is the problem's, else ``solvers_cmp.<problem>:Adapter``
+    (the place of a new problem's adapter: one file, no list to edit); ``None`` if neither
+    exists. Nothing is imported here (``find_spec`` only)."""
+    import importlib.util
+
+    here = [c for c in globals().values() if isinstance(c, type) and issubclass(c, Adapter)
+            and c.__module__ == __name__ and c.name == problem]
+    if here:
+        return f"{__name__}:{here[0].__name__}"
+    if importlib.util.find_spec(f"solvers_cmp.{problem}") is not None:
+        return f"solvers_cmp.{problem}:Adapter"
+    return None
+
+
+def _discover() -> dict[str, str]:
+    from optmodels import registry
+
+    found = {p: _adapter_path(p) for p in registry.names()}
+    return {p: path for p, path in found.items() if path is not None}
+
+
+#: Adapters by problem name → "module:Class": every problem of :mod:`optmodels.registry`
+#: with an adapter (:func:`_adapter_path`), in the registry's order; :func:`register` adds
+#: others (e.g. a test's adapter).
+REGISTRY: dict[str, str] = _discover()
 
 
 def register(name: str, path: str) -> None:
@@ -434,8 +443,13 @@ def adapter(name: str, path: str | None = None) -> Adapter:
         raise ProblemError(f"compare problems: unknown problem {name!r} "
                            f"(known: {sorted(REGISTRY)})")
     mod, _, cls = spec.partition(":")
-    return getattr(importlib.import_module(mod), cls)()
+    found = getattr(importlib.import_module(mod), cls, None)
+    if found is None:
+        raise ProblemError(f"compare problems: {name!r} has no adapter ({spec} not found)")
+    return found()
 
 
 def known_problems() -> Sequence[str]:
+    """The problems with an adapter, in the registry's order (then those added by
+    :func:`register`)."""
     return tuple(REGISTRY)

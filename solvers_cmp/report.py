@@ -8,6 +8,7 @@ from pathlib import Path
 from typing import Any
 
 from optmodels.io import markdown_table, write_csv
+from solvers_cmp.common import cpu_name
 
 PACKAGES = ("optmodels", "numpy", "scipy", "cvxpy", "casadi", "clarabel", "osqp", "scs",
             "highspy")
@@ -25,17 +26,6 @@ def environment() -> dict[str, Any]:
 
     return {"python": platform.python_version(), "platform": platform.platform(),
             "cpu": cpu_name(), "cores": os.cpu_count(), "packages": versions}
-
-
-def cpu_name() -> str:
-    """The CPU's model name (/proc/cpuinfo), else what ``platform`` knows."""
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or platform.machine()
 
 
 def write_plane(out: Path, timing: list[dict[str, Any]], accuracy: list[dict[str, Any]],

@@ -175,3 +175,199 @@ def test_unknown_solver_option_is_problem_error(solver: str) -> None:
 def test_solver_name_must_be_a_string() -> None:
     with pytest.raises(ProblemError, match="solver"):
         require_solver(3)  # type: ignore[arg-type]
+
+
+# ------------------------------------------------------- issue 15: solver knowledge
+# The option values the problem modules passed before the back-ends owned them, written
+# out here as an independent record: the same options must reach the solvers.
+_OLD_LSQ = {
+    "OSQP": {"eps_abs": 1e-6, "eps_rel": 1e-6, "polishing": True, "max_iter": 200_000},
+    "CLARABEL": {"tol_gap_abs": 1e-12, "tol_gap_rel": 1e-12, "tol_feas": 1e-12},
+    "SCS": {"eps_abs": 1e-9, "eps_rel": 1e-9, "max_iters": 200_000},
+}
+_OLD_QP = {
+    "OSQP": {"eps_abs": 1e-9, "eps_rel": 1e-9, "polishing": True, "polish_refine_iter": 50,
+             "max_iter": 200_000},
+    "SCS": {"eps_abs": 1e-9, "eps_rel": 1e-9, "max_iters": 200_000},
+    "CLARABEL": {"tol_gap_abs": 1e-10, "tol_gap_rel": 1e-10, "tol_feas": 1e-10,
+                 "tol_ktratio": 1e-8},
+}
+_OLD_SOCP = {"SCS": {"eps_abs": 1e-9, "eps_rel": 1e-9, "max_iters": 200_000}}
+
+
+def _record_solves(monkeypatch: pytest.MonkeyPatch) -> list[dict]:
+    """Every ``cp.Problem.solve`` call's keyword arguments (the call then runs as usual)."""
+    calls: list[dict] = []
+    original = cp.Problem.solve
+
+    def spy(self, *args, **kwargs):  # type: ignore[no-untyped-def]
+        calls.append(dict(kwargs))
+        return original(self, *args, **kwargs)
+
+    monkeypatch.setattr(cp.Problem, "solve", spy)
+    return calls
+
+
+def _sent(call: dict) -> dict:
+    return {k: v for k, v in call.items() if k not in ("solver", "verbose")}
+
+
+def test_profile_tables_are_the_old_ones_and_the_problems_share_them() -> None:
+    from optmodels import trajectories
+    from optmodels.backends import profiles
+    from optmodels.biasfield import lipschitz, selection
+    from solvers_cmp import cases
+
+    assert profiles.DEFAULTS == {"lsq": _OLD_LSQ, "qp": _OLD_QP, "socp": _OLD_SOCP}
+    # the old names are the back-end's tables themselves, not copies
+    assert trajectories.SOLVER_DEFAULTS is profiles.DEFAULTS["lsq"]
+    assert selection.SOLVER_DEFAULTS is profiles.DEFAULTS["qp"]
+    assert selection.SOCP_DEFAULTS is lipschitz.SOCP_DEFAULTS is profiles.DEFAULTS["socp"]
+    assert cases.HIGH_OPTIONS is profiles.HIGH_OPTIONS is profiles.PROFILES["high"]
+    assert profiles.PROFILES["default"] == {}
+    # merge order: class defaults < profile < caller; lower-case names are CVXPY's too
+    got = profiles.solver_options("qp", "clarabel", {"tol_feas": 3e-9}, profile="high")
+    assert got == {**_OLD_QP["CLARABEL"], **profiles.HIGH_OPTIONS["CLARABEL"],
+                   "tol_feas": 3e-9}
+    assert profiles.solver_options("socp", "CLARABEL") == {}
+    assert profiles.profile_options("high", "ipopt") == {"tol": 1e-12,
+                                                         "constr_viol_tol": 1e-12}
+    # callers get copies: mutating one never changes the table
+    got["tol_gap_abs"] = 1.0
+    nested = profiles.profile_options("high", "CASADI_OSQP")
+    nested["osqp"]["eps_abs"] = 1.0
+    assert profiles.HIGH_OPTIONS["CASADI_OSQP"]["osqp"]["eps_abs"] == 1e-10
+    assert profiles.DEFAULTS["qp"]["CLARABEL"]["tol_gap_abs"] == 1e-10
+    with pytest.raises(ProblemError, match="problem class"):
+        profiles.solver_options("nlp", "OSQP")
+    with pytest.raises(ProblemError, match="profile"):
+        profiles.profile_options("fast", "OSQP")
+
+
+def test_harness_profiles_use_the_backend_table() -> None:
+    from optmodels.backends import profiles
+    from solvers_cmp import harness
+
+    assert set(harness.PROFILES) == set(profiles.PROFILES)
+    for solver in ("CLARABEL", "OSQP", "SCS", "HIGHS", "CASADI_OSQP", "ipopt", "sqpmethod"):
+        assert harness.PROFILES["default"].options(solver) == {}
+        assert harness.PROFILES["high"].options(solver) == profiles.HIGH_OPTIONS[solver]
+    assert harness.PROFILES["high"].options("PIQP") == {}
+
+
+@pytest.mark.parametrize("solver", ["OSQP", "CLARABEL", "SCS"])
+def test_trajectories_options_reach_the_solver(monkeypatch: pytest.MonkeyPatch,
+                                               solver: str) -> None:
+    from optmodels import trajectories as tr
+
+    rng = np.random.default_rng(7)
+    times = [np.sort(rng.uniform(0, 50, 12)) for _ in range(3)]
+    start, vel = rng.normal(0, 10), rng.normal(0, 2, 3)
+    vals = [start + vel[j] * t + rng.normal(0, 0.5, t.size) for j, t in enumerate(times)]
+    data = tr.TrajectoryData(times, vals, 1.0)
+    calls = _record_solves(monkeypatch)
+    sol = tr.solve(data, "diverging", solver=solver.lower())
+    assert [_sent(c) for c in calls] == [_OLD_LSQ[solver]]
+    assert sol.status.ok
+    ref = tr.closed_form(data, "diverging")
+    np.testing.assert_allclose(sol.theta, ref.theta, rtol=1e-6, atol=1e-6)
+    # the caller's option wins over the default, the other defaults stay
+    calls.clear()
+    key = next(iter(_OLD_LSQ[solver]))
+    tr.solve(data, "diverging", solver=solver, **{key: 1e-7})
+    assert _sent(calls[0]) == {**_OLD_LSQ[solver], key: 1e-7}
+
+
+def test_biasfield_options_reach_the_solver(monkeypatch: pytest.MonkeyPatch) -> None:
+    from optmodels import biasfield as bf
+
+    fd, _ = bf.synthetic_field_data(3, cells=20)
+    calls = _record_solves(monkeypatch)
+    qp = bf.solve(fd, solver="CLARABEL")
+    lip = bf.solve_lipschitz(fd, solver="SCS", max_iters=50_000)
+    lip_c = bf.solve_lipschitz(fd, solver="CLARABEL")
+    assert [_sent(c) for c in calls] == [
+        _OLD_QP["CLARABEL"], {**_OLD_SOCP["SCS"], "max_iters": 50_000}, {}]
+    # the QP agrees with the closed form (11), an independent computation
+    ref = bf.closed_form(fd)
+    assert qp.status.ok and ref.status.ok
+    scale = np.max(np.abs(ref.field))
+    assert np.max(np.abs(qp.field - ref.field)) <= 1e-6 * scale
+    assert lip_c.status.ok
+    if lip.status.ok:  # SCS to 1e-9 on the same SOCP: the same smallest L
+        assert lip.lipschitz == pytest.approx(lip_c.lipschitz, rel=1e-4)
+
+
+def test_milp_options_per_solver() -> None:
+    from optmodels.backends.profiles import milp_options
+
+    assert milp_options("HIGHS", 0.0, None) == {
+        "mip_rel_gap": 0.0, "mip_abs_gap": 1e-12, "output_flag": False, "presolve": "off"}
+    assert milp_options("HIGHS", 0.01, 5.0, verbose=True) == {
+        "mip_rel_gap": 0.01, "mip_abs_gap": 1e-6, "output_flag": True, "presolve": "off",
+        "time_limit": 5.0}
+    assert milp_options("SCIPY", 0.02, 3.0) == {
+        "scipy_options": {"mip_rel_gap": 0.02, "time_limit": 3.0}}
+    assert milp_options("SCIP", 0.0, 2.0) == {
+        "scip_params": {"limits/gap": 0.0, "limits/time": 2.0}}
+    assert milp_options("GLPK_MI", 0.0, None) == {}
+    with pytest.raises(ProblemError, match=r"assignment\.solve solver: time_limit"):
+        milp_options("GLPK_MI", 0.0, 1.0, where="assignment.solve")
+
+
+def test_assignment_gap_and_time_limit_reach_highs(monkeypatch: pytest.MonkeyPatch) -> None:
+    from optmodels import assignment as asg
+
+    rng = np.random.default_rng(11)
+    means = rng.uniform(0, 3, (3, 2))
+    meas = means + rng.normal(0, 0.3, (3, 2))
+    data = asg.AssignmentData(means, np.stack([0.2 * np.eye(2)] * 3), meas, 0.25 * np.eye(2),
+                              9.0, 0.9, 0.3)
+    calls = _record_solves(monkeypatch)
+    sol = asg.solve(data, mip_gap=0.0, time_limit=30.0)
+    assert [_sent(c) for c in calls] == [{"mip_rel_gap": 0.0, "mip_abs_gap": 1e-12,
+                                          "output_flag": False, "presolve": "off",
+                                          "time_limit": 30.0}]
+    assert sol.status.ok
+    # the MAP hypothesis by enumeration (the paper's method, no solver)
+    best = asg.brute_force(data)
+    assert sol.log_score == pytest.approx(best.log_score, rel=1e-9, abs=1e-9)
+    assert sorted(map(tuple, sol.partition)) == sorted(map(tuple, best.partition))
+    # the old private names still translate the same way
+    from optmodels.assignment import _as_solver, _solver_options
+
+    assert _solver_options("w", "SCIP", 0.1, None, False) == {"scip_params": {"limits/gap": 0.1}}
+    assert _as_solver("w", "highs") == "HIGHS"
+    with pytest.raises(ProblemError, match="does not solve integer programs"):
+        _as_solver("assignment.solve", "CLARABEL")
+
+
+def test_highs_banner_is_silenced_for_every_highs_solve() -> None:
+    """A fresh interpreter solving an LP with HIGHS (no MILP, no assignment module): its
+    stdout holds only what Python printed, never HiGHS' C banner."""
+    import subprocess
+    import sys
+
+    script = ("import cvxpy as cp\n"
+              "from optmodels.backends.cvxpy_backend import solve_problem\n"
+              "x = cp.Variable(2)\n"
+              "p = cp.Problem(cp.Minimize(x[0] + 2 * x[1]), [x >= 1, x[0] + x[1] <= 5])\n"
+              "r = solve_problem(p, 'HIGHS')\n"
+              "print(r.status.value, round(float(p.value), 9))\n")
+    out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
+                         timeout=120, check=True)
+    assert out.stdout.split() == ["optimal", "3.0"]
+
+
+def test_conic_status_table_covers_every_unified_code() -> None:
+    import cvxpy.settings as s
+
+    from optmodels.backends.casadi_backend import UNIFIED_STATUS
+    from optmodels.backends.casadi_qp import CONIC_STATUS, FAILURE_STATUS
+
+    assert set(CONIC_STATUS) == set(UNIFIED_STATUS)
+    assert FAILURE_STATUS is CONIC_STATUS
+    # only a certified infeasibility carries a verdict; every other failure is an error
+    assert CONIC_STATUS["SOLVER_RET_INFEASIBLE"] == s.INFEASIBLE
+    assert {v for k, v in CONIC_STATUS.items() if k != "SOLVER_RET_INFEASIBLE"} == {
+        s.SOLVER_ERROR}

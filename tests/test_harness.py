@@ -314,3 +314,123 @@ def test_harness_ctrl_c_keeps_rows_and_resumes(tmp_path: Path, trouble: None) ->
 
     assert [outcome(r) for r in resumed] == [outcome(r) for r in fresh]
     assert len(_csv_rows(tmp_path / "a" / "results.csv")) == 6
+
+
+# ------------------------------------------------------------------------ on Dask
+@pytest.fixture(scope="module")
+def dask_cluster() -> object:
+    import distributed  # in the test extra (pyproject): must be here, never skipped
+
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=True,
+                                  dashboard_address=None) as cluster:
+        yield cluster
+
+
+def _outcome(r: dict[str, object]) -> tuple[object, ...]:
+    # errors of 'trouble': 0 or 5e-4 exactly (x = data [+ 1e-3]), or NaN; messages of the
+    # failures name the same time limit / exit code / exception on both engines
+    return (r["solver"], r["status"], r["success"], r["reason"],
+            f"{r['solution_error']:.6g}", r["message"] if not r["success"] else "")
+
+
+def test_sweep_on_a_dask_cluster_equals_the_local_one_and_resumes(
+        tmp_path: Path, trouble: None, dask_cluster: object) -> None:
+    address = dask_cluster.scheduler_address  # type: ignore[attr-defined]
+    local = harness.run_sweep(["trouble"], tmp_path / "a", time_limit=1.0)
+    remote = harness.run_sweep(["trouble"], tmp_path / "b", time_limit=1.0,
+                               scheduler=address)
+    assert [_outcome(r) for r in remote] == [_outcome(r) for r in local]
+    by = {r["solver"]: r for r in remote}
+    assert by["sleep"]["status"] == "time_limit" and by["crash"]["status"] == "crashed"
+    assert by["sloppy"]["solution_error"] == pytest.approx(1e-3 / 2)
+    assert {r["solver"] for r in _csv_rows(tmp_path / "b" / "results.csv")} == set(by)
+    # resume on the cluster from the local run's file, cut after 3 rows: only the
+    # 3 missing runs are run; the rows kept are not rewritten
+    (tmp_path / "c").mkdir()
+    lines = (tmp_path / "a" / "results.csv").read_text().splitlines()
+    (tmp_path / "c" / "results.csv").write_text("\n".join(lines[:4]) + "\n")
+    resumed = harness.run_sweep(["trouble"], tmp_path / "c", time_limit=1.0,
+                                scheduler=address)
+    assert [_outcome(r) for r in resumed] == [_outcome(r) for r in local]
+    text = (tmp_path / "c" / "results.csv").read_text().splitlines()
+    assert text[:4] == lines[:4] and len(text) == 7
+    assert sorted(r["solver"] for r in _csv_rows(tmp_path / "c" / "results.csv")) == sorted(by)
+    # a finished sweep on the cluster runs nothing: the file is unchanged
+    again = harness.run_sweep(["trouble"], tmp_path / "c", time_limit=1.0,
+                              scheduler=address)
+    assert (tmp_path / "c" / "results.csv").read_text().splitlines() == text
+    assert [_outcome(r) for r in again] == [_outcome(r) for r in local]
+
+
+def test_cli_compare_on_a_dask_scheduler(tmp_path: Path, dask_cluster: object,
+                                         capsys: pytest.CaptureFixture[str]) -> None:
+    address = dask_cluster.scheduler_address  # type: ignore[attr-defined]
+    common = ["compare", "--problems", "trajectories", "--instances", "parallel",
+              "--sizes", "10", "--solvers", "CLARABEL", "--json"]
+    assert main([*common, "--out", str(tmp_path / "l")]) == 0
+    local = json.loads(capsys.readouterr().out)
+    assert main([*common, "--out", str(tmp_path / "d"), "--scheduler", address]) == 0
+    remote = json.loads(capsys.readouterr().out)  # exactly one JSON document on stdout
+    assert remote["runs"] == local["runs"] == 3 and remote["successes"] == 3
+    rows_l = _csv_rows(tmp_path / "l" / "results.csv")
+    rows_d = _csv_rows(tmp_path / "d" / "results.csv")
+    key = ("formulation", "solver")
+    err = {tuple(r[k] for k in key): float(r["solution_error"]) for r in rows_l}
+    assert sorted(err) == sorted(tuple(r[k] for k in key) for r in rows_d)
+    # the error is the real one (see test_sweep_rows_resume_and_errors): recompute it
+    data = cs.adapter("trajectories").make("parallel", 10, 0)
+    ref = tr.closed_form(data, "parallel")
+    sol = tr.solve(data, "parallel", formulation="reduced", solver="CLARABEL")
+    exact = np.max(np.abs(sol.theta - ref.theta)) / np.max(np.abs(ref.theta))
+    for r in rows_d:  # same deterministic solver on the same data: round-off apart
+        assert r["status"] in ("optimal", "optimal_inaccurate") and r["success"] == "True"
+        assert float(r["solution_error"]) == pytest.approx(
+            err[tuple(r[k] for k in key)], abs=1e-12)
+    row = next(r for r in rows_d if r["formulation"] == "reduced")
+    assert float(row["solution_error"]) == pytest.approx(exact, abs=1e-12)
+
+
+def test_bad_and_unreachable_schedulers(tmp_path: Path,
+                                        capsys: pytest.CaptureFixture[str]) -> None:
+    for bad in ("localhost:8786", "tcp://", 3):
+        with pytest.raises(ProblemError, match="compare scheduler"):
+            harness.run_sweep(["trajectories"], tmp_path / "o", sizes=[10], scheduler=bad)
+    assert not (tmp_path / "o" / "results.csv").exists()  # refused before any work
+    t0 = time.monotonic()
+    with pytest.raises(ProblemError, match="compare scheduler: cannot reach the Dask"):
+        harness.run_sweep(["trajectories"], tmp_path / "u", sizes=[10],
+                          scheduler="tcp://127.0.0.1:1", connect_timeout=1.0)
+    assert time.monotonic() - t0 < 8  # the connect timeout, not distributed's 30 s
+    assert main(["compare", "--problems", "trajectories", "--sizes", "10", "--out",
+                 str(tmp_path / "v"), "--scheduler", "localhost:8786", "--json"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "tcp://host:8786" in err[0], err
+    assert main(["compare", "--details", "--scheduler", "tcp://h:1", "--out",
+                 str(tmp_path / "x")]) == 2
+    assert "--scheduler" in capsys.readouterr().err
+
+
+def test_ctrl_c_of_a_dask_sweep_keeps_rows_and_resumes(
+        tmp_path: Path, trouble: None, dask_cluster: object,
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    from optmodels.montecarlo import Interrupted
+
+    address = dask_cluster.scheduler_address  # type: ignore[attr-defined]
+    judge = harness._judge
+
+    def ctrl_c_at_sleep(row: dict[str, object], prof: harness.Profile) -> None:
+        if row["solver"] == "sleep":  # Ctrl-C while the 4th result comes back
+            raise KeyboardInterrupt
+        judge(row, prof)
+
+    monkeypatch.setattr(harness.sweep, "_judge", ctrl_c_at_sleep)  # read by _sweep
+    with pytest.raises(Interrupted, match="compare: interrupted after 3 new run") as info:
+        harness.run_sweep(["trouble"], tmp_path, time_limit=1.0, scheduler=address)
+    assert [r["solver"] for r in info.value.partial] == ["numpy", "crash", "ok"]
+    assert [r["solver"] for r in _csv_rows(tmp_path / "results.csv")] == [
+        "numpy", "crash", "ok"]
+    monkeypatch.setattr(harness.sweep, "_judge", judge)
+    resumed = harness.run_sweep(["trouble"], tmp_path, time_limit=1.0, scheduler=address)
+    local = harness.run_sweep(["trouble"], tmp_path / "local", time_limit=1.0)
+    assert [_outcome(r) for r in resumed] == [_outcome(r) for r in local]
+    assert len(_csv_rows(tmp_path / "results.csv")) == 6

@@ -372,3 +372,37 @@ def test_unreachable_dask_scheduler_is_a_clear_error() -> None:
             "cannot reach the Dask scheduler at tcp://127.0.0.1:9 within 1 s")):
         mc.run(Slow(0.0), 4, scheduler="tcp://127.0.0.1:9", connect_timeout=1.0)
     assert time.monotonic() - t0 < 15  # the connect timeout, not distributed's 30 s
+
+
+# ------------------------------------------------------------ the shared engine: execute
+def test_execute_serial_pool_and_a_lost_task() -> None:
+    import math
+    import operator
+
+    from optmodels.montecarlo.engine import execute
+
+    xs = np.random.default_rng(11).uniform(1.0, 100.0, size=6)
+    tasks = [(math.sqrt, float(x)) for x in xs]
+    got: dict[str, dict[int, float]] = {"serial": {}, "processes": {}}
+    for engine in got:
+        desc = execute(operator.call, tasks, scheduler=engine, workers=2,
+                       on_result=lambda k, v, e=engine: got[e].__setitem__(k, v))
+        assert desc.startswith(engine)
+        assert sorted(got[engine]) == list(range(6))
+        np.testing.assert_allclose([got[engine][k] for k in range(6)], np.sqrt(xs),
+                                   rtol=1e-15)
+    # a task that kills its worker is lost (with whatever was in flight with it), the
+    # others still run in a new pool; each task is reported exactly once
+    tasks.insert(2, (os._exit, 3))
+    done: dict[int, float] = {}
+    lost: list[int] = []
+    execute(operator.call, tasks, scheduler="processes", workers=1,
+            on_result=done.__setitem__, on_lost=lambda k, msg: lost.append(k))
+    assert 2 in lost and len(lost) <= 2 and not set(lost) & set(done)
+    assert sorted([*lost, *done]) == list(range(7))
+    want = dict(enumerate(np.sqrt(np.insert(xs, 2, np.nan))))
+    for k, v in done.items():
+        assert v == pytest.approx(want[k], rel=1e-15)
+    with pytest.raises(ProblemError, match="compare scheduler"):
+        execute(operator.call, tasks, scheduler="nowhere", on_result=done.__setitem__,
+                what="compare")

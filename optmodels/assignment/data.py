@@ -31,15 +31,20 @@ import scipy.sparse as sps
 from scipy.special import comb
 
 from optmodels.core import (
+    VERIFY_TOL,
     FloatArray,
     ProblemError,
     Solution,
+    Status,
+    Verdict,
     as_count,
     as_finite_array,
     as_positive,
     as_probability,
     check_spd,
     check_spd_stack,
+    failure,
+    finish,
 )
 
 Partition = list[tuple[int, ...]]
@@ -339,3 +344,46 @@ def _recheck(data: AssignmentData, groups: list[tuple[int, ...]], keep: np.ndarr
     res["objective"] = (abs(solver_objective - s) / max(1.0, abs(s))
                         if np.isfinite(solver_objective) else math.inf)
     return part, assign, s, res, ""
+
+
+# ----------------------------------------------------------------------------- the gate
+def _finish_point(data: AssignmentData, groups: list[tuple[int, ...]], keep: np.ndarray,
+                  x: FloatArray, a_eq: sps.csr_matrix, a_ub: sps.csr_matrix,
+                  b_ub: FloatArray, solver_objective: float,
+                  exclude: Sequence[AssignmentSolution], fixed: Partition | None, *,
+                  common: dict[str, Any], gap_reached: float | None, gap: float,
+                  info: dict[str, Any]) -> AssignmentSolution:
+    """End of the MILP solve for the solver's point ``x`` (``common``: the back-end's
+    fields, status OK): :func:`_recheck`, then the one gate
+    (:func:`optmodels.core.finish`) on its residuals; refused: the failure form (no
+    hypothesis; the rounded one in ``info["rejected_partition"]``/``["rejected_assignment"]``).
+    Accepted OPTIMAL with a reached MIP gap above VERIFY_TOL (relative to max(1, |score|))
+    is OPTIMAL_INACCURATE: not proven optimal."""
+    part, assign, s, resid, why = _recheck(data, groups, keep, x, a_eq, a_ub, b_ub,
+                                           solver_objective, exclude, fixed)
+    fields = {k: v for k, v in common.items() if k not in ("status", "message")}
+
+    def note(v: Verdict) -> str:
+        if why:
+            return f"re-check failed: {why}"
+        return "" if v.status.ok else f"re-check failed: residuals {resid}"
+
+    def reject(sol: AssignmentSolution) -> AssignmentSolution:
+        rest = {k: v for k, v in fields.items() if k != "method"}
+        return failure(AssignmentSolution, sol.method, sol.message, status=sol.status,
+                       mip_gap=gap_reached, residuals=resid,
+                       info=dict(info, rejected_partition=part, rejected_assignment=assign),
+                       **rest)
+
+    sol = AssignmentSolution(status=common["status"], objective=s, partition=part,
+                             assignment=assign, log_score=s, message=common["message"],
+                             mip_gap=gap_reached if gap_reached is not None else gap,
+                             residuals=resid, info=info, **fields)
+    sol = finish(sol, note=note, reject=reject)
+    if sol.ok and gap_reached is not None and np.isfinite(gap_reached):
+        # HiGHS' gap is relative to |incumbent|; judge it relative to max(1, |score|)
+        scaled = gap_reached * abs(s) / max(1.0, abs(s))
+        if scaled > VERIFY_TOL and sol.status is Status.OPTIMAL:
+            sol.status = Status.OPTIMAL_INACCURATE
+            sol.message += f"; stopped at MIP gap {gap_reached:.3g} (not proven optimal)"
+    return sol

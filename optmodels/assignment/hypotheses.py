@@ -26,7 +26,7 @@ from optmodels.assignment.data import (
     log_likelihoods,
     score,
 )
-from optmodels.core import ProblemError, Status, as_count, timed
+from optmodels.core import ProblemError, Status, as_count, as_instance, timed
 
 #: :func:`brute_force` refuses above this many hypotheses (:func:`count_hypotheses`); it
 #: scores about 10⁵ per second, so the limit is about two minutes.
@@ -127,6 +127,7 @@ def count_gated(gates: Sequence[Sequence[int]], *, new_target: bool = False) -> 
 def enumerate_hypotheses(data: AssignmentData) -> Iterator[tuple[Partition, tuple[int, ...]]]:
     """Every hypothesis (14): each set partition (restricted to candidate groups) and each
     assignment of the measurements to its blocks (≤ 1 each) or the background."""
+    as_instance("assignment.enumerate_hypotheses data", data, AssignmentData)
     allowed = set(candidate_groups(data))
     for part in set_partitions(range(data.q)):
         blocks = sorted(tuple(sorted(b)) for b in part)
@@ -163,6 +164,7 @@ def brute_force(data: AssignmentData, *,
         :data:`BRUTE_FORCE_LIMIT` = 10⁷, about two minutes at 10⁵ hypotheses per second):
         use :func:`solve` (the same MAP as one MILP) instead.
     """
+    as_instance("assignment.brute_force data", data, AssignmentData)
     limit = as_count("assignment.brute_force max_hypotheses", max_hypotheses, minimum=1)
     total = count_hypotheses(data.q, data.n) if data.q <= COUNT_LIMIT and \
         data.n <= COUNT_LIMIT else math.inf

@@ -18,7 +18,7 @@ from optmodels.assignment.data import (
     log_likelihoods,
     score,
 )
-from optmodels.core import Status, timed, verified_status
+from optmodels.core import Status, as_instance, failure, finish, timed
 
 
 def linear_assignment(data: AssignmentData) -> AssignmentSolution:
@@ -31,6 +31,7 @@ def linear_assignment(data: AssignmentData) -> AssignmentSolution:
     :data:`~optmodels.core.VERIFY_TOL` (relative); otherwise it is downgraded or refused
     (:func:`~optmodels.core.verified_status`).
     """
+    as_instance("assignment.linear_assignment data", data, AssignmentData)
     with timed() as tm:
         q, n = data.q, data.n
         singles = [(j,) for j in range(q)]
@@ -50,12 +51,10 @@ def linear_assignment(data: AssignmentData) -> AssignmentSolution:
     part, assign = _canonical(singles, assign)
     s = score(data, part, assign)
     res = {"objective": abs(total - s) / max(1.0, abs(s)) if np.isfinite(s) else math.inf}
-    status = verified_status(Status.OPTIMAL, res["objective"])
-    if not status.ok:
-        return AssignmentSolution(status=status, objective=float("nan"),
-                                  method="linear_assignment", solve_time=tm.elapsed,
-                                  residuals=res, message="the assignment's total gain and "
-                                  "the recomputed score disagree")
-    return AssignmentSolution(status=status, objective=s, method="linear_assignment",
-                              solve_time=tm.elapsed, partition=part, assignment=assign,
-                              log_score=s, mip_gap=0.0, residuals=res)
+    sol = AssignmentSolution(status=Status.OPTIMAL, objective=s, method="linear_assignment",
+                             solve_time=tm.elapsed, partition=part, assignment=assign,
+                             log_score=s, mip_gap=0.0, residuals=res)
+    return finish(sol, note=lambda v: "", reject=lambda bad: failure(
+        AssignmentSolution, "linear_assignment", "the assignment's total gain and the "
+        "recomputed score disagree", status=bad.status, solve_time=tm.elapsed,
+        residuals=res))

@@ -16,7 +16,8 @@ is never needed for a MAP hypothesis and is not created.
 
 Holds: :func:`solve`, the dominance pruning :func:`_prune`, the sparse model
 :func:`_build_model` and the size guards :data:`MAX_LIKELIHOOD_ENTRIES`,
-:data:`MAX_MODEL_COLUMNS`; each solver's options are in :mod:`optmodels.assignment.solvers`.
+:data:`MAX_MODEL_COLUMNS`; each MILP solver's gap and time-limit names are the back-end's
+(:func:`optmodels.backends.profiles.milp_options`).
 """
 
 from __future__ import annotations
@@ -34,22 +35,20 @@ from optmodels.assignment.data import (
     AssignmentSolution,
     Partition,
     _as_partition,
-    _recheck,
+    _finish_point,
     block_log_prior,
     candidate_groups,
     log_likelihoods,
 )
-from optmodels.assignment.solvers import _as_solver, _silence_highs_banner, _solver_options
-from optmodels.backends.cvxpy_backend import solve_problem
+from optmodels.backends.cvxpy_backend import as_milp_solver, solve_problem
+from optmodels.backends.profiles import milp_options
 from optmodels.core import (
-    VERIFY_TOL,
     FloatArray,
     ProblemError,
     Status,
     as_number,
     as_positive,
     timed,
-    verified_status,
 )
 
 #: Entries of the ln φ_iS table (N × candidate groups, 8 bytes each: 160 MB at the limit).
@@ -203,7 +202,7 @@ def solve(data: AssignmentData, *, solver: str = "HIGHS", mip_gap: float = 0.0,
     w = "assignment.solve"
     if not isinstance(data, AssignmentData):
         raise ProblemError(f"{w} data: expected AssignmentData, got {type(data).__name__}")
-    key = _as_solver(w, solver)
+    key = as_milp_solver(w, solver)
     gap = as_number(f"{w} mip_gap", mip_gap, low=0.0, high=1.0, high_open=True)
     limit = None if time_limit is None else as_positive(f"{w} time_limit", time_limit)
     if not isinstance(prune, bool | np.bool_):
@@ -249,9 +248,8 @@ def solve(data: AssignmentData, *, solver: str = "HIGHS", mip_gap: float = 0.0,
         if a_ub.shape[0]:
             cons.append(a_ub @ x <= b_ub)
         prob = cp.Problem(cp.Maximize(c @ x), cons)
-    if key == "HIGHS":
-        _silence_highs_banner()
-    opts = _solver_options(w, key, gap, limit, bool(options.get("verbose", False)))
+    # solve_problem silences HiGHS' banner before a HIGHS solve
+    opts = milp_options(key, gap, limit, verbose=bool(options.get("verbose", False)), where=w)
     res = solve_problem(prob, key, **{**opts, **options})
     common = res.common()
     common["build_time"] += tb.elapsed
@@ -266,27 +264,6 @@ def solve(data: AssignmentData, *, solver: str = "HIGHS", mip_gap: float = 0.0,
         return AssignmentSolution(objective=float("nan"), message=msg, mip_gap=gap_reached,
                                   info=info, **common)
     xv = np.asarray(x.value, dtype=float).reshape(-1)
-    part, assign, s, resid, why = _recheck(data, groups, keep, xv, a_eq, a_ub, b_ub,
-                                           float(res.objective), exclude, fixed)
-    status = verified_status(res.status, max(resid.values()))
-    message = common.pop("message")
-    common.pop("status")
-    if why:
-        message += f"; re-check failed: {why}"
-    elif not status.ok:
-        message += f"; re-check failed: residuals {resid}"
-    if status.ok and gap_reached is not None and np.isfinite(gap_reached):
-        # HiGHS' gap is relative to |incumbent|; judge it relative to max(1, |score|)
-        scaled = gap_reached * abs(s) / max(1.0, abs(s))
-        if scaled > VERIFY_TOL and status is Status.OPTIMAL:
-            status = Status.OPTIMAL_INACCURATE
-            message += f"; stopped at MIP gap {gap_reached:.3g} (not proven optimal)"
-    if not status.ok:
-        return AssignmentSolution(status=status, objective=float("nan"), message=message,
-                                  mip_gap=gap_reached, residuals=resid,
-                                  info=dict(info, rejected_partition=part,
-                                            rejected_assignment=assign), **common)
-    return AssignmentSolution(status=status, objective=s, partition=part, assignment=assign,
-                              log_score=s, message=message,
-                              mip_gap=gap_reached if gap_reached is not None else gap,
-                              residuals=resid, info=info, **common)
+    return _finish_point(data, groups, keep, xv, a_eq, a_ub, b_ub, float(res.objective),
+                         exclude, fixed, common=common, gap_reached=gap_reached,
+                         gap=gap, info=info)

@@ -1,8 +1,11 @@
 """CasADi back-end: run a built ``nlpsol`` function and report status, timings, iterations.
 
-Problem modules build their NLP once per structure (data enter as parameters ``p``) and
-cache it, so that Monte Carlo and sequential runs pay the symbolic construction only once;
-:func:`build_nlpsol` times that construction and :func:`run_nlpsol` one solve.
+Problem modules build their NLP once per structure (data enter as parameters ``p``) in
+the one cache :data:`NLP_CACHE` (:func:`cached_nlpsol`, keyed by problem namespace and
+structure, FIFO-bounded per namespace), so that Monte Carlo and sequential runs pay the
+symbolic construction only once; :func:`build_nlpsol` times that construction and
+:func:`run_nlpsol` one solve. :func:`accept_precision_limit` is the one rule for IPOPT's
+precision limit (accepted as OPTIMAL_INACCURATE only after the problem's NumPy check).
 Status tables: :data:`IPOPT_STATUS` covers every IPOPT ``ApplicationReturnStatus``,
 :data:`SQP_STATUS` every ``return_status`` of CasADi's sqpmethod and feasiblesqpmethod, and
 :data:`UNIFIED_STATUS` CasADi's plugin-independent ``unified_return_status`` (used for
@@ -22,7 +25,7 @@ import functools
 import os
 import sys
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import Any
@@ -31,11 +34,12 @@ import casadi as ca
 import numpy as np
 
 from optmodels.backends.common import BackendResult, probe_in_child
-from optmodels.core import ProblemError, SolverNotAvailable, Status
+from optmodels.core import VERIFY_TOL, ProblemError, SolverNotAvailable, Status
 
-__all__ = ["IPOPT_STATUS", "NLP_PLUGINS", "NLP_PLUGIN_DEFAULTS", "SQP_STATUS", "UNIFIED_STATUS",
-           "BuiltNlp", "build_nlpsol", "check_options", "nlp_plugins", "nlp_status",
-           "probe_nlp_plugins", "run_nlpsol"]
+__all__ = ["IPOPT_STATUS", "NLP_CACHE", "NLP_PLUGINS", "NLP_PLUGIN_DEFAULTS", "SQP_STATUS",
+           "UNIFIED_STATUS", "BuiltNlp", "NlpCache", "accept_precision_limit", "build_nlpsol",
+           "cached_nlpsol", "check_options", "nlp_plugins", "nlp_status", "probe_nlp_plugins",
+           "run_nlpsol"]
 
 #: CasADi NLP plugins the comparison tries, in report order (commercial ones left out).
 NLP_PLUGINS = ("ipopt", "sqpmethod", "feasiblesqpmethod", "blocksqp", "fatrop")
@@ -216,6 +220,71 @@ def build_nlpsol(
         if bad is not None:
             raise _option_error(plugin, user, RuntimeError(bad))
     return BuiltNlp(solver=solver, build_time=build_time, plugin=plugin)
+
+
+class NlpCache:
+    """The one cache of built NLPs: keys are ``(namespace, *structure)`` (the data enter as
+    parameters, so one build serves every solve of that structure), first in first out,
+    at most ``size`` entries per namespace. ``clear(namespace)`` forgets one problem's
+    builds (``plane.clear_nlp_cache``, ``fusion.clear_joint_cache``), ``clear()`` all."""
+
+    def __init__(self, size: int = 8) -> None:
+        self.size = size
+        self._built: dict[tuple[Any, ...], BuiltNlp] = {}
+
+    def get(self, key: tuple[Any, ...], make: Callable[[], BuiltNlp]) -> tuple[BuiltNlp, bool]:
+        """The NLP built for ``key``, and whether this call built it (with ``make``)."""
+        if key in self._built:
+            return self._built[key], False
+        built = make()
+        same = [k for k in self._built if k[0] == key[0]]
+        if len(same) >= self.size:
+            del self._built[same[0]]
+        self._built[key] = built
+        return built, True
+
+    def clear(self, namespace: str | None = None) -> None:
+        for k in [k for k in self._built if namespace is None or k[0] == namespace]:
+            del self._built[k]
+
+    def keys(self, namespace: str | None = None) -> list[tuple[Any, ...]]:
+        return [k for k in self._built if namespace is None or k[0] == namespace]
+
+    def __contains__(self, key: object) -> bool:
+        return key in self._built
+
+    def __len__(self) -> int:
+        return len(self._built)
+
+
+#: Built NLPs of every problem (see :class:`NlpCache`).
+NLP_CACHE = NlpCache()
+
+
+def cached_nlpsol(namespace: str, key: tuple[Any, ...], make_nlp: Callable[[], dict[str, Any]],
+                  *, plugin: str = "ipopt", options: dict[str, Any] | None = None
+                  ) -> tuple[BuiltNlp, bool]:
+    """:func:`build_nlpsol` of ``make_nlp()`` once per (``namespace``, ``key``, plugin,
+    options) in :data:`NLP_CACHE`; returns the built NLP and whether this call built it."""
+    full = (namespace, *key, plugin, repr(sorted((options or {}).items())))
+    return NLP_CACHE.get(full, lambda: build_nlpsol(make_nlp(), plugin=plugin,
+                                                    options=options))
+
+
+#: IPOPT's (and the SQP methods') return status at their precision limit.
+PRECISION_LIMIT = "Search_Direction_Becomes_Too_Small"
+
+
+def accept_precision_limit(status: Status, message: str, verified: float, note: str,
+                           tol: float = VERIFY_TOL) -> tuple[Status, str]:
+    """IPOPT stopped at its precision limit (:data:`PRECISION_LIMIT`, an ERROR in the
+    tables): the point is accepted as OPTIMAL_INACCURATE only if the problem's own NumPy
+    check ``verified`` (e.g. the Newton step to the stationary point) is at most ``tol``
+    (:data:`optmodels.core.VERIFY_TOL`); ``note`` is appended to the message then. Any
+    other status passes unchanged. The verification gate still applies afterwards."""
+    if message == PRECISION_LIMIT and verified <= tol:
+        return Status.OPTIMAL_INACCURATE, message + note
+    return status, message
 
 
 def _check_plugin(plugin: Any) -> str:

@@ -32,6 +32,7 @@ from optmodels.core import ProblemError
 
 __all__ = [
     "CANDIDATE_PLUGINS",
+    "CONIC_STATUS",
     "EXCLUDED",
     "PREFIX",
     "CasadiConic",
@@ -125,8 +126,8 @@ class CasadiConic(QpSolver):
     Solver options passed to ``problem.solve(solver=CasadiConic(...), **opts)`` go to the
     plugin unchanged (CasADi's own option dictionary); one the plugin refuses raises
     :class:`~optmodels.core.ProblemError` naming it. The status is CasADi's ``success``
-    flag: OPTIMAL when set; otherwise :data:`FAILURE_STATUS` of the unified return status
-    (infeasible), SOLVER_ERROR for anything else. Callers re-check the
+    flag: OPTIMAL when set; otherwise :data:`CONIC_STATUS` of the unified return status
+    (infeasible, or SOLVER_ERROR), SOLVER_ERROR for a code it lacks. Callers re-check the
     solution against the original problem in NumPy anyway.
     """
 
@@ -166,7 +167,7 @@ class CasadiConic(QpSolver):
         x = np.asarray(out["x"], dtype=float).ravel()
         if not stats.get("success", False) or not np.all(np.isfinite(x)):
             unified = str(stats.get("unified_return_status", ""))
-            return failure_solution(FAILURE_STATUS.get(unified, s.SOLVER_ERROR), attr)
+            return failure_solution(CONIC_STATUS.get(unified, s.SOLVER_ERROR), attr)
         opt_val = float(out["cost"]) + inverse_data[s.OFFSET]
         primal = {inverse_data[self.VAR_ID]: x}
         # CasADi's λ_a (∇f + Aᵀλ = 0) has CVXPY's sign convention for these rows as is.
@@ -179,12 +180,23 @@ class CasadiConic(QpSolver):
         return Solution(s.OPTIMAL, opt_val, primal, duals, attr)
 
 
-#: CasADi's ``unified_return_status`` of a failed conic call → CVXPY status. Every other
-#: failure, an unknown code included, is SOLVER_ERROR (an iteration limit too: CVXPY's
-#: USER_LIMIT expects a primal point to unpack); success needs CasADi's ``success`` flag.
-FAILURE_STATUS: dict[str, str] = {
+#: The status table of every CasADi conic plugin (:data:`CANDIDATE_PLUGINS`): CasADi's
+#: plugin-independent ``unified_return_status`` (``casadi_types.hpp``; the plugins' own
+#: codes are translated into it by CasADi) of a *failed* call → CVXPY status. Success
+#: needs CasADi's ``success`` flag (and finite x), whatever the code; an iteration limit
+#: is SOLVER_ERROR (CVXPY's USER_LIMIT expects a primal point to unpack), and so is any
+#: code not listed here. Only INFEASIBLE carries a verdict (the plugin's certificate).
+CONIC_STATUS: dict[str, str] = {
     "SOLVER_RET_INFEASIBLE": s.INFEASIBLE,
+    "SOLVER_RET_LIMITED": s.SOLVER_ERROR,
+    "SOLVER_RET_NAN": s.SOLVER_ERROR,
+    "SOLVER_RET_EXCEPTION": s.SOLVER_ERROR,
+    "SOLVER_RET_UNKNOWN": s.SOLVER_ERROR,
+    # reported with success unset (e.g. non-finite x): not a solution either
+    "SOLVER_RET_SUCCESS": s.SOLVER_ERROR,
 }
+#: The former name of :data:`CONIC_STATUS` (the same table).
+FAILURE_STATUS = CONIC_STATUS
 
 #: Plugins left out on purpose, with the reason (shown in the comparison report).
 EXCLUDED: dict[str, str] = {

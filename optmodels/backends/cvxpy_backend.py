@@ -8,22 +8,37 @@ INFEASIBLE and UNBOUNDED are reported only with the solver's certificate: CVXPY'
 iteration limit, with an unconverged certificate; SCS at 2 iterations says so of feasible,
 bounded problems) map to ``Status.ERROR``. A solver option the solver rejects (unknown
 name or bad value) is bad input: :class:`~optmodels.core.ProblemError` naming the option.
+
+MILPs: :data:`MILP_SOLVERS` (the CVXPY solvers that take integer variables),
+:func:`as_milp_solver`, and each solver's names for the gap and time limit
+(:func:`~optmodels.backends.profiles.milp_options`, re-exported here). Every HIGHS call of
+:func:`solve_problem` first silences the banner HiGHS prints from C
+(:func:`silence_highs_banner`). Option defaults per problem class and the settings profiles
+are in :mod:`optmodels.backends.profiles`.
 """
 
 from __future__ import annotations
 
+import contextlib
+import ctypes
+import functools
+import os
 import re
+import sys
 import time
 import warnings
 from typing import Any
 
 import cvxpy as cp
+from cvxpy.reductions.solvers.defines import MI_SOLVERS
 
 from optmodels.backends.casadi_qp import CasadiConic, casadi_qp_plugins, plugin_of, probe_plugins
 from optmodels.backends.common import BackendResult
+from optmodels.backends.profiles import milp_options as milp_options
 from optmodels.core import OptModelsError, ProblemError, SolverNotAvailable, Status
 
-__all__ = ["CVXPY_STATUS", "available_solvers", "require_solver", "solve_problem"]
+__all__ = ["CVXPY_STATUS", "MILP_SOLVERS", "as_milp_solver", "available_solvers",
+           "milp_options", "require_solver", "silence_highs_banner", "solve_problem"]
 
 CVXPY_STATUS: dict[str, Status] = {
     cp.OPTIMAL: Status.OPTIMAL,
@@ -55,6 +70,11 @@ PIP_NAMES: dict[str, str] = {
     "DAQP": "daqp",
     "QOCO": "qoco",
 }
+
+
+#: CVXPY solvers that take integer variables; any other name is refused by
+#: :func:`as_milp_solver`.
+MILP_SOLVERS: tuple[str, ...] = tuple(MI_SOLVERS)
 
 
 def available_solvers() -> list[str]:
@@ -89,6 +109,48 @@ def require_solver(name: str) -> str:
     return key
 
 
+def as_milp_solver(where: str, solver: Any) -> str:
+    """The canonical (upper-case) name of a MILP solver; a name that is not a string or not
+    in :data:`MILP_SOLVERS` is a :class:`ProblemError` naming ``where``."""
+    if not isinstance(solver, str):
+        raise ProblemError(f"{where} solver: expected a solver name, got {solver!r}")
+    key = solver.upper()
+    if key not in MILP_SOLVERS:
+        installed = [s for s in MILP_SOLVERS if s in available_solvers()]
+        raise ProblemError(f"{where} solver: {solver!r} does not solve integer programs; "
+                           f"use a MILP solver ({', '.join(installed)} installed here)")
+    return key
+
+
+@functools.cache
+def silence_highs_banner() -> None:
+    """HiGHS prints its banner ("Running HiGHS 1.x ...") from C to the process's stdout
+    when the first ``Highs`` object of the process is created, before any option
+    (``output_flag``, ``log_to_console``) can be set -- CVXPY creates it inside the solve.
+    Create that first object here with file descriptor 1 pointed at /dev/null, once per
+    process; later objects print nothing with CVXPY's ``log_to_console=False``.
+    :func:`solve_problem` calls it before every HIGHS solve."""
+    try:
+        import highspy
+    except ImportError:  # HiGHS not installed: nothing to silence
+        return
+    try:
+        sys.stdout.flush()
+        saved = os.dup(1)
+    except (OSError, ValueError, AttributeError):  # no usable fd 1: nothing to protect
+        return
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    try:
+        os.dup2(devnull, 1)
+        highspy.Highs()
+        with contextlib.suppress(OSError, AttributeError):  # flush C stdio before restoring
+            ctypes.CDLL(None).fflush(None)
+    finally:
+        os.dup2(saved, 1)
+        os.close(saved)
+        os.close(devnull)
+
+
 def solve_problem(
     problem: cp.Problem, solver: str, *, verbose: bool = False, **options: Any
 ) -> BackendResult:
@@ -110,6 +172,8 @@ def solve_problem(
         If ``solver`` is not installed.
     """
     name = require_solver(solver)
+    if name == "HIGHS":
+        silence_highs_banner()
     plugin = plugin_of(name)
     target: Any = CasadiConic(plugin) if plugin is not None else name
     t0 = time.perf_counter()

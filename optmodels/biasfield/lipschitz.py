@@ -13,6 +13,7 @@ from typing import Any, Literal
 import cvxpy as cp
 import numpy as np
 
+from optmodels.backends.profiles import DEFAULTS, solver_options
 from optmodels.biasfield.cells import FieldData
 from optmodels.biasfield.problem import FieldSolution, _arguments, _finish, _lipschitz_data, _run
 from optmodels.biasfield.verify import _verify, box_feasibility, lipschitz_residuals
@@ -21,8 +22,8 @@ from optmodels.core import ProblemError, as_positive, timed
 __all__ = ["SOCP_DEFAULTS", "solve_lipschitz"]
 
 
-SOCP_DEFAULTS: dict[str, dict[str, Any]] = {"SCS": {"eps_abs": 1e-9, "eps_rel": 1e-9,
-                                                     "max_iters": 200_000}}
+#: Default solver options: the back-end's table for SOCPs (the same object).
+SOCP_DEFAULTS: dict[str, dict[str, Any]] = DEFAULTS["socp"]
 
 
 def solve_lipschitz(data: FieldData, *, box: tuple[float, float] | None = None,
@@ -86,7 +87,7 @@ def solve_lipschitz(data: FieldData, *, box: tuple[float, float] | None = None,
         prob = cp.Problem(cp.Minimize(lip), cons + box_cons + cap_cons)
     # the SOCP is solved to the solvers' own default accuracy (Clarabel's 1e-10 gap of the
     # QP defaults ends "inaccurate" here); the certificate is re-checked below anyway
-    res = _run(fn, prob, solver, {**SOCP_DEFAULTS.get(solver.upper(), {}), **options})
+    res = _run(fn, prob, solver, solver_options("socp", solver, options))
     common = res.common()
     common["build_time"] += tb.elapsed
     common["method"] = method

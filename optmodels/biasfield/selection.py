@@ -41,6 +41,7 @@ import numpy as np
 from scipy import sparse
 from scipy.sparse import linalg as splinalg
 
+from optmodels.backends.profiles import DEFAULTS, solver_options
 from optmodels.biasfield.cells import FieldData, uncertainty_sets
 from optmodels.biasfield.identifiability import Identifiability, identifiability
 from optmodels.biasfield.lipschitz import SOCP_DEFAULTS as SOCP_DEFAULTS
@@ -81,18 +82,9 @@ __all__ = ["FieldSolution", "Identifiability", "box_feasibility", "closed_form",
            "solve_lipschitz"]
 
 
-#: Default solver options: tight enough for the 1e-8 agreement with the closed form.
-SOLVER_DEFAULTS: dict[str, dict[str, Any]] = {
-    # OSQP's polish refines its KKT solve 3 times by default: on these problems that left
-    # 1e-3 relative errors in φ while reporting "solved, polishing successful"; 50 reach 1e-15
-    "OSQP": {"eps_abs": 1e-9, "eps_rel": 1e-9, "polishing": True, "polish_refine_iter": 50,
-             "max_iter": 200_000},
-    "SCS": {"eps_abs": 1e-9, "eps_rel": 1e-9, "max_iters": 200_000},
-    # Clarabel's default gap 1e-8 leaves ~2e-6 relative errors in a box-bound φ of the
-    # reduced problem; 1e-10 brings them to ~3e-8 for one more iteration
-    "CLARABEL": {"tol_gap_abs": 1e-10, "tol_gap_rel": 1e-10, "tol_feas": 1e-10,
-                 "tol_ktratio": 1e-8},
-}
+#: Default solver options: the back-end's table for QPs that must agree with a closed form
+#: to ~1e-8 (the same object; the reasons for each value are given there).
+SOLVER_DEFAULTS: dict[str, dict[str, Any]] = DEFAULTS["qp"]
 
 
 # ----------------------------------------------------------------------------- closed form
@@ -201,7 +193,7 @@ def solve(data: FieldData, *, box: tuple[float, float] | None = None,
                    + (2.0 / norm2) * (bmat.T @ (rs @ u0)) @ eta)
         box_cons = [u <= bound / sc, -u <= bound / sc] if bound is not None else []
         prob = cp.Problem(cp.Minimize(obj), cons + box_cons)
-    opts = {**SOLVER_DEFAULTS.get(solver.upper(), {}), **options}
+    opts = solver_options("qp", solver, options)
     res = _run(fn, prob, solver, opts)
     common = res.common()
     common["build_time"] += tb.elapsed

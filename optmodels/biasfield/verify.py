@@ -29,7 +29,7 @@ from optmodels.biasfield.problem import (
     _lipschitz_data,
     _r_matrix,
 )
-from optmodels.core import FloatArray, ProblemError, Status, verified_status
+from optmodels.core import FloatArray, ProblemError, finish
 
 __all__ = ["box_feasibility", "kkt_residuals", "lipschitz_residuals"]
 
@@ -61,28 +61,24 @@ def _conditioning_residual(kappa: float) -> float:
 
 
 # ----------------------------------------------------------------------------- status
+def _no_field(sol: FieldSolution) -> None:
+    """The bias field's failure form: no field, φ, η (NaN), no Lipschitz constant."""
+    sol.field = np.full_like(sol.field, np.nan)
+    sol.phi = np.full_like(sol.phi, np.nan)
+    sol.eta = np.full_like(sol.eta, np.nan)
+    sol.lipschitz = None if sol.lipschitz is None else float("nan")
+
+
 def _verify(sol: FieldSolution) -> FieldSolution:
     """A claimed optimum whose NumPy-recomputed residual (KKT: stationarity, box violation,
     complementarity; or the Lipschitz SOCP's certificate; conditioning) exceeds VERIFY_TOL
     is reported OPTIMAL_INACCURATE, above REJECT_TOL
-    ERROR (without a field): :func:`optmodels.core.verified_status`."""
-    worst = sol.max_residual
-    new = verified_status(sol.status, worst)
-    if new == sol.status:
+    ERROR (without a field): the one gate :func:`optmodels.core.finish`
+    (:func:`optmodels.core.verified_status`; ``dual_sign`` is a diagnostic, not a
+    residual)."""
+    if not sol.ok:  # a failed solve was packed without a field already
         return sol
-    sol.status = new
-    which = max((k for k in sol.residuals if k != "dual_sign"),
-                key=lambda k: -np.inf if np.isnan(sol.residuals[k]) else sol.residuals[k],
-                default="residual")
-    if new == Status.ERROR:
-        sol.message += f"; {which} residual {worst:.1e} fails the NumPy check"
-        sol.field = np.full_like(sol.field, np.nan)
-        sol.phi = np.full_like(sol.phi, np.nan)
-        sol.eta = np.full_like(sol.eta, np.nan)
-        sol.lipschitz = None if sol.lipschitz is None else float("nan")
-    else:
-        sol.message += f"; {which} residual {worst:.1e} (NumPy check)"
-    return sol
+    return finish(sol, ignore=("dual_sign",), reject=_no_field)
 
 
 # ----------------------------------------------------------------------------- QP

@@ -58,10 +58,12 @@ def _check_selection(problems: Sequence[str], solvers: Sequence[str] | None,
 def _run_harness(out: Path, problems: Sequence[str], *, sizes: list[int] | None,
                  solvers: list[str] | None, profile: str, seed: int,
                  time_limit: float | None, quick: bool = False, progress: bool,
-                 instances: list[str] | None = None) -> dict[str, Any]:
+                 instances: list[str] | None = None, scheduler: str | None = None
+                 ) -> dict[str, Any]:
     """The comparison harness (:mod:`solvers_cmp.harness`) and its report.
 
     ``quick``: the main job's sweep -- each problem's two smallest default sizes.
+    ``scheduler``: ``None``/``"local"``, or a Dask address (each run a Dask task).
     ``references_ok``: every closed-form (reference) row succeeded."""
     from optmodels.backends.casadi_backend import probe_nlp_plugins
     from optmodels.backends.casadi_qp import probe_plugins
@@ -77,7 +79,8 @@ def _run_harness(out: Path, problems: Sequence[str], *, sizes: list[int] | None,
         plan_sizes = {p: list(cs.adapter(p).sizes[:2]) for p in problems}
     rows = harness.run_sweep(problems, out, sizes=plan_sizes, solvers=solvers,
                              profile=profile, seeds=(seed,), time_limit=time_limit,
-                             instances=instances, progress=progress)
+                             instances=instances, progress=progress,
+                             scheduler=scheduler)
     # after the sweep: a second sweep refused by the folder's lock must not overwrite it
     write_json(out / "environment.json", env)
     prof = harness.PROFILES[profile]
@@ -131,12 +134,15 @@ def _compare(args: argparse.Namespace) -> Outcome:
     solvers = _names(args.solvers)
     instances = _names(args.instances)
     if args.details:
+        if args.scheduler not in (None, "local"):
+            raise ProblemError("--scheduler: only for the sweep, not with --details")
         res = _run_compare(Path(args.out), problems, args.sizes or [100, 1000, 10000],
                            args.runs, args.repeats, args.seed, progress=not args.json)
         return res, True
     res = _run_harness(Path(args.out), problems, sizes=args.sizes, solvers=solvers,
                        profile=args.profile, seed=args.seed, time_limit=args.time_limit,
-                       instances=instances, progress=not args.json)
+                       instances=instances, progress=not args.json,
+                       scheduler=args.scheduler)
     return res, res["references_ok"]
 
 
@@ -174,6 +180,11 @@ def register(sub: Any) -> None:
                       help="per run, s (> 0; default: the profile's)")
     cmp_.add_argument("--seed", type=count0, default=0)
     cmp_.add_argument("--out", default="report/compare")
+    cmp_.add_argument("--scheduler", default="local",
+                      help="'local' (default: one isolated worker process here) or a Dask "
+                           "scheduler address, e.g. tcp://host:8786: each run is a task on "
+                           "the cluster, with its time limit; results.csv and resume as "
+                           "locally")
     cmp_.add_argument("--details", action="store_true",
                       help="run the per-problem studies instead (plane Monte Carlo accuracy, "
                            "benchmarks at the issues' target sizes)")

@@ -144,9 +144,10 @@ def fuse(a1: ArrayLike, s1: ArrayLike, a2: ArrayLike, s2: ArrayLike, *,
     w_err = float(np.max(dw) / max(float(np.max(np.abs(w))), np.finfo(float).tiny))
     residuals = {"gradient": res_grad, "estimate_error": float(np.max(bound) / size),
                  "weight_error": w_err}
-    est, w, cov = _verify(common, residuals, est, w, cov)
-    return FusionSolution(objective=_wls_objective(est, x1, c1, x2, c2),
-                          residuals=residuals, estimate=est, covariance=cov, W=w, **common)
+    sol = _verify(FusionSolution(objective=float("nan"), residuals=residuals, estimate=est,
+                                 covariance=cov, W=w, **common))
+    sol.objective = _wls_objective(sol.estimate, x1, c1, x2, c2)
+    return sol
 
 
 def _fuse_correlated(x1: FloatArray, a: FloatArray, x2: FloatArray, b: FloatArray,
@@ -185,6 +186,7 @@ def _fuse_correlated(x1: FloatArray, a: FloatArray, x2: FloatArray, b: FloatArra
     size = max(float(np.max(np.abs(np.concatenate([est, x1, x2])))), np.finfo(float).tiny)
     bound = float(np.max(_combination_bound(w, dw, x1, x2))) / size
     residuals = {"gradient": res_grad, "estimate_error": bound, "weight_error": w_err}
-    est, w, cov = _verify(common, residuals, est, w, cov)
-    return FusionSolution(objective=float(np.trace(cov)), residuals=residuals,
-                          estimate=est, covariance=cov, W=w, **common)
+    sol = _verify(FusionSolution(objective=float("nan"), residuals=residuals, estimate=est,
+                                 covariance=cov, W=w, **common))
+    sol.objective = float(np.trace(sol.covariance))
+    return sol

@@ -1,7 +1,7 @@
 """Joint ML position of the two-site system (paper 003, the original problem): min_x
 Σ_k ((z_k − z_k(x)) / σ_k)² from all three measurements, as one block-separable CasADi/
-IPOPT NLP over T rows (built once per T and options, FIFO cache), or by a vectorised
-Gauss-Newton cross-check in NumPy, each re-checked in NumPy (stationarity and the
+IPOPT NLP over T rows (built once per T and options, in the CasADi back-end's cache),
+or by a vectorised Gauss-Newton cross-check in NumPy, each re-checked in NumPy (stationarity and the
 Newton step in CRB units). :class:`JointMLMixin` is the base of
 :class:`optmodels.fusion.two_site.TwoSiteSystem`."""
 
@@ -15,15 +15,22 @@ import casadi as ca
 import numpy as np
 from numpy.typing import ArrayLike
 
-from optmodels.backends.casadi_backend import BuiltNlp, build_nlpsol, check_options, run_nlpsol
+from optmodels.backends.casadi_backend import (
+    NLP_CACHE,
+    BuiltNlp,
+    accept_precision_limit,
+    cached_nlpsol,
+    check_options,
+    run_nlpsol,
+)
 from optmodels.core import (
-    VERIFY_TOL,
     FloatArray,
     ProblemError,
     Solution,
     Status,
+    Verdict,
     as_choice,
-    verified_status,
+    finish,
 )
 
 if TYPE_CHECKING:
@@ -112,22 +119,25 @@ class JointMLMixin:
         worst_step = float(np.max(step))
         worst = max(worst_stat, worst_step) if np.isfinite(worst_stat + worst_step) \
             else float("inf")
-        if common["message"] == "Search_Direction_Becomes_Too_Small" and worst <= VERIFY_TOL:
-            # IPOPT's precision limit (tiny noise makes the whitened problem stiff): accept
-            # the point only because the NumPy stationarity check passes
-            common["status"] = Status.OPTIMAL_INACCURATE
-            common["message"] += f" (stationarity {worst:.1e} verified in NumPy)"
-        new = verified_status(common["status"], worst)
-        if new == Status.ERROR and common["status"].ok:
-            common["message"] += f"; stationarity {worst_stat:.2g}, Newton step " \
-                f"{worst_step:.2g} (CRB units) fail the NumPy check"
-        common["status"] = new
-        if not new.ok:
-            est = np.full_like(est, np.nan)
-        obj = float(np.sum(wr**2)) if new.ok else float("nan")
-        return JointMLSolution(objective=obj, residuals={"stationarity": worst_stat,
-                                                         "newton_step": worst_step},
-                               estimate=est, stationarity=stat, **common)
+        # IPOPT's precision limit (tiny noise makes the whitened problem stiff): accept the
+        # point only because the NumPy stationarity check passes
+        common["status"], common["message"] = accept_precision_limit(
+            common["status"], common["message"], worst,
+            f" (stationarity {worst:.1e} verified in NumPy)")
+
+        def note(v: Verdict) -> str:
+            return (f"stationarity {worst_stat:.2g}, Newton step {worst_step:.2g} (CRB units)"
+                    " fail the NumPy check") if v.status == Status.ERROR and v.before.ok \
+                else ""
+
+        def no_estimate(sol: JointMLSolution) -> None:
+            sol.estimate = np.full_like(sol.estimate, np.nan)
+            sol.objective = float("nan")
+
+        sol = JointMLSolution(objective=float(np.sum(wr**2)),
+                              residuals={"stationarity": worst_stat, "newton_step": worst_step},
+                              estimate=est, stationarity=stat, **common)
+        return finish(sol, note=note, reject=no_estimate)  # the one gate
 
     def _whitened(self: TwoSiteSystem, z: FloatArray, x: FloatArray
                   ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
@@ -198,15 +208,18 @@ def _newton_step(jw: FloatArray, g: FloatArray) -> FloatArray:
         return np.where(ok, np.sqrt(np.abs(q)), np.inf)
 
 
-_JOINT_CACHE: dict[tuple[Any, ...], BuiltNlp] = {}
+#: The built joint-ML NLPs live in the CasADi back-end's one cache, under this namespace.
+_CACHE_NAMESPACE = "fusion.joint_ml"
+_JOINT_CACHE = NLP_CACHE  # the shared cache (formerly fusion's own FIFO dict)
 
 
 def _joint_nlp(t: int, options: dict[str, Any]) -> tuple[BuiltNlp, bool]:
     """Block-separable NLP of T joint-ML problems, variables u with x = start + L u
     (cached per T and options)."""
-    key = (t, repr(sorted(options.items())))
-    if key in _JOINT_CACHE:
-        return _JOINT_CACHE[key], False
+    return cached_nlpsol(_CACHE_NAMESPACE, (t,), lambda: _joint_problem(t), options=options)
+
+
+def _joint_problem(t: int) -> dict[str, Any]:
     u = ca.MX.sym("u", t, 2)
     z = ca.MX.sym("z", t, 3)
     x0 = ca.MX.sym("x0", t, 2)
@@ -225,16 +238,11 @@ def _joint_nlp(t: int, options: dict[str, Any]) -> tuple[BuiltNlp, bool]:
     rb = wrap(z[:, 1] - ca.atan2(db_x, db_y)) / sig[0]
     rd = (z[:, 2] - (ca.sqrt(db_x**2 + db_y**2) - ca.sqrt(da_x**2 + da_y**2))) / sig[1]
     f = ca.sumsqr(ra) + ca.sumsqr(rb) + ca.sumsqr(rd)
-    nlp = {"x": ca.vec(u), "f": f / t,
-           "p": ca.vertcat(ca.vec(z), ca.vec(x0), length, sa, sb, sig)}
-    built = build_nlpsol(nlp, options=options)
-    if len(_JOINT_CACHE) >= 8:
-        _JOINT_CACHE.pop(next(iter(_JOINT_CACHE)))
-    _JOINT_CACHE[key] = built
-    return built, True
+    return {"x": ca.vec(u), "f": f / t,
+            "p": ca.vertcat(ca.vec(z), ca.vec(x0), length, sa, sb, sig)}
 
 
 def clear_joint_cache() -> None:
     """Forget the built joint-ML NLPs (the next solve pays the CasADi construction again;
     used by benchmarks that measure cold build + solve)."""
-    _JOINT_CACHE.clear()
+    NLP_CACHE.clear(_CACHE_NAMESPACE)

@@ -7,11 +7,11 @@ return a bare matrix."""
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TypeVar
 
 import numpy as np
 
-from optmodels.core import REJECT_TOL, FloatArray, ProblemError, Status, verified_status
+from optmodels.core import REJECT_TOL, FloatArray, ProblemError, Solution, Status, Verdict, finish
 
 _EPS = float(np.finfo(float).eps)
 
@@ -68,24 +68,25 @@ def _wls_objective(x: FloatArray, a1: FloatArray, c1: FloatArray, a2: FloatArray
     return float(d1 @ c1 @ d1 + d2 @ c2 @ d2)
 
 
-def _verify(common: dict[str, Any], residuals: dict[str, float], est: FloatArray,
-            w: FloatArray, cov: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """A solver's (or a closed form's) 'optimal' is not taken on trust:
-    :func:`optmodels.core.verified_status` with the largest NumPy-recomputed residual.
-    A result that is not OK keeps no estimate (NaN), and no W/covariance if W failed."""
-    worst_key = max(residuals, key=lambda k: -1.0 if np.isnan(residuals[k])
-                    else residuals[k])
-    worst = residuals[worst_key]
-    if any(np.isnan(v) for v in residuals.values()):
-        worst = float("nan")
-    new = verified_status(common["status"], worst)
-    if new != common["status"]:
-        verdict = "fails the NumPy check" if new == Status.ERROR else "(NumPy check)"
-        common["status"] = new
-        common["message"] = f"{common.get('message', '')}; {worst_key} " \
-            f"{worst:.1e} {verdict}"
-    if not new.ok:
-        est = np.full_like(est, np.nan)
-        if not residuals["weight_error"] <= REJECT_TOL:
-            w, cov = np.full_like(w, np.nan), np.full_like(cov, np.nan)
-    return est, w, cov
+S = TypeVar("S", bound=Solution)
+
+
+def _note(v: Verdict) -> str:
+    verdict = "fails the NumPy check" if v.status == Status.ERROR else "(NumPy check)"
+    return f"{v.key} {v.worst:.1e} {verdict}"
+
+
+def _no_estimate(sol: S) -> None:
+    """Fusion's failure form: no estimate (NaN), and no W/covariance if W itself failed."""
+    sol.estimate = np.full_like(sol.estimate, np.nan)  # type: ignore[attr-defined]
+    if not sol.residuals["weight_error"] <= REJECT_TOL:
+        sol.W = np.full_like(sol.W, np.nan)  # type: ignore[attr-defined]
+        sol.covariance = np.full_like(sol.covariance, np.nan)  # type: ignore[attr-defined]
+
+
+def _verify(sol: S) -> S:
+    """A solver's (or a closed form's) 'optimal' is not taken on trust: the one gate
+    (:func:`optmodels.core.finish`, i.e. :func:`~optmodels.core.verified_status` of the
+    largest NumPy-recomputed residual). A result that is not OK keeps no estimate (NaN),
+    and no W/covariance if W failed."""
+    return finish(sol, note=_note, reject=_no_estimate)

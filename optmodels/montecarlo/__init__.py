@@ -62,6 +62,7 @@ from optmodels.montecarlo.engine import CONNECT_TIMEOUT as CONNECT_TIMEOUT
 from optmodels.montecarlo.engine import MAX_TRIALS as MAX_TRIALS
 from optmodels.montecarlo.engine import MAX_WORKERS as MAX_WORKERS
 from optmodels.montecarlo.engine import Chunk as Chunk
+from optmodels.montecarlo.engine import execute as execute
 from optmodels.montecarlo.engine import run
 from optmodels.montecarlo.files import LineLog
 from optmodels.montecarlo.files import log as log

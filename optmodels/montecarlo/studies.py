@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, fields
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -35,6 +35,9 @@ class PlaneAngle:
     unweighted SVD plane, and the Cramér–Rao bound of the angle for the trial's truth.
     ``setting``: "two-source" (D_i = α_i² D, closed form) or "radar" (general D_i,
     reduced NLP)."""
+
+    name: ClassVar[str] = "plane-angle"
+    problem: ClassVar[str] = "plane"
 
     n: int = 50
     setting: str = "radar"
@@ -73,6 +76,9 @@ class TrajectoriesEta:
     (the unique parameter of a diverging family) from the dependent fit and from its own
     independent line; Q objects at t = 0..N−1, σ = 1. The ratio of the means is η."""
 
+    name: ClassVar[str] = "trajectories-eta"
+    problem: ClassVar[str] = "trajectories"
+
     q: int = 2
     n: int = 10
 
@@ -104,6 +110,9 @@ class FusionWeight:
     """Fusion (paper 003): Ŵ from n snapshots of two independent estimators (sample
     covariances about the sample mean), vec Ŵ per trial; the summary compares its sample
     covariance with the linearised (10)."""
+
+    name: ClassVar[str] = "fusion-weight"
+    problem: ClassVar[str] = "fusion"
 
     n: int = 30
     s1: tuple[tuple[float, ...], ...] = ((1.0, 0.0, 0.0), (0.0, 2.0, 0.0), (0.0, 0.0, 3.0))
@@ -155,6 +164,9 @@ class BiasfieldRecovery:
     the true smooth field, range (m) and azimuth (mrad), on synthetic uncertainty sets with
     ``noise`` metres of position noise."""
 
+    name: ClassVar[str] = "biasfield-recovery"
+    problem: ClassVar[str] = "biasfield"
+
     cells: int = 200
     noise: float = 20.0
 
@@ -181,6 +193,9 @@ class AssignmentSeparation:
     (detection probability 1, no clutter in the truth, ρ = 0.05 in the model). A trial
     scores 1 when the MAP hypothesis gets the resolution right (merged vs not) and
     pairs every mark with its source."""
+
+    name: ClassVar[str] = "assignment-separation"
+    problem: ClassVar[str] = "assignment"
 
     separation: float = 1.0
     resolution: float = 1.5
@@ -219,14 +234,22 @@ class AssignmentSeparation:
         return {"rate": p, "se": float(np.sqrt(p * (1 - p) / v["correct"].size))}
 
 
-#: Built-in studies by name (the CLI's ``optmodels montecarlo NAME``).
-STUDIES: dict[str, Callable[..., Study]] = {
-    "plane-angle": PlaneAngle,
-    "trajectories-eta": TrajectoriesEta,
-    "fusion-weight": FusionWeight,
-    "biasfield-recovery": BiasfieldRecovery,
-    "assignment-separation": AssignmentSeparation,
-}
+def _declared() -> dict[str, Callable[..., Study]]:
+    """The studies of this module, each declaring its ``name`` and ``problem`` (class
+    attributes), in the order of :mod:`optmodels.registry` (then by name): a new problem's
+    study is its class here, no list to edit."""
+    from optmodels import registry
+
+    order = {p: i for i, p in enumerate(registry.names())}
+    found = [c for c in globals().values() if isinstance(c, type) and c.__module__ == __name__
+             and isinstance(c.__dict__.get("name"), str) and "problem" in c.__dict__]
+    found.sort(key=lambda c: (order.get(c.problem, len(order)), c.name))
+    return {c.name: c for c in found}
+
+
+#: Built-in studies by name (the CLI's ``optmodels montecarlo NAME``): every study class
+#: of this module (:func:`_declared`).
+STUDIES: dict[str, Callable[..., Study]] = _declared()
 
 
 def study(name: str, **params: Any) -> Study:

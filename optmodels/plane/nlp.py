@@ -2,7 +2,8 @@ r"""Generic formulations of the plane problem in CasADi, and the multistart solv
 
 ``"full"``: the original problem (1.2)-(1.3) in all 3N + 4 unknowns; ``"reduced"``:
 (1.12)-(1.13) in ``(n, a)``, valid for general :math:`D_i`. Both are built once per
-structure (a FIFO cache of built NLPs; the data enter as parameters) and solved by
+structure (in the CasADi back-end's one cache of built NLPs, namespace ``"plane"``; the
+data enter as parameters) and solved by
 :func:`solve` from up to three starts along the principal axes of the scaled data, every
 run re-checked by :mod:`optmodels.plane.verify`.
 """
@@ -16,9 +17,14 @@ import casadi as ca
 import numpy as np
 from numpy.typing import ArrayLike
 
-from optmodels.backends.casadi_backend import BuiltNlp, build_nlpsol, run_nlpsol
+from optmodels.backends.casadi_backend import (
+    NLP_CACHE,
+    BuiltNlp,
+    accept_precision_limit,
+    cached_nlpsol,
+    run_nlpsol,
+)
 from optmodels.core import (
-    VERIFY_TOL,
     FloatArray,
     ProblemError,
     SolverNotAvailable,
@@ -111,8 +117,10 @@ def _reduced_problem(n: int) -> dict[str, Any]:
     }
 
 
-_NLP_CACHE: dict[tuple[Any, ...], BuiltNlp] = {}
-_NLP_CACHE_SIZE = 8
+#: The built NLPs live in the CasADi back-end's one cache, under this namespace.
+_CACHE_NAMESPACE = "plane"
+_NLP_CACHE = NLP_CACHE  # the shared cache (formerly plane's own FIFO dict)
+_NLP_CACHE_SIZE = NLP_CACHE.size
 
 
 def _get_nlp(
@@ -123,15 +131,10 @@ def _get_nlp(
     The symbolic construction does not depend on the data values, so Monte Carlo and
     sequential runs pay it once per (formulation, N, options).
     """
-    key = (formulation, n, plugin, repr(sorted((options or {}).items())))
-    if key in _NLP_CACHE:
-        return _NLP_CACHE[key], False
-    problem = _full_problem(n) if formulation == "full" else _reduced_problem(n)
-    built = build_nlpsol(problem, plugin=plugin, options=options)
-    if len(_NLP_CACHE) >= _NLP_CACHE_SIZE:
-        _NLP_CACHE.pop(next(iter(_NLP_CACHE)))
-    _NLP_CACHE[key] = built
-    return built, True
+    return cached_nlpsol(
+        _CACHE_NAMESPACE, (formulation, n),
+        lambda: _full_problem(n) if formulation == "full" else _reduced_problem(n),
+        plugin=plugin, options=options)
 
 
 #: A stationary point whose smallest profile curvature is below -1e-6 of the largest is a
@@ -143,7 +146,7 @@ _SADDLE_RTOL = 1e-6
 def clear_nlp_cache() -> None:
     """Forget the built CasADi NLPs (the next solve pays the construction again; used by
     benchmarks that measure cold build + solve)."""
-    _NLP_CACHE.clear()
+    NLP_CACHE.clear(_CACHE_NAMESPACE)
 
 
 def _principal_axes(points: FloatArray) -> FloatArray:
@@ -306,12 +309,11 @@ def solve(
         if np.all(np.isfinite(normal)) and np.linalg.norm(normal) > 0:
             chk = _profile_check(sc.points, sc.covs, normal / np.linalg.norm(normal))
             curv_i, step_i = float(chk.curvature[0]), float(chk.step[0])
-            if res.message == "Search_Direction_Becomes_Too_Small" and step_i <= VERIFY_TOL:
-                # IPOPT's precision limit: accept only a point verified independently
-                # (the re-check in _finish then applies to it like to any other).
-                status = Status.OPTIMAL_INACCURATE
-                message += f" (KKT point verified: Newton step {step_i:.1e} rad, " \
-                    f"curvature {curv_i:.2f})"
+            # IPOPT's precision limit: accept only a point verified independently
+            # (the re-check in _finish then applies to it like to any other).
+            status, message = accept_precision_limit(
+                status, message, step_i, f" (KKT point verified: Newton step {step_i:.1e} "
+                f"rad, curvature {curv_i:.2f})")
             if status.ok and curv_i < -_SADDLE_RTOL:
                 status = Status.ERROR
                 message += f"; not a minimum of (1.12)-(1.13): profile curvature {curv_i:.2g}" \

@@ -4,7 +4,9 @@ The Newton step on the unit sphere of the Rayleigh quotient (1.14)-(1.15) of the
 ``(Q, D)`` (:func:`_rayleigh_check`: closed form, SVD baseline) or of the profile of
 (1.12) (:func:`_profile_check`: generic solve), with the round-off floors of gradient and
 Hessian; and :func:`_finish`, which every estimate goes through: canonical sign,
-projection (1.8), residuals of (1.3), then :func:`optmodels.core.verified_status`.
+projection (1.8), residuals of (1.3), then the one gate :func:`optmodels.core.finish`
+(:func:`optmodels.core.verified_status` of the dimensionless checks); a non-finite
+estimate is the failure form :func:`optmodels.core.failure`.
 """
 
 from __future__ import annotations
@@ -14,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from optmodels.core import FloatArray, Status, verified_status
+from optmodels.core import FloatArray, Status, failure, finish
 from optmodels.plane.data import (
     _EPS,
     PlaneData,
@@ -175,11 +177,9 @@ def _finish(
     info = dict(info or {})
     if not np.all(np.isfinite(normal)) or not np.isfinite(offset) \
             or float(np.linalg.norm(normal)) == 0.0:
-        return PlaneSolution(
-            status=status if not status.ok else Status.ERROR, objective=float("nan"),
-            method=method, build_time=build_time, solve_time=solve_time,
-            iterations=iterations, message=message or "non-finite iterate", info=info,
-        )
+        return failure(PlaneSolution, method, message or "non-finite iterate", status=status,
+                       build_time=build_time, solve_time=solve_time, iterations=iterations,
+                       info=info)
     normal, offset = _canonical_sign(normal, offset)
     checks: dict[str, float] = {}
     if projected is None:
@@ -194,14 +194,9 @@ def _finish(
     scale = float(np.max(np.abs(data.points)))
     checks.update(unit_normal=residuals["unit_normal"], plane=residuals["plane"] / scale,
                   stationarity=float(stationarity))
-    worst = max(checks.values())
-    new_status = verified_status(status, worst)
-    if new_status != status:
-        message = (message + "; " if message else "") + \
-            f"re-check of (1.2)-(1.3): worst {worst:.2g} ({max(checks, key=checks.__getitem__)})"
     info["verification"] = checks
-    return PlaneSolution(
-        status=new_status,
+    sol = PlaneSolution(
+        status=status,
         objective=objective(data, projected),
         method=method,
         build_time=build_time,
@@ -214,3 +209,7 @@ def _finish(
         offset=offset,
         projected=projected,
     )
+    # the one gate (core.finish) on the dimensionless checks; a refused plane keeps its
+    # numbers for diagnosis (status ERROR, never OK)
+    return finish(sol, checks, note=lambda v: f"re-check of (1.2)-(1.3): worst {v.worst:.2g} "
+                  f"({v.key})")

@@ -13,11 +13,11 @@ from typing import Any
 
 import numpy as np
 
-from optmodels.core import ProblemError, Status, timed, verified_status
+from optmodels.core import ProblemError, Status, Verdict, as_instance, timed
 from optmodels.trajectories.data import Family, FamilyName, TrajectoryData, resolve_family
 from optmodels.trajectories.fits import _fit, _kind
-from optmodels.trajectories.solution import TrajectorySolution, _nan_solution, _package
-from optmodels.trajectories.verify import REJECT_TOL, VERIFY_TOL, _downgrade, _recheck
+from optmodels.trajectories.solution import TrajectorySolution, _finish
+from optmodels.trajectories.verify import REJECT_TOL, VERIFY_TOL, _recheck
 
 
 # --------------------------------------------------------------------------- closed forms
@@ -53,6 +53,7 @@ def closed_form(data: TrajectoryData, family: FamilyName | Family = "diverging",
     ProblemError
         Bad arguments, a numerically singular design, an epoch too far from the data.
     """
+    as_instance("trajectories.closed_form data", data, TrajectoryData)
     fam = resolve_family(family, data.n_objects)
     if not isinstance(printed, bool | np.bool_):
         raise ProblemError(f"trajectories.closed_form printed: expected True or False, got "
@@ -67,26 +68,14 @@ def closed_form(data: TrajectoryData, family: FamilyName | Family = "diverging",
     residuals = {"shared_start": 0.0, "shared_velocity": 0.0, "stationarity": stat}
     message = {"diverging": "(8)-(9)", "parallel": "(12)-(13)",
                "independent": "single-line LSQ"}.get(kind, "normal equations (3)")
-    status = verified_status(Status.OPTIMAL, stat)
-    common: dict[str, Any] = {"status": status, "method": "closed_form",
+    common: dict[str, Any] = {"status": Status.OPTIMAL, "method": "closed_form",
                               "solve_time": tm.elapsed,
                               "message": message + (" as printed" if printed else "")}
-    if status is Status.ERROR:
-        common["message"] += (f"; verification failed: stationarity = {stat:.2e} > "
-                              f"{REJECT_TOL:g}")
-        if printed:
-            sol = _package(data, fam, ref, fit.theta, residuals, obj, common)
-            sol.info.update(diag)
-            return sol
-        sol = _nan_solution(data, fam, fit, residuals, common, fit.theta)
-        sol.status = Status.ERROR
-        sol.info.update(diag)
-        return sol
-    if status is Status.OPTIMAL_INACCURATE:
-        common["message"] += f"; stationarity = {stat:.2e} > {VERIFY_TOL:g}"
-    common["status"], note = _downgrade(data, status, diag)
-    if note:
-        common["message"] += "; " + note
-    sol = _package(data, fam, fit, fit.theta, residuals, obj, common)
-    sol.info.update(diag)
-    return sol
+
+    def note(v: Verdict) -> str:
+        if v.status is Status.ERROR:
+            return f"verification failed: stationarity = {stat:.2e} > {REJECT_TOL:g}"
+        return f"stationarity = {stat:.2e} > {VERIFY_TOL:g}"
+
+    return _finish(data, fam, fit, fit.theta, residuals, obj, diag, common, strict=False,
+                   note=note, keep=ref if printed else None)

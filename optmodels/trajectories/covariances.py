@@ -13,7 +13,7 @@ from typing import Literal
 
 import numpy as np
 
-from optmodels.core import FloatArray, ProblemError, as_choice, as_count, as_positive
+from optmodels.core import FloatArray, ProblemError, as_choice, as_count, as_instance, as_positive
 from optmodels.trajectories.data import Family, FamilyName, TrajectoryData, resolve_family
 from optmodels.trajectories.fits import _fit
 from optmodels.trajectories.solution import _shape
@@ -30,6 +30,7 @@ def covariance(data: TrajectoryData, family: FamilyName | Family) -> FloatArray:
     ProblemError
         The design is numerically singular (see :class:`TrajectoryData`).
     """
+    as_instance("trajectories.covariance data", data, TrajectoryData)
     fam = resolve_family(family, data.n_objects)
     cov = _fit(data, fam).cov
     return cov.copy() if data.vector else cov[0].copy()
@@ -121,6 +122,7 @@ def variance_ratios(data: TrajectoryData, family: FamilyName | Family) -> dict[s
     """Var(start_j), Var(velocity_j) under the family divided by the same variances from
     object j's own independent line, for the data's actual times and variances: the
     general form of the conclusions' η and η0. Arrays (Q,) or (Q, d)."""
+    as_instance("trajectories.variance_ratios data", data, TrajectoryData)
     fam = resolve_family(family, data.n_objects)
     q = data.n_objects
     dep = _fit(data, fam).cov

@@ -1,7 +1,9 @@
 """The generic solve of paper 002's least squares (1): a CVXPY model, either the ``Q``
 lines with the family's equality constraints (``"constrained"``) or the unconstrained
 problem in θ with the design matrix (``"reduced"``), in centred, scaled units, with
-:data:`SOLVER_DEFAULTS`; the answer is re-checked in NumPy (:mod:`.verify`).
+the back-end's options for the class ``"lsq"`` (:data:`SOLVER_DEFAULTS`, the table
+:data:`optmodels.backends.profiles.DEFAULTS` ``["lsq"]``); the answer is re-checked in NumPy
+(:mod:`.verify`).
 """
 
 from __future__ import annotations
@@ -13,29 +15,17 @@ import numpy as np
 import scipy.sparse as sp
 
 from optmodels.backends.cvxpy_backend import solve_problem
-from optmodels.core import FloatArray, ProblemError, Status, as_choice, timed
+from optmodels.backends.profiles import DEFAULTS
+from optmodels.backends.profiles import solver_options as backend_options
+from optmodels.core import FloatArray, ProblemError, as_choice, as_instance, timed
 from optmodels.trajectories.data import Family, FamilyName, TrajectoryData, resolve_family
 from optmodels.trajectories.fits import _anchors, _fit
 from optmodels.trajectories.moments import _stats
-from optmodels.trajectories.solution import TrajectorySolution, _nan_solution, _package
-from optmodels.trajectories.verify import (
-    REJECT_TOL,
-    VERIFY_TOL,
-    _downgrade,
-    _line_residuals,
-    _recheck,
-)
+from optmodels.trajectories.solution import TrajectorySolution, _finish_solve, _nan_solution
 
-#: Default solver options. The QP has equality constraints only, so OSQP's polishing step
-#: (one solve of the KKT system once ADMM has converged) lands on the exact solution
-#: (~1e-15 relative) already from eps = 1e-6; asking ADMM itself for 1e-10 costs 12 525
-#: iterations (22 s) on the parallel family with Q = 100 × 1000 points, for nothing. Every
-#: generic solution is verified afterwards (:data:`VERIFY_TOL`), so a failed polish shows.
-SOLVER_DEFAULTS: dict[str, dict[str, Any]] = {
-    "OSQP": {"eps_abs": 1e-6, "eps_rel": 1e-6, "polishing": True, "max_iter": 200_000},
-    "CLARABEL": {"tol_gap_abs": 1e-12, "tol_gap_rel": 1e-12, "tol_feas": 1e-12},
-    "SCS": {"eps_abs": 1e-9, "eps_rel": 1e-9, "max_iters": 200_000},
-}
+#: Default solver options: the back-end's table for equality-constrained least squares
+#: (the same object; the reasons for each value are given there).
+SOLVER_DEFAULTS: dict[str, dict[str, Any]] = DEFAULTS["lsq"]
 
 
 # --------------------------------------------------------------------------- generic solve
@@ -157,6 +147,7 @@ def solve(data: TrajectoryData, family: FamilyName | Family = "diverging", *,
     ProblemError
         Bad arguments, a numerically singular design, an epoch too far from the data.
     """
+    as_instance("trajectories.solve data", data, TrajectoryData)
     fam = resolve_family(family, data.n_objects)
     form = as_choice("trajectories.solve formulation", formulation, ("constrained", "reduced"))
     if solver is None:
@@ -166,7 +157,7 @@ def solve(data: TrajectoryData, family: FamilyName | Family = "diverging", *,
     else:
         raise ProblemError(f"trajectories.solve solver: expected a solver name (str), got "
                            f"{type(solver).__name__}")
-    opts = {**SOLVER_DEFAULTS.get(name, {}), **solver_options}
+    opts = backend_options("lsq", name, solver_options)
     with timed() as tb:
         fit = _fit(data, fam)
         prob, back = _cvxpy_problem(data, fam, form)
@@ -181,27 +172,4 @@ def solve(data: TrajectoryData, family: FamilyName | Family = "diverging", *,
     if not np.all(np.isfinite(theta)):
         common["message"] += "; the solver returned non-finite values"
         return _nan_solution(data, fam, fit, {}, common, None)
-    obj, stat, diag = _recheck(data, fam, fit, theta)
-    std = np.sqrt(np.diagonal(fit.cov, axis1=1, axis2=2)).T
-    residuals = ({"shared_start": 0.0, "shared_velocity": 0.0} if lines is None
-                 else _line_residuals(_stats(data), fam, *lines, std))
-    residuals["stationarity"] = stat
-    status = common["status"]
-    worst_key = max(residuals, key=residuals.__getitem__)
-    worst = residuals[worst_key]
-    if not np.isfinite(worst) or worst > VERIFY_TOL:
-        note = f"; verification failed: {worst_key} = {worst:.2e} > {VERIFY_TOL:g}"
-        common["message"] += note
-        if status is Status.OPTIMAL and worst <= REJECT_TOL:
-            common["status"] = Status.OPTIMAL_INACCURATE
-        else:
-            return _nan_solution(data, fam, fit, residuals, common, theta)
-    common["status"], note = _downgrade(data, common["status"], diag)
-    if note:
-        common["message"] += "; " + note
-    sol = _package(data, fam, fit, theta, residuals, obj, common)
-    sol.info.update(diag)
-    if lines is not None:
-        sol.info["lines"] = {"position": lines[0], "velocity": lines[1],
-                             "at_time": (lines[2][:, 0] + data.epoch)}
-    return sol
+    return _finish_solve(data, fam, fit, theta, lines, common)

@@ -11,7 +11,7 @@ from typing import Any, Literal
 import numpy as np
 from scipy import stats
 
-from optmodels.core import ProblemError, Status, as_choice, as_probability
+from optmodels.core import ProblemError, Status, as_choice, as_instance, as_probability
 from optmodels.trajectories.closed_forms import closed_form
 from optmodels.trajectories.data import Family, FamilyName, TrajectoryData, resolve_family
 from optmodels.trajectories.fits import _fit, _kind
@@ -72,6 +72,7 @@ def family_test(data: TrajectoryData, family: FamilyName | Family = "diverging",
     level = as_probability("trajectories.family_test level", level, low_open=True,
                            high_open=True)
     mode = as_choice("trajectories.family_test sigma2", sigma2, ("known", "estimated"))
+    as_instance("trajectories.family_test data", data, TrajectoryData)
     fam = resolve_family(family, data.n_objects)
     if fam.n_constraints == 0:
         raise ProblemError("family: independent lines impose no constraint to test")

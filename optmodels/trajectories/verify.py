@@ -12,6 +12,8 @@ from typing import Any
 
 import numpy as np
 
+from optmodels.core import REJECT_TOL as REJECT_TOL
+from optmodels.core import VERIFY_TOL as VERIFY_TOL
 from optmodels.core import FloatArray, ProblemError, Status
 from optmodels.trajectories.data import Family, TrajectoryData
 from optmodels.trajectories.fits import _Fit
@@ -20,9 +22,10 @@ from optmodels.trajectories.moments import EPS, TIME_RESOLUTION_WARN, _per, _Sta
 #: Relative violation (equalities, stationarity) above which a solver's claimed optimum
 #: is downgraded by :func:`solve`: OPTIMAL → OPTIMAL_INACCURATE, and OPTIMAL_INACCURATE →
 #: ERROR (never returned as a solution). Above REJECT_TOL a claimed OPTIMAL becomes ERROR
-#: too. The closed forms use :func:`optmodels.core.verified_status` (same thresholds).
-VERIFY_TOL = 1e-6
-REJECT_TOL = 1e-3
+#: too. These are the core's thresholds; the rule is the one gate
+#: (:func:`optmodels.core.gate`, strict for a solver's claim, plain for the closed forms);
+#: ``VERIFY_TOL`` and ``REJECT_TOL`` here are :data:`optmodels.core.VERIFY_TOL` and
+#: :data:`optmodels.core.REJECT_TOL`, imported above.
 
 #: Rounding of the reported start at ``epoch`` in units of the standard deviation of the
 #: object's position at its data, ``eps·|V_j (T_j − epoch)|·√Σw``, counted when the epoch

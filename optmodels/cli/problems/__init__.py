@@ -30,13 +30,13 @@ def modules() -> list[ModuleType]:
 
 
 def names() -> tuple[str, ...]:
-    """The problems with a module here, in the comparison harness's order
-    (:func:`solvers_cmp.cases.known_problems`: the README's table, plane first) -- the
-    order ``optmodels demo`` runs them and lists them in report/index.md; a problem the
-    harness does not know comes after, by name."""
-    from solvers_cmp import cases
+    """The problems with a module here, in the registry's order (:func:`optmodels.registry.names`:
+    the README's table, plane first) -- the order ``optmodels demo`` runs them and lists them
+    in report/index.md; a module here of a problem the registry does not know comes after,
+    by name."""
+    from optmodels import registry
 
-    order = {p: i for i, p in enumerate(cases.known_problems())}
+    order = {p: i for i, p in enumerate(registry.names())}
     return tuple(sorted(_found(), key=lambda p: (order.get(p, len(order)), p)))
 
 

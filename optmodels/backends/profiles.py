@@ -1,0 +1,158 @@
+"""Solver knowledge the problems share: option defaults per problem class, the settings
+profiles (``default``/``high``), and each MILP solver's names for the gap and time limit.
+
+A problem module names its *problem class* and the solver; the back-end decides the
+options (:func:`solver_options`):
+
+- ``"lsq"``: equality-constrained least squares (paper 002's generic solve);
+- ``"qp"``: QPs whose answer must agree with a closed form to ~1e-8 (paper 001's
+  selection (9)-(10) [+ box (8)]);
+- ``"socp"``: second-order cone programs solved to the solvers' own default accuracy,
+  their certificate re-checked afterwards (paper 001's Lipschitz class).
+
+Options are merged, later winning: the class defaults (:data:`DEFAULTS`), then the profile
+(:data:`PROFILES`: ``default`` adds nothing, ``high`` pushes every solver to ~1e-10, what
+the comparison harness's ``high`` profile passes), then the caller's own options. Keys are
+the solvers' own (CVXPY solver names upper case; CasADi NLP plugins lower case). MILP
+solvers take the relative gap and the time limit under their own names
+(:func:`milp_options`).
+
+Pure Python, no solver imported here: the tables can be read (harness, docs) without
+loading CVXPY or CasADi.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from optmodels.core import ProblemError
+
+__all__ = ["DEFAULTS", "HIGH_OPTIONS", "MILP_LIMIT_SOLVERS", "PROBLEM_CLASSES", "PROFILES",
+           "defaults", "milp_options", "profile_options", "solver_options"]
+
+#: Default options by problem class, then solver.
+DEFAULTS: dict[str, dict[str, dict[str, Any]]] = {
+    # The least squares has equality constraints only, so OSQP's polishing step (one solve
+    # of the KKT system once ADMM has converged) lands on the exact solution (~1e-15
+    # relative) already from eps = 1e-6; asking ADMM itself for 1e-10 costs 12 525
+    # iterations (22 s) on the parallel family with Q = 100 × 1000 points, for nothing.
+    # Every generic solution is verified afterwards, so a failed polish shows.
+    "lsq": {
+        "OSQP": {"eps_abs": 1e-6, "eps_rel": 1e-6, "polishing": True, "max_iter": 200_000},
+        "CLARABEL": {"tol_gap_abs": 1e-12, "tol_gap_rel": 1e-12, "tol_feas": 1e-12},
+        "SCS": {"eps_abs": 1e-9, "eps_rel": 1e-9, "max_iters": 200_000},
+    },
+    # Tight enough for the 1e-8 agreement with the closed form.
+    "qp": {
+        # OSQP's polish refines its KKT solve 3 times by default: on the bias-field
+        # problems that left 1e-3 relative errors in φ while reporting "solved, polishing
+        # successful"; 50 reach 1e-15
+        "OSQP": {"eps_abs": 1e-9, "eps_rel": 1e-9, "polishing": True,
+                 "polish_refine_iter": 50, "max_iter": 200_000},
+        "SCS": {"eps_abs": 1e-9, "eps_rel": 1e-9, "max_iters": 200_000},
+        # Clarabel's default gap 1e-8 leaves ~2e-6 relative errors in a box-bound φ of the
+        # reduced problem; 1e-10 brings them to ~3e-8 for one more iteration
+        "CLARABEL": {"tol_gap_abs": 1e-10, "tol_gap_rel": 1e-10, "tol_feas": 1e-10,
+                     "tol_ktratio": 1e-8},
+    },
+    # The solvers' own default accuracy (Clarabel's 1e-10 gap of the QP defaults ends
+    # "inaccurate" on the Lipschitz SOCP); only SCS, a first-order solver, is tightened.
+    "socp": {
+        "SCS": {"eps_abs": 1e-9, "eps_rel": 1e-9, "max_iters": 200_000},
+    },
+}
+
+#: The problem classes :data:`DEFAULTS` knows.
+PROBLEM_CLASSES: tuple[str, ...] = tuple(DEFAULTS)
+
+#: High-accuracy options per solver (the ``high`` profile), over the class defaults.
+HIGH_OPTIONS: dict[str, dict[str, Any]] = {
+    "CLARABEL": {"tol_gap_abs": 1e-12, "tol_gap_rel": 1e-12, "tol_feas": 1e-12,
+                 "tol_ktratio": 1e-10},
+    "OSQP": {"eps_abs": 1e-10, "eps_rel": 1e-10, "max_iter": 200_000, "polishing": True},
+    "SCS": {"eps_abs": 1e-10, "eps_rel": 1e-10, "max_iters": 200_000},
+    "HIGHS": {"primal_feasibility_tolerance": 1e-10, "dual_feasibility_tolerance": 1e-10},
+    "CASADI_OSQP": {"osqp": {"eps_abs": 1e-10, "eps_rel": 1e-10, "max_iter": 200_000,
+                             "polish": True, "verbose": False}},
+    "CASADI_PROXQP": {"proxqp": {"eps_abs": 1e-10}},
+    "ipopt": {"tol": 1e-12, "constr_viol_tol": 1e-12},
+    "sqpmethod": {"tol_pr": 1e-12, "tol_du": 1e-12},
+    "feasiblesqpmethod": {"tol_pr": 1e-12, "tol_du": 1e-12},
+}
+
+#: Settings profiles: profile → solver → options over the class defaults.
+PROFILES: dict[str, dict[str, dict[str, Any]]] = {
+    "default": {},  # optmodels' own defaults (already tighter than several solvers' own)
+    "high": HIGH_OPTIONS,
+}
+
+#: MILP solvers whose gap and time-limit names :func:`milp_options` knows.
+MILP_LIMIT_SOLVERS: tuple[str, ...] = ("HIGHS", "SCIPY", "SCIP")
+
+
+def _copy(opts: dict[str, Any]) -> dict[str, Any]:
+    """A copy two levels deep (CasADi plugins take nested option dictionaries)."""
+    return {k: dict(v) if isinstance(v, dict) else v for k, v in opts.items()}
+
+
+def defaults(problem_class: str, solver: str) -> dict[str, Any]:
+    """The default options of ``solver`` (any case for CVXPY names) on ``problem_class``;
+    empty for a solver without defaults there (its own defaults apply)."""
+    if problem_class not in DEFAULTS:
+        raise ProblemError(f"problem class: expected one of {', '.join(PROBLEM_CLASSES)}, "
+                           f"got {problem_class!r}")
+    return _copy(DEFAULTS[problem_class].get(solver.upper(), {}))
+
+
+def profile_options(profile: str, solver: str) -> dict[str, Any]:
+    """What the settings ``profile`` adds for ``solver`` (upper case for CVXPY names,
+    lower case for CasADi NLP plugins, as :data:`HIGH_OPTIONS` keys them)."""
+    if profile not in PROFILES:
+        raise ProblemError(f"profile: expected one of {', '.join(sorted(PROFILES))}, "
+                           f"got {profile!r}")
+    table = PROFILES[profile]
+    return _copy(table.get(solver, table.get(solver.upper(), {})))
+
+
+def solver_options(problem_class: str, solver: str, user: dict[str, Any] | None = None, *,
+                   profile: str = "default") -> dict[str, Any]:
+    """The options that reach ``solver``: class defaults, then the profile's, then the
+    caller's ``user`` options (each later one wins, key by key)."""
+    return {**defaults(problem_class, solver), **profile_options(profile, solver),
+            **(user or {})}
+
+
+def milp_options(solver: str, mip_gap: float, time_limit: float | None, *,
+                 verbose: bool = False, where: str = "solver") -> dict[str, Any]:
+    """Each MILP solver's own names for the relative gap and the time limit (s).
+
+    HIGHS, SCIPY (``scipy.optimize.milp``, HiGHS inside) and SCIP; any other solver takes
+    neither (a non-zero gap or a time limit is a :class:`ProblemError` naming ``where``).
+    """
+    if solver == "HIGHS":
+        # mip_abs_gap 1e-12 (log-score units): with mip_rel_gap = 0 HiGHS stops when the
+        # bound is within round-off of the incumbent; the gap it reports is ~1e-16
+        # presolve off: on the assignment's set-partitioning models HiGHS 1.16's presolve
+        # is the bottleneck (Q = 200, pairs allowed: 54 s of presolve, then 3 s of branch
+        # and bound; 5 s in all without it), and the root LP is already tight; pass
+        # presolve="on" to restore it
+        opts: dict[str, Any] = {"mip_rel_gap": mip_gap,
+                                "mip_abs_gap": 1e-12 if mip_gap == 0 else 1e-6,
+                                "output_flag": verbose, "presolve": "off"}
+        if time_limit is not None:
+            opts["time_limit"] = time_limit
+        return opts
+    if solver == "SCIPY":  # scipy.optimize.milp (HiGHS inside)
+        sopts: dict[str, Any] = {"mip_rel_gap": mip_gap}
+        if time_limit is not None:
+            sopts["time_limit"] = time_limit
+        return {"scipy_options": sopts}
+    if solver == "SCIP":
+        params: dict[str, Any] = {"limits/gap": mip_gap}
+        if time_limit is not None:
+            params["limits/time"] = time_limit
+        return {"scip_params": params}
+    if time_limit is not None or mip_gap != 0:
+        raise ProblemError(f"{where} solver: time_limit and mip_gap are passed to HIGHS, "
+                           f"SCIPY and SCIP only; give {solver}'s own options instead")
+    return {}

@@ -1,0 +1,72 @@
+"""Readers and writers for user data (CSV, ``.npz``) and results (CSV, Markdown, JSON).
+
+Every reader turns a file it cannot use into one :class:`~optmodels.core.ProblemError`
+naming the file (and, where it helps, the line, column or byte): a missing file, a
+directory, a file without read permission, text that is not UTF-8 (with its byte offset),
+binary data, a truncated or foreign archive. CSV files are read as UTF-8 with or without
+the byte-order mark that spreadsheet programs write ("CSV UTF-8").
+
+Every writer creates the missing parent folders of its output path and refuses a path
+that is an existing directory (or whose parent is a file) with a ProblemError naming it.
+
+Modules (the public names are re-exported here unchanged, ``from optmodels.io import ...``):
+
+- :mod:`~optmodels.io.paths` — path arguments, checked input files, UTF-8 text, output
+  files and folders;
+- :mod:`~optmodels.io.tables` — CSV: :func:`read_csv_rows`, :func:`csv_numbers`, the plane
+  (paper 000) and trajectory (paper 002) track files;
+- :mod:`~optmodels.io.binary` — ``.npz`` / ``.npy`` arrays and JSON documents;
+- :mod:`~optmodels.io.writers` — CSV, plane CSV, JSON and Markdown writers.
+"""
+
+from __future__ import annotations
+
+from optmodels.io.binary import _ZIP_MAGIC as _ZIP_MAGIC
+from optmodels.io.binary import _file_head as _file_head
+from optmodels.io.binary import read_json, read_npy, read_npz
+from optmodels.io.paths import _MAGIC as _MAGIC
+from optmodels.io.paths import _make_dir as _make_dir
+from optmodels.io.paths import _read_bytes as _read_bytes
+from optmodels.io.paths import _write_text as _write_text
+from optmodels.io.paths import as_path, input_file, output_dir, output_file, read_text
+from optmodels.io.tables import _COV_COLUMNS as _COV_COLUMNS
+from optmodels.io.tables import (
+    CsvRows,
+    PlaneCsv,
+    csv_numbers,
+    read_csv_rows,
+    read_plane_csv,
+    read_trajectory_csv,
+)
+from optmodels.io.tables import _columns as _columns
+from optmodels.io.writers import (
+    csv_cell,
+    json_default,
+    markdown_table,
+    write_csv,
+    write_json,
+    write_plane_csv,
+)
+
+__all__ = [
+    "CsvRows",
+    "PlaneCsv",
+    "as_path",
+    "csv_cell",
+    "csv_numbers",
+    "input_file",
+    "json_default",
+    "markdown_table",
+    "output_dir",
+    "output_file",
+    "read_csv_rows",
+    "read_json",
+    "read_npy",
+    "read_npz",
+    "read_plane_csv",
+    "read_text",
+    "read_trajectory_csv",
+    "write_csv",
+    "write_json",
+    "write_plane_csv",
+]

@@ -1,0 +1,165 @@
+"""Checked file-system access: path arguments, input files, output files and folders.
+
+:func:`as_path` turns a path argument into a :class:`~pathlib.Path`; :func:`input_file`
+checks an existing readable regular file; :func:`read_text` reads UTF-8 text (BOM dropped),
+refusing UTF-16, binary data and non-UTF-8 bytes with the byte offset and line;
+:func:`output_file` / :func:`output_dir` prepare a path to write to (missing parent folders
+created). The private ``_read_bytes`` / ``_write_text`` / ``_make_dir`` turn ``OSError`` into
+one :class:`~optmodels.core.ProblemError` naming the path. No equations (file handling only).
+"""
+
+from __future__ import annotations
+
+import codecs
+import os
+from pathlib import Path
+from typing import Any
+
+from optmodels.core import ProblemError
+
+# signatures of files that are often given where a text CSV is expected
+_MAGIC = (
+    (b"PAR1", "a Parquet file (give it the .parquet suffix where Parquet is accepted)"),
+    (b"PK\x03\x04", "a ZIP archive (an .npz or .xlsx file?), not CSV text"),
+    (b"\x93NUMPY", "a NumPy .npy file, not CSV text"),
+    (b"\x1f\x8b", "gzip-compressed (decompress it first)"),
+)
+
+
+
+# --------------------------------------------------------------------------- paths
+def as_path(name: str, value: Any) -> Path:
+    """A file-system path argument as :class:`~pathlib.Path`.
+
+    Raises
+    ------
+    ProblemError
+        Naming ``name`` if ``value`` is not a ``str``/``os.PathLike`` or is empty.
+    """
+    if isinstance(value, bytes) or not isinstance(value, str | os.PathLike):
+        raise ProblemError(f"{name}: expected a file path, got {type(value).__name__} "
+                           f"{value!r:.60}")
+    text = os.fspath(value)
+    if not text or "\x00" in text:
+        raise ProblemError(f"{name}: not a usable file path: {text!r:.60}")
+    return Path(text)
+
+
+def input_file(path: str | os.PathLike[str], *, what: str = "file",
+               name: str = "path") -> Path:
+    """An existing, readable regular file.
+
+    Raises
+    ------
+    ProblemError
+        Naming the path: no such file, a directory, not readable (permission).
+    """
+    p = as_path(name, path)
+    try:
+        if p.is_dir():
+            raise ProblemError(f"{p}: is a directory, expected a {what}")
+        if not p.exists():
+            raise ProblemError(f"{p}: no such file (expected a {what})")
+        if not p.is_file():
+            raise ProblemError(f"{p}: not a regular file (expected a {what})")
+        if not os.access(p, os.R_OK):
+            raise ProblemError(f"{p}: permission denied (cannot read the {what})")
+    except OSError as exc:  # e.g. a path component that is a file, a name too long
+        raise ProblemError(f"{p}: cannot open the {what} ({exc.strerror or exc})") from None
+    return p
+
+
+def _read_bytes(p: Path, what: str) -> bytes:
+    try:
+        return p.read_bytes()
+    except PermissionError:
+        raise ProblemError(f"{p}: permission denied (cannot read the {what})") from None
+    except IsADirectoryError:
+        raise ProblemError(f"{p}: is a directory, expected a {what}") from None
+    except FileNotFoundError:
+        raise ProblemError(f"{p}: no such file (expected a {what})") from None
+    except OSError as exc:
+        raise ProblemError(f"{p}: cannot read the {what} ({exc.strerror or exc})") from None
+
+
+def read_text(path: str | os.PathLike[str], *, what: str = "text file",
+              name: str = "path") -> str:
+    """The text of a UTF-8 file (a leading byte-order mark is dropped).
+
+    Raises
+    ------
+    ProblemError
+        Naming the file: the path problems of :func:`input_file`; UTF-16 text; binary
+        data (a NUL byte, or the signature of a Parquet/ZIP/.npy/gzip file); text that is
+        not UTF-8 (Latin-1, Windows-1251, ...), with the byte offset and line of the first
+        byte that does not decode.
+    """
+    p = input_file(path, what=what, name=name)
+    data = _read_bytes(p, what)
+    if data.startswith((codecs.BOM_UTF16_LE, codecs.BOM_UTF16_BE)):
+        raise ProblemError(f"{p}: UTF-16 text; save the {what} as UTF-8 (e.g. 'CSV UTF-8')")
+    for magic, text in _MAGIC:
+        if data.startswith(magic):
+            raise ProblemError(f"{p}: {text}")
+    nul = data.find(b"\x00")
+    if nul >= 0:
+        line = data.count(b"\n", 0, nul) + 1
+        raise ProblemError(f"{p}: binary data (a NUL byte at byte {nul}, line {line}); "
+                           f"expected a text {what}")
+    skip = len(codecs.BOM_UTF8) if data.startswith(codecs.BOM_UTF8) else 0
+    try:
+        return data[skip:].decode("utf-8")
+    except UnicodeDecodeError as exc:
+        pos = skip + exc.start
+        line = data.count(b"\n", 0, pos) + 1
+        raise ProblemError(
+            f"{p}: not UTF-8 text (byte 0x{data[pos]:02x} at byte {pos}, line {line}); "
+            f"save the {what} as UTF-8 (e.g. 'CSV UTF-8')"
+        ) from None
+
+
+def output_file(path: str | os.PathLike[str], *, name: str = "path") -> Path:
+    """Prepare a path to write a file to: its missing parent folders are created.
+
+    Raises
+    ------
+    ProblemError
+        Naming the path if it is an existing directory, if a parent is an existing file,
+        or if the parent folder cannot be created (permission).
+    """
+    p = as_path(name, path)
+    if p.is_dir():
+        raise ProblemError(f"{p}: is an existing directory; give a file name to write to")
+    _make_dir(p.parent, what="the folder of")
+    return p
+
+
+def output_dir(path: str | os.PathLike[str], *, name: str = "path") -> Path:
+    """Prepare a folder to write results into, creating it (and its parents) if missing.
+
+    Raises
+    ------
+    ProblemError
+        Naming the path if it (or a parent) is an existing file, or cannot be created.
+    """
+    p = as_path(name, path)
+    _make_dir(p, what="the output folder")
+    return p
+
+
+def _make_dir(d: Path, *, what: str) -> None:
+    try:
+        d.mkdir(parents=True, exist_ok=True)
+    except (FileExistsError, NotADirectoryError):
+        raise ProblemError(f"{d}: cannot create {what} (it, or a parent, is an existing "
+                           "file)") from None
+    except OSError as exc:
+        raise ProblemError(f"{d}: cannot create {what} ({exc.strerror or exc})") from None
+
+
+def _write_text(p: Path, text: str, *, newline: str | None = None) -> None:
+    try:
+        with p.open("w", encoding="utf-8", newline=newline) as fh:
+            fh.write(text)
+    except OSError as exc:
+        raise ProblemError(f"{p}: cannot write ({exc.strerror or exc})") from None

@@ -1,0 +1,232 @@
+"""CSV tables: the generic reader and the plane and trajectory track files.
+
+:func:`read_csv_rows` reads a comma-separated UTF-8 file (BOM allowed) into a header and
+its non-blank rows with their file lines (:class:`CsvRows`); :func:`csv_numbers` turns a
+column into floats, naming the first bad cell. :func:`read_plane_csv` reads the points x_i
+of paper 000, (1.2) (with optional ``t``, α_i² or per-point covariance, :class:`PlaneCsv`);
+:func:`read_trajectory_csv` reads the classified measurements of paper 002.
+(Named ``tables`` so that it does not shadow the standard-library ``csv``.)
+"""
+
+from __future__ import annotations
+
+import csv
+import io as _stdio
+import os
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any, NamedTuple
+
+import numpy as np
+
+from optmodels.core import FloatArray, ProblemError
+from optmodels.io.paths import as_path, read_text
+
+_COV_COLUMNS = ("cxx", "cxy", "cxz", "cyy", "cyz", "czz")
+
+
+# --------------------------------------------------------------------------- CSV
+class CsvRows(NamedTuple):
+    """A CSV file as text: ``header`` (names stripped, lower-case), the non-blank data
+    ``rows`` (lists of cells, each as long as the header) and the 1-based file ``lines``
+    where each row starts."""
+
+    header: list[str]
+    rows: list[list[str]]
+    lines: list[int]
+
+
+def read_csv_rows(path: str | os.PathLike[str], *, what: str = "CSV file") -> CsvRows:
+    """Header and non-blank data rows of a comma-separated UTF-8 file (BOM allowed).
+
+    Columns with an empty header and no data (a trailing separator written by spreadsheet
+    programs) are dropped.
+
+    Raises
+    ------
+    ProblemError
+        Naming the file: any problem of :func:`read_text`; malformed CSV (with the line);
+        an empty file or no data rows; an unnamed column with data; a duplicate column
+        name (case-blind); a row whose number of fields differs from the header's.
+    """
+    p = as_path("path", path)
+    text = read_text(p, what=what)
+    reader = csv.reader(_stdio.StringIO(text, newline=""), strict=True)
+    rows: list[list[str]] = []
+    lines: list[int] = []
+    try:
+        header_row = next(reader, None)
+        if header_row is None:
+            raise ProblemError(f"{p}: empty file (expected a header line)")
+        while True:
+            start = reader.line_num + 1
+            r = next(reader, None)
+            if r is None:
+                break
+            if "".join(r).strip():  # not a blank line (C-level test, fast)
+                rows.append(r)
+                lines.append(start)
+    except csv.Error as exc:
+        raise ProblemError(f"{p}: line {reader.line_num}: malformed CSV ({exc})") from None
+    header = [h.strip().lower() for h in header_row]
+    if len(header) == 1 and ";" in header[0]:
+        raise ProblemError(f"{p}: the header {header_row[0]!r} looks semicolon-separated; "
+                           "save the file with comma separators (and decimal points)")
+    if not rows:
+        raise ProblemError(f"{p}: no data rows")
+    for r, line in zip(rows, lines, strict=True):
+        if len(r) != len(header):
+            raise ProblemError(f"{p}: line {line} has {len(r)} fields, the header has "
+                               f"{len(header)}")
+    keep = [j for j, h in enumerate(header)
+            if h or any(r[j].strip() for r in rows)]
+    if len(keep) < len(header):
+        header = [header[j] for j in keep]
+        rows = [[r[j] for j in keep] for r in rows]
+    for j, h in enumerate(header):
+        if not h:
+            raise ProblemError(f"{p}: column {j + 1} has data but no name in the header")
+        if h in header[:j]:
+            raise ProblemError(f"{p}: column {h!r} appears more than once in the header")
+    return CsvRows(header, rows, lines)
+
+
+def csv_numbers(path: str | os.PathLike[str], column: str, cells: Sequence[Any],
+                lines: Sequence[int] | None = None, *, finite: bool = True) -> FloatArray:
+    """A column of CSV cells (text) or of a Parquet table (numbers) as floats.
+
+    ``lines`` gives the file line of each cell for the messages (else the row number).
+
+    Raises
+    ------
+    ProblemError
+        Naming the file, the column and the line of the first cell that is not a number
+        (or, with ``finite``, is NaN/inf).
+    """
+    arr = np.asarray(cells)
+
+    def where(i: int) -> str:
+        return f"line {lines[i]}" if lines is not None else f"row {i + 1}"
+
+    try:
+        values = arr.astype(float)
+    except (TypeError, ValueError, OverflowError):
+        values = None
+    if values is None or values.ndim != 1:
+        for i, c in enumerate(arr.reshape(-1) if arr.ndim else [arr.item()]):
+            try:
+                float(c)
+            except (TypeError, ValueError, OverflowError):
+                cell = c.item() if isinstance(c, np.generic) else c
+                raise ProblemError(f"{path}: {where(i)}, column {column!r}: {cell!r:.40} is "
+                                   "not a number") from None
+        raise ProblemError(f"{path}: column {column!r} is not a column of numbers")
+    if finite:
+        bad = np.flatnonzero(~np.isfinite(values))
+        if bad.size:
+            i = int(bad[0])
+            raise ProblemError(f"{path}: {where(i)}, column {column!r}: {values[i]} (NaN/inf;"
+                               f" {bad.size} such value(s) in the column, need finite numbers)")
+    return values
+
+
+def _columns(p: Path, table: CsvRows, names: Sequence[str]) -> dict[str, FloatArray]:
+    col = {h: j for j, h in enumerate(table.header)}
+    return {c: csv_numbers(p, c, [r[col[c]] for r in table.rows], table.lines) for c in names}
+
+
+class PlaneCsv(dict):
+    """Columns of a plane CSV: ``points`` (N, 3) and optional ``t``, ``alpha2``, ``cov``
+    ((N, 3, 3) from ``cxx, cxy, cxz, cyy, cyz, czz``)."""
+
+
+def read_plane_csv(path: str | os.PathLike[str]) -> PlaneCsv:
+    """Read a plane-of-maneuver track (paper 000, the points x_i of (1.2)).
+
+    Columns ``x, y, z`` (m) and optional ``t`` (s), ``alpha2`` (the α_i² of D_i = α_i² D)
+    or the per-point covariance ``cxx, cxy, cxz, cyy, cyz, czz`` (m²). Column order is
+    free; names are case-blind; other columns are ignored. UTF-8 with or without a BOM.
+
+    Raises
+    ------
+    ProblemError
+        Naming the file: see :func:`read_csv_rows`; a missing column; a cell that is not
+        a finite number (with its line and column); an incomplete covariance.
+    """
+    p = as_path("io.read_plane_csv path", path)
+    table = read_csv_rows(p, what="plane CSV")
+    col = set(table.header)
+    missing = [c for c in ("x", "y", "z") if c not in col]
+    if missing:
+        raise ProblemError(f"{p}: missing column(s) {', '.join(missing)} (need x, y, z; "
+                           f"have {', '.join(table.header)})")
+    present = [c for c in _COV_COLUMNS if c in col]
+    if present and len(present) != 6:
+        raise ProblemError(f"{p}: per-point covariance needs all of {', '.join(_COV_COLUMNS)}"
+                           f" (missing {', '.join(c for c in _COV_COLUMNS if c not in col)})")
+    names = ["x", "y", "z", *(c for c in ("t", "alpha2") if c in col), *present]
+    v = _columns(p, table, names)
+    out = PlaneCsv(points=np.column_stack([v["x"], v["y"], v["z"]]))
+    if "t" in v:
+        out["t"] = v["t"]
+    if "alpha2" in v:
+        out["alpha2"] = v["alpha2"]
+    if present:
+        out["cov"] = np.stack(
+            [
+                np.stack([v["cxx"], v["cxy"], v["cxz"]], axis=-1),
+                np.stack([v["cxy"], v["cyy"], v["cyz"]], axis=-1),
+                np.stack([v["cxz"], v["cyz"], v["czz"]], axis=-1),
+            ],
+            axis=-2,
+        )
+    return out
+
+
+def read_trajectory_csv(path: str | os.PathLike[str]) -> dict[str, Any]:
+    """Read classified measurements for the dependent-trajectories problem (paper 002).
+
+    Columns ``object, t, y`` (1-D) or ``object, t, x, y`` / ``object, t, x, y, z`` (m,
+    t in s), optional ``sigma2`` (per-row variance, m²). ``object`` is any non-empty
+    label; objects keep the order of their first row. UTF-8 with or without a BOM.
+
+    Returns
+    -------
+    dict
+        ``objects`` (labels), ``coordinates``, ``times``, ``values`` (lists per object)
+        and ``sigma2`` (list per object or None).
+
+    Raises
+    ------
+    ProblemError
+        Naming the file: see :func:`read_csv_rows`; a missing column; an empty label; a
+        cell that is not a finite number (with its line and column).
+    """
+    p = as_path("io.read_trajectory_csv path", path)
+    table = read_csv_rows(p, what="trajectory CSV")
+    col = {h: i for i, h in enumerate(table.header)}
+    for need in ("object", "t"):
+        if need not in col:
+            raise ProblemError(f"{p}: missing column {need!r} (need object, t, y or x, y[, z])")
+    coords = ["x", "y", "z"] if "z" in col else ["x", "y"] if "x" in col else ["y"]
+    missing = [c for c in coords if c not in col]
+    if missing:
+        raise ProblemError(f"{p}: missing column(s) {', '.join(missing)}")
+    num = ["t", *coords] + (["sigma2"] if "sigma2" in col else [])
+    v = _columns(p, table, num)
+    labels = [r[col["object"]].strip() for r in table.rows]
+    if "" in labels:
+        raise ProblemError(f"{p}: line {table.lines[labels.index('')]}: empty 'object' label")
+    data = np.column_stack([v[c] for c in num])
+    groups: dict[str, list[int]] = {}
+    for i, label in enumerate(labels):
+        groups.setdefault(label, []).append(i)
+    arrays = {k: data[idx] for k, idx in groups.items()}
+    nc = len(coords)
+    return {
+        "objects": list(arrays),
+        "coordinates": coords,
+        "times": [a[:, 0] for a in arrays.values()],
+        "values": [a[:, 1] if nc == 1 else a[:, 1:1 + nc] for a in arrays.values()],
+        "sigma2": [a[:, 1 + nc] for a in arrays.values()] if "sigma2" in col else None,
+    }

@@ -1,0 +1,120 @@
+"""Writers of results: tidy CSV, plane CSV, JSON and Markdown tables.
+
+:func:`write_plane_csv` writes the format :func:`~optmodels.io.read_plane_csv` reads
+(paper 000 points, 17 digits so floats round-trip); :func:`write_csv` writes tidy rows
+(cells by :func:`csv_cell`); :func:`write_json` writes indented JSON (NumPy values by
+:func:`json_default`); :func:`markdown_table` formats rows as a GitHub-flavoured table.
+Every writer creates missing parent folders (:func:`~optmodels.io.output_file`).
+"""
+
+from __future__ import annotations
+
+import csv
+import io as _stdio
+import json
+import os
+from collections.abc import Iterable, Mapping, Sequence
+from typing import Any
+
+import numpy as np
+
+from optmodels.core import FloatArray, ProblemError, as_finite_array
+from optmodels.io.paths import _write_text, output_file
+
+
+# --------------------------------------------------------------------------- writers
+def write_plane_csv(path: str | os.PathLike[str], points: FloatArray,
+                    **columns: FloatArray) -> None:
+    """Write points (N, 3) (m) and optional per-point columns (``t``, ``alpha2``, the
+    covariance ``cxx``...) in the format :func:`read_plane_csv` reads (17 digits: floats
+    round-trip exactly). Missing parent folders are created.
+
+    Raises
+    ------
+    ProblemError
+        Naming the argument for points not (N, 3) finite or a column not (N,); naming
+        the path if it cannot be written (see :func:`output_file`).
+    """
+    pts = as_finite_array("io.write_plane_csv points", points, ndim=2)
+    if pts.shape[1] != 3:
+        raise ProblemError(f"io.write_plane_csv points: expected (N, 3), got {pts.shape}")
+    cols = [as_finite_array(f"io.write_plane_csv {k}", v, shape=(pts.shape[0],))
+            for k, v in columns.items()]
+    p = output_file(path, name="io.write_plane_csv path")
+    buf = _stdio.StringIO()
+    np.savetxt(buf, np.column_stack([pts, *cols]), delimiter=",",
+               header=",".join(["x", "y", "z", *columns]), comments="", fmt="%.17g")
+    _write_text(p, buf.getvalue())
+
+
+def write_csv(path: str | os.PathLike[str], rows: Sequence[Mapping[str, Any]]) -> None:
+    """Tidy CSV (UTF-8): one row a mapping, columns in first-seen order. Missing parent
+    folders are created.
+
+    Raises
+    ------
+    ProblemError
+        Naming the path if it is a directory or cannot be written; if a row is not a
+        mapping.
+    """
+    cols: list[str] = []
+    for i, r in enumerate(rows):
+        if not isinstance(r, Mapping):
+            raise ProblemError(f"io.write_csv rows: row {i} is a {type(r).__name__}, "
+                               "expected a mapping")
+        cols += [k for k in r if k not in cols]
+    p = output_file(path, name="io.write_csv path")
+    buf = _stdio.StringIO(newline="")
+    w = csv.DictWriter(buf, fieldnames=cols)
+    w.writeheader()
+    for r in rows:
+        w.writerow({k: csv_cell(r.get(k)) for k in cols})
+    _write_text(p, buf.getvalue(), newline="")
+
+
+def csv_cell(v: Any) -> Any:
+    """A CSV cell: floats with 10 significant digits, anything else as is."""
+    if isinstance(v, float | np.floating):
+        return f"{float(v):.10g}"
+    return v
+
+
+def write_json(path: str | os.PathLike[str], obj: Any) -> None:
+    """``obj`` as indented JSON (NumPy arrays and scalars as lists and numbers). Missing
+    parent folders are created.
+
+    Raises
+    ------
+    ProblemError
+        Naming the path if it is a directory or cannot be written.
+    """
+    p = output_file(path, name="io.write_json path")
+    _write_text(p, json.dumps(obj, indent=2, default=json_default) + "\n")
+
+
+def json_default(o: Any) -> Any:
+    """``json.dumps(default=...)`` for NumPy arrays and scalars."""
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    if isinstance(o, np.generic):
+        return o.item()
+    raise TypeError(f"not JSON serialisable: {type(o).__name__}")
+
+
+def markdown_table(rows: Iterable[Mapping[str, Any]], columns: Sequence[str],
+                   formats: Mapping[str, str] | None = None) -> str:
+    """A GitHub-flavoured Markdown table of ``rows`` restricted to ``columns``."""
+    fmts = formats or {}
+    lines = ["| " + " | ".join(columns) + " |", "|" + "---|" * len(columns)]
+    for r in rows:
+        cells = []
+        for c in columns:
+            v = r.get(c, "")
+            if isinstance(v, float | np.floating) and c in fmts:
+                cells.append(format(float(v), fmts[c]))
+            elif isinstance(v, float | np.floating):
+                cells.append(f"{float(v):.4g}")
+            else:
+                cells.append(str(v))
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"

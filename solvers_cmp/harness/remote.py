@@ -1,0 +1,49 @@
+"""The Dask path of the comparison harness: one run as one Dask task.
+
+:func:`_remote_run` runs on a Dask worker, in a child :class:`~solvers_cmp.harness.worker.Worker`
+(one per worker thread, kept in :data:`_REMOTE`) with the same time limit as the local
+engine. Dask pickles it by reference (``solvers_cmp.harness.remote._remote_run``): the
+package must be importable on the Dask workers.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from typing import Any
+
+from solvers_cmp import cases as cs
+from solvers_cmp.common import cpu_name
+from solvers_cmp.harness.planning import Case
+from solvers_cmp.harness.versions import solver_version
+from solvers_cmp.harness.worker import Worker
+
+#: Per thread of a Dask worker: its isolated run process and the last case prepared.
+_REMOTE = threading.local()
+
+
+def _remote_run(ad_path: str, case: Case, run: cs.Run, options: dict[str, Any],
+                limit: float) -> tuple[str, Any, float, str, str]:
+    """One comparison run as a Dask task (``run_sweep(scheduler=ADDRESS)``): on the Dask
+    worker, in a child process (one per worker thread, kept across tasks, restarted after
+    a crash or a time-out) with the time limit enforced there, exactly as the local
+    engine: the case's instance and reference first (``4 * limit``, once per case while
+    the child lives; a failure is remembered for the case's other runs), then the run.
+    Returns ``(kind, result, wall, solver_version, cpu)`` of this machine."""
+    worker = getattr(_REMOTE, "worker", None)
+    if worker is None:
+        worker = _REMOTE.worker = Worker("-")
+        _REMOTE.prepared = None
+    key = (ad_path, case)
+    prepared = _REMOTE.prepared
+    if prepared is None or prepared[0] != key:
+        kind, res = worker.call("prepare", (ad_path, case), 4 * limit)
+        prepared = _REMOTE.prepared = (key, None if kind == "ok" else
+                                       f"instance/reference {kind}: {res}")
+    if prepared[1] is not None:
+        kind, res, wall = "error", prepared[1], 0.0
+    else:
+        t0 = time.perf_counter()
+        kind, res = worker.call("run", (ad_path, case, run, options), limit)
+        wall = time.perf_counter() - t0
+    return kind, res, wall, solver_version(run.solver), cpu_name()

@@ -13,15 +13,18 @@ face                             per-problem module (looked up by name)
 ``optmodels`` (package)          ``optmodels.<name>`` (lazy attribute, ``__all__``)
 ``optmodels <name> <verb>``      ``optmodels/cli/problems/<name>.py``
 ``optmodels demo``               ``optmodels/demo/<name>.py`` (``run_<name>_demo``)
-``optmodels compare``            ``solvers_cmp.<name>:Adapter`` (or an adapter class in
-                                 ``solvers_cmp.cases`` whose ``name`` is the problem's)
-``optmodels montecarlo``         a study in ``optmodels.montecarlo.studies`` declaring
-                                 ``problem = "<name>"``
+``optmodels compare``            ``solvers_cmp.<name>:Adapter`` (an adapter class in
+                                 ``solvers_cmp.cases`` whose ``name`` is the problem's
+                                 would be found first; none is left there)
+``optmodels compare --details``  ``solvers_cmp.<name>.write_report`` (the report
+                                 section; also ``solvers_cmp.report.write_<name>``)
+``optmodels montecarlo``         ``optmodels/montecarlo/studies/<name>.py`` (a study
+                                 class declaring ``problem = "<name>"``)
 ===============================  =================================================
 
 Order: the card's ``order`` (the README's table: plane, trajectories, fusion, biasfield,
-assignment), then the name. It is the order of ``optmodels demo`` and report/index.md, of
-the comparison harness and of ``optmodels.__all__``.
+assignment), then the name. It is the order of ``optmodels demo`` and report/index.md and
+of the comparison harness (``optmodels.__all__`` lists the problems alphabetically).
 
 Card keys: ``name`` (the package's name), ``order`` (int), ``paper`` (file under
 ``shared/papers/``), ``title``, ``original`` (the equations of the original form),

@@ -7,10 +7,17 @@ Rows follow DESIGN.md's columns. Fusion: ``solution_error`` is max |α − α_cf
 minimum-trace weight), ``max_violation`` the relative optimality residual re-computed in
 NumPy. Joint ML: ``solution_error`` is the largest distance to the Gauss-Newton solution in
 units of the CRB RMS. Times are medians of ``repeats`` runs.
+
+This file is the problem's whole comparison face: the rows and benchmarks above,
+:class:`Adapter` (the harness adapter, ``solvers_cmp.fusion:Adapter``, found by
+:mod:`solvers_cmp.cases` by the problem's name; references: closed forms (1)-(2) and (S1 −
+S12)D⁺, the two-site joint ML) and :func:`write_report` (the ``compare --details`` section,
+also ``solvers_cmp.report.write_fusion``).
 """
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -18,6 +25,9 @@ from tqdm import tqdm
 
 from optmodels import fusion as fu
 from optmodels.backends.cvxpy_backend import available_solvers
+from optmodels.io import markdown_table
+from solvers_cmp import cases, report
+from solvers_cmp.cases import Outcome, Run, _rel_max, cvxpy_qp_solvers
 from solvers_cmp.common import repeat
 
 #: CVXPY solvers that accept the (unconstrained) least-squares fusion problems.
@@ -134,3 +144,93 @@ def benchmark(*, repeats: int = 5, seed: int = 0) -> list[dict[str, Any]]:
         rep = repeat(fn, repeats)
         res.append({"case": name, "median_s": rep.median, "min_s": rep.best})
     return res
+
+
+# ------------------------------------------------------------ harness adapter
+class Adapter(cases.Adapter):
+    """Fusion of two estimates (paper 003). ``independent``: the WLS problem in α vs
+    (1)-(2); ``correlated``: the minimum-trace weight vs (S1 − S12)D⁺, size = m;
+    ``joint-ml``: the two-site ML position fix for T independent measurement rows (size =
+    T) by CasADi/IPOPT, against a NumPy Gauss-Newton (the reference; error in units
+    of the CRB RMS)."""
+
+    name = "fusion"
+    instances = ("independent", "correlated", "joint-ml")
+    sizes = (3, 20, 100)
+    size_meaning = "dimension m (joint-ml: rows T)"
+    problem_class = "QP (unconstrained least squares); joint-ml: NLP"
+
+    def make(self, instance: str, size: int, seed: int) -> Any:
+        from optmodels import fusion as fu
+        from solvers_cmp.fusion import instance as gen
+
+        if instance == "joint-ml":
+            system = fu.TwoSiteSystem.on_baseline()
+            x = np.array([8_000.0, 30_000.0])
+            z = system.sample(x, size, np.random.default_rng([seed, size]))
+            return {"system": system, "z": z,
+                    "crb": float(np.sqrt(np.trace(system.crb(x))))}
+        return gen(size, seed, instance == "correlated")
+
+    def _fuse(self, d: dict[str, Any], **kw: Any) -> Any:
+        from optmodels import fusion as fu
+
+        extra = {"s12": d["s12"]} if "s12" in d else {}
+        return fu.fuse(d["a1"], d["s1"], d["a2"], d["s2"], **extra, **kw)
+
+    def reference(self, instance: str, data: Any) -> Outcome:
+        if instance == "joint-ml":
+            sol = data["system"].joint_ml(data["z"], method="gauss_newton")
+            return cases._from_solution(sol, sol.estimate / data["crb"])
+        sol = self._fuse(data)
+        return cases._from_solution(sol, sol.estimate)
+
+    def runs(self, instance: str) -> list[Run]:
+        if instance == "joint-ml":
+            return [Run("ML", "ipopt")]
+        form = "min-trace W" if instance == "correlated" else "weighted LSQ"
+        return [Run("closed_form", "numpy")] + [Run(form, s) for s in cvxpy_qp_solvers()]
+
+    def solve(self, instance: str, data: Any, run: Run, options: dict[str, Any]) -> Outcome:
+        if instance == "joint-ml":
+            sol = data["system"].joint_ml(data["z"], options=options or None)
+            return cases._from_solution(sol, sol.estimate / data["crb"])
+        if run.formulation == "closed_form":
+            sol = self._fuse(data)
+        else:
+            sol = self._fuse(data, method="cvxpy", solver=run.solver, **options)
+        return cases._from_solution(sol, sol.estimate)
+
+    def error(self, x: Any, ref: Any) -> float:
+        a, b = np.asarray(x, float), np.asarray(ref, float)
+        if a.ndim == 2:  # joint ML: largest position distance, in CRB units
+            return float(np.max(np.linalg.norm(a - b, axis=1)))
+        return _rel_max(a, b)
+
+
+# ------------------------------------------------------ compare --details report
+def write_report(out: Path, rows: list[dict[str, Any]],
+                 bench: list[dict[str, Any]] | None = None) -> str:
+    """Write ``fusion_results.csv`` (and ``fusion_benchmark.csv``) and return the Markdown
+    section."""
+    report._results_csv(out, "fusion", rows)
+    cols = ["case", "size", "formulation", "solver", "status", "solution_error",
+            "objective_gap", "max_violation", "build_time", "solve_time", "iterations"]
+    fmt = {"solution_error": ".1e", "objective_gap": ".1e", "max_violation": ".1e",
+           "build_time": ".4f", "solve_time": ".4f"}
+    md = ("## Fusion of two estimates (paper 003)\n\n"
+          "Closed forms ((1)-(2) for independent estimates, (S1 − S12)D⁺ for correlated "
+          "ones) against CVXPY on the generic problems (weighted least squares in α; "
+          "minimum trace of the fused covariance in W), size = m; and the two-site joint "
+          "ML (size = number of independent problems T, solved as one block-separable NLP) "
+          "by IPOPT against a NumPy Gauss-Newton, solution error in units of the CRB "
+          "RMS:\n\n" + markdown_table(rows, cols, fmt))
+    md += ("\nEvery problem here is an unconstrained least-squares problem: Clarabel and "
+           "OSQP land on the closed form to round-off, SCS (first-order) near 1e-8. CVXPY's "
+           "canonicalisation (~6 ms) dominates their times; the closed forms take well "
+           "under a millisecond.\n")
+    md += report._benchmark(out, "fusion", bench,
+                            "Benchmark (wall seconds, median and best of the repeats; "
+                            "target: Monte Carlo of Ŵ with 10⁵ trials at m = 3 in ≤ 2 s):",
+                            ["case", "median_s", "min_s"], ".4f")
+    return md + "\n"

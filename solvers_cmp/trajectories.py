@@ -6,10 +6,17 @@ median of ``repeats`` runs (build = CVXPY canonicalisation, solve = the solver's
 ``solution_error`` is max |θ − θ_cf| / max |θ_cf|; ``max_violation`` the largest relative
 violation of the family's equalities and of the normal equations (stationarity),
 re-computed in NumPy.
+
+This file is the problem's whole comparison face: the rows and benchmarks above,
+:class:`Adapter` (the harness adapter, ``solvers_cmp.trajectories:Adapter``, found by
+:mod:`solvers_cmp.cases` by the problem's name; references: closed forms (8)-(9), (12)-(13))
+and :func:`write_report` (the ``compare --details`` section, also
+``solvers_cmp.report.write_trajectories``).
 """
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -17,6 +24,9 @@ from tqdm import tqdm
 
 from optmodels import trajectories as tr
 from optmodels.backends.cvxpy_backend import available_solvers
+from optmodels.io import markdown_table
+from solvers_cmp import cases, report
+from solvers_cmp.cases import Outcome, Run, cvxpy_qp_solvers
 from solvers_cmp.common import repeat
 
 #: CVXPY solvers that accept an equality-constrained least-squares QP, in report order.
@@ -97,3 +107,74 @@ def benchmark(q: int = 100, n: int = 1000, *, repeats: int = 5, seed: int = 0
             res.append({"case": f"{family}: {name}", "objects": q, "points": n,
                         "median_s": rep.median, "min_s": rep.best})
     return res
+
+
+# ------------------------------------------------------------ harness adapter
+class Adapter(cases.Adapter):
+    """Dependent linear trajectories (paper 002). size = points per object, Q = 10
+    objects. Instances: the two families of the paper (shared start, shared velocity).
+    Reference: the closed forms (8)-(9), (12)-(13). Error on θ relative to max |θ|."""
+
+    name = "trajectories"
+    instances = ("diverging", "parallel")
+    sizes = (10, 100, 1000)
+    size_meaning = "points per object (Q = 10)"
+    problem_class = "QP (equality-constrained least squares)"
+    objects = 10
+
+    def make(self, instance: str, size: int, seed: int) -> Any:
+        from solvers_cmp.trajectories import instance as gen
+
+        return gen(instance, self.objects, size, seed)
+
+    def reference(self, instance: str, data: Any) -> Outcome:
+        from optmodels import trajectories as tr
+
+        sol = tr.closed_form(data, instance)  # type: ignore[arg-type]
+        return cases._from_solution(sol, sol.theta)
+
+    def runs(self, instance: str) -> list[Run]:
+        return [Run("closed_form", "numpy")] + [
+            Run(f, s) for f in ("constrained", "reduced") for s in cvxpy_qp_solvers()]
+
+    def solve(self, instance: str, data: Any, run: Run, options: dict[str, Any]) -> Outcome:
+        from optmodels import trajectories as tr
+
+        if run.formulation == "closed_form":
+            sol = tr.closed_form(data, instance)  # type: ignore[arg-type]
+        else:
+            sol = tr.solve(data, instance, formulation=run.formulation,  # type: ignore[arg-type]
+                           solver=run.solver, **options)
+        return cases._from_solution(sol, sol.theta)
+
+
+# ------------------------------------------------------ compare --details report
+def write_report(out: Path, rows: list[dict[str, Any]],
+                 bench: list[dict[str, Any]] | None = None) -> str:
+    """Write ``trajectories_results.csv`` (and ``trajectories_benchmark.csv``) and return
+    the Markdown section."""
+    report._results_csv(out, "trajectories", rows)
+    cols = ["family", "objects", "points", "formulation", "solver", "status",
+            "solution_error", "objective_gap", "max_violation", "build_time", "solve_time",
+            "iterations"]
+    fmt = {"solution_error": ".1e", "objective_gap": ".1e", "max_violation": ".1e",
+           "build_time": ".4f", "solve_time": ".4f"}
+    big = max(r["size"] for r in rows)
+    md = ("## Dependent linear trajectories (paper 002)\n\n"
+          "Closed form against CVXPY solvers on the original constrained problem (Q lines + "
+          "the family's equalities) and on the reduced problem in θ. Full grid in "
+          "`trajectories_results.csv`; largest instance:\n\n"
+          + markdown_table([r for r in rows if r["size"] == big], cols, fmt))
+    worst = max((r["solution_error"] for r in rows if r["status"] == "optimal"), default=0.0)
+    md += (f"\nLargest solution error of any optimal generic solve against the closed form "
+           f"over the grid: {worst:.1e} (relative to max |θ|). The QP has equality "
+           "constraints only: Clarabel (one KKT factorisation) and OSQP (its polishing step "
+           "solves the KKT system) land on the closed form to 1e-11 or better; SCS, first-"
+           "order with eps = 1e-9 on the rescaled problem, stops near 3e-8 from N = 100 "
+           "points on. CVXPY's canonicalisation (build) is half of the generic time or "
+           "more; SCS's build of the reduced form is the slowest step of the grid.\n")
+    md += report._benchmark(out, "trajectories", bench,
+                            "Benchmark (wall seconds, median and best of the repeats; targets: "
+                            "closed form ≤ 0.01 s, CVXPY ≤ 2 s):",
+                            ["case", "objects", "points", "median_s", "min_s"], ".4f")
+    return md + "\n"

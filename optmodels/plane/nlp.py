@@ -342,5 +342,6 @@ def solve(
         "min_curvature": curvature,
         "cached_build": not fresh,
         "verification": verification,
+        **({"rejected": out.info["rejected"]} if "rejected" in out.info else {}),
     }
     return out

@@ -209,7 +209,17 @@ def _finish(
         offset=offset,
         projected=projected,
     )
-    # the one gate (core.finish) on the dimensionless checks; a refused plane keeps its
-    # numbers for diagnosis (status ERROR, never OK)
-    return finish(sol, checks, note=lambda v: f"re-check of (1.2)-(1.3): worst {v.worst:.2g} "
-                  f"({v.key})")
+    # the one gate (core.finish) on the dimensionless checks; a refused plane is returned
+    # without an estimate (its numbers stay in info["rejected"] for diagnosis)
+    return finish(sol, checks, reject=_no_plane,
+                  note=lambda v: f"re-check of (1.2)-(1.3): worst {v.worst:.2g} ({v.key})")
+
+
+def _no_plane(sol: PlaneSolution) -> PlaneSolution:
+    """The failure form of a plane solution: NaN normal and offset, no projected points;
+    what the solver returned is kept in ``info["rejected"]``."""
+    sol.info["rejected"] = {"normal": sol.normal, "offset": sol.offset}
+    sol.normal = np.full(3, np.nan)
+    sol.offset = float("nan")
+    sol.projected = np.empty((0, 3))
+    return sol

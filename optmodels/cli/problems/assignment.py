@@ -122,10 +122,9 @@ def run_details(out: Path, *, sizes: list[int], runs: int, repeats: int, seed: i
     """``optmodels compare --details``: :mod:`solvers_cmp.assignment`'s rows; the report
     section and the result entry."""
     from solvers_cmp import assignment as cmp_as
-    from solvers_cmp import report
 
     rows = cmp_as.rows(seed=seed, repeats=max(1, min(repeats, 3)), progress=progress)
-    md = report.write_assignment(out, rows)
+    md = cmp_as.write_report(out, rows)
     return md, {"results": rows}
 
 

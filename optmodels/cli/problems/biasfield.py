@@ -138,10 +138,9 @@ def run_details(out: Path, *, sizes: list[int], runs: int, repeats: int, seed: i
     """``optmodels compare --details``: :mod:`solvers_cmp.biasfield`'s rows; the report
     section and the result entry."""
     from solvers_cmp import biasfield as cmp_bf
-    from solvers_cmp import report
 
     rows = cmp_bf.rows(seed=seed, repeats=1, progress=progress)
-    md = report.write_biasfield(out, rows)
+    md = cmp_bf.write_report(out, rows)
     return md, {"results": rows}
 
 

@@ -96,12 +96,11 @@ def run_details(out: Path, *, sizes: list[int], runs: int, repeats: int, seed: i
     """``optmodels compare --details``: :mod:`solvers_cmp.fusion`'s rows and benchmark;
     the report section and the result entry."""
     from solvers_cmp import fusion as cmp_fusion
-    from solvers_cmp import report
 
     rows = cmp_fusion.rows(seed=seed, repeats=max(1, min(repeats, 3)),
                            progress=progress)
     bench = cmp_fusion.benchmark(repeats=repeats, seed=seed)
-    md = report.write_fusion(out, rows, bench)
+    md = cmp_fusion.write_report(out, rows, bench)
     return md, {"results": rows, "benchmark": bench}
 
 

@@ -110,12 +110,11 @@ def run_details(out: Path, *, sizes: list[int], runs: int, repeats: int, seed: i
     """``optmodels compare --details``: timing and Monte Carlo accuracy per size and the
     benchmark (:mod:`solvers_cmp.plane`); the report section and the result entry."""
     from solvers_cmp import plane as cmp_plane
-    from solvers_cmp import report
 
     timing = cmp_plane.timing_rows(sizes, seed=seed, repeats=repeats, progress=progress)
     acc = cmp_plane.accuracy_rows(sizes, runs=runs, seed=seed, progress=progress)
     bench = cmp_plane.benchmark(max(sizes), repeats=repeats, seed=seed)
-    md = report.write_plane(out, timing, acc, bench)
+    md = cmp_plane.write_report(out, timing, acc, bench)
     return md, {"timing": timing, "accuracy": acc, "benchmark": bench}
 
 

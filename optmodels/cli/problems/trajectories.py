@@ -122,12 +122,11 @@ def run_details(out: Path, *, sizes: list[int], runs: int, repeats: int, seed: i
                 progress: bool) -> tuple[str, dict[str, Any]]:
     """``optmodels compare --details``: :mod:`solvers_cmp.trajectories`' rows and
     benchmark; the report section and the result entry."""
-    from solvers_cmp import report
     from solvers_cmp import trajectories as cmp_traj
 
     rows = cmp_traj.rows(seed=seed, repeats=max(1, min(repeats, 3)), progress=progress)
     bench = cmp_traj.benchmark(repeats=repeats, seed=seed)
-    md = report.write_trajectories(out, rows, bench)
+    md = cmp_traj.write_report(out, rows, bench)
     return md, {"results": rows, "benchmark": bench}
 
 

@@ -91,6 +91,36 @@ def rows(cases: tuple[tuple[int, int, float | None], ...] = CASES, *, seed: int 
     return out
 
 
+def kbest_benchmark(q: int = 12, n: int = 14, k: tuple[int, ...] = (2, 10), *,
+                    repeats: int = 3, seed: int = 0,
+                    gate: float | None = None) -> list[dict[str, Any]]:
+    """Wall time of :func:`optmodels.assignment.k_best` (median of ``repeats``) on the
+    comparison's scene (:func:`instance`; Q = 12, N = 14, every group: issue 18's case),
+    with the MAP (:func:`optmodels.assignment.solve`) for scale. One row per k (k = 1:
+    the MAP): the k-th best score, the size of the reduced model the MILPs ran on, and
+    whether the scores are non-increasing and the hypotheses distinct."""
+    data = instance(q, n, seed, gate)
+    out: list[dict[str, Any]] = []
+    rep = repeat(lambda: asg.solve(data), repeats)
+    out.append({"q": q, "n": n, "k": 1, "method": "MAP (solve)", "median_s": rep.median,
+                "walls_s": rep.walls, "kth_score": rep.last.log_score,
+                "candidate_groups": rep.last.info.get("candidate_groups"),
+                "assignment_variables": rep.last.info.get("assignment_variables"),
+                "consistent": rep.last.ok})
+    for kk in k:
+        rep = repeat(lambda kk=kk: asg.k_best(data, kk), repeats)
+        hyps = rep.last.hypotheses
+        scores = [h.log_score for h in hyps]
+        keys = {(tuple(h.partition), tuple(map(int, h.assignment))) for h in hyps}
+        out.append({"q": q, "n": n, "k": kk, "method": "k_best", "median_s": rep.median,
+                    "walls_s": rep.walls, "kth_score": scores[-1],
+                    "candidate_groups": hyps[-1].info.get("candidate_groups"),
+                    "assignment_variables": hyps[-1].info.get("assignment_variables"),
+                    "consistent": len(keys) == len(hyps) == kk
+                    and bool(np.all(np.diff(scores) <= 1e-9))})
+    return out
+
+
 # ------------------------------------------------------------ harness adapter
 class Adapter(cases.Adapter):
     """Joint assignment with unresolved groups (paper 004); size = Q objects, N = Q + Q//8

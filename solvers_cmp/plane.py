@@ -195,6 +195,47 @@ def benchmark(n: int = 10_000, repeats: int = 5, seed: int = 0) -> list[dict[str
     return rows
 
 
+def full_nlp_scaling(sizes: Any = (10_000, 20_000, 40_000, 100_000), starts: int = 3,
+                     repeats: int = 3, seed: int = 0) -> list[dict[str, Any]]:
+    """Cold build + solve of the full NLP (1.2)-(1.3) against N: general D_i (radar,
+    broadside), ``starts`` starts, the NLP cache cleared before each of ``repeats`` runs.
+    One row per N: median and best wall time, the median build and solve times, IPOPT
+    iterations (all starts) and solve time per iteration, the sparsity of the Jacobian of
+    (1.3) and of the Hessian of the Lagrangian (upper triangle), and the ratio of the
+    median time to the previous N's over the ratio of the N (1 = linear)."""
+    sizes = _sizes("solvers_cmp.plane.full_nlp_scaling", sizes)
+    starts = as_count("solvers_cmp.plane.full_nlp_scaling starts", starts, minimum=1,
+                      maximum=3)
+    repeats = as_count("solvers_cmp.plane.full_nlp_scaling repeats", repeats, minimum=1)
+    seed = as_count("solvers_cmp.plane.full_nlp_scaling seed", seed)
+    from optmodels.plane import nlp
+
+    rows: list[dict[str, Any]] = []
+    for n in sizes:
+        data = _data(scenarios.radar_plane(n, np.random.default_rng([seed, n]),
+                                           geometry="broadside"))
+        rep = repeat(lambda d=data: plane.solve(d, "full", starts=starts), repeats,
+                     setup=plane.clear_nlp_cache)
+        sols = [s.require_ok() for s in rep.results]
+        solver = nlp._get_nlp("full", n, None)[0].solver
+        iters = float(np.median([s.iterations for s in sols]))
+        solve = float(np.median([s.solve_time for s in sols]))
+        row = {"size": n, "starts": starts, "repeats": repeats, "median_s": rep.median,
+               "min_s": rep.best,
+               "build_s": float(np.median([s.build_time for s in sols])),
+               "solve_s": solve, "iterations": iters,
+               "s_per_iteration": solve / iters if iters else float("nan"),
+               "jac_g_nnz": solver.get_function("nlp_jac_g").sparsity_out(1).nnz(),
+               "hess_lag_nnz": solver.get_function("nlp_hess_l").sparsity_out(0).nnz(),
+               "growth_vs_linear": float("nan")}
+        if rows:
+            prev = rows[-1]
+            row["growth_vs_linear"] = (rep.median / prev["median_s"]) / (n / prev["size"])
+        rows.append(row)
+    plane.clear_nlp_cache()
+    return rows
+
+
 # ------------------------------------------------------------ harness adapter
 class Adapter(cases.Adapter):
     """Plane of maneuver (paper 000). size = N points. ``two-source``: D_i = α_i² D, the

@@ -1,23 +1,52 @@
-"""The k best hypotheses of (13)-(14) by repeated MILPs with no-good cuts, and the
-JPDA-style posterior marginals β from them (:func:`k_best`, :class:`KBest`; at most
-:data:`K_BEST_LIMIT` MILPs).
+r"""The k best hypotheses of (13)-(14) and the JPDA-style posterior marginals β from them
+(:func:`k_best`, :class:`KBest`; at most :data:`K_BEST_LIMIT` MILPs).
+
+Scheme (exact; ``docs/formulations.md``): the MAP by the pruned MILP; k distinct feasible
+hypotheses around it (single changes, scored in NumPy) give a lower bound L ≤ s_k on the
+k-th best score; a dual point of the LP relaxation of the *unpruned* model gives, for each
+column c, an upper bound U_c on the score of every hypothesis that uses c (valid for any
+dual point, computed in NumPy: it does not trust the LP solver); the columns with
+U_c < L are removed — every hypothesis using one scores below s_k — and the k best are
+found by MILPs with no-good cuts on that reduced model, each re-checked in NumPy.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
+import cvxpy as cp
 import numpy as np
+from scipy.optimize import linprog
 
-from optmodels.assignment.data import AssignmentData, AssignmentSolution
+from optmodels.assignment.data import (
+    AssignmentData,
+    AssignmentSolution,
+    Partition,
+    _canonical,
+    _finish_point,
+    block_log_prior,
+    candidate_groups,
+    log_likelihoods,
+    score,
+)
 from optmodels.assignment.hypotheses import COUNT_LIMIT, count_hypotheses
-from optmodels.assignment.milp import solve
+from optmodels.assignment.milp import (
+    MAX_LIKELIHOOD_ENTRIES,
+    MAX_MODEL_COLUMNS,
+    _build_model,
+    solve,
+)
 from optmodels.assignment.solvers import _as_solver
-from optmodels.core import Status, as_count
+from optmodels.backends.cvxpy_backend import solve_problem
+from optmodels.backends.profiles import milp_options
+from optmodels.core import FloatArray, ProblemError, Status, as_count, timed
 
 #: :func:`k_best` solves one MILP per hypothesis: at most this many.
 K_BEST_LIMIT = 10_000
+#: Relative slack of the bound test U_c < L (round-off of the NumPy sums, ~1e-13).
+_BOUND_TOL = 1e-9
 
 
 @dataclass(frozen=True)
@@ -33,9 +62,142 @@ class KBest:
     neglected: float
 
 
+Hypothesis = tuple[tuple[tuple[int, ...], ...], tuple[int, ...]]
+
+
+def _neighbours(partition: Partition, assignment: Sequence[int],
+                allowed: set[tuple[int, ...]]) -> list[tuple[Partition, list[int]]]:
+    """Hypotheses one change away from ``h``: a measurement moved to the background or to
+    another block (its previous owner's measurement to the background), a merged block
+    split into singletons (its measurement to the background or to one member), two
+    blocks merged when the union is a candidate group (keeping either measurement)."""
+    part, a = list(partition), [int(x) for x in assignment]
+    owner = {k: i for i, k in enumerate(a) if k >= 0}
+    out: list[tuple[Partition, list[int]]] = []
+    for i, ki in enumerate(a):
+        if ki >= 0:
+            out.append((part, [*a[:i], -1, *a[i + 1:]]))
+        for b in range(len(part)):
+            if b != ki:
+                new = list(a)
+                if b in owner:
+                    new[owner[b]] = -1
+                new[i] = b
+                out.append((part, new))
+    for b, blk in enumerate(part):
+        if len(blk) < 2:
+            continue
+        rest = [x for x in part if x != blk]
+        split = rest + [(j,) for j in blk]
+        idx = {x: m for m, x in enumerate(split)}
+        base = [idx[part[k]] if k >= 0 and k != b else -1 for k in a]
+        out.append((split, base))
+        if b in owner:
+            for j in blk:
+                new = list(base)
+                new[owner[b]] = idx[(j,)]
+                out.append((split, new))
+    for b1 in range(len(part)):
+        for b2 in range(b1 + 1, len(part)):
+            union = tuple(sorted(part[b1] + part[b2]))
+            if union not in allowed:
+                continue
+            merged = [x for m, x in enumerate(part) if m not in (b1, b2)] + [union]
+            idx = {x: m for m, x in enumerate(merged)}
+            base = [idx[part[k]] if k >= 0 and k not in (b1, b2) else -1 for k in a]
+            out.append((merged, base))
+            for b in (b1, b2):
+                if b in owner:
+                    new = list(base)
+                    new[owner[b]] = idx[union]
+                    out.append((merged, new))
+    return out
+
+
+def _lower_bound(data: AssignmentData, first: AssignmentSolution, k: int,
+                 groups: list[tuple[int, ...]], ll: FloatArray) -> float:
+    """A lower bound L on the k-th best score: the k-th best of k distinct feasible
+    hypotheses (the MAP and its neighbours, two rounds), each scored by :func:`score`;
+    −inf when fewer than k are found."""
+    if k == 1:
+        return first.log_score
+    table = dict(zip(groups, ll.T, strict=True))
+    allowed = set(groups)
+    seen: dict[Hypothesis, float] = {}
+
+    def add(part: Partition, a: Sequence[int]) -> None:
+        p, aa = _canonical(part, a)
+        key = (tuple(p), tuple(int(x) for x in aa))
+        if key not in seen:
+            seen[key] = score(data, p, aa, table)
+
+    add(first.partition, first.assignment)
+    frontier: list[Hypothesis] = list(seen)
+    for _ in range(2):
+        for p, a in frontier:
+            for part, aa in _neighbours(list(p), a, allowed):
+                add(part, aa)
+        if len(seen) >= 4 * k:
+            break
+        frontier = [h for h, _ in sorted(seen.items(), key=lambda x: -x[1])[:k]]
+    scores = sorted((s for s in seen.values() if np.isfinite(s)), reverse=True)
+    return scores[k - 1] if len(scores) >= k else -math.inf
+
+
+def _column_bounds(c: FloatArray, a_eq, a_ub, b_ub: FloatArray) -> FloatArray | None:
+    """U_c ≥ the objective of every 0/1 point of the model with x_c = 1, from a dual
+    point (y, u ≥ 0) of the LP relaxation: with r = c − A_eqᵀy − A_ubᵀu and
+    D = Σy + u·b + Σ max(0, r), c·x ≤ D + min(0, r_c) for every x ∈ [0, 1] feasible with
+    x_c = 1 (weak duality, any y and u ≥ 0). None if the LP gives no dual point."""
+    try:
+        res = linprog(-c, A_ub=a_ub if a_ub.shape[0] else None,
+                      b_ub=b_ub if a_ub.shape[0] else None, A_eq=a_eq,
+                      b_eq=np.ones(a_eq.shape[0]), bounds=(0.0, 1.0), method="highs")
+    except (ValueError, ArithmeticError):  # no bound: nothing is removed
+        return None
+    if res.status != 0 or res.eqlin is None:
+        return None
+    y = -np.asarray(res.eqlin.marginals, dtype=float)
+    u = np.maximum(-np.asarray(res.ineqlin.marginals, dtype=float), 0.0) if \
+        a_ub.shape[0] else np.zeros(0)
+    if not (np.all(np.isfinite(y)) and np.all(np.isfinite(u))):
+        return None
+    r = c - a_eq.T @ y - (a_ub.T @ u if a_ub.shape[0] else 0.0)
+    d = float(y.sum() + u @ b_ub + np.maximum(r, 0.0).sum())
+    return d + np.minimum(r, 0.0)
+
+
+def _solve_reduced(data: AssignmentData, groups: list[tuple[int, ...]], gain: FloatArray,
+                   keep: np.ndarray, exclude: Sequence[AssignmentSolution],
+                   key: str) -> AssignmentSolution:
+    """One MILP of :func:`~optmodels.assignment.milp.solve` on the given columns (zero
+    gap), with the same NumPy re-check and status gate."""
+    with timed() as tb:
+        c, a_eq, a_ub, b_ub = _build_model(data, groups, gain, keep, exclude, False)
+        x = cp.Variable(len(c), boolean=True)
+        cons = [a_eq @ x == np.ones(a_eq.shape[0])]
+        if a_ub.shape[0]:
+            cons.append(a_ub @ x <= b_ub)
+        prob = cp.Problem(cp.Maximize(c @ x), cons)
+    opts = milp_options(key, 0.0, None, verbose=False, where="assignment.k_best")
+    res = solve_problem(prob, key, **opts)
+    common = res.common()
+    common["build_time"] += tb.elapsed
+    gap_reached = res.info.get("mip_gap")
+    info = dict(res.info, candidate_groups=len(groups), assignment_variables=len(keep))
+    if not res.status.ok or x.value is None:
+        if res.status.ok:
+            common["status"] = Status.ERROR
+        return AssignmentSolution(objective=float("nan"), mip_gap=gap_reached, info=info,
+                                  **common)
+    xv = np.asarray(x.value, dtype=float).reshape(-1)
+    return _finish_point(data, groups, keep, xv, a_eq, a_ub, b_ub, float(res.objective),
+                         exclude, None, common=common, gap_reached=gap_reached, gap=0.0,
+                         info=info)
+
+
 def k_best(data: AssignmentData, k: int, *, solver: str = "HIGHS") -> KBest:
-    """The k best hypotheses by repeated MILPs with no-good cuts (no pruning, so that the
-    2nd, 3rd, … best are not removed as dominated), and JPDA-style marginals from them.
+    """The k best hypotheses (exact: module docstring) and JPDA-style marginals from them.
 
     Parameters
     ----------
@@ -52,18 +214,62 @@ def k_best(data: AssignmentData, k: int, *, solver: str = "HIGHS") -> KBest:
     SolveError
         If one of the MILPs fails.
     """
-    k = as_count("assignment.k_best k", k, minimum=1, maximum=K_BEST_LIMIT)
-    _as_solver("assignment.k_best", solver)
-    found: list[AssignmentSolution] = []
-    for _ in range(k):
-        s = solve(data, solver=solver, prune=False, exclude=found)
+    w = "assignment.k_best"
+    k = as_count(f"{w} k", k, minimum=1, maximum=K_BEST_LIMIT)
+    key = _as_solver(w, solver)
+    if not isinstance(data, AssignmentData):
+        raise ProblemError(f"{w} data: expected AssignmentData, got {type(data).__name__}")
+    groups = candidate_groups(data)
+    n = data.n
+    if n * len(groups) > MAX_LIKELIHOOD_ENTRIES:
+        raise ProblemError(f"{w}: N × candidate groups = {n} × {len(groups)} likelihoods, "
+                           f"above the limit {MAX_LIKELIHOOD_ENTRIES:.0e}; tighten "
+                           f"group_gate or lower max_group_size")
+    ll = log_likelihoods(data, groups)
+    bonus = np.array([block_log_prior(data, g, True) - block_log_prior(data, g, False)
+                      for g in groups])
+    gain = ll + bonus
+    keep = np.argwhere(np.isfinite(gain)).reshape(-1, 2)  # −inf: impossible, no column
+    n_g, n_k = len(groups), len(keep)
+    if n_g + n_k + n > MAX_MODEL_COLUMNS:
+        raise ProblemError(
+            f"{w}: {n_g + n_k + n} binary columns ({n_g} groups, {n_k} measurement-group "
+            f"pairs), above the limit {MAX_MODEL_COLUMNS:.0e}; prune=False keeps every "
+            f"pair; tighten group_gate or lower max_group_size")
+    first = solve(data, solver=key)
+    if first.status is Status.INFEASIBLE:
+        return _result(data, [])
+    found = [first.require_ok()]
+    if k > 1:
+        low = _lower_bound(data, first, k, groups, ll)
+        if np.isfinite(low):  # drop the columns no hypothesis scoring ≥ L uses
+            c, a_eq, a_ub, b_ub = _build_model(data, groups, gain, keep, (), False)
+            bound = _column_bounds(c, a_eq, a_ub, b_ub)
+            if bound is not None:
+                ok = bound >= low - _BOUND_TOL * max(1.0, abs(low))
+                ok_g = ok[:n_g] | np.array([len(g) == 1 for g in groups], dtype=bool)
+                ok_k = ok[n_g:n_g + n_k] & ok_g[keep[:, 1]]
+                new_index = np.cumsum(ok_g) - 1
+                groups = [g for g, o in zip(groups, ok_g, strict=True) if o]
+                gain = gain[:, ok_g]
+                keep = np.column_stack([keep[ok_k, 0], new_index[keep[ok_k, 1]]])
+    for _ in range(k - 1):
+        s = _solve_reduced(data, groups, gain, keep, found, key)
         if s.status is Status.INFEASIBLE:
-            break  # fewer than k hypotheses exist
+            break  # fewer than k hypotheses exist (only when nothing was removed)
         found.append(s.require_ok())
+    return _result(data, found)
+
+
+def _result(data: AssignmentData, found: list[AssignmentSolution]) -> KBest:
+    """KBest from the hypotheses found: β from their normalised weights, and the bound on
+    the neglected mass."""
+    beta: list[dict[tuple[int, ...], float]] = [{} for _ in range(data.n)]
+    if not found:
+        return KBest(found, beta, math.inf)
     scores = np.array([h.log_score for h in found])
     w = np.exp(scores - scores.max())
     w /= w.sum()
-    beta: list[dict[tuple[int, ...], float]] = [{} for _ in range(data.n)]
     for h, wh in zip(found, w, strict=True):
         for i, a in enumerate(h.assignment):
             key = h.partition[a] if a >= 0 else ()

@@ -186,13 +186,18 @@ class BuiltNlp:
 
 
 def build_nlpsol(
-    nlp: dict[str, Any], *, plugin: str = "ipopt", options: dict[str, Any] | None = None
+    nlp: dict[str, Any], *, plugin: str = "ipopt", options: dict[str, Any] | None = None,
+    derivatives: dict[str, ca.Function] | None = None,
 ) -> BuiltNlp:
     """Build ``ca.nlpsol`` for ``nlp`` (keys x, f, g, p) with quiet defaults.
 
     ``options`` go to IPOPT itself for ``plugin="ipopt"`` (merged over
     :data:`IPOPT_DEFAULTS`), to CasADi's plugin options otherwise (over
-    :data:`NLP_PLUGIN_DEFAULTS`).
+    :data:`NLP_PLUGIN_DEFAULTS`). ``derivatives``: CasADi functions the problem writes
+    itself instead of the ones CasADi generates (plugin options ``jac_g``: ``(x, p) ->
+    (g, jac_g_x)``, ``hess_lag``: ``(x, p, lam_f, lam_g) -> (triu_hess_gamma_x_x)``,
+    ``grad_f``: ``(x, p) -> (f, grad_f_x)``), e.g. when CasADi's sparsity detection and
+    colouring of a Jacobian with dense columns costs O(N²) (the plane's full NLP).
 
     Raises
     ------
@@ -205,7 +210,7 @@ def build_nlpsol(
     """
     plugin = _check_plugin(plugin)
     user = check_options(options)
-    opts = _plugin_options(plugin, user)
+    opts = {**_plugin_options(plugin, user), **(derivatives or {})}
     t0 = time.perf_counter()
     try:
         with _quiet_fds():  # a refused option is in the exception; IPOPT also prints it
@@ -262,13 +267,17 @@ NLP_CACHE = NlpCache()
 
 
 def cached_nlpsol(namespace: str, key: tuple[Any, ...], make_nlp: Callable[[], dict[str, Any]],
-                  *, plugin: str = "ipopt", options: dict[str, Any] | None = None
+                  *, plugin: str = "ipopt", options: dict[str, Any] | None = None,
+                  derivatives: Callable[[], dict[str, ca.Function]] | None = None,
                   ) -> tuple[BuiltNlp, bool]:
     """:func:`build_nlpsol` of ``make_nlp()`` once per (``namespace``, ``key``, plugin,
-    options) in :data:`NLP_CACHE`; returns the built NLP and whether this call built it."""
+    options) in :data:`NLP_CACHE`; returns the built NLP and whether this call built it.
+    ``derivatives()`` (called only when building) gives :func:`build_nlpsol`'s
+    ``derivatives``; they must be determined by ``key`` and ``plugin``."""
     full = (namespace, *key, plugin, repr(sorted((options or {}).items())))
-    return NLP_CACHE.get(full, lambda: build_nlpsol(make_nlp(), plugin=plugin,
-                                                    options=options))
+    return NLP_CACHE.get(full, lambda: build_nlpsol(
+        make_nlp(), plugin=plugin, options=options,
+        derivatives=derivatives() if derivatives is not None else None))
 
 
 #: IPOPT's (and the SQP methods') return status at their precision limit.

@@ -504,6 +504,14 @@ def as_choice(name: str, value: Any, choices: Iterable[str]) -> str:
     return value
 
 
+def as_flag(name: str, value: Any) -> bool:
+    """A boolean switch: ``True``/``False`` (NumPy's too) only; ``1``, ``"yes"`` or ``None``
+    are refused rather than read as truthy."""
+    if not isinstance(value, bool | np.bool_):
+        raise ProblemError(f"{name}: expected True or False, got {_scalar_text(value)}")
+    return bool(value)
+
+
 def as_instance(name: str, value: Any, cls: type) -> Any:
     """``value`` if it is a ``cls`` (the problem's data object), else a ProblemError naming
     ``name`` and the type received (instead of an AttributeError deep inside)."""

@@ -46,6 +46,7 @@ from optmodels.core import (
     FloatArray,
     ProblemError,
     Status,
+    as_flag,
     as_number,
     as_positive,
     timed,
@@ -205,8 +206,7 @@ def solve(data: AssignmentData, *, solver: str = "HIGHS", mip_gap: float = 0.0,
     key = as_milp_solver(w, solver)
     gap = as_number(f"{w} mip_gap", mip_gap, low=0.0, high=1.0, high_open=True)
     limit = None if time_limit is None else as_positive(f"{w} time_limit", time_limit)
-    if not isinstance(prune, bool | np.bool_):
-        raise ProblemError(f"{w} prune: expected True or False, got {prune!r}")
+    as_flag(f"{w} prune", prune)
     if isinstance(exclude, AssignmentSolution) or not all(
             isinstance(h, AssignmentSolution) for h in exclude):
         raise ProblemError(f"{w} exclude: expected a sequence of AssignmentSolution")

@@ -32,7 +32,15 @@ import numpy as np
 import pymap3d
 
 from optmodels.biasfield.data import AircraftPaths, PlotTable, RadarSet
-from optmodels.core import FloatArray, ProblemError, as_choice, as_number, as_positive
+from optmodels.core import (
+    FloatArray,
+    ProblemError,
+    as_choice,
+    as_flag,
+    as_instance,
+    as_number,
+    as_positive,
+)
 from optmodels.io import as_path, csv_numbers, input_file, read_csv_rows
 
 __all__ = ["GeodeticOrigin", "read_plots", "read_radars", "read_tracks"]
@@ -235,13 +243,9 @@ def read_plots(path: str | os.PathLike[str], radars: RadarSet, *, azimuth_unit: 
         azimuth outside ±360° (±2π rad: degrees read as radians?); an unknown radar; plots
         beyond their radar's ``max_range`` unless ``drop_out_of_range``.
     """
-    if not isinstance(radars, RadarSet):
-        raise ProblemError(f"biasfield.read_plots radars: expected a RadarSet, got "
-                           f"{type(radars).__name__}")
+    as_instance("biasfield.read_plots radars", radars, RadarSet)
     unit = as_choice("biasfield.read_plots azimuth_unit", azimuth_unit, ("deg", "rad"))
-    if not isinstance(drop_out_of_range, bool | np.bool_):
-        raise ProblemError("biasfield.read_plots drop_out_of_range: expected True or False, "
-                           f"got {drop_out_of_range!r:.60}")
+    as_flag("biasfield.read_plots drop_out_of_range", drop_out_of_range)
     tab = _table(path, "plots")
     raw = tab.text("radar")
     t = tab.numeric("time")

@@ -34,6 +34,7 @@ from optmodels.core import (
     Solution,
     as_choice,
     as_finite_array,
+    as_instance,
     as_positive,
 )
 
@@ -135,8 +136,7 @@ def _box(data: FieldData, box: Sequence[float] | None, where: str = "biasfield.s
          ) -> FloatArray | None:
     """The box (8) as bounds on φ (2mK,): ``box`` = (K1 range bound, m; K2 azimuth bound,
     rad), two positive finite numbers, or None."""
-    if not isinstance(data, FieldData):
-        raise ProblemError(f"{where} data: expected a FieldData, got {type(data).__name__}")
+    as_instance(f"{where} data", data, FieldData)
     if box is None:
         return None
     if isinstance(box, str | bytes) or np.ndim(box) != 1 or np.size(box) != 2:

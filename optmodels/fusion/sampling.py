@@ -18,6 +18,7 @@ from optmodels.core import (
     ProblemError,
     as_count,
     as_finite_array,
+    as_flag,
     check_spd,
 )
 from optmodels.fusion.inputs import (
@@ -122,9 +123,7 @@ def weight_from_samples(a1: ArrayLike, a2: ArrayLike, *, correlated: bool = Fals
     fn = "weight_from_samples"
     x1 = as_finite_array(_where(fn, "a1"), a1, ndim=2, max_abs=MAX_MAGNITUDE)
     x2 = as_finite_array(_where(fn, "a2"), a2, shape=x1.shape, max_abs=MAX_MAGNITUDE)
-    if not isinstance(correlated, bool | np.bool_):
-        raise ProblemError(f"{_where(fn, 'correlated')}: expected True or False, got "
-                           f"{correlated!r}")
+    as_flag(_where(fn, "correlated"), correlated)
     n, m = x1.shape
     _check_n(_where(fn, "a1 rows (snapshots)"), n, m)
     full = np.cov(np.hstack([x1, x2]).T)

@@ -20,6 +20,7 @@ from optmodels.core import (
     as_choice,
     as_count,
     as_finite_array,
+    as_flag,
     as_positive,
 )
 from optmodels.fusion.two_site_ml import JointMLMixin
@@ -355,8 +356,7 @@ class TwoSiteSystem(JointMLMixin):
         fn = "fusion.TwoSiteSystem.fused"
         zz = np.atleast_2d(self._z(z, f"{fn} z"))
         weights_at = as_choice(f"{fn} weights_at", weights_at, ("true", "estimated"))
-        if not isinstance(correlated, bool | np.bool_):
-            raise ProblemError(f"{fn} correlated: expected True or False, got {correlated!r}")
+        as_flag(f"{fn} correlated", correlated)
         a1, a2 = self.triangulate(zz), self.azimuth_range_difference(zz)
         if w is not None:
             wm = as_finite_array(f"{fn} w", w, shape=(2, 2), max_abs=MAX_MAGNITUDE)

@@ -25,6 +25,7 @@ from optmodels.core import (
     ProblemError,
     Status,
     as_finite_array,
+    as_instance,
     check_spd,
     timed,
 )
@@ -141,9 +142,7 @@ def closed_form(data: PlaneData) -> PlaneSolution:
         positive curvature: the two smallest generalized eigenvalues of ``(Q, D)``
         coincide to round-off, e.g. collinear points).
     """
-    if not isinstance(data, PlaneData):
-        raise ProblemError(
-            f"plane.closed_form data: expected a PlaneData, got {type(data).__name__}")
+    as_instance("plane.closed_form data", data, PlaneData)
     if data.base_cov is None or data.alpha2 is None:
         raise ProblemError(
             "cov: the closed form needs proportional covariances D_i = alpha_i^2 D (1.4); "
@@ -214,8 +213,7 @@ def svd_fit(data: PlaneData) -> PlaneSolution:
     The points are then projected onto that plane by (1.8) so that ``objective`` is (1.2)
     under the data's covariances, comparable with the ML solutions.
     """
-    if not isinstance(data, PlaneData):
-        raise ProblemError(f"plane.svd_fit data: expected a PlaneData, got {type(data).__name__}")
+    as_instance("plane.svd_fit data", data, PlaneData)
     with timed() as t:
         c = data.points.mean(axis=0)
         _, _, vt = np.linalg.svd(data.points - c, full_matrices=False)

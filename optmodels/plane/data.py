@@ -22,6 +22,7 @@ from optmodels.core import (
     ProblemError,
     Solution,
     as_finite_array,
+    as_instance,
     as_number,
     check_spd,
     check_spd_stack,
@@ -262,8 +263,7 @@ def project(data: PlaneData, normal: ArrayLike, offset: float) -> FloatArray:
 
 
 def _check_data(where: str, data: Any) -> None:
-    if not isinstance(data, PlaneData):
-        raise ProblemError(f"{where} data: expected a PlaneData, got {type(data).__name__}")
+    as_instance(f"{where} data", data, PlaneData)
 
 
 def _check_plane(where: str, data: Any, normal: ArrayLike, offset: Any) -> tuple[FloatArray,

@@ -32,6 +32,7 @@ from optmodels.core import (
     as_choice,
     as_count,
     as_finite_array,
+    as_instance,
     timed,
 )
 from optmodels.plane.data import PlaneData, PlaneSolution, _oblique_projection, _weighted_offset
@@ -292,8 +293,7 @@ def solve(
     noise standard deviations; then :func:`optmodels.core.verified_status`. A stationary
     point with negative curvature (saddle or maximum) is reported as ERROR.
     """
-    if not isinstance(data, PlaneData):
-        raise ProblemError(f"plane.solve data: expected a PlaneData, got {type(data).__name__}")
+    as_instance("plane.solve data", data, PlaneData)
     formulation = as_choice("plane.solve formulation", formulation,  # type: ignore[assignment]
                             ("full", "reduced"))
     auto = isinstance(starts, str) and starts == "auto"

@@ -19,6 +19,7 @@ from optmodels.core import (
     MAX_MAGNITUDE,
     FloatArray,
     ProblemError,
+    as_instance,
     as_number,
     as_probability,
 )
@@ -166,9 +167,7 @@ def planarity_test(
         line, at ``level``) and :math:`\\Lambda_{\\min}` is below the χ²(N − 3) threshold.
     """
     lv = as_probability("plane.planarity_test level", level, low_open=True, high_open=True)
-    if not isinstance(data, PlaneData):
-        raise ProblemError(
-            f"plane.planarity_test data: expected a PlaneData, got {type(data).__name__}")
+    as_instance("plane.planarity_test data", data, PlaneData)
     if data.n_points < 4:
         raise ProblemError("points: the planarity test needs N >= 4 (dof = N - 3)")
     if solution is None:

@@ -11,9 +11,7 @@ from __future__ import annotations
 
 from typing import Any
 
-import numpy as np
-
-from optmodels.core import ProblemError, Status, Verdict, as_instance, timed
+from optmodels.core import ProblemError, Status, Verdict, as_flag, as_instance, timed
 from optmodels.trajectories.data import Family, FamilyName, TrajectoryData, resolve_family
 from optmodels.trajectories.fits import _fit, _kind
 from optmodels.trajectories.solution import TrajectorySolution, _finish
@@ -55,9 +53,7 @@ def closed_form(data: TrajectoryData, family: FamilyName | Family = "diverging",
     """
     as_instance("trajectories.closed_form data", data, TrajectoryData)
     fam = resolve_family(family, data.n_objects)
-    if not isinstance(printed, bool | np.bool_):
-        raise ProblemError(f"trajectories.closed_form printed: expected True or False, got "
-                           f"{printed!r:.40}")
+    as_flag("trajectories.closed_form printed", printed)
     with timed() as tm:
         kind = _kind(fam)
         if printed and kind != "parallel":

@@ -13,7 +13,15 @@ from typing import Literal
 
 import numpy as np
 
-from optmodels.core import FloatArray, ProblemError, as_choice, as_count, as_instance, as_positive
+from optmodels.core import (
+    FloatArray,
+    ProblemError,
+    as_choice,
+    as_count,
+    as_flag,
+    as_instance,
+    as_positive,
+)
 from optmodels.trajectories.data import Family, FamilyName, TrajectoryData, resolve_family
 from optmodels.trajectories.fits import _fit
 from optmodels.trajectories.solution import _shape
@@ -69,8 +77,7 @@ def paper_covariance(family: Literal["diverging", "parallel"], n: int, dt: float
     n = as_count(f"{where} n", n, minimum=2)
     dt = as_positive(f"{where} dt", dt)
     sigma2 = as_positive(f"{where} sigma2", sigma2)
-    if not isinstance(printed, bool | np.bool_):
-        raise ProblemError(f"{where} printed: expected True or False, got {printed!r:.40}")
+    as_flag(f"{where} printed", printed)
     nn, t = float(n), float(dt)
     k = 3 / (t * nn * (nn + 1))
     if family == "diverging":

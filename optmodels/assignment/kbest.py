@@ -41,7 +41,7 @@ from optmodels.assignment.milp import (
 from optmodels.assignment.solvers import _as_solver
 from optmodels.backends.cvxpy_backend import solve_problem
 from optmodels.backends.profiles import milp_options
-from optmodels.core import FloatArray, ProblemError, Status, as_count, timed
+from optmodels.core import FloatArray, ProblemError, Status, as_count, as_instance, timed
 
 #: :func:`k_best` solves one MILP per hypothesis: at most this many.
 K_BEST_LIMIT = 10_000
@@ -217,8 +217,7 @@ def k_best(data: AssignmentData, k: int, *, solver: str = "HIGHS") -> KBest:
     w = "assignment.k_best"
     k = as_count(f"{w} k", k, minimum=1, maximum=K_BEST_LIMIT)
     key = _as_solver(w, solver)
-    if not isinstance(data, AssignmentData):
-        raise ProblemError(f"{w} data: expected AssignmentData, got {type(data).__name__}")
+    as_instance(f"{w} data", data, AssignmentData)
     groups = candidate_groups(data)
     n = data.n
     if n * len(groups) > MAX_LIKELIHOOD_ENTRIES:

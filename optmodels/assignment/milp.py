@@ -47,6 +47,7 @@ from optmodels.core import (
     ProblemError,
     Status,
     as_flag,
+    as_instance,
     as_number,
     as_positive,
     timed,
@@ -201,8 +202,7 @@ def solve(data: AssignmentData, *, solver: str = "HIGHS", mip_gap: float = 0.0,
         model is allocated).
     """
     w = "assignment.solve"
-    if not isinstance(data, AssignmentData):
-        raise ProblemError(f"{w} data: expected AssignmentData, got {type(data).__name__}")
+    as_instance(f"{w} data", data, AssignmentData)
     key = as_milp_solver(w, solver)
     gap = as_number(f"{w} mip_gap", mip_gap, low=0.0, high=1.0, high_open=True)
     limit = None if time_limit is None else as_positive(f"{w} time_limit", time_limit)

@@ -22,18 +22,15 @@ option, never a raw CasADi ``RuntimeError``. An unknown plugin name raises
 from __future__ import annotations
 
 import functools
-import os
-import sys
 import time
-from collections.abc import Callable, Iterator
-from contextlib import contextmanager
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
 import casadi as ca
 import numpy as np
 
-from optmodels.backends.common import BackendResult, probe_in_child
+from optmodels.backends.common import BackendResult, last_line, probe_in_child, quiet_fds
 from optmodels.core import VERIFY_TOL, ProblemError, SolverNotAvailable, Status
 
 __all__ = ["IPOPT_STATUS", "NLP_CACHE", "NLP_PLUGINS", "NLP_PLUGIN_DEFAULTS", "SQP_STATUS",
@@ -213,7 +210,7 @@ def build_nlpsol(
     opts = {**_plugin_options(plugin, user), **(derivatives or {})}
     t0 = time.perf_counter()
     try:
-        with _quiet_fds():  # a refused option is in the exception; IPOPT also prints it
+        with quiet_fds():  # a refused option is in the exception; IPOPT also prints it
             solver = ca.nlpsol("optmodels_nlp", plugin, nlp, opts)
     except RuntimeError as exc:
         raise _option_error(plugin, user, exc) from None
@@ -328,28 +325,6 @@ def _plugin_options(plugin: str, user: dict[str, Any]) -> dict[str, Any]:
     return opts
 
 
-@contextmanager
-def _quiet_fds() -> Iterator[None]:
-    """Silence the C-level stdout/stderr (IPOPT prints its option errors there)."""
-    try:
-        sys.stdout.flush()
-        sys.stderr.flush()
-        saved = [os.dup(1), os.dup(2)]
-    except (OSError, ValueError, AttributeError):  # no real file descriptors
-        yield
-        return
-    devnull = os.open(os.devnull, os.O_WRONLY)
-    try:
-        os.dup2(devnull, 1)
-        os.dup2(devnull, 2)
-        yield
-    finally:
-        os.dup2(saved[0], 1)
-        os.dup2(saved[1], 2)
-        for fd in (*saved, devnull):
-            os.close(fd)
-
-
 def _probe_options(plugin: str, user: dict[str, Any]) -> str | None:
     """Build and (for IPOPT) run min x² with ``user`` options; the CasADi/IPOPT complaint,
     or None if the options are accepted."""
@@ -357,7 +332,7 @@ def _probe_options(plugin: str, user: dict[str, Any]) -> str | None:
     probe = {"x": x, "f": x * x, "g": x}
     code = None
     try:
-        with _quiet_fds():
+        with quiet_fds():
             solver = ca.nlpsol("optmodels_probe", plugin, probe, _plugin_options(plugin, user))
             if plugin == "ipopt":
                 solver(x0=1.0, lbg=-10.0, ubg=10.0)
@@ -370,21 +345,16 @@ def _probe_options(plugin: str, user: dict[str, Any]) -> str | None:
     return None
 
 
-def _casadi_reason(text: str) -> str:
-    lines = [ln.strip() for ln in str(text).splitlines() if ln.strip()]
-    return (lines[-1] if lines else str(text))[:200]
-
-
 def _option_error(plugin: str, user: dict[str, Any], exc: RuntimeError) -> ProblemError:
     """Find the option CasADi refused (each alone in a probe build) and name it."""
     for key, value in user.items():
         why = _probe_options(plugin, {key: value})
         if why is not None:
             return ProblemError(f"options[{key!r}] = {value!r}: rejected by the CasADi "
-                                f"{plugin} plugin ({_casadi_reason(why)})")
+                                f"{plugin} plugin ({last_line(why)})")
     what = f"options {user!r}" if user else "its defaults"
     return ProblemError(f"CasADi {plugin} plugin could not be built with {what} "
-                        f"({_casadi_reason(str(exc))})")
+                        f"({last_line(str(exc))})")
 
 
 def run_nlpsol(

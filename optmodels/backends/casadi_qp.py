@@ -27,7 +27,7 @@ from cvxpy.reductions.solution import Solution, failure_solution
 from cvxpy.reductions.solvers import utilities
 from cvxpy.reductions.solvers.qp_solvers.qp_solver import QpSolver
 
-from optmodels.backends.common import probe_in_child
+from optmodels.backends.common import last_line, probe_in_child
 from optmodels.core import ProblemError
 
 __all__ = [
@@ -89,14 +89,9 @@ def _solve_qp(plugin: str, p: Any, q: np.ndarray, a: Any, lba: np.ndarray, uba: 
     try:
         out = solver(h=h, g=q, a=am, lba=lba, uba=uba)
     except RuntimeError as exc:  # evaluation failure inside the plugin: a solver failure
-        raise SolverError(f"CasADi conic plugin {plugin}: {_reason(str(exc))}") from None
+        raise SolverError(f"CasADi conic plugin {plugin}: {last_line(str(exc))}") from None
     wall = time.perf_counter() - t0
     return out, solver.stats(), wall
-
-
-def _reason(text: str) -> str:
-    lines = [ln.strip() for ln in text.splitlines() if ln.strip()]
-    return (lines[-1] if lines else text)[:200]
 
 
 def _option_error(plugin: str, options: dict[str, Any], sparsity: dict[str, Any],
@@ -108,9 +103,9 @@ def _option_error(plugin: str, options: dict[str, Any], sparsity: dict[str, Any]
                      {**_QUIET.get(plugin, {}), "error_on_fail": False, key: value})
         except RuntimeError as one:
             return ProblemError(f"solver option {key!r} = {value!r}: rejected by the CasADi "
-                                f"conic plugin {plugin} ({_reason(str(one))})")
+                                f"conic plugin {plugin} ({last_line(str(one))})")
     return ProblemError(f"CasADi conic plugin {plugin} could not be built with options "
-                        f"{options!r} ({_reason(str(exc))})")
+                        f"{options!r} ({last_line(str(exc))})")
 
 
 class CasadiConic(QpSolver):

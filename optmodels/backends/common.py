@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import os
+import sys
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -63,3 +66,34 @@ def probe_in_child(script: str, names: Sequence[str], timeout: float = 120.0
         if todo:  # the child died on the first name left
             res[todo.pop(0)] = f"crashed the interpreter (exit code {proc.returncode})"
     return res
+
+
+@contextmanager
+def quiet_fds(fds: Sequence[int] = (1, 2)) -> Iterator[bool]:
+    """Point the process's file descriptors ``fds`` (C-level stdout/stderr, where IPOPT and
+    HiGHS print) at /dev/null for the block, then restore them. Yields False, silencing
+    nothing, where there are no real file descriptors."""
+    try:
+        sys.stdout.flush()
+        sys.stderr.flush()
+        saved = [os.dup(fd) for fd in fds]
+    except (OSError, ValueError, AttributeError):  # no real file descriptors
+        yield False
+        return
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    try:
+        for fd in fds:
+            os.dup2(devnull, fd)
+        yield True
+    finally:
+        for fd, old in zip(fds, saved, strict=True):
+            os.dup2(old, fd)
+        for fd in (*saved, devnull):
+            os.close(fd)
+
+
+def last_line(text: object, limit: int = 200) -> str:
+    """The last non-blank line of a solver's message (CasADi's errors end with the reason),
+    cut to ``limit`` characters."""
+    lines = [ln.strip() for ln in str(text).splitlines() if ln.strip()]
+    return (lines[-1] if lines else str(text))[:limit]

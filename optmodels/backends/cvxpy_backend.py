@@ -22,9 +22,7 @@ from __future__ import annotations
 import contextlib
 import ctypes
 import functools
-import os
 import re
-import sys
 import time
 import warnings
 from typing import Any
@@ -33,7 +31,7 @@ import cvxpy as cp
 from cvxpy.reductions.solvers.defines import MI_SOLVERS
 
 from optmodels.backends.casadi_qp import CasadiConic, casadi_qp_plugins, plugin_of, probe_plugins
-from optmodels.backends.common import BackendResult
+from optmodels.backends.common import BackendResult, quiet_fds
 from optmodels.backends.profiles import milp_options as milp_options
 from optmodels.core import OptModelsError, ProblemError, SolverNotAvailable, Status
 
@@ -134,21 +132,12 @@ def silence_highs_banner() -> None:
         import highspy
     except ImportError:  # HiGHS not installed: nothing to silence
         return
-    try:
-        sys.stdout.flush()
-        saved = os.dup(1)
-    except (OSError, ValueError, AttributeError):  # no usable fd 1: nothing to protect
-        return
-    devnull = os.open(os.devnull, os.O_WRONLY)
-    try:
-        os.dup2(devnull, 1)
+    with quiet_fds((1,)) as quiet:
+        if not quiet:  # no usable fd 1: nothing to protect
+            return
         highspy.Highs()
         with contextlib.suppress(OSError, AttributeError):  # flush C stdio before restoring
             ctypes.CDLL(None).fflush(None)
-    finally:
-        os.dup2(saved, 1)
-        os.close(saved)
-        os.close(devnull)
 
 
 def solve_problem(

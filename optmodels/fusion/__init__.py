@@ -87,7 +87,6 @@ from optmodels.fusion.two_site import TwoSiteSystem
 from optmodels.fusion.two_site import _at as _at
 from optmodels.fusion.two_site import _first_index as _first_index
 from optmodels.fusion.two_site import _xy as _xy
-from optmodels.fusion.two_site_ml import _JOINT_CACHE as _JOINT_CACHE
 from optmodels.fusion.two_site_ml import JointMLSolution, clear_joint_cache
 from optmodels.fusion.two_site_ml import _joint_nlp as _joint_nlp
 from optmodels.fusion.two_site_ml import _newton_step as _newton_step

@@ -210,7 +210,6 @@ def _newton_step(jw: FloatArray, g: FloatArray) -> FloatArray:
 
 #: The built joint-ML NLPs live in the CasADi back-end's one cache, under this namespace.
 _CACHE_NAMESPACE = "fusion.joint_ml"
-_JOINT_CACHE = NLP_CACHE  # the shared cache (formerly fusion's own FIFO dict)
 
 
 def _joint_nlp(t: int, options: dict[str, Any]) -> tuple[BuiltNlp, bool]:

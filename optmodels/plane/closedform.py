@@ -25,6 +25,7 @@ from optmodels.core import (
     ProblemError,
     Status,
     as_finite_array,
+    as_flag,
     as_instance,
     check_spd,
     timed,
@@ -185,8 +186,7 @@ def change_of_basis(base_cov: ArrayLike, q: ArrayLike, *, printed: bool = False)
     qm = as_finite_array("plane.change_of_basis q", q, shape=(3, 3), max_abs=MAX_MAGNITUDE)
     if float(np.max(np.abs(qm - qm.T))) > 1e-10 * max(float(np.max(np.abs(qm))), 1e-300):
         raise ProblemError("plane.change_of_basis q: must be symmetric (Q of (1.5))")
-    if not isinstance(printed, bool | np.bool_):
-        raise ProblemError(f"plane.change_of_basis printed: expected a bool, got {printed!r}")
+    as_flag("plane.change_of_basis printed", printed)
     m, h = np.linalg.eigh(d)
     t = h / np.sqrt(m)
     _, g = np.linalg.eigh(t.T @ qm @ t)

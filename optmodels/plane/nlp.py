@@ -186,8 +186,6 @@ def _reduced_problem(n: int) -> dict[str, Any]:
 
 #: The built NLPs live in the CasADi back-end's one cache, under this namespace.
 _CACHE_NAMESPACE = "plane"
-_NLP_CACHE = NLP_CACHE  # the shared cache (formerly plane's own FIFO dict)
-_NLP_CACHE_SIZE = NLP_CACHE.size
 
 
 def _get_nlp(

@@ -138,16 +138,11 @@ HIGH_OPTIONS: dict[str, dict[str, Any]] = importlib.import_module(
 
 
 def _adapter_path(problem: str) -> str | None:
-    """Where the adapter of a registered problem is, found by the problem's name: a class
-    of this module whose ``name`` is the problem's, else ``solvers_cmp.<problem>:Adapter``
-    (the place of a new problem's adapter: one file, no list to edit); ``None`` if neither
-    exists. Nothing is imported here (``find_spec`` only)."""
+    """Where the adapter of a registered problem is, found by the problem's name:
+    ``solvers_cmp.<problem>:Adapter`` (one file per problem, no list to edit); ``None`` if
+    there is no such module. Nothing is imported here (``find_spec`` only)."""
     import importlib.util
 
-    here = [c for c in globals().values() if isinstance(c, type) and issubclass(c, Adapter)
-            and c.__module__ == __name__ and c.name == problem]
-    if here:
-        return f"{__name__}:{here[0].__name__}"
     if importlib.util.find_spec(f"solvers_cmp.{problem}") is not None:
         return f"solvers_cmp.{problem}:Adapter"
     return None

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import platform
 import time
 from collections.abc import Callable
@@ -46,6 +47,7 @@ def repeat(fn: Callable[[], Any], repeats: int,
     return Repeated(results, walls)
 
 
+@functools.cache
 def cpu_name() -> str:
     """The CPU's model name (/proc/cpuinfo), else what ``platform`` knows."""
     try:

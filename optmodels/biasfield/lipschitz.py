@@ -15,7 +15,14 @@ import numpy as np
 
 from optmodels.backends.profiles import DEFAULTS, solver_options
 from optmodels.biasfield.cells import FieldData
-from optmodels.biasfield.problem import FieldSolution, _arguments, _finish, _lipschitz_data, _run
+from optmodels.biasfield.problem import (
+    FieldSolution,
+    _arguments,
+    _failed_method,
+    _finish,
+    _lipschitz_data,
+    _run,
+)
 from optmodels.biasfield.verify import _verify, box_feasibility, lipschitz_residuals
 from optmodels.core import ProblemError, as_positive, timed
 
@@ -92,8 +99,7 @@ def solve_lipschitz(data: FieldData, *, box: tuple[float, float] | None = None,
     common["build_time"] += tb.elapsed
     common["method"] = method
     if not res.status.ok or eta.value is None:
-        nan = np.full(phi0.size, np.nan)
-        return _finish(data, sets, nan, np.full(phi1.shape[1], np.nan), common, bound, None)
+        return _failed_method(data, sets, common, bound)
     et = np.asarray(eta.value, dtype=float) * sc[0]
     phi = phi0 + phi1 @ et if formulation == "reduced" else np.asarray(u.value) * sc
     jumps = np.linalg.norm((prob_data["jump"] @ phi).reshape(-1, m2), axis=1) / dist

@@ -181,6 +181,15 @@ def _run(where: str, prob: cp.Problem, solver: str, opts: dict[str, Any]) -> Any
         raise ProblemError(f"{where} options: {exc}") from None
 
 
+def _failed_method(data: FieldData, sets: Sets, common: dict[str, Any],
+                   bound: FloatArray | None) -> FieldSolution:
+    """The result of a method that produced no field (a failed solve, an overflow, a
+    proven-infeasible box): φ and η NaN, packed and re-checked by :func:`_finish`."""
+    phi0, phi1 = sets
+    return _finish(data, sets, np.full(phi0.size, np.nan), np.full(phi1.shape[1], np.nan),
+                   common, bound, None)
+
+
 def _finish(data: FieldData, sets: Sets, phi: FloatArray, eta: FloatArray,
             common: dict[str, Any],
             bound: FloatArray | None, duals: FloatArray | None,

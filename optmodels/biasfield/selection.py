@@ -50,6 +50,7 @@ from optmodels.biasfield.problem import (
     FieldSolution,
     _arguments,
     _check_graph,
+    _failed_method,
     _finish,
     _r_matrix,
     _run,
@@ -119,11 +120,9 @@ def closed_form(data: FieldData) -> FieldSolution:
     common = {"status": Status.OPTIMAL, "method": "closed_form", "solve_time": tm.elapsed,
               "message": "(11), sign corrected"}
     if not (np.all(np.isfinite(phi)) and np.all(np.isfinite(eta))):
-        nan = np.full(phi0.size, np.nan)
         common.update(status=Status.ERROR, message="(11): the solve overflowed (non-finite "
                       "field); Φ1ᵀRΦ1 is numerically singular")
-        return _finish(data, (phi0, phi1), nan, np.full(phi1.shape[1], np.nan), common,
-                       None, None)
+        return _failed_method(data, (phi0, phi1), common, None)
     sol = _finish(data, (phi0, phi1), phi, eta, common, None, None)
     sol.info["components"] = n_comp
     grad = phi1.T @ (r @ phi)
@@ -166,13 +165,12 @@ def solve(data: FieldData, *, box: tuple[float, float] | None = None,
     if bound is not None:
         bad = box_feasibility(data, box, sets=sets)  # type: ignore[arg-type]
         if bad.size:
-            nan = np.full(phi0.size, np.nan)
-            return _finish(data, sets, nan, np.full(phi1.shape[1], np.nan), {
+            return _failed_method(data, sets, {
                 "status": Status.INFEASIBLE, "method": method,
                 "message": f"box (8) misses the uncertainty sets of cells {bad[:20].tolist()}"
                            f"{' …' if bad.size > 20 else ''} ({bad.size} cells): no field "
                            "in these sets satisfies |f_range| ≤ K1, |f_azimuth| ≤ K2"},
-                bound, None)
+                bound)
     sc = _scales(data, phi0)
     with timed() as tb:
         gs = (edge_factor(data) @ sparse.diags(sc)).tocsr()
@@ -199,8 +197,7 @@ def solve(data: FieldData, *, box: tuple[float, float] | None = None,
     common["build_time"] += tb.elapsed
     common["method"] = method
     if not res.status.ok or eta.value is None:
-        nan = np.full(phi0.size, np.nan)
-        return _finish(data, sets, nan, np.full(phi1.shape[1], np.nan), common, bound, None)
+        return _failed_method(data, sets, common, bound)
     et = np.asarray(eta.value) * sc[0]
     phi = phi0 + phi1 @ et if formulation == "reduced" else np.asarray(u.value) * sc
     duals = None

@@ -27,6 +27,7 @@ from optmodels.fusion.inputs import _pair, _where
 from optmodels.fusion.verify import (
     _EPS,
     _combination_bound,
+    _relative_weight_error,
     _verify,
     _weight_bound,
     _wls_objective,
@@ -141,7 +142,7 @@ def fuse(a1: ArrayLike, s1: ArrayLike, a2: ArrayLike, s2: ArrayLike, *,
     bound = np.minimum(np.abs(cov) @ g_err,
                        np.abs(est - alpha_w) + _combination_bound(w, dw, x1, x2))
     size = max(float(np.max(np.abs(np.concatenate([est, x1, x2])))), np.finfo(float).tiny)
-    w_err = float(np.max(dw) / max(float(np.max(np.abs(w))), np.finfo(float).tiny))
+    w_err = _relative_weight_error(dw, w)
     residuals = {"gradient": res_grad, "estimate_error": float(np.max(bound) / size),
                  "weight_error": w_err}
     sol = _verify(FusionSolution(objective=float("nan"), residuals=residuals, estimate=est,
@@ -181,7 +182,7 @@ def _fuse_correlated(x1: FloatArray, a: FloatArray, x2: FloatArray, b: FloatArra
     grad = w @ d - (a - c)
     res_grad = float(np.max(np.abs(grad)) / (np.max(np.abs(d)) * max(1.0, np.max(np.abs(w)))))
     dw = _weight_bound(w, d, a - c, np.linalg.pinv(d, rcond=PINV_RTOL, hermitian=True))
-    w_err = float(np.max(dw) / max(float(np.max(np.abs(w))), np.finfo(float).tiny))
+    w_err = _relative_weight_error(dw, w)
     # |δα| ≤ |δW||a2 − a1| + round-off of a1 + W(a2 − a1)
     size = max(float(np.max(np.abs(np.concatenate([est, x1, x2])))), np.finfo(float).tiny)
     bound = float(np.max(_combination_bound(w, dw, x1, x2))) / size

@@ -42,8 +42,12 @@ def _weight_bound(w: FloatArray, mat: FloatArray, rhs: FloatArray,
 def _weight_error(w: FloatArray, mat: FloatArray, rhs: FloatArray,
                   inv: FloatArray | None = None) -> float:
     """Relative forward error bound max|δW| / max|W| (see :func:`_weight_bound`)."""
-    err = _weight_bound(w, mat, rhs, inv)
-    return float(np.max(err) / max(float(np.max(np.abs(w))), np.finfo(float).tiny))
+    return _relative_weight_error(_weight_bound(w, mat, rhs, inv), w)
+
+
+def _relative_weight_error(dw: FloatArray, w: FloatArray) -> float:
+    """max|δW| / max|W| for an elementwise bound ``dw`` on W's error."""
+    return float(np.max(dw) / max(float(np.max(np.abs(w))), np.finfo(float).tiny))
 
 
 def _combination_bound(w: FloatArray, dw: FloatArray, x1: FloatArray, x2: FloatArray

@@ -9,14 +9,13 @@ package must be importable on the Dask workers.
 from __future__ import annotations
 
 import threading
-import time
 from typing import Any
 
 from solvers_cmp import cases as cs
 from solvers_cmp.common import cpu_name
 from solvers_cmp.harness.planning import Case
 from solvers_cmp.harness.versions import solver_version
-from solvers_cmp.harness.worker import Worker
+from solvers_cmp.harness.worker import Worker, run_prepared
 
 #: Per thread of a Dask worker: its isolated run process and the last case prepared.
 _REMOTE = threading.local()
@@ -33,17 +32,6 @@ def _remote_run(ad_path: str, case: Case, run: cs.Run, options: dict[str, Any],
     worker = getattr(_REMOTE, "worker", None)
     if worker is None:
         worker = _REMOTE.worker = Worker("-")
-        _REMOTE.prepared = None
-    key = (ad_path, case)
-    prepared = _REMOTE.prepared
-    if prepared is None or prepared[0] != key:
-        kind, res = worker.call("prepare", (ad_path, case), 4 * limit)
-        prepared = _REMOTE.prepared = (key, None if kind == "ok" else
-                                       f"instance/reference {kind}: {res}")
-    if prepared[1] is not None:
-        kind, res, wall = "error", prepared[1], 0.0
-    else:
-        t0 = time.perf_counter()
-        kind, res = worker.call("run", (ad_path, case, run, options), limit)
-        wall = time.perf_counter() - t0
-    return kind, res, wall, solver_version(run.solver), cpu_name()
+        _REMOTE.prepared = [None, None]
+    return (*run_prepared(worker, _REMOTE.prepared, ad_path, case, run, options, limit),
+            solver_version(run.solver), cpu_name())

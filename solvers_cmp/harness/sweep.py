@@ -9,7 +9,6 @@ appended to ``results.csv`` by this process alone.
 
 from __future__ import annotations
 
-import time
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -26,7 +25,7 @@ from solvers_cmp.harness.profiles import PROFILES, Profile, _judge
 from solvers_cmp.harness.remote import _remote_run
 from solvers_cmp.harness.results import COLUMNS, _csv_line, _key, _load_results
 from solvers_cmp.harness.versions import solver_version
-from solvers_cmp.harness.worker import Worker, _InProcess
+from solvers_cmp.harness.worker import Worker, _InProcess, run_prepared
 
 
 def run_sweep(problems: Sequence[str], out: Path, *, sizes: Sizes = None,
@@ -140,15 +139,8 @@ def _sweep(rl: LineLog, done: dict[tuple[Any, ...], dict[str, Any]],
         """One run on this machine: the instance and its reference once per case (their
         own, longer, time limit), then the run in the worker with the time limit."""
         assert worker is not None
-        if prepared[0] != (ad_path, case):
-            kind, res = worker.call("prepare", (ad_path, case), 4 * limit)
-            prepared[:] = [(ad_path, case),
-                           None if kind == "ok" else f"instance/reference {kind}: {res}"]
-        if prepared[1] is not None:
-            return "error", prepared[1], 0.0, solver_version(run.solver), cpu
-        t0 = time.perf_counter()
-        kind, res = worker.call("run", (ad_path, case, run, options), limit)
-        return kind, res, time.perf_counter() - t0, solver_version(run.solver), cpu
+        return (*run_prepared(worker, prepared, ad_path, case, run, options, limit),
+                solver_version(run.solver), cpu)
 
     def lost(t: int, msg: str) -> None:
         record(t, ("crashed", msg, float("nan"), solver_version(tasks[t][4].solver),

@@ -13,6 +13,7 @@ from __future__ import annotations
 import contextlib
 import multiprocessing as mp
 import os
+import time
 import traceback
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -192,3 +193,21 @@ class _InProcess:
 
     def stop(self, kill: bool = False) -> None:
         pass
+
+
+def run_prepared(worker: Worker | _InProcess, prepared: list[Any], ad_path: str, case: Case,
+                 run: cs.Run, options: dict[str, Any], limit: float
+                 ) -> tuple[str, Any, float]:
+    """One run in ``worker``, the local and the Dask engine alike: the case's instance and
+    reference first (their own, longer, time limit ``4 * limit``; once per case, remembered
+    in ``prepared`` = [(path, case), failure message or None], a failure kept for the case's
+    other runs), then the run with ``limit``. Returns ``(kind, result, wall seconds)``."""
+    if prepared[0] != (ad_path, case):
+        kind, res = worker.call("prepare", (ad_path, case), 4 * limit)
+        prepared[:] = [(ad_path, case),
+                       None if kind == "ok" else f"instance/reference {kind}: {res}"]
+    if prepared[1] is not None:
+        return "error", prepared[1], 0.0
+    t0 = time.perf_counter()
+    kind, res = worker.call("run", (ad_path, case, run, options), limit)
+    return kind, res, time.perf_counter() - t0

@@ -9,8 +9,6 @@ problem's name through :mod:`optmodels.registry` (module :func:`__getattr__`, no
 
 from __future__ import annotations
 
-import importlib
-import importlib.util
 import platform
 from importlib import metadata
 from pathlib import Path
@@ -45,10 +43,8 @@ def __getattr__(name: str) -> Any:
     if problem != name:
         from optmodels import registry
 
-        if (problem in registry.names()
-                and importlib.util.find_spec(f"solvers_cmp.{problem}") is not None):
-            found = getattr(importlib.import_module(f"solvers_cmp.{problem}"),
-                            "write_report", None)
+        if problem in registry.names():
+            found = getattr(registry.face_module("solvers_cmp", problem), "write_report", None)
             if found is not None:
                 return found
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -21,7 +21,7 @@ The contract (README, "Command line"):
 #                  fd-1 redirect, strict JSON printing, the one-line-error argparse class
 #   args.py        argparse types built on optmodels.core's as_* checks
 #   problems/      one module per problem: its verbs (register), demo hook, --details hook;
-#                  discovered with pkgutil -- no list of problem names here
+#                  discovered by name through the registry -- no list of problem names here
 #   demo.py, compare.py, montecarlo.py   the multi-problem commands
 # Every name the single-module cli.py had is re-exported below (hence the file-wide F401).
 # ruff: noqa: F401

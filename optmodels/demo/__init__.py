@@ -34,7 +34,7 @@ def __getattr__(attr: str) -> Any:
     """``run_<name>_demo`` of a registered problem, from its module here."""
     for p in _with_module():
         if attr == _entry(p):
-            return getattr(importlib.import_module(f"{__name__}.{p}"), attr)
+            return getattr(registry.face_module(__name__, p), attr)
     raise AttributeError(f"module {__name__!r} has no attribute {attr!r}")
 
 

@@ -15,33 +15,26 @@ A problem module provides
 
 from __future__ import annotations
 
-import importlib
-import pkgutil
 from types import ModuleType
 
-
-def _found() -> list[str]:
-    return sorted(m.name for m in pkgutil.iter_modules(__path__) if not m.name.startswith("_"))
-
-
-def modules() -> list[ModuleType]:
-    """Every problem module of this package, imported, sorted by name."""
-    return [importlib.import_module(f"{__name__}.{name}") for name in _found()]
+from optmodels import registry
 
 
 def names() -> tuple[str, ...]:
-    """The problems with a module here, in the registry's order (:func:`optmodels.registry.names`:
-    the README's table, plane first) -- the order ``optmodels demo`` runs them and lists them
-    in report/index.md; a module here of a problem the registry does not know comes after,
-    by name."""
-    from optmodels import registry
+    """The registered problems with a module here, in the registry's order
+    (:func:`optmodels.registry.names`: the README's table, plane first) -- the order
+    ``optmodels demo`` runs them and lists them in report/index.md."""
+    return tuple(p for p in registry.names() if registry.face_module(__name__, p) is not None)
 
-    order = {p: i for i, p in enumerate(registry.names())}
-    return tuple(sorted(_found(), key=lambda p: (order.get(p, len(order)), p)))
+
+def modules() -> list[ModuleType]:
+    """Every problem module of this package, imported, sorted by name (the order of the
+    sub-commands in ``optmodels --help``)."""
+    return [m for p in sorted(names()) if (m := registry.face_module(__name__, p))]
 
 
 def with_hook(hook: str) -> dict[str, ModuleType]:
     """The problem modules defining ``hook`` (``run_demo``, ``run_details``) by problem
     name, in the order of :func:`names`."""
-    mods = {name: importlib.import_module(f"{__name__}.{name}") for name in _found()}
-    return {p: mods[p] for p in names() if hasattr(mods[p], hook)}
+    return {p: m for p in names()
+            if hasattr(m := registry.face_module(__name__, p), hook)}

@@ -16,7 +16,6 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-import cvxpy as cp
 import numpy as np
 from scipy.optimize import linprog
 
@@ -25,23 +24,19 @@ from optmodels.assignment.data import (
     AssignmentSolution,
     Partition,
     _canonical,
-    _finish_point,
-    block_log_prior,
     candidate_groups,
-    log_likelihoods,
     score,
 )
 from optmodels.assignment.hypotheses import COUNT_LIMIT, count_hypotheses
 from optmodels.assignment.milp import (
-    MAX_LIKELIHOOD_ENTRIES,
     MAX_MODEL_COLUMNS,
     _build_model,
+    _gains,
+    _solve_model,
     solve,
 )
 from optmodels.assignment.solvers import _as_solver
-from optmodels.backends.cvxpy_backend import solve_problem
-from optmodels.backends.profiles import milp_options
-from optmodels.core import FloatArray, ProblemError, Status, as_count, as_instance, timed
+from optmodels.core import FloatArray, ProblemError, Status, as_count, as_instance
 
 #: :func:`k_best` solves one MILP per hypothesis: at most this many.
 K_BEST_LIMIT = 10_000
@@ -167,35 +162,6 @@ def _column_bounds(c: FloatArray, a_eq, a_ub, b_ub: FloatArray) -> FloatArray | 
     return d + np.minimum(r, 0.0)
 
 
-def _solve_reduced(data: AssignmentData, groups: list[tuple[int, ...]], gain: FloatArray,
-                   keep: np.ndarray, exclude: Sequence[AssignmentSolution],
-                   key: str) -> AssignmentSolution:
-    """One MILP of :func:`~optmodels.assignment.milp.solve` on the given columns (zero
-    gap), with the same NumPy re-check and status gate."""
-    with timed() as tb:
-        c, a_eq, a_ub, b_ub = _build_model(data, groups, gain, keep, exclude, False)
-        x = cp.Variable(len(c), boolean=True)
-        cons = [a_eq @ x == np.ones(a_eq.shape[0])]
-        if a_ub.shape[0]:
-            cons.append(a_ub @ x <= b_ub)
-        prob = cp.Problem(cp.Maximize(c @ x), cons)
-    opts = milp_options(key, 0.0, None, verbose=False, where="assignment.k_best")
-    res = solve_problem(prob, key, **opts)
-    common = res.common()
-    common["build_time"] += tb.elapsed
-    gap_reached = res.info.get("mip_gap")
-    info = dict(res.info, candidate_groups=len(groups), assignment_variables=len(keep))
-    if not res.status.ok or x.value is None:
-        if res.status.ok:
-            common["status"] = Status.ERROR
-        return AssignmentSolution(objective=float("nan"), mip_gap=gap_reached, info=info,
-                                  **common)
-    xv = np.asarray(x.value, dtype=float).reshape(-1)
-    return _finish_point(data, groups, keep, xv, a_eq, a_ub, b_ub, float(res.objective),
-                         exclude, None, common=common, gap_reached=gap_reached, gap=0.0,
-                         info=info)
-
-
 def k_best(data: AssignmentData, k: int, *, solver: str = "HIGHS") -> KBest:
     """The k best hypotheses (exact: module docstring) and JPDA-style marginals from them.
 
@@ -220,21 +186,14 @@ def k_best(data: AssignmentData, k: int, *, solver: str = "HIGHS") -> KBest:
     as_instance(f"{w} data", data, AssignmentData)
     groups = candidate_groups(data)
     n = data.n
-    if n * len(groups) > MAX_LIKELIHOOD_ENTRIES:
-        raise ProblemError(f"{w}: N × candidate groups = {n} × {len(groups)} likelihoods, "
-                           f"above the limit {MAX_LIKELIHOOD_ENTRIES:.0e}; tighten "
-                           f"group_gate or lower max_group_size")
-    ll = log_likelihoods(data, groups)
-    bonus = np.array([block_log_prior(data, g, True) - block_log_prior(data, g, False)
-                      for g in groups])
-    gain = ll + bonus
+    ll, gain = _gains(w, data, groups)
     keep = np.argwhere(np.isfinite(gain)).reshape(-1, 2)  # −inf: impossible, no column
     n_g, n_k = len(groups), len(keep)
     if n_g + n_k + n > MAX_MODEL_COLUMNS:
         raise ProblemError(
             f"{w}: {n_g + n_k + n} binary columns ({n_g} groups, {n_k} measurement-group "
-            f"pairs), above the limit {MAX_MODEL_COLUMNS:.0e}; prune=False keeps every "
-            f"pair; tighten group_gate or lower max_group_size")
+            f"pairs), above the limit {MAX_MODEL_COLUMNS:.0e}; tighten group_gate or "
+            f"lower max_group_size")
     first = solve(data, solver=key)
     if first.status is Status.INFEASIBLE:
         return _result(data, [])
@@ -253,7 +212,7 @@ def k_best(data: AssignmentData, k: int, *, solver: str = "HIGHS") -> KBest:
                 gain = gain[:, ok_g]
                 keep = np.column_stack([keep[ok_k, 0], new_index[keep[ok_k, 1]]])
     for _ in range(k - 1):
-        s = _solve_reduced(data, groups, gain, keep, found, key)
+        s = _solve_model(w, data, groups, gain, keep, found, None, key, 0.0, None, {}, 0.0)
         if s.status is Status.INFEASIBLE:
             break  # fewer than k hypotheses exist (only when nothing was removed)
         found.append(s.require_ok())

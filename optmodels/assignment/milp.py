@@ -216,17 +216,10 @@ def solve(data: AssignmentData, *, solver: str = "HIGHS", mip_gap: float = 0.0,
         groups = sorted(set(fixed))
     else:
         groups = candidate_groups(data)
-    q, n = data.q, data.n
-    if n * len(groups) > MAX_LIKELIHOOD_ENTRIES:
-        raise ProblemError(f"{w}: N × candidate groups = {n} × {len(groups)} likelihoods, "
-                           f"above the limit {MAX_LIKELIHOOD_ENTRIES:.0e}; tighten "
-                           f"group_gate or lower max_group_size")
+    n = data.n
     with timed() as tb:
-        ll = log_likelihoods(data, groups)
-        bonus = np.array([block_log_prior(data, g, True) - block_log_prior(data, g, False)
-                          for g in groups])
+        _, gain = _gains(w, data, groups)
         bg = -math.log(data.volume)
-        gain = ll + bonus
         if prune:
             usable = gain > bg  # exact pruning 1 (module docstring)
             if fixed is None and data.block_log_prior is None:
@@ -241,9 +234,39 @@ def solve(data: AssignmentData, *, solver: str = "HIGHS", mip_gap: float = 0.0,
                 f"measurement-group pairs), above the limit {MAX_MODEL_COLUMNS:.0e}"
                 + ("; prune=False keeps every pair" if not prune else "")
                 + "; tighten group_gate or lower max_group_size")
+    return _solve_model(w, data, groups, gain, keep, exclude, fixed, key, gap, limit,
+                        options, tb.elapsed)
+
+
+def _gains(w: str, data: AssignmentData, groups: list[tuple[int, ...]]
+           ) -> tuple[FloatArray, FloatArray]:
+    """The log-likelihoods (N, G) of the measurements on the groups and the gains ln φ +
+    ln P(detected) − ln P(undetected) of the MILP's columns γ_iS, after the size guard
+    :data:`MAX_LIKELIHOOD_ENTRIES`."""
+    n = data.n
+    if n * len(groups) > MAX_LIKELIHOOD_ENTRIES:
+        raise ProblemError(f"{w}: N × candidate groups = {n} × {len(groups)} likelihoods, "
+                           f"above the limit {MAX_LIKELIHOOD_ENTRIES:.0e}; tighten "
+                           f"group_gate or lower max_group_size")
+    ll = log_likelihoods(data, groups)
+    bonus = np.array([block_log_prior(data, g, True) - block_log_prior(data, g, False)
+                      for g in groups])
+    return ll, ll + bonus
+
+
+def _solve_model(w: str, data: AssignmentData, groups: list[tuple[int, ...]],
+                 gain: FloatArray, keep: np.ndarray, exclude: Sequence[AssignmentSolution],
+                 fixed: Partition | None, key: str, gap: float, limit: float | None,
+                 options: dict[str, Any], build_time: float) -> AssignmentSolution:
+    """The MILP on the columns ``groups``/``keep`` (with the no-good cuts of ``exclude``),
+    solved by ``key`` and ended by the NumPy re-check and the status gate
+    (:func:`~optmodels.assignment.data._finish_point`); ``build_time`` is the caller's
+    share of the model building."""
+    q, n = data.q, data.n
+    with timed() as tb:
         c, a_eq, a_ub, b_ub = _build_model(data, groups, gain, keep, exclude,
                                            fixed is not None)
-        x = cp.Variable(columns, boolean=True)
+        x = cp.Variable(len(c), boolean=True)
         cons = [a_eq @ x == np.ones(q + n)]
         if a_ub.shape[0]:
             cons.append(a_ub @ x <= b_ub)
@@ -252,7 +275,7 @@ def solve(data: AssignmentData, *, solver: str = "HIGHS", mip_gap: float = 0.0,
     opts = milp_options(key, gap, limit, verbose=bool(options.get("verbose", False)), where=w)
     res = solve_problem(prob, key, **{**opts, **options})
     common = res.common()
-    common["build_time"] += tb.elapsed
+    common["build_time"] += build_time + tb.elapsed
     gap_reached = res.info.get("mip_gap")
     info = dict(res.info, candidate_groups=len(groups), assignment_variables=len(keep))
     if not res.status.ok or x.value is None:

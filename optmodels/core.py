@@ -512,6 +512,21 @@ def as_flag(name: str, value: Any) -> bool:
     return bool(value)
 
 
+def as_generator(where: str, seed: Any) -> np.random.Generator:
+    """A ``numpy.random.Generator`` as given, or seeded from a whole number ≥ 0 (or a
+    sequence of them); anything else is one :class:`ProblemError` "<where> seed: ..."."""
+    if isinstance(seed, np.random.Generator):
+        return seed
+    if isinstance(seed, bool | np.bool_ | float | str | bytes) or seed is None:
+        raise ProblemError(f"{where} seed: expected a whole number >= 0 or a "
+                           f"numpy.random.Generator, got {seed!r}")
+    try:
+        return np.random.default_rng(seed)
+    except (TypeError, ValueError) as exc:
+        raise ProblemError(f"{where} seed: expected a whole number >= 0 or a "
+                           f"numpy.random.Generator, got {seed!r} ({exc})") from None
+
+
 def as_instance(name: str, value: Any, cls: type) -> Any:
     """``value`` if it is a ``cls`` (the problem's data object), else a ProblemError naming
     ``name`` and the type received (instead of an AttributeError deep inside)."""

@@ -386,10 +386,10 @@ def test_biasfield_build_and_solve(tmp_path: Path) -> None:
     big = np.abs(cf.field).max(axis=(0, 1))
     r_qp, r_box, r_lip, r_badbox, r_missing = run_many([
         ["biasfield", "solve", npz, "--out", out, "--json"],
-        ["biasfield", "solve", npz, "--out", tmp_path / "box", "--json", "--box",
+        ["biasfield", "solve", npz, "--out", tmp_path / "box", "--json", "--box-deg",
          f"{1e-3 * big[0]},{np.rad2deg(1e-3 * big[1])}"],
         ["biasfield", "solve", npz, "--out", tmp_path / "lip", "--lipschitz", "--json"],
-        ["biasfield", "solve", npz, "--box", "1", "--out", tmp_path / "x"],
+        ["biasfield", "solve", npz, "--box-deg", "1", "--out", tmp_path / "x"],
         ["biasfield", "solve", tmp_path / "missing.npz", "--out", tmp_path / "y"],
     ], expect=None)
     assert r_qp.code == 0 and r_qp.json()["status"] == "optimal"
@@ -406,7 +406,7 @@ def test_biasfield_build_and_solve(tmp_path: Path) -> None:
     assert r_lip.code == 0
     res = r_lip.json()
     assert res["status"] == "optimal" and res["lipschitz"] > 0
-    assert_error(r_badbox, 2, "--box")
+    assert_error(r_badbox, 2, "--box-deg")
     assert_error(r_missing, 2, "missing.npz")
 
 
@@ -471,10 +471,11 @@ def test_demo_assignment_writes_report(tmp_path: Path, capsys: pytest.CaptureFix
     from optmodels.demo import assignment as demo_as
 
     monkeypatch.setattr(demo_as, "SEPARATIONS", (40.0, 400.0))
+    monkeypatch.setattr(demo_as, "TRACKING_RATIOS", (0.5, 3.0))  # the track-level study
     assert cli.main(["demo", "assignment", "--out", str(tmp_path), "--json"]) == 0
     res = json.loads(capsys.readouterr().out)
     assert res["failed"] == {}
-    for f in ("association.png", "report.md", "summary.json"):
+    for f in ("association.png", "report.md", "summary.json", "tracking.png"):
         assert (tmp_path / "assignment" / f).is_file()
     rows = {r["separation, m"]: r for r in res["problems"]["assignment"]["rows"]}
     # below the resolution (150 m) the MAP recognises merges: better than resolved-only by

@@ -19,7 +19,14 @@ is in :mod:`~optmodels.assignment.data`, the MILP and its exact pruning in
   HiGHS banner;
 * :mod:`~optmodels.assignment.milp`: :func:`solve`, the sparse MILP and its pruning;
 * :mod:`~optmodels.assignment.linear`: :func:`linear_assignment` (merges disallowed);
-* :mod:`~optmodels.assignment.kbest`: :func:`k_best`, :class:`KBest` (marginals).
+* :mod:`~optmodels.assignment.kbest`: :func:`k_best`, :class:`KBest` (marginals);
+* :mod:`~optmodels.assignment.sensor`: the sensor's resolution model :class:`Resolution`
+  (the probability that a group is unresolved, from the members' predicted separation and
+  uncertainty; the paper's constant ρ as a special case) and the polar measurement
+  covariances :func:`polar_measurement_covs`;
+* :mod:`~optmodels.assignment.stonesoup`: :class:`MergedMeasurementAssociator`, a Stone
+  Soup data associator on the MAP with merged measurements, usable in Stone Soup's
+  ``MultiTargetTracker`` (optional dependency ``stonesoup``; import it from its module).
 
 Every name is re-exported here (``from optmodels import assignment as asg; asg.solve``).
 To monkeypatch what a function uses, patch the submodule that uses it (e.g.
@@ -41,6 +48,7 @@ from optmodels.assignment.data import _as_partition as _as_partition
 from optmodels.assignment.data import _canonical as _canonical
 from optmodels.assignment.data import _logpdf as _logpdf
 from optmodels.assignment.data import _recheck as _recheck
+from optmodels.assignment.data import group_moments as group_moments
 from optmodels.assignment.hypotheses import BRUTE_FORCE_LIMIT as BRUTE_FORCE_LIMIT
 from optmodels.assignment.hypotheses import COUNT_LIMIT as COUNT_LIMIT
 from optmodels.assignment.hypotheses import _assignments as _assignments
@@ -62,6 +70,13 @@ from optmodels.assignment.milp import MAX_MODEL_COLUMNS as MAX_MODEL_COLUMNS
 from optmodels.assignment.milp import _build_model as _build_model
 from optmodels.assignment.milp import _prune as _prune
 from optmodels.assignment.milp import solve
+from optmodels.assignment.sensor import (
+    Resolution,
+    cartesian_to_polar,
+    connected_probability,
+    polar_measurement_covs,
+    polar_to_cartesian,
+)
 from optmodels.assignment.solvers import MILP_SOLVERS as MILP_SOLVERS
 from optmodels.assignment.solvers import _as_solver as _as_solver
 from optmodels.assignment.solvers import _silence_highs_banner as _silence_highs_banner
@@ -71,15 +86,20 @@ __all__ = [
     "AssignmentData",
     "AssignmentSolution",
     "KBest",
+    "Resolution",
     "block_log_prior",
     "brute_force",
     "candidate_groups",
+    "cartesian_to_polar",
+    "connected_probability",
     "count_hypotheses",
     "count_per_variant",
     "enumerate_hypotheses",
     "k_best",
     "linear_assignment",
     "log_likelihoods",
+    "polar_measurement_covs",
+    "polar_to_cartesian",
     "score",
     "set_partitions",
     "solve",

@@ -30,6 +30,7 @@ import numpy as np
 import scipy.sparse as sps
 from scipy.special import comb
 
+from optmodels.assignment.sensor import Resolution, log_group_weight
 from optmodels.core import (
     VERIFY_TOL,
     FloatArray,
@@ -39,9 +40,9 @@ from optmodels.core import (
     Verdict,
     as_count,
     as_finite_array,
+    as_instance,
     as_positive,
     as_probability,
-    check_spd,
     check_spd_stack,
     failure,
     finish,
@@ -60,18 +61,23 @@ MAX_CANDIDATE_GROUPS = 100_000
 @dataclass
 class AssignmentData:
     """Predictions ``means`` (Q, d), ``covs`` (Q, d, d); ``measurements`` (N, d) with noise
-    ``meas_cov`` (d, d); surveillance ``volume`` Δx (m^d); detection probability ``pd`` ∈
-    (0, 1); per-merge prior factor ``rho`` ∈ (0, 1]; candidate groups limited by
-    ``max_group_size`` (default: all sizes) and ``group_gate`` (members pairwise within
-    this Mahalanobis distance of each other's predictions, under K_i + K_j; default: no
-    gate). Units SI: means and measurements in m (or the sensor's own units, the same
-    for all), covariances in their square, Δx in m^d.
+    ``meas_cov``: one (d, d) for all or one per measurement (N, d, d), R_i (e.g. from
+    :func:`~optmodels.assignment.sensor.polar_measurement_covs`); surveillance ``volume``
+    Δx (m^d); detection probability ``pd`` ∈ (0, 1); the merge prior: a per-merge factor
+    ``rho`` ∈ (0, 1] (the paper's constant), or instead a ``sensor``
+    (:class:`~optmodels.assignment.sensor.Resolution`: the prior of a group from its
+    members' predicted separation and uncertainty, and the centroid weights; give one of
+    ``rho`` and ``sensor``); candidate groups limited by ``max_group_size`` (default: all
+    sizes) and ``group_gate`` (members pairwise within this Mahalanobis distance of each
+    other's predictions, under K_i + K_j; default: no gate). Units SI: means and
+    measurements in m (or the sensor's own units, the same for all), covariances in their
+    square, Δx in m^d.
 
     Your own model: ``log_likelihood(data, S)`` → (N,) ln φ_iS for block S (replaces the
     Gaussian default), and ``block_log_prior(S, detected)`` → the block's share of ln P(H)
-    (default (|S| − 1) ln ρ + ln P_D or ln(1 − P_D)). The prior must decompose over blocks
-    for the MILP to stay linear. With a custom prior only the background-dominance pruning
-    is applied (the others rely on the default prior's form)."""
+    (default (|S| − 1) ln ρ, or ln w(S) with a sensor, + ln P_D or ln(1 − P_D)). The prior
+    must decompose over blocks for the MILP to stay linear. With a custom prior only the
+    background-dominance pruning is applied."""
 
     means: FloatArray
     covs: FloatArray
@@ -79,11 +85,17 @@ class AssignmentData:
     meas_cov: FloatArray
     volume: float
     pd: float
-    rho: float
+    rho: float | None = None
     max_group_size: int | None = None
     group_gate: float | None = None
     log_likelihood: Callable[[AssignmentData, tuple[int, ...]], FloatArray] | None = None
     block_log_prior: Callable[[tuple[int, ...], bool], float] | None = None
+    sensor: Resolution | None = None
+    _pair_u: FloatArray | None = field(default=None, init=False, repr=False, compare=False)
+    _log_w: dict[tuple[int, ...], float] = field(default_factory=dict, init=False,
+                                                  repr=False, compare=False)
+    _conn: dict[Any, float] = field(default_factory=dict, init=False, repr=False,
+                                    compare=False)
 
     def __post_init__(self) -> None:
         w = "assignment.AssignmentData"
@@ -101,14 +113,33 @@ class AssignmentData:
         if self.measurements.shape[1] != d:
             raise ProblemError(f"{w} measurements: expected (N, {d}) like means, got "
                                f"{self.measurements.shape}")
-        self.meas_cov = as_finite_array(f"{w} meas_cov", self.meas_cov, shape=(d, d))
-        check_spd(f"{w} meas_cov", self.meas_cov)
+        n = self.measurements.shape[0]
+        self.meas_cov = as_finite_array(f"{w} meas_cov", self.meas_cov, ndim=(2, 3))
+        if self.meas_cov.shape not in ((d, d), (n, d, d)):
+            raise ProblemError(f"{w} meas_cov: expected ({d}, {d}) or one per measurement "
+                               f"({n}, {d}, {d}), got {self.meas_cov.shape}")
+        check_spd_stack(f"{w} meas_cov", self.meas_cov)
         self.pd = as_probability(f"{w} pd", self.pd, low_open=True, high_open=True)
         # Δx (m^d, SI) enters through its logarithm: positive and finite. ρ is the prior
         # factor of one merge, P(H) ∝ ρ^(Q − |π|): in (0, 1] (ρ > 1 would make merged
         # variants a priori more likely than the resolved one)
         self.volume = as_positive(f"{w} volume", self.volume)
-        self.rho = as_probability(f"{w} rho", self.rho, low_open=True)
+        if self.sensor is not None:
+            as_instance(f"{w} sensor", self.sensor, Resolution)
+            if self.rho is not None:
+                raise ProblemError(f"{w} rho: give rho (a constant merge prior) or sensor "
+                                   f"(the resolution model), not both")
+            if self.block_log_prior is not None:
+                raise ProblemError(f"{w} sensor: give sensor or your own block_log_prior, "
+                                   f"not both")
+            self.sensor._check(f"{w} sensor", d, q)
+            self._pair_u = self.sensor.pair_probabilities(self.means, self.covs)
+        elif self.rho is None:
+            raise ProblemError(f"{w} rho: required without a sensor (the constant merge "
+                               f"prior, in (0, 1])")
+        else:
+            self.rho = as_probability(f"{w} rho", self.rho, low_open=True)
+        self._log_w, self._conn = {}, {}
         if self.max_group_size is not None:
             self.max_group_size = as_count(f"{w} max_group_size", self.max_group_size,
                                            minimum=1)
@@ -118,6 +149,23 @@ class AssignmentData:
             if getattr(self, name) is not None and not callable(getattr(self, name)):
                 raise ProblemError(f"{w} {name}: expected a callable or None, got "
                                    f"{type(getattr(self, name)).__name__}")
+
+    @property
+    def per_measurement_cov(self) -> bool:
+        """True when ``meas_cov`` holds one covariance per measurement."""
+        return self.meas_cov.ndim == 3
+
+    @property
+    def log_prior_constant(self) -> float:
+        """C = Σ_{i<j} ln(1 − u_ij) with a sensor (0 without): ln P(π) = C + Σ_S ln w(S);
+        :func:`score` leaves C out (it is the same for every hypothesis)."""
+        if self._pair_u is None:
+            return 0.0
+        return float(np.sum(np.log1p(-self._pair_u[np.triu_indices(self.q, 1)])))
+
+    def pair_unresolved(self) -> FloatArray | None:
+        """The sensor's pair probabilities u_ij (Q, Q), or None without a sensor."""
+        return None if self._pair_u is None else self._pair_u.copy()
 
     @property
     def q(self) -> int:
@@ -195,19 +243,39 @@ def candidate_groups(data: AssignmentData, *,
 
 
 def block_log_prior(data: AssignmentData, group: tuple[int, ...], detected: bool) -> float:
-    """A block's share of ln P(H): the user's ``block_log_prior`` or the default
-    (|S| − 1) ln ρ + (ln P_D if detected else ln(1 − P_D))."""
+    """A block's share of ln P(H): the user's ``block_log_prior``, or with a sensor
+    ln w(S) (:func:`~optmodels.assignment.sensor.log_group_weight`: ln P_conn(S) −
+    Σ_{i<j∈S} ln(1 − u_ij); ln(u_ij/(1 − u_ij)) for a pair, 0 for a singleton), else the
+    constant (|S| − 1) ln ρ; plus ln P_D if detected, else ln(1 − P_D)."""
     if data.block_log_prior is not None:
         v = float(data.block_log_prior(tuple(group), bool(detected)))
         if not np.isfinite(v):
             raise ProblemError(f"block_log_prior: non-finite value for {group}, {detected}")
         return v
-    return (len(group) - 1) * math.log(data.rho) + (
-        math.log(data.pd) if detected else math.log1p(-data.pd))
+    det = math.log(data.pd) if detected else math.log1p(-data.pd)
+    if data._pair_u is not None:
+        g = tuple(group)
+        lw = data._log_w.get(g)
+        if lw is None:
+            lw = data._log_w[g] = log_group_weight(data._pair_u, g, data._conn)
+        return lw + det
+    return (len(group) - 1) * math.log(data.rho) + det
+
+
+def group_moments(data: AssignmentData, group: tuple[int, ...]
+                  ) -> tuple[FloatArray, FloatArray]:
+    """The predicted return of a block: centroid Σ w_j m_j and its covariance Σ w_j² K_j
+    (without the measurement noise); weights equal or the sensor's amplitudes."""
+    idx = list(group)
+    if data.sensor is None or isinstance(data.sensor.weights, str):
+        return data.means[idx].mean(axis=0), data.covs[idx].sum(axis=0) / len(idx) ** 2
+    wts = data.sensor.centroid_weights(tuple(group))
+    return wts @ data.means[idx], np.einsum("j,jab->ab", wts**2, data.covs[idx])
 
 
 def log_likelihoods(data: AssignmentData, groups: Sequence[tuple[int, ...]]) -> FloatArray:
-    """ln φ_iS (N, len(groups)): the user's ``log_likelihood`` or the default model."""
+    """ln φ_iS (N, len(groups)): the user's ``log_likelihood`` or the default model
+    N(x_i; Σ w_j m_j, Σ w_j² K_j + R_i) (5), R_i the measurement's own covariance."""
     out = np.empty((data.n, len(groups)))
     if data.log_likelihood is not None:
         for c, g in enumerate(groups):
@@ -221,12 +289,50 @@ def log_likelihoods(data: AssignmentData, groups: Sequence[tuple[int, ...]]) -> 
                                    f"(or −inf) for block {g}, got shape {v.shape}")
             out[:, c] = v
         return out
-    for c, g in enumerate(groups):
-        idx = list(g)
-        mean = data.means[idx].mean(axis=0)
-        cov = data.covs[idx].sum(axis=0) / len(idx) ** 2 + data.meas_cov
-        out[:, c] = _logpdf(data.measurements, mean, cov) if data.n else []
+    if data.n:
+        for start in range(0, len(groups), _CHUNK):
+            part = groups[start:start + _CHUNK]
+            out[:, start:start + len(part)] = _default_loglik(data, part).T
     return out
+
+
+#: Groups per batch of the default likelihood (bounds the (groups, N, d, d) work arrays).
+_CHUNK = 2048
+
+
+def _group_matrix(data: AssignmentData, groups: Sequence[tuple[int, ...]]
+                  ) -> sps.csr_matrix:
+    """The centroid weights as a sparse (len(groups), Q) matrix (row S: w_j on S's
+    members)."""
+    rows = np.repeat(np.arange(len(groups)), [len(g) for g in groups])
+    cols = np.fromiter((j for g in groups for j in g), dtype=int, count=len(rows))
+    if data.sensor is None or isinstance(data.sensor.weights, str):
+        vals = np.repeat([1.0 / len(g) for g in groups], [len(g) for g in groups])
+    else:
+        amp = data.sensor.weights
+        sums = np.array([amp[list(g)].sum() for g in groups])
+        vals = amp[cols] / sums[rows]
+    return sps.csr_matrix((vals, (rows, cols)), shape=(len(groups), data.q))
+
+
+def _default_loglik(data: AssignmentData, groups: Sequence[tuple[int, ...]]) -> FloatArray:
+    """ln N(x_i; Σ w_j m_j, Σ w_j² K_j + R_i) (len(groups), N), batched over the groups
+    (one Cholesky factor per group, or per group and measurement with R_i each)."""
+    q, d = data.means.shape
+    wm = _group_matrix(data, groups)
+    mean = np.asarray(wm @ data.means)  # (G, d)
+    cov = np.asarray(wm.power(2) @ data.covs.reshape(q, d * d)).reshape(-1, d, d)
+    diff = data.measurements[None, :, :] - mean[:, None, :]  # (G, N, d)
+    const = 0.5 * d * math.log(2 * math.pi)
+    if data.per_measurement_cov:
+        chol = np.linalg.cholesky(cov[:, None] + data.meas_cov[None])  # (G, N, d, d)
+        z = np.linalg.solve(chol, diff[..., None])[..., 0]
+        logdet = np.sum(np.log(np.diagonal(chol, axis1=-2, axis2=-1)), axis=-1)  # (G, N)
+    else:
+        chol = np.linalg.cholesky(cov + data.meas_cov)  # (G, d, d)
+        z = np.linalg.solve(chol, diff.transpose(0, 2, 1)).transpose(0, 2, 1)
+        logdet = np.sum(np.log(np.diagonal(chol, axis1=-2, axis2=-1)), axis=-1)[:, None]
+    return -0.5 * np.sum(z**2, axis=-1) - logdet - const
 
 
 def score(data: AssignmentData, partition: Partition, assignment: Sequence[int],

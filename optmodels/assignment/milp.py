@@ -4,15 +4,18 @@ exact pruning, the model, the solve and its re-check (:func:`~optmodels.assignme
 MILP (binary z_S per candidate group, γ_iS, γ_i0):
 
 .. math::
-    \max\ \sum_S z_S\,[(|S|-1)\ln\rho + \ln(1-P_D)]
+    \max\ \sum_S z_S\,p_0(S)
           + \sum_{i,S}\gamma_{iS}\,[\ln\varphi_{iS} + \ln P_D - \ln(1-P_D)]
           - \sum_i \gamma_{i0}\ln\Delta x
 
 subject to Σ_{S∋j} z_S = 1 (exact cover), Σ_i γ_iS ≤ z_S, Σ_S γ_iS + γ_i0 = 1 (the
-equality (2) omits). Since Σ_S z_S |S| = Q, the first sum is exactly (Q − |π|)ln ρ plus
-|π| ln(1 − P_D). Exact pruning: a γ_iS whose gain ln φ_iS + ln P_D − ln(1 − P_D) does not
-exceed the background's −ln Δx can be replaced by γ_i0 without lowering the score, so it
-is never needed for a MAP hypothesis and is not created.
+equality (2) omits), with p_0(S) the block's undetected prior term (constant ρ:
+(|S| − 1) ln ρ + ln(1 − P_D), so the first sum is (Q − |π|) ln ρ + |π| ln(1 − P_D); with a
+sensor ln w(S) + ln(1 − P_D), :mod:`~optmodels.assignment.sensor`) and φ_iS the
+measurement's likelihood with its own covariance R_i. Exact pruning: a γ_iS whose gain
+ln φ_iS + ln P_D − ln(1 − P_D) does not exceed the background's −ln Δx can be replaced
+by γ_i0 without lowering the score, so it is never needed for a MAP hypothesis and is
+not created.
 
 Holds: :func:`solve`, the dominance pruning :func:`_prune`, the sparse model
 :func:`_build_model` and the size guards :data:`MAX_LIKELIHOOD_ENTRIES`,
@@ -63,36 +66,46 @@ MAX_MODEL_COLUMNS = 1_000_000
 # ----------------------------------------------------------------------------- MILP
 def _prune(data: AssignmentData, groups: list[tuple[int, ...]], gain: FloatArray,
            usable: np.ndarray) -> tuple[list[tuple[int, ...]], FloatArray, np.ndarray]:
-    """Exact dominance pruning of merged groups (never removes a MAP hypothesis).
+    """Exact dominance pruning of merged groups (never removes a MAP hypothesis), for any
+    prior that decomposes over blocks, with p0(S) = ``block_log_prior(S, undetected)``
+    and the column gains gain_iS = ln φ_iS + p1(S) − p0(S) (whatever the likelihoods: one
+    R for all measurements or R_i each; the rules only compare entries of this table).
 
     2. Measurement i on a merged group S is dominated if splitting S into singletons, giving
        i to its best member and leaving the others undetected, scores at least as much:
-       (|S| − 1) ln ρ + gain_iS ≤ max_{j∈S} gain_ij + (|S| − 1) ln(1 − P_D); or if peeling
-       one member j off (i on S ∖ {j}, {j} undetected) does: gain_iS + ln ρ ≤
-       gain_{i,S∖j} + ln(1 − P_D). The swaps are always feasible (S's members are used
-       nowhere else), so γ_iS is never needed.
+       p0(S) + gain_iS ≤ Σ_{j∈S} p0({j}) + max_{j∈S} gain_ij; or if peeling one member j
+       off (i on S ∖ {j}, {j} undetected) does: p0(S) + gain_iS ≤ p0(S ∖ j) + p0({j}) +
+       gain_{i,S∖j}. The swaps are always feasible (S's members are used nowhere else, the
+       other blocks keep their prior terms), so γ_iS is never needed.
     3. A merged group left without any measurement can only be undetected; if
-       ρ ≤ 1 − P_D, its singletons (undetected) score at least as much
-       (|S| ln(1 − P_D) ≥ (|S| − 1) ln ρ + ln(1 − P_D)), so z_S is never needed.
+       p0(S) ≤ Σ_{j∈S} p0({j}), its singletons (undetected) score at least as much, so
+       z_S is never needed. (Constant prior: p0(S) = (|S| − 1) ln ρ + ln(1 − P_D), so the
+       rules read (|S| − 1) ln ρ + gain_iS ≤ max_j gain_ij + (|S| − 1) ln(1 − P_D),
+       gain_iS + ln ρ ≤ gain_{i,S∖j} + ln(1 − P_D), and ρ ≤ 1 − P_D.)
     """
-    lr, l1 = math.log(data.rho), math.log1p(-data.pd)
     index = {g: c for c, g in enumerate(groups)}
     single = {g[0]: c for c, g in enumerate(groups) if len(g) == 1}
+    p0 = np.array([block_log_prior(data, g, False) for g in groups])
     keep_g = np.ones(len(groups), dtype=bool)
-    for c, g in enumerate(groups):
-        if len(g) == 1:
-            continue
-        best_member = np.max(gain[:, [single[j] for j in g]], axis=1)
-        dominated = (len(g) - 1) * lr + gain[:, c] <= best_member + (len(g) - 1) * l1
+    sizes = np.array([len(g) for g in groups])
+    for size in np.unique(sizes[sizes > 1]):  # one batch per group size
+        cs = np.flatnonzero(sizes == size)
+        members = np.array([groups[c] for c in cs])  # (G_s, s)
+        scol = np.vectorize(single.__getitem__, otypes=[int])(members)
+        split = p0[scol].sum(axis=1)  # Σ_j p0({j})
+        lhs = p0[cs] + gain[:, cs]  # (N, G_s)
+        dominated = lhs <= split + gain[:, scol].max(axis=2)
         # 2'. peel one member j: S \ {j} keeps i, {j} undetected. S \ {j} is a candidate
         # too (subsets of a gated clique are cliques, sizes only shrink)
-        for j in g:
-            rest = index.get(tuple(x for x in g if x != j))
-            if rest is not None:
-                dominated |= gain[:, c] + lr <= gain[:, rest] + l1
-        usable[:, c] &= ~dominated
-        if not usable[:, c].any() and lr <= l1:
-            keep_g[c] = False
+        for pos in range(size):
+            rest = np.array([index.get(tuple(np.delete(m, pos).tolist()), -1)
+                             for m in members])
+            ok = rest >= 0
+            if ok.any():
+                rr = rest[ok]
+                dominated[:, ok] |= lhs[:, ok] <= p0[rr] + p0[scol[ok, pos]] + gain[:, rr]
+        usable[:, cs] &= ~dominated
+        keep_g[cs] = usable[:, cs].any(axis=0) | (p0[cs] > split)
     idx = np.flatnonzero(keep_g)
     return [groups[c] for c in idx], gain[:, idx], usable[:, idx]
 

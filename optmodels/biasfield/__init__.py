@@ -8,9 +8,14 @@ Part 1: ``data`` (plot tables, radar sites), ``geometry`` (polar maps), ``ingest
 ``fields`` (bias field models). Part 2 (section 4; entry point ``selection``): ``problem``
 (the original problem (8)-(10), :class:`FieldSolution`), ``selection`` (closed form (11),
 the QP (9)-(10)), ``lipschitz`` (the Lipschitz class), ``verify`` (the NumPy re-checks),
-``identifiability``.
+``identifiability``. Real recordings (issue 16): ``geometry3d`` (the exact 3-D geometry:
+slant range, each radar's own north, the common plane), ``recording`` (ASTERIX CAT048 /
+CAT021 in), ``frames`` (pandas in and out), ``cleaning`` (gaps, glitches, ground traffic).
+Using the field (issue 17): ``usage`` (:class:`FieldMap`, :func:`correct_plots`,
+:func:`registration_error`, :func:`score`), ``referee`` (ADS-B as the referee).
 """
 
+from optmodels.biasfield import geometry3d
 from optmodels.biasfield.baseline import BaselineResult, azimuth_bias_baseline
 from optmodels.biasfield.cells import (
     FieldData,
@@ -21,8 +26,15 @@ from optmodels.biasfield.cells import (
     synthetic_field_data,
     uncertainty_sets,
 )
-from optmodels.biasfield.data import PlotTable, RadarSet
+from optmodels.biasfield.cleaning import (
+    CleaningLimits,
+    CleaningReport,
+    clean_plots,
+    clean_reports,
+)
+from optmodels.biasfield.data import AircraftPaths, PlotTable, RadarSet
 from optmodels.biasfield.fields import BiasField
+from optmodels.biasfield.frames import from_frame, to_frame
 from optmodels.biasfield.geometry import (
     bias_from_shift,
     from_polar,
@@ -34,6 +46,22 @@ from optmodels.biasfield.geometry import (
 from optmodels.biasfield.ingest import read_plots, read_radars, read_tracks
 from optmodels.biasfield.lipschitz import solve_lipschitz
 from optmodels.biasfield.problem import FieldSolution
+from optmodels.biasfield.recording import (
+    AdsbReports,
+    Recording,
+    RecordingReport,
+    fl_to_height,
+    read_recording,
+    read_sites,
+)
+from optmodels.biasfield.referee import (
+    AbsoluteError,
+    AdsbField,
+    absolute_error,
+    adsb_field,
+    adsb_reference,
+    compare_fields,
+)
 from optmodels.biasfield.selection import closed_form, solve
 from optmodels.biasfield.tracks import (
     ResidualCheck,
@@ -42,22 +70,55 @@ from optmodels.biasfield.tracks import (
     hat_basis,
     residual_check,
 )
+from optmodels.biasfield.usage import (
+    Corrected,
+    FieldMap,
+    FieldScore,
+    RegistrationError,
+    correct_plots,
+    field_map,
+    registration_error,
+    score,
+)
 
 __all__ = [
+    "AbsoluteError",
+    "AdsbField",
+    "AdsbReports",
+    "AircraftPaths",
     "BaselineResult",
     "BiasField",
+    "CleaningLimits",
+    "CleaningReport",
+    "Corrected",
     "FieldData",
+    "FieldMap",
+    "FieldScore",
     "FieldSolution",
     "PlotTable",
     "RadarSet",
+    "Recording",
+    "RecordingReport",
+    "RegistrationError",
     "ResidualCheck",
     "TrackFit",
+    "absolute_error",
+    "adsb_field",
+    "adsb_reference",
     "azimuth_bias_baseline",
     "bias_from_shift",
     "build_field_data",
+    "clean_plots",
+    "clean_reports",
     "closed_form",
+    "compare_fields",
+    "correct_plots",
+    "field_map",
     "fit_tracks",
+    "fl_to_height",
+    "from_frame",
     "from_polar",
+    "geometry3d",
     "hat_basis",
     "laplacian",
     "neighbours",
@@ -65,12 +126,17 @@ __all__ = [
     "polar_jacobian",
     "read_plots",
     "read_radars",
+    "read_recording",
+    "read_sites",
     "read_tracks",
+    "registration_error",
     "residual_check",
+    "score",
     "shift_from_bias",
     "solve",
     "solve_lipschitz",
     "synthetic_field_data",
+    "to_frame",
     "to_polar",
     "uncertainty_sets",
     "wrap_angle",

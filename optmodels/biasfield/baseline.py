@@ -12,12 +12,15 @@ polyline x(t) = g(t)θ (3) with knots at fixed times, shared by all radars; rada
     \quad (4),
 
 with x̃(t) = z_i(t) (as in the paper's reference [2]) and (ρ, α) its range and azimuth
-from radar i (a small clockwise rotation about the site). The θ of every object are
-eliminated by Schur complements, leaving an m × m system for Δ; its inverse is the
-covariance of Δ̂. The fit is judged by χ² = Σ rᵀV⁻¹r with 2n − Σ 2K_a − m degrees of
-freedom: if the constant model is right (and the polyline resolves the manoeuvres), χ²/dof
-≈ 1; for a position-dependent field it is rejected, and estimates from different groups of
-trajectories disagree beyond their standard errors -- the paper's observation.
+from radar i (a small clockwise rotation about the site; for a 3-D radar set -- slant range,
+azimuth from the radar's own north, plots with heights -- the exact ∂z/∂α at fixed slant
+range and height, :func:`~optmodels.biasfield.geometry3d.plane_jacobian`, and the exact 3-D
+covariance V). The θ of every object are eliminated by Schur complements, leaving an
+m × m system for Δ; its inverse is the covariance of Δ̂. The fit is judged by
+χ² = Σ rᵀV⁻¹r with 2n − Σ 2K_a − m degrees of freedom: if the constant model is right
+(and the polyline resolves the manoeuvres), χ²/dof ≈ 1; for a position-dependent field it
+is rejected, and estimates from different groups of trajectories disagree beyond their
+standard errors -- the paper's observation.
 """
 
 from __future__ import annotations
@@ -28,6 +31,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import linalg, stats
 
+from optmodels.biasfield import geometry3d as g3
 from optmodels.biasfield.data import PlotTable, RadarSet
 from optmodels.biasfield.geometry import to_polar
 from optmodels.biasfield.tracks import _check_tables, _knots, _pieces, polyline_normal, whiten
@@ -77,11 +81,17 @@ def azimuth_bias_baseline(plots: PlotTable, radars: RadarSet, *,
     z_all = plots.cartesian(radars)
     vinv_all = np.empty((len(plots), 2, 2))
     dcol = np.empty((len(plots), 2))
+    h_all = plots.height if radars.is_3d else None
     for i in range(m):
         sel = plots.radar == i
-        vinv_all[sel] = np.linalg.inv(radars.cartesian_cov(i, z_all[sel]))
-        pol = to_polar(z_all[sel], radars.sites[i])
-        dcol[sel] = pol[:, :1] * np.column_stack([np.cos(pol[:, 1]), -np.sin(pol[:, 1])])
+        h_i = None if h_all is None else h_all[sel]
+        vinv_all[sel] = np.linalg.inv(radars.cartesian_cov(i, z_all[sel], height=h_i))
+        if radars.is_3d:  # ∂z/∂α at fixed slant range and height (exact)
+            dcol[sel] = g3.plane_jacobian(z_all[sel], h_i, radars.geodetic[i],  # type: ignore
+                                          radars.origin)[:, :, 1]
+        else:
+            pol = to_polar(z_all[sel], radars.sites[i])
+            dcol[sel] = pol[:, :1] * np.column_stack([np.cos(pol[:, 1]), -np.sin(pol[:, 1])])
     ids = np.unique(plots.object[plots.object >= 0]) if objects is None else np.asarray(objects)
     s_mat = np.zeros((m, m))
     s_rhs = np.zeros(m)

@@ -21,6 +21,7 @@ r"""Cells, averaging and uncertainty sets (paper 001, section 3 and (9)-(10)).
 
 from __future__ import annotations
 
+import time
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -29,7 +30,6 @@ from typing import Any, Literal
 import numpy as np
 from numpy.typing import ArrayLike
 from scipy import sparse
-from scipy.cluster.vq import kmeans2
 from scipy.spatial import Delaunay, QhullError, cKDTree
 
 from optmodels.biasfield.data import PlotTable, RadarSet
@@ -60,6 +60,15 @@ class FieldData:
     positions ξ̂_i(k); ``adjacency`` symmetric 0/1, given as a dense or sparse (K, K) matrix
     or an (E, 2) edge list, stored sparse (CSR); ``P`` the weight of ‖·‖_F: (2, 2)
     for every radar, or (2m, 2m); ``xi_cov`` (K, m, 2, 2) covariances of ξ̂_i(k) if known.
+
+    3-D geometry (optional, all saved and loaded): ``jacobians`` (K, m, 2, 2) the exact
+    ∇p_i = ∂(slant range, azimuth)/∂(East, North) of each radar at each cell's mean
+    position ξ̂_(k) and mean target height; ``heights`` (K,) that height (m above the
+    WGS-84 ellipsoid); ``geodetic`` (m, 3) the sites (lat deg, lon deg, h m) and
+    ``origin`` (3,) the common plane's origin. With ``geodetic``, ``origin`` and
+    ``heights`` the sets (10) use the exact 3-D polar maps (:func:`uncertainty_sets`);
+    with ``jacobians`` alone, Φ⁰ is linearised through them; without any, the 2-D maps
+    of the sites ``radars``.
     """
 
     radars: FloatArray
@@ -68,6 +77,10 @@ class FieldData:
     adjacency: np.ndarray
     P: FloatArray
     xi_cov: FloatArray | None = None
+    jacobians: FloatArray | None = None
+    heights: FloatArray | None = None
+    geodetic: FloatArray | None = None
+    origin: FloatArray | None = None
 
     def __post_init__(self) -> None:
         self.radars = as_finite_array("radars", self.radars, ndim=2)
@@ -101,6 +114,41 @@ class FieldData:
             # indefinite one was accepted before)
             check_spd_stack("biasfield.FieldData xi_cov", cov)
             self.xi_cov = cov
+        self._check_geometry3d(k, m)
+
+    def _check_geometry3d(self, k: int, m: int) -> None:
+        from optmodels.biasfield.geometry3d import site_geodetic
+
+        if self.jacobians is not None:
+            jac = as_finite_array("biasfield.FieldData jacobians", self.jacobians,
+                                  shape=(k, m, 2, 2), max_abs=MAX_MAGNITUDE)
+            det = jac[..., 0, 0] * jac[..., 1, 1] - jac[..., 0, 1] * jac[..., 1, 0]
+            scale = np.abs(jac).max(axis=(-1, -2)) ** 2
+            if np.any(np.abs(det) <= 1e-12 * scale):
+                raise ProblemError("biasfield.FieldData jacobians: a singular ∇p_i (a cell "
+                                   "at a radar site?)")
+            self.jacobians = jac
+        if self.heights is not None:
+            self.heights = as_finite_array("biasfield.FieldData heights", self.heights,
+                                           shape=(k,), max_abs=1e6)
+        if (self.geodetic is None) != (self.origin is None):
+            raise ProblemError("biasfield.FieldData geodetic: give both the geodetic sites "
+                               "and the origin, or neither")
+        if self.geodetic is not None:
+            geo = as_finite_array("biasfield.FieldData geodetic", self.geodetic, shape=(m, 3))
+            for j in range(m):
+                site_geodetic(f"biasfield.FieldData geodetic[{j}]", geo[j])
+            self.geodetic = geo
+            self.origin = site_geodetic("biasfield.FieldData origin", self.origin)
+            if self.heights is None:
+                raise ProblemError("biasfield.FieldData heights: the 3-D sets need the cell "
+                                   "heights (K,) with the geodetic sites")
+
+    @property
+    def is_3d(self) -> bool:
+        """True when the sets (10) use the exact 3-D polar maps (geodetic, origin, heights)
+        or per-cell Jacobians."""
+        return self.geodetic is not None or self.jacobians is not None
 
     @property
     def m(self) -> int:
@@ -116,8 +164,9 @@ class FieldData:
         arrays = {"radars": self.radars, "centers": self.centers, "xi": self.xi,
                   "edges": np.column_stack([upper.row, upper.col]).astype(np.int64),
                   "P": self.P}
-        if self.xi_cov is not None:
-            arrays["xi_cov"] = self.xi_cov
+        for name in ("xi_cov", "jacobians", "heights", "geodetic", "origin"):
+            if getattr(self, name) is not None:
+                arrays[name] = getattr(self, name)
         if not isinstance(path, str | Path):
             raise ProblemError(f"biasfield.FieldData.save path: expected a file name, got "
                                f"{type(path).__name__}")
@@ -130,7 +179,9 @@ class FieldData:
     @classmethod
     def load(cls, path: str | Path) -> FieldData:
         """Read an ``.npz`` written by :meth:`save` (or by hand with the same keys; the
-        neighbours as ``edges`` (E, 2) or a dense ``adjacency`` (K, K))."""
+        neighbours as ``edges`` (E, 2) or a dense ``adjacency`` (K, K)); the optional keys
+        ``xi_cov``, ``jacobians``, ``heights``, ``geodetic``, ``origin`` (files of the 2-D
+        chain have none of the last four)."""
         if not isinstance(path, str | Path):
             raise ProblemError(f"biasfield.FieldData.load path: expected a file name, got "
                                f"{type(path).__name__}")
@@ -138,7 +189,9 @@ class FieldData:
                      one_of=("edges", "adjacency"))
         adj = d["edges"] if "edges" in d else d["adjacency"]
         try:
-            return cls(d["radars"], d["centers"], d["xi"], adj, d["P"], d.get("xi_cov"))
+            return cls(d["radars"], d["centers"], d["xi"], adj, d["P"], d.get("xi_cov"),
+                       d.get("jacobians"), d.get("heights"), d.get("geodetic"),
+                       d.get("origin"))
         except ProblemError as exc:
             raise ProblemError(f"{path}: {exc}") from None
 
@@ -172,7 +225,16 @@ def _as_adjacency(adj: Any, k: int) -> sparse.csr_matrix:
 def place_centers(points: ArrayLike, count: int, *, method: Literal["kmeans", "grid"] = "kmeans",
                   seed: int | np.random.Generator = 0) -> FloatArray:
     """Cell centres: k-means of ``points`` (traffic concentrations) or a square grid of about
-    ``count`` nodes over their bounding box."""
+    ``count`` nodes over their bounding box.
+
+    k-means: the coordinates scaled by their standard deviations; ``count`` distinct
+    points drawn at random (``seed``) as the start, then :data:`LLOYD_ITERATIONS` Lloyd
+    iterations on ALL the points (nearest centre by a k-d tree, O(N log K) per iteration
+    instead of the O(N K) of a brute-force search; an empty cluster keeps its centre).
+    This is scipy's ``kmeans2(minit="points", iter=20)`` step for step (same start from
+    the same generator, same updates): the centres agree to rounding (test
+    ``test_place_centers_equals_scipy_kmeans2``); at N = 2·10⁶, K = 10⁴ it takes about a
+    minute on 2 cores where scipy's takes hours. (k-means++ seeding is O(N K²).)"""
     fn = "biasfield.place_centers"
     pts = as_finite_array(f"{fn} points", points, ndim=2, max_abs=MAX_MAGNITUDE)
     if pts.shape[1] != 2:
@@ -187,16 +249,31 @@ def place_centers(points: ArrayLike, count: int, *, method: Literal["kmeans", "g
     if method == "kmeans":
         rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
         scale = pts.std(axis=0)
-        # k-means++ seeding is O(N K²) in scipy (minutes at K = 2000); random points,
-        # then Lloyd iterations, are O(N K) per iteration
-        cent, _ = kmeans2(pts / scale, count, iter=20, seed=rng, minit="points")
-        return cent * scale
+        return _lloyd(pts / scale, count, rng) * scale
     if method == "grid":
         lo, hi = pts.min(axis=0), pts.max(axis=0)
         side = int(np.ceil(np.sqrt(count)))
         gx, gy = np.meshgrid(np.linspace(lo[0], hi[0], side), np.linspace(lo[1], hi[1], side))
         return np.column_stack([gx.ravel(), gy.ravel()])
     raise ProblemError(f"method: expected 'kmeans' or 'grid', got {method!r}")
+
+
+#: Lloyd iterations of :func:`place_centers` (as scipy's ``kmeans2(iter=20)``).
+LLOYD_ITERATIONS = 20
+
+
+def _lloyd(pts: FloatArray, count: int, rng: np.random.Generator) -> FloatArray:
+    """Lloyd's k-means from ``count`` random distinct points of ``pts`` (N, d); nearest
+    centre by cKDTree; an empty cluster keeps its previous centre."""
+    cent = pts[rng.choice(pts.shape[0], size=count, replace=False)].copy()
+    for _ in range(LLOYD_ITERATIONS):
+        label = cKDTree(cent).query(pts, workers=-1)[1]
+        n = np.bincount(label, minlength=count)
+        has = n > 0
+        for c in range(pts.shape[1]):
+            sums = np.bincount(label, pts[:, c], minlength=count)
+            cent[has, c] = sums[has] / n[has]
+    return cent
 
 
 def neighbours(centers: ArrayLike, *, method: Literal["delaunay", "radius"] = "delaunay",
@@ -254,10 +331,28 @@ def uncertainty_sets(data: FieldData, *, space: Literal["polar", "cartesian"] = 
         return s0, sparse.block_diag([np.tile(np.eye(2), (m, 1))] * k, format="csr")
     phi0 = np.empty((k, m, 2))
     blocks = []
-    for i in range(m):
-        d = to_polar(data.xi[:, i], data.radars[i]) - to_polar(mean, data.radars[i])
-        phi0[:, i] = np.column_stack([d[:, 0], wrap_angle(d[:, 1])])
-    jac = np.stack([polar_jacobian(mean, data.radars[i]) for i in range(m)], axis=1)
+    if data.geodetic is not None and data.heights is not None:
+        # exact 3-D polar maps at each cell's height: slant range, each radar's own north
+        from optmodels.biasfield import geometry3d as g3
+
+        lat0, lon0 = g3.plane_to_geodetic(mean, data.origin)
+        for i in range(m):
+            lat, lon = g3.plane_to_geodetic(data.xi[:, i], data.origin)
+            r1, a1 = g3.measure(data.geodetic[i], lat, lon, data.heights)
+            r0, a0 = g3.measure(data.geodetic[i], lat0, lon0, data.heights)
+            phi0[:, i] = np.column_stack([r1 - r0, wrap_angle(a1 - a0)])
+        jac = data.jacobians if data.jacobians is not None else np.stack(
+            [g3.polar_jacobian3d(mean, data.heights, data.geodetic[i], data.origin)
+             for i in range(m)], axis=1)
+    elif data.jacobians is not None:
+        # only the Jacobians known: Φ0 linearised, ∇p_i(ξ̂_(k))(ξ̂_i(k) − ξ̂_(k))
+        jac = data.jacobians
+        phi0[:] = np.einsum("kiab,kib->kia", jac, data.xi - mean[:, None, :])
+    else:
+        for i in range(m):
+            d = to_polar(data.xi[:, i], data.radars[i]) - to_polar(mean, data.radars[i])
+            phi0[:, i] = np.column_stack([d[:, 0], wrap_angle(d[:, 1])])
+        jac = np.stack([polar_jacobian(mean, data.radars[i]) for i in range(m)], axis=1)
     for kk in range(k):
         blocks.append(jac[kk].reshape(2 * m, 2))
     return phi0.reshape(-1), sparse.block_diag(blocks, format="csr")
@@ -267,7 +362,8 @@ def uncertainty_sets(data: FieldData, *, space: Literal["polar", "cartesian"] = 
 class Diagnostics:
     """What :func:`build_field_data` used and dropped: plots dropped by reason, per kept
     cell the averaging instants (``samples_per_cell``), the plots behind them (all radars)
-    and the objects, and the number of cells dropped for lack of data."""
+    and the objects, the number of cells dropped for lack of data, and the seconds of
+    each stage (``timings``)."""
 
     dropped_plots: dict[str, int] = field(default_factory=dict)
     samples_per_cell: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
@@ -275,13 +371,16 @@ class Diagnostics:
     objects_per_cell: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
     dropped_cells: int = 0
     fits: list[TrackFit] = field(default_factory=list, repr=False)
+    #: wall seconds of the stages: ``fits``, ``samples``, ``centres``, ``averaging``
+    timings: dict[str, float] = field(default_factory=dict)
 
 
 def build_field_data(plots: PlotTable, radars: RadarSet, *, cells: int | ArrayLike = 50,
                      cell_radius: float | None = None, knot_spacing: float = 20.0,
                      sample_step: float = 5.0, neighbour_method: Literal[
                          "delaunay", "radius"] = "delaunay", neighbour_radius: float | None = None,
-                     P: ArrayLike | None = None, exclude_radius: float = 20e3, seed: int = 0
+                     P: ArrayLike | None = None, exclude_radius: float = 20e3, seed: int = 0,
+                     scheduler: Any = None, positions: ArrayLike | None = None
                      ) -> tuple[FieldData, Diagnostics]:
     """Plots → :class:`FieldData`: track fits (3), cells, averaging (6)-(7), neighbours.
 
@@ -292,6 +391,18 @@ def build_field_data(plots: PlotTable, radars: RadarSet, *, cells: int | ArrayLi
     object seen by all m radars are dropped with a warning (counted in the diagnostics).
     Samples within ``exclude_radius`` of any radar are not used: the paper's neighbourhoods
     B_i, where the field is not smooth and the linearisation of p_i fails.
+
+    3-D radar set (``radars.is_3d``; plots with slant ranges, own-north azimuths and target
+    heights): the track fits use the exact plane positions and Jacobians at each plot's
+    height; each cell gets its mean target height (the plots' heights, interpolated in time
+    per object, averaged with the weights of (6)-(7)) and the exact ∇p_i at its mean
+    position and that height (``FieldData.jacobians``, ``heights``, ``geodetic``,
+    ``origin``), so that the sets (10) use the exact 3-D maps.
+
+    ``scheduler``: passed to :func:`~optmodels.biasfield.tracks.fit_tracks` (``None``:
+    in this process). ``positions`` (n, 2): the plots' positions on the common plane
+    (``plots.cartesian(radars)``) if the caller has them already, passed to ``fit_tracks``
+    (the exact 3-D placement costs ~11 s per 10⁶ plots: compute it once per chain).
 
     Units: ``cell_radius``, ``neighbour_radius``, ``exclude_radius`` in metres;
     ``knot_spacing``, ``sample_step`` in seconds.
@@ -310,8 +421,14 @@ def build_field_data(plots: PlotTable, radars: RadarSet, *, cells: int | ArrayLi
     exclude_radius = as_positive(f"{fn} exclude_radius (m)", exclude_radius, allow_zero=True)
     seed = as_count(f"{fn} seed", seed)
     _check_tables(fn, plots, radars)
-    fits, dropped = fit_tracks(plots, radars, knot_spacing=knot_spacing)
+    extra: dict[str, Any] = {} if scheduler is None else {"scheduler": scheduler}
+    if positions is not None:
+        extra["positions"] = positions
+    clock = time.perf_counter()
+    fits, dropped = fit_tracks(plots, radars, knot_spacing=knot_spacing, **extra)
+    height_of = _height_interpolants(plots) if radars.is_3d else {}
     diag = Diagnostics(dropped_plots=dict(dropped.counts), fits=fits)
+    clock = _lap(diag, "fits", clock)
     m = radars.m
     by_obj: dict[int, list[list[TrackFit]]] = {}
     for f in fits:
@@ -346,14 +463,16 @@ def build_field_data(plots: PlotTable, radars: RadarSet, *, cells: int | ArrayLi
     if not samples:
         raise ProblemError("plots: no object is seen by all m radars at the same time; "
                            "no cell can be formed")
-    pos_all = np.vstack(all_pos)
+    clock = _lap(diag, "samples", clock)
     if np.ndim(cells) == 0:
-        centers = place_centers(pos_all, int(cells), seed=seed)  # type: ignore[arg-type]
+        centers = place_centers(np.vstack(all_pos), int(cells),  # type: ignore[arg-type]
+                                seed=seed)
     else:
         centers = as_finite_array(f"{fn} cells", cells, ndim=2, max_abs=MAX_MAGNITUDE)
         if centers.shape[1] != 2 or centers.shape[0] < 2:
             raise ProblemError(f"{fn} cells: expected (K, 2) centres (m) with K ≥ 2, got "
                                f"{centers.shape}")
+    clock = _lap(diag, "centres", clock)
     tree = cKDTree(centers)
     if cell_radius is None:
         nn = tree.query(centers, k=2)[0][:, 1]
@@ -361,29 +480,16 @@ def build_field_data(plots: PlotTable, radars: RadarSet, *, cells: int | ArrayLi
     k0 = centers.shape[0]
     sum_xi = np.zeros((k0, m, 2))
     sum_cov = np.zeros((k0, m, 2, 2))
+    sum_h = np.zeros(k0)
     n_obj = np.zeros(k0, dtype=int)
     n_smp = np.zeros(k0, dtype=int)
     n_plt = np.zeros(k0, dtype=int)
     plot_times = plots.time
     for (t, per_radar, pidx), pos in zip(samples, all_pos, strict=True):
-        dist, cell = tree.query(pos)
-        near = np.min(np.linalg.norm(pos[:, None] - radars.sites[None], axis=2), axis=1)
-        inside = (dist <= cell_radius) & (near > exclude_radius)
-        for kk in np.unique(cell[inside]):
-            sel = inside & (cell == kk)
-            n_sel = int(sel.sum())
-            n_obj[kk] += 1
-            n_smp[kk] += n_sel
-            for i in range(m):
-                # average over the object's instants in the cell, piece by piece (6)-(7)
-                for j in np.unique(pidx[i, sel]):
-                    ts = t[sel & (pidx[i] == j)]
-                    w = ts.size / n_sel
-                    pt = plot_times[per_radar[i][j].rows]
-                    n_plt[kk] += int(np.sum((pt >= ts[0]) & (pt <= ts[-1] + sample_step)))
-                    mean_p, cov_p = per_radar[i][j].mean_over(ts)
-                    sum_xi[kk, i] += w * mean_p
-                    sum_cov[kk, i] += w * w * cov_p
+        _accumulate(t, per_radar, pidx, pos, tree, cell_radius, radars, exclude_radius,
+                    sample_step, plot_times, height_of, sum_xi, sum_cov, sum_h, n_obj,
+                    n_smp, n_plt)
+    clock = _lap(diag, "averaging", clock)
     keep = n_obj > 0
     diag.dropped_cells = int(np.sum(~keep))
     if diag.dropped_cells:
@@ -404,7 +510,93 @@ def build_field_data(plots: PlotTable, radars: RadarSet, *, cells: int | ArrayLi
                                for i in range(m)]).toarray()
     else:
         p = as_finite_array(f"{fn} P", P, ndim=2, max_abs=MAX_MAGNITUDE)
-    return FieldData(radars.sites, centers, xi, adj, p, xi_cov), diag
+    if not radars.is_3d:
+        return FieldData(radars.sites, centers, xi, adj, p, xi_cov), diag
+    heights = sum_h[keep] / n_obj[keep]
+    mean = xi.mean(axis=1)
+    jac = np.stack([radars.polar_jacobian(i, mean, heights) for i in range(m)], axis=1)
+    return FieldData(radars.sites, centers, xi, adj, p, xi_cov, jac, heights,
+                     radars.geodetic, radars.origin), diag
+
+
+def _lap(diag: Diagnostics, stage: str, since: float) -> float:
+    """Record the seconds of ``stage`` since ``since``; return the clock."""
+    now = time.perf_counter()
+    diag.timings[stage] = now - since
+    return now
+
+
+def _accumulate(t: FloatArray, per_radar: list[list[TrackFit]], pidx: np.ndarray,
+                pos: FloatArray, tree: cKDTree, cell_radius: float, radars: RadarSet,
+                exclude_radius: float, sample_step: float, plot_times: FloatArray,
+                height_of: dict[int, tuple[FloatArray, FloatArray]], sum_xi: FloatArray,
+                sum_cov: FloatArray, sum_h: FloatArray, n_obj: np.ndarray, n_smp: np.ndarray,
+                n_plt: np.ndarray) -> None:
+    """One object's share of the averages (6)-(7), added in place to the per-cell sums.
+
+    The object's sampling instants ``t`` (positions ``pos``, each radar's piece ``pidx``)
+    are sorted by cell once (stable: time order kept inside a cell); per radar and piece
+    ONE :meth:`TrackFit.means_over` gives the means and covariances over all the cells at
+    once (the same numbers as one :meth:`TrackFit.mean_over` per cell), and the plots
+    behind each (cell, piece) are counted by binary search in the piece's sorted plot
+    times: O(samples log) per object instead of O(samples × cells crossed) Python calls."""
+    m = radars.m
+    dist, cell = tree.query(pos)
+    near = np.min(np.linalg.norm(pos[:, None] - radars.sites[None], axis=2), axis=1)
+    idx = np.flatnonzero((dist <= cell_radius) & (near > exclude_radius))
+    if idx.size == 0:
+        return
+    idx = idx[np.argsort(cell[idx], kind="stable")]
+    cs = cell[idx]
+    first = np.flatnonzero(np.concatenate([[True], cs[1:] != cs[:-1]]))
+    cells_here = cs[first]
+    n_sel = np.diff(np.append(first, cs.size))
+    grp = np.repeat(np.arange(first.size), n_sel)  # cell label 0..G−1 of each sample
+    n_obj[cells_here] += 1
+    n_smp[cells_here] += n_sel
+    ts_all = t[idx]
+    if radars.is_3d:
+        ht, hv = height_of[per_radar[0][0].object]
+        sum_h[cells_here] += np.bincount(grp, np.interp(ts_all, ht, hv)) / n_sel
+    for i in range(m):
+        pieces_i = pidx[i, idx]
+        for j in np.unique(pieces_i):
+            fit = per_radar[i][j]
+            on = pieces_i == j
+            ts, g = ts_all[on], grp[on]
+            # the cells this piece covers, relabelled 0..G'−1 (g is sorted)
+            starts = np.flatnonzero(np.concatenate([[True], g[1:] != g[:-1]]))
+            local = np.repeat(np.arange(starts.size), np.diff(np.append(starts, g.size)))
+            gs = g[starts]
+            kk = cells_here[gs]
+            mean_p, cov_p = fit.means_over(ts, local)
+            w = np.diff(np.append(starts, g.size)) / n_sel[gs]
+            sum_xi[kk, i] += w[:, None] * mean_p
+            sum_cov[kk, i] += (w * w)[:, None, None] * cov_p
+            pt = plot_times[fit.rows]
+            if np.any(pt[1:] < pt[:-1]):
+                pt = np.sort(pt)
+            lo = np.minimum.reduceat(ts, starts)
+            hi = np.maximum.reduceat(ts, starts) + sample_step
+            n_plt[kk] += (np.searchsorted(pt, hi, side="right")
+                          - np.searchsorted(pt, lo, side="left"))
+
+
+def _height_interpolants(plots: PlotTable) -> dict[int, tuple[FloatArray, FloatArray]]:
+    """Per object: the (time, height) of its plots with a known height (all radars), sorted
+    by time, for np.interp (the target's height as ADS-B or a corrected flight level gives
+    it, the same for every radar)."""
+    if plots.height is None:
+        raise ProblemError("biasfield.build_field_data plots: a 3-D radar set needs the "
+                           "target heights (PlotTable height)")
+    ok = ~np.isnan(plots.height) & (plots.object >= 0)
+    obj, t, h = plots.object[ok], plots.time[ok], plots.height[ok]
+    order = np.lexsort((t, obj))
+    obj, t, h = obj[order], t[order], h[order]
+    cuts = np.flatnonzero(np.diff(obj)) + 1
+    return {int(o[0]): (tt, hh) for o, tt, hh in zip(np.split(obj, cuts), np.split(t, cuts),
+                                                      np.split(h, cuts), strict=True)
+            if o.size}
 
 
 #: Size guard of :func:`synthetic_field_data` (memory grows as cells × radars).

@@ -1,12 +1,23 @@
-"""Radars and radar plots (paper 001, (1)): the tables the bias-field pipeline reads."""
+"""Radars and radar plots (paper 001, (1)): the tables the bias-field pipeline reads.
+
+Two geometries share the tables. **2-D** (``RadarSet`` without ``geodetic``): sites and
+targets on one flat plane, ``range`` the distance on it, azimuth from the plane's North.
+**3-D** (``RadarSet(..., geodetic=...)``): sites at their latitude, longitude and height
+above the WGS-84 ellipsoid, each plot's ``range`` is the SLANT range and its azimuth is
+clockwise from the radar's OWN north, and plots carry the target ``height`` (m above the
+ellipsoid); positions on the common plane are exact through ECEF
+(:mod:`optmodels.biasfield.geometry3d`).
+"""
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
 
+from optmodels.biasfield import geometry3d as g3
 from optmodels.biasfield.geometry import from_polar, polar_jacobian
 from optmodels.core import MAX_MAGNITUDE, FloatArray, ProblemError, as_count, as_finite_array
 
@@ -15,20 +26,53 @@ __all__ = ["AircraftPaths", "PlotTable", "RadarSet"]
 
 @dataclass(frozen=True)
 class RadarSet:
-    """m 2-D radars: ``sites`` (m, 2) East-North (m); per radar ``sigma_range`` (m),
-    ``sigma_azimuth`` (rad), ``max_range`` (m) and ``names``.
+    """m radars: ``sites`` (m, 2) East-North (m) on the common plane; per radar
+    ``sigma_range`` (m), ``sigma_azimuth`` (rad), ``max_range`` (m) and ``names``.
+
+    3-D (``geodetic`` given): ``geodetic`` (m, 3) site latitude (deg), longitude (deg),
+    height (m above the WGS-84 ellipsoid); ``origin`` (3,) (lat deg, lon deg, h m) of the
+    common plane (default: the mean latitude and longitude of the sites, height 0);
+    ``sites`` is then computed (the East-North of each site's footprint on the plane of
+    ``origin``, :func:`~optmodels.biasfield.geometry3d.common_plane`) and may be ``None``;
+    a given one is replaced. Plots of a 3-D set have SLANT ranges and azimuths clockwise
+    from each radar's own north. ``ids``: per radar a (SAC, SIC) pair of ints 0-255
+    (ASTERIX I010), or empty.
 
     The noise covariance of a plot is V_i = diag(σ_r², σ_az²) in the radar's polar frame,
-    and, to first order, ∇p_i⁻¹ V_i ∇p_i⁻ᵀ in Cartesian coordinates (:meth:`cartesian_cov`).
+    and, to first order, ∇p_i⁻¹ V_i ∇p_i⁻ᵀ on the plane (:meth:`cartesian_cov`; in 3-D
+    ∇p_i is the exact Jacobian at the target's plane position and height).
     """
 
-    sites: FloatArray
+    sites: FloatArray | None
     sigma_range: FloatArray
     sigma_azimuth: FloatArray
     max_range: FloatArray
     names: tuple[str, ...] = field(default=())
+    geodetic: FloatArray | None = None
+    origin: FloatArray | None = None
+    ids: tuple[tuple[int, int], ...] = field(default=())
 
     def __post_init__(self) -> None:
+        if self.geodetic is not None:
+            geo = as_finite_array("biasfield.RadarSet geodetic", self.geodetic, ndim=2)
+            if geo.shape[1] != 3:
+                raise ProblemError("biasfield.RadarSet geodetic: expected (m, 3) latitude "
+                                   f"(deg), longitude (deg), height (m), got {geo.shape}")
+            for j in range(geo.shape[0]):
+                g3.site_geodetic(f"biasfield.RadarSet geodetic[{j}]", geo[j])
+            if self.origin is None:
+                org = np.array([geo[:, 0].mean(), geo[:, 1].mean(), 0.0])
+            else:
+                org = g3.site_geodetic("biasfield.RadarSet origin", self.origin)
+            object.__setattr__(self, "geodetic", geo)
+            object.__setattr__(self, "origin", org)
+            object.__setattr__(self, "sites", g3.common_plane(geo[:, 0], geo[:, 1], org))
+        elif self.origin is not None:
+            object.__setattr__(self, "origin", g3.site_geodetic("biasfield.RadarSet origin",
+                                                                self.origin))
+        if self.sites is None:
+            raise ProblemError("biasfield.RadarSet sites: give the sites (m, 2) East-North "
+                               "(m) or their geodetic positions (geodetic=)")
         sites = as_finite_array("biasfield.RadarSet sites", self.sites, ndim=2,
                                 max_abs=MAX_MAGNITUDE)
         if sites.shape[1] != 2:
@@ -55,10 +99,16 @@ class RadarSet:
             raise ProblemError(f"biasfield.RadarSet names: need {m} distinct non-empty names, "
                                f"got {names}")
         object.__setattr__(self, "names", names)
+        object.__setattr__(self, "ids", _as_ids(self.ids, m))
 
     @property
     def m(self) -> int:
-        return int(self.sites.shape[0])
+        return int(self.sites.shape[0])  # type: ignore[union-attr]
+
+    @property
+    def is_3d(self) -> bool:
+        """True when the sites are geodetic: slant ranges, each radar's own north."""
+        return self.geodetic is not None
 
     def index(self, radar: str | int) -> int:
         """Index of a radar given by name or index."""
@@ -70,33 +120,130 @@ class RadarSet:
             return self.names.index(str(radar))
         raise ProblemError(f"radar: unknown radar id {radar!r} (known: {self.names})")
 
+    def index_of_id(self, sac: int, sic: int) -> int:
+        """Index of the radar with ASTERIX identifier (SAC, SIC)."""
+        key = (int(sac), int(sic))
+        if key not in self.ids:
+            raise ProblemError(f"radar: no radar with SAC/SIC {key} (known: {self.ids})")
+        return self.ids.index(key)
+
     def polar_cov(self, i: int) -> FloatArray:
         """V_i = diag(σ_r², σ_az²) of radar ``i`` (m², rad²)."""
         i = as_count("biasfield.RadarSet.polar_cov i", i, maximum=self.m - 1)
         return np.diag([self.sigma_range[i] ** 2, self.sigma_azimuth[i] ** 2])
 
-    def cartesian_cov(self, i: int, x: ArrayLike) -> FloatArray:
-        """V_i(x) in Cartesian coordinates, (..., 2, 2), to first order."""
+    def polar_jacobian(self, i: int, x: ArrayLike, height: ArrayLike | None = None
+                       ) -> FloatArray:
+        """∇p_i at plane positions x (..., 2) (m), (..., 2, 2): ∂(range, azimuth)/∂(E, N);
+        in 3-D the exact Jacobian at fixed target ``height`` (..., ) (m above the
+        ellipsoid), required there."""
+        i = as_count("biasfield.RadarSet.polar_jacobian i", i, maximum=self.m - 1)
+        pts = as_finite_array("biasfield.RadarSet.polar_jacobian x", x, max_abs=MAX_MAGNITUDE)
+        if pts.shape[-1:] != (2,):
+            raise ProblemError("biasfield.RadarSet.polar_jacobian x: expected (..., 2), got "
+                               f"{pts.shape}")
+        if not self.is_3d:
+            return polar_jacobian(pts, self.sites[i])  # type: ignore[index]
+        h = _heights("biasfield.RadarSet.polar_jacobian height", height, pts.shape[:-1])
+        return g3.polar_jacobian3d(pts, h, self.geodetic[i], self.origin)  # type: ignore[index]
+
+    def cartesian_cov(self, i: int, x: ArrayLike, height: ArrayLike | None = None
+                      ) -> FloatArray:
+        """V_i(x) on the common plane, (..., 2, 2), to first order: ∇p_i⁻¹ V_i ∇p_i⁻ᵀ at
+        x (..., 2) (m); a 3-D set needs the target ``height`` (...,) (m above the
+        ellipsoid) and uses the exact Jacobian there."""
         i = as_count("biasfield.RadarSet.cartesian_cov i", i, maximum=self.m - 1)
         pts = as_finite_array("biasfield.RadarSet.cartesian_cov x", x, max_abs=MAX_MAGNITUDE)
         if pts.shape[-1:] != (2,):
             raise ProblemError("biasfield.RadarSet.cartesian_cov x: expected (..., 2), got "
                                f"{pts.shape}")
-        ginv = np.linalg.inv(polar_jacobian(pts, self.sites[i]))
+        if self.is_3d:
+            h = _heights("biasfield.RadarSet.cartesian_cov height", height, pts.shape[:-1])
+            jac = g3.polar_jacobian3d(pts, h, self.geodetic[i], self.origin)  # type: ignore
+        else:
+            jac = polar_jacobian(pts, self.sites[i])  # type: ignore[index]
+        ginv = np.linalg.inv(jac)
         return ginv @ self.polar_cov(i) @ np.swapaxes(ginv, -1, -2)
+
+    def to_polar(self, i: int, x: ArrayLike, height: ArrayLike | None = None) -> FloatArray:
+        """p_i(x): plane positions (..., 2) → [range (m), azimuth (rad)] of radar ``i``; in
+        3-D the slant range and the azimuth from the radar's own north of a target at
+        ``height`` (m above the ellipsoid)."""
+        from optmodels.biasfield.geometry import to_polar
+
+        i = as_count("biasfield.RadarSet.to_polar i", i, maximum=self.m - 1)
+        if not self.is_3d:
+            return to_polar(x, self.sites[i])  # type: ignore[index]
+        pts = as_finite_array("biasfield.RadarSet.to_polar x", x, max_abs=MAX_MAGNITUDE)
+        h = _heights("biasfield.RadarSet.to_polar height", height, pts.shape[:-1])
+        return g3.to_polar3d(pts, h, self.geodetic[i], self.origin)  # type: ignore[index]
+
+
+def _track_arrays(fn: str, a: int, times: ArrayLike, lat: ArrayLike, lon: ArrayLike,
+                  height: ArrayLike, org: FloatArray
+                  ) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """One aircraft's checked times (T,), plane positions (T, 2) and geodetic (T, 3)."""
+    t = as_finite_array(f"{fn} times[{a}]", times, ndim=1, max_abs=MAX_MAGNITUDE)
+    if t.size < 1 or np.any(np.diff(t) <= 0):
+        raise ProblemError(f"{fn} times[{a}]: need ≥ 1 strictly increasing instants")
+    geo = np.column_stack([
+        as_finite_array(f"{fn} lat[{a}]", lat, shape=t.shape),
+        as_finite_array(f"{fn} lon[{a}]", lon, shape=t.shape),
+        as_finite_array(f"{fn} height[{a}]", height, shape=t.shape, max_abs=1e6)])
+    if np.any(np.abs(geo[:, 0]) >= 90):
+        raise ProblemError(f"{fn} lat[{a}]: latitudes must be within (−90, 90) deg")
+    return t, g3.common_plane(geo[:, 0], geo[:, 1], org), geo
+
+
+def _as_ids(ids: Any, m: int) -> tuple[tuple[int, int], ...]:
+    """() or m distinct (SAC, SIC) pairs of ints 0-255."""
+    arg = "biasfield.RadarSet ids"
+    if ids is None or (not isinstance(ids, np.ndarray) and len(ids) == 0):
+        return ()
+    try:
+        arr = np.asarray(ids)
+    except (TypeError, ValueError) as exc:  # ragged
+        raise ProblemError(f"{arg}: expected {m} (SAC, SIC) pairs, got {ids!r:.80}") from exc
+    if arr.size == 0:
+        return ()
+    if arr.shape != (m, 2) or not (np.issubdtype(arr.dtype, np.integer) or (
+            np.issubdtype(arr.dtype, np.floating) and np.all(np.mod(arr, 1) == 0))):
+        raise ProblemError(f"{arg}: expected {m} (SAC, SIC) pairs of integers, got "
+                           f"{arr.dtype} {arr.shape}")
+    if arr.min() < 0 or arr.max() > 255:
+        raise ProblemError(f"{arg}: SAC and SIC are integers 0-255, got {arr.tolist()}")
+    out = tuple((int(a), int(b)) for a, b in arr)
+    if len(set(out)) != m:
+        raise ProblemError(f"{arg}: need {m} distinct (SAC, SIC) pairs, got {out}")
+    return out
+
+
+def _heights(name: str, height: ArrayLike | None, shape: tuple[int, ...]) -> FloatArray:
+    """Target heights (m above the ellipsoid) broadcast to ``shape``; required, finite."""
+    if height is None:
+        raise ProblemError(f"{name}: a 3-D radar set needs the target height (m above the "
+                           "WGS-84 ellipsoid)")
+    h = as_finite_array(name, height, max_abs=1e6)
+    try:
+        return np.broadcast_to(h, shape)
+    except ValueError:
+        raise ProblemError(f"{name}: expected shape {shape}, got {h.shape}") from None
 
 
 @dataclass(frozen=True)
 class PlotTable:
     """Radar plots, one row each: ``time`` (s), ``radar`` (index into a :class:`RadarSet`),
     ``range`` (m), ``azimuth`` (rad, clockwise from North), ``object`` (track id, −1 if
-    unknown). Rows are kept in the order given."""
+    unknown), ``height`` (m above the WGS-84 ellipsoid, NaN where unknown; ``None``: no
+    heights). With a 3-D :class:`RadarSet`, ``range`` is the slant range and the azimuth is
+    clockwise from the radar's own north. Rows are kept in the order given."""
 
     time: FloatArray
     radar: np.ndarray
     range: FloatArray
     azimuth: FloatArray
     object: np.ndarray
+    height: FloatArray | None = None
 
     def __post_init__(self) -> None:
         t = as_finite_array("biasfield.PlotTable time", self.time, ndim=1, max_abs=MAX_MAGNITUDE)
@@ -114,6 +261,20 @@ class PlotTable:
             if arr.shape != (n,) or not np.issubdtype(arr.dtype, np.integer):
                 raise ProblemError(f"biasfield.PlotTable {name}: expected {n} integers, got "
                                    f"{arr.dtype} {arr.shape}")
+        if self.height is not None:
+            try:
+                h = np.asarray(self.height, dtype=float)
+            except (TypeError, ValueError) as exc:
+                raise ProblemError(f"biasfield.PlotTable height: not a numeric array ({exc})"
+                                   ) from None
+            if h.shape != (n,):
+                raise ProblemError(f"biasfield.PlotTable height: expected {n} heights (m), "
+                                   f"got shape {h.shape}")
+            known = h[~np.isnan(h)]
+            if np.any(~np.isfinite(known)) or np.any(np.abs(known) > 1e6):
+                raise ProblemError("biasfield.PlotTable height: heights must be finite "
+                                   "(within ±1000 km) or NaN for unknown")
+            object.__setattr__(self, "height", h)
         object.__setattr__(self, "time", t)
         object.__setattr__(self, "range", r)
         object.__setattr__(self, "azimuth", az)
@@ -137,8 +298,33 @@ class PlotTable:
             raise ProblemError(f"range: {int(over.sum())} plots beyond their radar's "
                                "max_range (outside the valid range)")
 
+    def locatable(self, radars: RadarSet) -> np.ndarray:
+        """(n,) booleans: plots whose plane position :meth:`cartesian` can compute (2-D:
+        all; 3-D: a known height and a slant range that reaches it)."""
+        if not isinstance(radars, RadarSet):
+            raise ProblemError(f"biasfield.PlotTable.locatable radars: expected a RadarSet, "
+                               f"got {type(radars).__name__}")
+        if not radars.is_3d:
+            return np.ones(len(self), dtype=bool)
+        return np.all(np.isfinite(self._positions3d(radars)), axis=1)
+
+    def _positions3d(self, radars: RadarSet) -> FloatArray:
+        out = np.full((len(self), 2), np.nan)
+        h = self.height if self.height is not None else np.full(len(self), np.nan)
+        for i in range(radars.m):
+            sel = (self.radar == i) & ~np.isnan(h)
+            if sel.any():
+                _, _, e, n = g3.locate(radars.geodetic[i], self.range[sel],  # type: ignore
+                                       self.azimuth[sel], h[sel], radars.origin)
+                out[sel] = np.column_stack([e, n])
+        return out
+
     def cartesian(self, radars: RadarSet) -> FloatArray:
-        """Plot positions z (n, 2) in the common Cartesian frame."""
+        """Plot positions z (n, 2) East-North (m) on the common plane: 2-D polar → plane;
+        3-D the exact position (:func:`~optmodels.biasfield.geometry3d.locate`) of the
+        target at the plot's slant range, azimuth and height. ProblemError for a 3-D set if
+        a plot has no height or a slant range shorter than its height difference (select
+        them out with :meth:`locatable`)."""
         if not isinstance(radars, RadarSet):
             raise ProblemError(f"biasfield.PlotTable.cartesian radars: expected a RadarSet, "
                                f"got {type(radars).__name__}")
@@ -146,11 +332,24 @@ class PlotTable:
         if bad.any():  # rows of no radar would be left uninitialised below
             raise ProblemError(f"radar: unknown radar index {int(self.radar[bad][0])} in "
                                f"{int(bad.sum())} plots (radars 0..{radars.m - 1})")
+        if radars.is_3d:
+            if self.height is None or np.isnan(self.height).any():
+                n_bad = len(self) if self.height is None else int(np.isnan(self.height).sum())
+                raise ProblemError(f"biasfield.PlotTable height: {n_bad} plots of a 3-D radar "
+                                   "set have no height (m above the ellipsoid); drop them "
+                                   "(PlotTable.locatable) or give their heights")
+            out = self._positions3d(radars)
+            miss = ~np.all(np.isfinite(out), axis=1)
+            if miss.any():
+                raise ProblemError(f"range: {int(miss.sum())} plots have a slant range shorter "
+                                   "than the height difference to their radar (no position);"
+                                   " drop them (PlotTable.locatable)")
+            return out
         out = np.empty((len(self), 2))
         for i in range(radars.m):
             sel = self.radar == i
             out[sel] = from_polar(np.column_stack([self.range[sel], self.azimuth[sel]]),
-                                  radars.sites[i])
+                                  radars.sites[i])  # type: ignore[index]
         return out
 
     def subset(self, mask: np.ndarray) -> PlotTable:
@@ -163,38 +362,236 @@ class PlotTable:
             raise ProblemError("biasfield.PlotTable.subset mask: expected booleans or "
                                f"indices, got {sel.dtype}")
         return PlotTable(self.time[mask], self.radar[mask], self.range[mask],
-                         self.azimuth[mask], self.object[mask])
+                         self.azimuth[mask], self.object[mask],
+                         None if self.height is None else self.height[mask])
 
 
-@dataclass(frozen=True)
 class AircraftPaths:
-    """Dense true paths: ``times`` (T,) shared grid (s) and ``positions`` (A, T, 2) (m);
-    ``active`` (A, T) where each aircraft is airborne."""
+    """True (or reference) aircraft paths, each over its OWN time span.
 
-    times: FloatArray
-    positions: FloatArray
-    active: np.ndarray
+    Per aircraft a: ``times`` (T_a,) (s, strictly increasing), plane positions East-North
+    (T_a, 2) (m) and, for 3-D paths, geodetic positions (T_a, 3) latitude (deg), longitude
+    (deg), height (m above the WGS-84 ellipsoid) in the frame of ``origin`` (lat deg, lon
+    deg, h m). Memory is per-aircraft arrays only: 48 bytes per report for 3-D paths (a day
+    of 5000 aircraft at 1 report/s, ≈ 1.5 h each, is ≈ 1.3 GB).
 
-    def __post_init__(self) -> None:
-        t = as_finite_array("biasfield.AircraftPaths times", self.times, ndim=1,
+    Constructors: :meth:`from_reports` (one row per report, e.g. ADS-B), :meth:`from_tracks`
+    (per-aircraft geodetic arrays), :meth:`from_plane` (per-aircraft plane positions and
+    heights), and the old dense 2-D form ``AircraftPaths(times (T,), positions (A, T, 2),
+    active (A, T))`` still accepted for callers not yet migrated. The dense attributes
+    ``times``, ``positions``, ``active`` exist for every form (built on the union of all
+    instants for per-aircraft paths, O(A·T) memory: for small studies only).
+    """
+
+    #: Reports dropped by :meth:`from_reports` as repeated instants of an aircraft.
+    duplicates: int = 0
+
+    def __init__(self, times: ArrayLike, positions: ArrayLike, active: ArrayLike) -> None:
+        t = as_finite_array("biasfield.AircraftPaths times", times, ndim=1,
                             max_abs=MAX_MAGNITUDE)
         if t.size < 2 or np.any(np.diff(t) <= 0):
             raise ProblemError("biasfield.AircraftPaths times: need at least 2 strictly "
                                f"increasing instants, got {t.size}")
-        pos = as_finite_array("biasfield.AircraftPaths positions", self.positions,
+        pos = as_finite_array("biasfield.AircraftPaths positions", positions,
                               shape=(None, t.size, 2), max_abs=MAX_MAGNITUDE)
-        act = np.asarray(self.active)
+        act = np.asarray(active)
         if act.dtype != bool or act.shape != pos.shape[:2]:
             raise ProblemError(f"biasfield.AircraftPaths active: expected {pos.shape[:2]} "
                                f"booleans, got {act.dtype} {act.shape}")
-        object.__setattr__(self, "times", t)
-        object.__setattr__(self, "positions", pos)
-        object.__setattr__(self, "active", act)
+        self._dense: tuple[FloatArray, FloatArray, np.ndarray] | None = (t, pos, act)
+        self._view: tuple[FloatArray, FloatArray, np.ndarray] | None = None
+        # the dense form interpolates over the whole grid (as before); spans from ``active``
+        self._t: list[FloatArray] = [t] * pos.shape[0]
+        self._en: list[FloatArray] = list(pos)
+        self._geo: list[FloatArray] | None = None
+        self.origin: FloatArray | None = None
+        self.labels: tuple[Any, ...] = tuple(range(pos.shape[0]))
+
+    # ----------------------------------------------------------------- constructors
+    @classmethod
+    def _per_aircraft(cls, times: list[FloatArray], en: list[FloatArray],
+                      geo: list[FloatArray] | None, origin: FloatArray | None,
+                      labels: tuple[Any, ...]) -> AircraftPaths:
+        obj = cls.__new__(cls)
+        obj._dense = None
+        obj._view = None
+        obj._t, obj._en, obj._geo = times, en, geo
+        obj.origin = origin
+        obj.labels = labels
+        return obj
+
+    @classmethod
+    def from_tracks(cls, times: list[ArrayLike], lat: list[ArrayLike], lon: list[ArrayLike],
+                    height: list[ArrayLike], origin: ArrayLike,
+                    labels: tuple[Any, ...] | None = None) -> AircraftPaths:
+        """3-D paths from per-aircraft arrays: times (s, strictly increasing), latitude,
+        longitude (deg), height (m above the ellipsoid); ``origin`` of the common plane."""
+        fn = "biasfield.AircraftPaths.from_tracks"
+        org = g3.site_geodetic(f"{fn} origin", origin)
+        if not (len(times) == len(lat) == len(lon) == len(height)) or not len(times):
+            raise ProblemError(f"{fn} times: need the same number (≥ 1) of per-aircraft "
+                               "times, lat, lon and height arrays")
+        ts, ens, geos = [], [], []
+        for a in range(len(times)):
+            t, en, geo = _track_arrays(fn, a, times[a], lat[a], lon[a], height[a], org)
+            ts.append(t)
+            geos.append(geo)
+            ens.append(en)
+        lab = tuple(range(len(ts))) if labels is None else tuple(labels)
+        if len(lab) != len(ts):
+            raise ProblemError(f"{fn} labels: expected {len(ts)} labels, got {len(lab)}")
+        return cls._per_aircraft(ts, ens, geos, org, lab)
+
+    @classmethod
+    def from_plane(cls, times: list[ArrayLike], en: list[ArrayLike], height: list[ArrayLike],
+                   origin: ArrayLike, labels: tuple[Any, ...] | None = None) -> AircraftPaths:
+        """3-D paths from per-aircraft plane positions East-North (T_a, 2) (m) and heights
+        (m above the ellipsoid); latitude and longitude by the exact inverse of the plane."""
+        fn = "biasfield.AircraftPaths.from_plane"
+        org = g3.site_geodetic(f"{fn} origin", origin)
+        lats, lons = [], []
+        for a in range(len(en)):
+            p = as_finite_array(f"{fn} en[{a}]", en[a], shape=(None, 2), max_abs=MAX_MAGNITUDE)
+            la, lo = g3.plane_to_geodetic(p, org)
+            lats.append(la)
+            lons.append(lo)
+        return cls.from_tracks(times, lats, lons, height, org, labels)
+
+    @classmethod
+    def from_reports(cls, objects: ArrayLike, times: ArrayLike, lat: ArrayLike,
+                     lon: ArrayLike, height: ArrayLike, origin: ArrayLike) -> AircraftPaths:
+        """3-D paths from reports, one row each (e.g. ADS-B): ``objects`` (n,) aircraft
+        labels (ints or strings, e.g. icao24), ``times`` (s), ``lat``, ``lon`` (deg),
+        ``height`` (m above the ellipsoid). Aircraft are indexed in sorted label order
+        (``labels``); each one's reports are sorted by time, and repeated instants keep the
+        first report (``duplicates`` counts the others). No cleaning, no resampling."""
+        fn = "biasfield.AircraftPaths.from_reports"
+        t = as_finite_array(f"{fn} times", times, ndim=1, max_abs=MAX_MAGNITUDE)
+        n = t.size
+        la = as_finite_array(f"{fn} lat", lat, shape=(n,))
+        lo = as_finite_array(f"{fn} lon", lon, shape=(n,))
+        h = as_finite_array(f"{fn} height", height, shape=(n,), max_abs=1e6)
+        obj = np.asarray(objects)
+        if obj.shape != (n,) or n == 0:
+            raise ProblemError(f"{fn} objects: expected {n} (≥ 1) labels, got shape "
+                               f"{obj.shape}")
+        org = g3.site_geodetic(f"{fn} origin", origin)
+        labels, inv = np.unique(obj, return_inverse=True)
+        order = np.lexsort((t, inv))
+        inv_s = inv[order]
+        del inv
+        keep = np.ones(n, dtype=bool)
+        keep[1:] = (inv_s[1:] != inv_s[:-1]) | (t[order[1:]] != t[order[:-1]])
+        order, inv_s = order[keep], inv_s[keep]
+        cuts = np.flatnonzero(np.diff(inv_s)) + 1
+        del inv_s
+        ts, ens, geos = [], [], []
+        # one aircraft at a time: the peak memory is the tables, the index and the result
+        for a, g in enumerate(np.split(order, cuts)):
+            tt, en, geo = _track_arrays(fn, a, t[g], la[g], lo[g], h[g], org)
+            ts.append(tt)
+            ens.append(en)
+            geos.append(geo)
+        out = cls._per_aircraft(ts, ens, geos, org,
+                                tuple(lab.item() if hasattr(lab, "item") else lab
+                                      for lab in labels))
+        out.duplicates = int(n - keep.sum())
+        return out
+
+    # ----------------------------------------------------------------- access
+    def __len__(self) -> int:
+        return len(self._t)
+
+    @property
+    def is_3d(self) -> bool:
+        """True when the geodetic positions (and heights) are known."""
+        return self._geo is not None
+
+    @property
+    def nbytes(self) -> int:
+        """Bytes held by the per-aircraft arrays (the dense form: its three arrays)."""
+        if self._dense is not None:
+            return int(sum(x.nbytes for x in self._dense))
+        return int(sum(x.nbytes for x in self._t) + sum(x.nbytes for x in self._en)
+                   + sum(x.nbytes for x in (self._geo or [])))
+
+    def _index(self, name: str, a: int) -> int:
+        return as_count(f"biasfield.AircraftPaths.{name} a", a, maximum=len(self) - 1)
+
+    def track(self, a: int) -> tuple[FloatArray, FloatArray, FloatArray | None]:
+        """Aircraft ``a`` over its own span: times (T_a,), East-North (T_a, 2), geodetic
+        (T_a, 3) lat, lon (deg), height (m) or ``None`` for 2-D paths."""
+        a = self._index("track", a)
+        if self._dense is not None:
+            on = self._dense[2][a]
+            return self._dense[0][on], self._dense[1][a, on], None
+        return self._t[a], self._en[a], None if self._geo is None else self._geo[a]
+
+    def span(self, a: int) -> tuple[float, float]:
+        """First and last instant (s) of aircraft ``a`` (NaN, NaN if never active)."""
+        t = self.track(a)[0]
+        return (float(t[0]), float(t[-1])) if t.size else (np.nan, np.nan)
 
     def at(self, a: int, t: ArrayLike) -> FloatArray:
-        """Position of aircraft ``a`` at times t (linear interpolation on the grid)."""
-        a = as_count("biasfield.AircraftPaths.at a", a, maximum=self.positions.shape[0] - 1)
+        """Plane position (len(t), 2) East-North (m) of aircraft ``a`` at times t (linear
+        interpolation between its samples; held constant beyond its span, as np.interp)."""
+        a = self._index("at", a)
         tt = as_finite_array("biasfield.AircraftPaths.at t", t)
-        p = self.positions[a]
-        return np.stack([np.interp(tt, self.times, p[:, 0]), np.interp(tt, self.times, p[:, 1])],
-                        axis=-1)
+        p = self._en[a]
+        return np.stack([np.interp(tt, self._t[a], p[:, 0]),
+                         np.interp(tt, self._t[a], p[:, 1])], axis=-1)
+
+    def geodetic_at(self, a: int, t: ArrayLike) -> FloatArray:
+        """Geodetic position (len(t), 3) latitude, longitude (deg), height (m above the
+        ellipsoid) of aircraft ``a`` at times t: linear interpolation of latitude,
+        longitude and height between samples (a rhumb-line step; it departs from the
+        plane-linear :meth:`at` by L² tan φ / (8R): 2 mm for 250 m steps at 55°N)."""
+        a = self._index("geodetic_at", a)
+        if self._geo is None:
+            raise ProblemError("biasfield.AircraftPaths.geodetic_at: these paths are 2-D "
+                               "(no geodetic positions); build them with from_reports, "
+                               "from_tracks or from_plane")
+        tt = as_finite_array("biasfield.AircraftPaths.geodetic_at t", t)
+        g = self._geo[a]
+        return np.stack([np.interp(tt, self._t[a], g[:, j]) for j in range(3)], axis=-1)
+
+    def height_at(self, a: int, t: ArrayLike) -> FloatArray:
+        """Height (m above the ellipsoid) of aircraft ``a`` at times t."""
+        return self.geodetic_at(a, t)[..., 2]
+
+    # ----------------------------------------------------------------- dense view
+    def _dense_view(self) -> tuple[FloatArray, FloatArray, np.ndarray]:
+        if self._dense is not None:
+            return self._dense
+        if self._view is None:
+            grid = np.unique(np.concatenate(self._t))
+            pos = np.empty((len(self), grid.size, 2))
+            act = np.zeros((len(self), grid.size), dtype=bool)
+            for a in range(len(self)):
+                pos[a] = self.at(a, grid)
+                act[a] = (grid >= self._t[a][0]) & (grid <= self._t[a][-1])
+            self._view = (grid, pos, act)
+        return self._view
+
+    def sample_step(self) -> float:
+        """Typical sampling step (s): the dense grid's step, or the median over aircraft
+        of each one's median step."""
+        if self._dense is not None:
+            return float(self._dense[0][1] - self._dense[0][0])
+        steps = [np.median(np.diff(t)) for t in self._t if t.size > 1]
+        return float(np.median(steps)) if steps else np.inf
+
+    @property
+    def times(self) -> FloatArray:
+        """Dense view: the shared instants (T,) (s)."""
+        return self._dense_view()[0]
+
+    @property
+    def positions(self) -> FloatArray:
+        """Dense view: positions (A, T, 2) East-North (m)."""
+        return self._dense_view()[1]
+
+    @property
+    def active(self) -> np.ndarray:
+        """Dense view: (A, T) where each aircraft is within its span."""
+        return self._dense_view()[2]

@@ -6,14 +6,16 @@
   Latitudes must lie in [-90, 90], longitudes in [-180, 360) (both the ±180 and the 0-360
   conventions), altitudes be finite; the sigmas and ``max_range`` positive and finite;
   names non-empty and distinct.
-* Plots: CSV or Parquet with ``time, radar, range, azimuth[, object]``; ``radar`` is the
+* Plots: CSV or Parquet with ``time, radar, range, azimuth[, object][, height]``; ``radar`` is the
   radar's name (or its index), ``range`` in metres (≥ 0), ``azimuth`` in degrees clockwise
   from North (``azimuth_unit="rad"`` for radians), within ±360° (±2π rad). Rows with an
   unknown radar raise; rows beyond a radar's ``max_range`` raise unless
   ``drop_out_of_range`` (then counted).
-* Aircraft tracks (e.g. ADS-B): ``object, time, lat, lon[, alt]`` → local ENU with
-  pymap3d, resampled on a common 1 s grid as :class:`AircraftPaths`, so that radar plots of
-  real traffic can be simulated with :func:`optmodels.scenarios.radar_network.simulate_plots`.
+* Aircraft tracks (e.g. ADS-B): ``object, time, lat, lon[, alt]`` → cleaned
+  (:mod:`optmodels.biasfield.cleaning`: split at gaps, impossible jumps and ground traffic
+  dropped and reported), each kept segment resampled every ``step`` seconds over its own
+  span as 3-D :class:`AircraftPaths`, so that radar plots of real traffic can be
+  simulated with :func:`optmodels.scenarios.radar_network.simulate_plots`.
 
 CSV files are UTF-8 with or without a byte-order mark (:func:`optmodels.io.read_csv_rows`);
 every unusable file or value is one :class:`~optmodels.core.ProblemError` naming the file
@@ -24,13 +26,20 @@ from __future__ import annotations
 
 import os
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pymap3d
 
+from optmodels.biasfield.cleaning import (
+    ADSB_LIMITS,
+    ADSB_SIGMA,
+    CleaningLimits,
+    CleaningReport,
+    clean_reports,
+)
 from optmodels.biasfield.data import AircraftPaths, PlotTable, RadarSet
 from optmodels.core import (
     FloatArray,
@@ -47,10 +56,11 @@ __all__ = ["GeodeticOrigin", "read_plots", "read_radars", "read_tracks"]
 
 GeodeticOrigin = tuple[float, float, float]
 
-#: Largest resampled track grid of :func:`read_tracks` (aircraft × instants): 2e7 points
-#: of 17 bytes (East, North, active), ~340 MB; a guard against times in ms or a tiny
-#: ``step`` (200 aircraft over a day at 1 s are 1.7e7).
-MAX_TRACK_GRID = 20_000_000
+#: Largest number of resampled track points of :func:`read_tracks` (all segments): 4e7
+#: points of 48 bytes (time, East, North, latitude, longitude, height) ≈ 1.9 GB; a guard
+#: against times in ms or a tiny ``step`` (a day of 5000 aircraft of 1.5 h each at 1 s is
+#: 2.7e7). Counted on each object's whole span, before the gaps are cut out.
+MAX_TRACK_GRID = 40_000_000
 
 
 @dataclass(frozen=True)
@@ -165,20 +175,29 @@ def _in_file(path: Path, exc: ProblemError) -> ProblemError:
     return ProblemError(f"{path}: {exc}")
 
 
-def read_radars(path: str | os.PathLike[str], *, origin: GeodeticOrigin | None = None
+def read_radars(path: str | os.PathLike[str], *,
+                origin: GeodeticOrigin | str | None = None, geometry: str = "2d"
                 ) -> tuple[RadarSet, GeodeticOrigin | None]:
     """Radars of paper 001 (sites, and the noise V_i of (1)) from a CSV.
 
     Columns ``name`` and either ``x, y`` (local East-North, m) or ``lat, lon[, alt]``
-    (degrees, m; converted to local ENU with pymap3d about ``origin``), plus
-    ``sigma_range`` (m), ``sigma_azimuth`` (degrees) and ``max_range`` (m).
+    (degrees, m above the WGS-84 ellipsoid), plus ``sigma_range`` (m), ``sigma_azimuth``
+    (degrees) and ``max_range`` (m); optional ``sac, sic`` (ASTERIX I010, integers 0-255).
 
     Parameters
     ----------
     path
         CSV (UTF-8, BOM allowed) or Parquet file.
     origin
-        (lat °, lon °, alt m) of the local frame; default: the first radar's position.
+        (lat °, lon °, alt m) of the common frame; ``"mean"``: the mean latitude, longitude
+        and altitude of the sites (what ``optmodels biasfield build`` uses by default);
+        ``None`` or ``"first"``: the first radar's position.
+    geometry
+        ``"2d"`` (default): the sites' East-North in the local ENU of ``origin``
+        (pymap3d), for plots whose ranges are ground ranges on that plane; ``"3d"``: a
+        3-D :class:`RadarSet` (``geodetic`` sites, slant ranges, each radar's own north;
+        needs ``lat, lon``; the sites are then the footprints on the common plane of
+        :mod:`~optmodels.biasfield.geometry3d`).
 
     Returns
     -------
@@ -191,9 +210,14 @@ def read_radars(path: str | os.PathLike[str], *, origin: GeodeticOrigin | None =
         Naming the file (and the line and column): unreadable file; missing column;
         latitude outside [-90, 90]°, longitude outside [-180, 360)°, a non-finite
         altitude or coordinate; a non-positive or non-finite sigma or ``max_range``; an
-        empty or duplicate name; fewer than 2 radars. ``origin`` is checked likewise.
+        empty or duplicate name; SAC/SIC not integers 0-255 or repeated; fewer than 2
+        radars; ``geometry="3d"`` without ``lat, lon``. ``origin`` is checked likewise.
     """
-    org_given = None if origin is None else _as_origin("biasfield.read_radars origin", origin)
+    fn = "biasfield.read_radars"
+    geometry = as_choice(f"{fn} geometry", geometry, ("2d", "3d"))
+    mode = origin if isinstance(origin, str) and origin in ("mean", "first") else None
+    org_given = None if origin is None or mode is not None else _as_origin(
+        f"{fn} origin", origin)
     tab = _table(path, "radars")
     names = tab.text("name")
     seen: dict[str, int] = {}
@@ -204,18 +228,45 @@ def read_radars(path: str | os.PathLike[str], *, origin: GeodeticOrigin | None =
             raise ProblemError(f"{tab.path}: {tab.where(i)}: radar name {name!r} repeats "
                                f"{tab.where(seen[name])} (names must be distinct)")
         seen[name] = i
+    ids: tuple[tuple[int, int], ...] = ()
+    if "sac" in tab.cols or "sic" in tab.cols:
+        sac, sic = tab.numeric("sac"), tab.numeric("sic")
+        for col, v in (("sac", sac), ("sic", sic)):
+            bad = (v != np.round(v)) | (v < 0) | (v > 255)
+            if bad.any():
+                i = int(np.flatnonzero(bad)[0])
+                raise ProblemError(f"{tab.path}: {tab.where(i)}, column {col!r}: {v[i]:g} "
+                                   "is not an integer 0-255 (ASTERIX I010)")
+        ids = tuple((int(a), int(b)) for a, b in zip(sac, sic, strict=True))
+    geo = None
     if "lat" in tab.cols or "lon" in tab.cols:
         lat, lon, alt = _geodetic(tab)
-        org = org_given or (float(lat[0]), float(lon[0]), float(alt[0]))
+        if org_given is not None:
+            org = org_given
+        elif mode == "mean":
+            org = (float(lat.mean()), float(_unwrap_lon(lon).mean()) % 360.0, float(alt.mean()))
+            if org[1] >= 180.0:
+                org = (org[0], org[1] - 360.0, org[2])
+        else:
+            org = (float(lat[0]), float(lon[0]), float(alt[0]))
         e, n, _ = pymap3d.geodetic2enu(lat, lon, alt, *org)
         sites = np.column_stack([e, n])
+        geo = np.column_stack([lat, lon, alt])
     else:
+        if geometry == "3d":
+            raise ProblemError(f"{tab.path}: geometry='3d' needs the columns lat, lon[, alt] "
+                               "(degrees, m above the WGS-84 ellipsoid)")
         sites = np.column_stack([tab.numeric("x"), tab.numeric("y")])
         org = None
     sig_r, sig_az = tab.positive("sigma_range"), tab.positive("sigma_azimuth")
     max_range = tab.positive("max_range")
     try:
-        radars = RadarSet(sites, sig_r, np.deg2rad(sig_az), max_range, tuple(names))
+        if geometry == "3d":
+            radars = RadarSet(None, sig_r, np.deg2rad(sig_az), max_range, tuple(names),
+                              geodetic=geo, origin=np.asarray(org), ids=ids)
+        else:
+            radars = RadarSet(sites, sig_r, np.deg2rad(sig_az), max_range, tuple(names),
+                              ids=ids)
     except ProblemError as exc:
         raise _in_file(tab.path, exc) from None
     return radars, org
@@ -226,9 +277,11 @@ def read_plots(path: str | os.PathLike[str], radars: RadarSet, *, azimuth_unit: 
     """Radar plots of paper 001 ((1): range and azimuth per radar and instant).
 
     Columns ``time`` (s), ``radar`` (a name of ``radars``, or its index), ``range`` (m,
-    ≥ 0), ``azimuth`` (degrees clockwise from North, or radians with
-    ``azimuth_unit="rad"``; within ±360° / ±2π) and optional ``object`` (track label;
-    empty, ``-1`` or ``nan`` for unknown).
+    ≥ 0; the slant range for a 3-D radar set), ``azimuth`` (degrees clockwise from North
+    -- the radar's own north in 3-D --, or radians with ``azimuth_unit="rad"``; within
+    ±360° / ±2π), optional ``object`` (track label; empty, ``-1`` or ``nan`` for unknown)
+    and optional ``height`` (target height, m above the WGS-84 ellipsoid; empty or
+    ``nan`` for unknown), which a 3-D radar set needs.
 
     Returns
     -------
@@ -277,8 +330,18 @@ def read_plots(path: str | os.PathLike[str], radars: RadarSet, *, azimuth_unit: 
         obj = np.array([ids.get(o, -1) for o in obj_raw], dtype=np.int64)
     else:
         obj = np.full(t.size, -1, dtype=np.int64)
+    height = None
+    if "height" in tab.cols:
+        cells = tab.text("height")
+        blank = np.array([c.lower() in ("", "nan") for c in cells])
+        height = np.full(t.size, np.nan)
+        if (~blank).any():
+            sub = _Table(tab.path, {"height": np.asarray(tab.need("height"))[~blank]},
+                         None if tab.lines is None else
+                         [ln for ln, b in zip(tab.lines, blank, strict=True) if not b])
+            height[~blank] = sub.numeric("height")
     try:
-        table = PlotTable(t, radar, rng, az, obj)
+        table = PlotTable(t, radar, rng, az, obj, height=height)
     except ProblemError as exc:
         raise _in_file(tab.path, exc) from None
     dropped: dict[str, int] = {}
@@ -294,13 +357,34 @@ def read_plots(path: str | os.PathLike[str], radars: RadarSet, *, azimuth_unit: 
     return table, dropped
 
 
-def read_tracks(path: str | os.PathLike[str], origin: GeodeticOrigin, *, step: float = 1.0
-                ) -> AircraftPaths:
-    """Aircraft tracks ``object, time, lat, lon[, alt]`` → local East-North paths.
+def read_tracks(path: str | os.PathLike[str], origin: GeodeticOrigin, *, step: float | None = 1.0,
+                clean: bool = True, limits: CleaningLimits = ADSB_LIMITS,
+                sigma: float = ADSB_SIGMA, report: bool = False
+                ) -> AircraftPaths | tuple[AircraftPaths, CleaningReport]:
+    """Aircraft tracks ``object, time, lat, lon[, alt]`` (e.g. ADS-B) → 3-D paths, each
+    aircraft over its own span.
 
-    Positions (lat, lon in degrees, alt in m) are converted to ENU about ``origin``
-    (lat °, lon °, alt m) and linearly resampled every ``step`` seconds; each aircraft is
-    active between its first and last report.
+    Positions (lat, lon in degrees, alt in m above the WGS-84 ellipsoid, 0 if absent) are
+    cleaned per object (:func:`~optmodels.biasfield.cleaning.clean_reports` with
+    ``limits``, on the exact 3-D chords of the local ENU of ``origin``: gaps longer than
+    ``limits.max_gap`` split a track, impossible jumps and ground traffic are dropped; every
+    dropped report is in the :class:`~optmodels.biasfield.cleaning.CleaningReport`), then
+    each kept segment is resampled every ``step`` seconds (the multiples of ``step`` within
+    the segment; ``None``: the report times) -- nothing is interpolated across a gap. The
+    paths (:meth:`AircraftPaths.from_tracks`, plane positions on the common plane of
+    ``origin`` (lat °, lon °, alt m)) hold one entry per segment, labelled by the object
+    (``"label#j"``, j = 1, 2, … when the object's track was split). Memory: 48 bytes per
+    resampled point, only over each segment.
+
+    Parameters
+    ----------
+    clean
+        Apply the cleaning (default); ``False`` keeps every report (only repeated instants
+        are merged) and still never interpolates across ``limits.max_gap``.
+    sigma
+        Per-axis noise of the reported positions (m) for the jump tests.
+    report
+        Also return the cleaning report (rows are the file's data rows, from 0).
 
     Raises
     ------
@@ -308,12 +392,18 @@ def read_tracks(path: str | os.PathLike[str], origin: GeodeticOrigin, *, step: f
         Naming the file (and the line or row, and the column): unreadable file; missing
         column; a time, latitude, longitude or altitude that is not a finite number;
         latitude outside [-90, 90]°, longitude outside [-180, 360)°; an empty object label;
-        an object with fewer than 2 reports at distinct times; a resampled grid larger
-        than :data:`MAX_TRACK_GRID` values (times in ms?). ``origin`` and ``step`` (s,
-        positive) are checked too.
+        an object with fewer than 2 reports at distinct times; resampled segments of more
+        than :data:`MAX_TRACK_GRID` points in all (times in ms?); nothing left after the
+        cleaning. ``origin``, ``step`` (s, positive), ``limits`` and ``sigma`` are checked
+        too.
     """
-    org = _as_origin("biasfield.read_tracks origin", origin)
-    dt = as_positive("biasfield.read_tracks step", step)
+    fn = "biasfield.read_tracks"
+    org = _as_origin(f"{fn} origin", origin)
+    dt = None if step is None else as_positive(f"{fn} step", step)
+    as_flag(f"{fn} clean", clean)
+    as_flag(f"{fn} report", report)
+    lim = as_instance(f"{fn} limits", limits, CleaningLimits)
+    sig = as_positive(f"{fn} sigma (m)", sigma, allow_zero=True)
     tab = _table(path, "tracks")
     obj = np.array(tab.text("object"))
     empty = np.flatnonzero(obj == "")
@@ -321,28 +411,64 @@ def read_tracks(path: str | os.PathLike[str], origin: GeodeticOrigin, *, step: f
         raise ProblemError(f"{tab.path}: {tab.where(int(empty[0]))}: empty 'object' label")
     t = tab.numeric("time")
     lat, lon, alt = _geodetic(tab)
-    names = list(dict.fromkeys(obj))
-    span = float(np.ceil(t.max()) - np.floor(t.min()))
-    size = (span / dt + 2.0) * len(names)
-    if size > MAX_TRACK_GRID:
-        raise ProblemError(f"{tab.path}: resampling {len(names)} aircraft over {span:g} s "
-                           f"every {dt:g} s needs {size:.3g} grid values (limit "
+    names, first, inv = np.unique(obj, return_index=True, return_inverse=True)
+    inv = inv.reshape(-1)
+    lo = np.full(names.size, np.inf)
+    hi = np.full(names.size, -np.inf)
+    np.minimum.at(lo, inv, t)
+    np.maximum.at(hi, inv, t)
+    distinct = np.unique(np.column_stack([inv, t]), axis=0)[:, 0].astype(np.int64)
+    few = np.flatnonzero(np.bincount(distinct, minlength=names.size) < 2)
+    if few.size:
+        name = names[few[np.argmin(first[few])]]
+        raise ProblemError(f"{tab.path}: object {name!r} has fewer than 2 reports at "
+                           "distinct times")
+    span = float(np.sum(hi - lo))
+    size = span / (dt or 1.0) + 2.0 * names.size
+    if dt is not None and size > MAX_TRACK_GRID:
+        raise ProblemError(f"{tab.path}: resampling {names.size} aircraft over {span:g} s "
+                           f"in all every {dt:g} s needs {size:.3g} grid values (limit "
                            f"{MAX_TRACK_GRID:.0e}); are the times in seconds?")
-    e, n, _ = pymap3d.geodetic2enu(lat, lon, alt, *org)
-    grid = np.arange(np.floor(t.min()), np.ceil(t.max()) + dt, dt)
-    pos = np.zeros((len(names), grid.size, 2))
-    active = np.zeros((len(names), grid.size), dtype=bool)
-    for a, name in enumerate(names):
-        sel = np.flatnonzero(obj == name)
-        sel = sel[np.argsort(t[sel], kind="stable")]
-        ts = t[sel]
-        if np.unique(ts).size < 2:
-            raise ProblemError(f"{tab.path}: object {name!r} has fewer than 2 reports at "
-                               "distinct times")
-        pos[a, :, 0] = np.interp(grid, ts, e[sel])
-        pos[a, :, 1] = np.interp(grid, ts, n[sel])
-        active[a] = (grid >= ts[0]) & (grid <= ts[-1])
+    e, n, u = pymap3d.geodetic2enu(lat, lon, alt, *org)
+    xyz = np.column_stack([e, n, u])
+    if clean:
+        segment, rep = clean_reports(obj, t, xyz, sigma=sig, heights=alt, limits=lim)
+    else:
+        segment, rep = clean_reports(obj, t, xyz, sigma=sig, limits=replace(
+            lim, max_speed=np.inf, max_acceleration=np.inf, ground_speed=0.0, min_points=1,
+            glitch_run=1))
+    if not np.any(segment >= 0):
+        raise ProblemError(f"{tab.path}: no usable track after the cleaning "
+                           f"(dropped {rep.counts})")
+    order = np.lexsort((t, segment))
+    order = order[segment[order] >= 0]
+    cuts = np.flatnonzero(np.diff(segment[order])) + 1
+    groups = np.split(order, cuts)
+    per_obj: dict[str, int] = {}
+    for g in groups:
+        per_obj[str(obj[g[0]])] = per_obj.get(str(obj[g[0]]), 0) + 1
+    seen: dict[str, int] = {}
+    times, lats, lons, hts, labels = [], [], [], [], []
+    for g in groups:
+        name = str(obj[g[0]])
+        seen[name] = seen.get(name, 0) + 1
+        labels.append(name if per_obj[name] == 1 else f"{name}#{seen[name]}")
+        ts = t[g]
+        grid = ts
+        if dt is not None:
+            cand = np.arange(np.ceil(ts[0] / dt), np.floor(ts[-1] / dt) + 1) * dt
+            grid = cand if cand.size >= 2 else ts
+        times.append(grid)
+        lats.append(np.interp(grid, ts, lat[g]))
+        lons.append(np.interp(grid, ts, _unwrap_lon(lon[g])))
+        hts.append(np.interp(grid, ts, alt[g]))
     try:
-        return AircraftPaths(grid, pos, active)
+        paths = AircraftPaths.from_tracks(times, lats, lons, hts, org, tuple(labels))
     except ProblemError as exc:
         raise _in_file(tab.path, exc) from None
+    return (paths, rep) if report else paths
+
+
+def _unwrap_lon(lon: FloatArray) -> FloatArray:
+    """Longitudes without the ±180° jump, for interpolation (degrees)."""
+    return np.rad2deg(np.unwrap(np.deg2rad(lon)))

@@ -1,7 +1,12 @@
-"""Paper 001 demo: a simulated network of four radars with smooth bias fields, end to end —
-plots → track fits → cells → uncertainty sets → the smoothest field (closed form (11), the
-QP with and without the box (8), the Lipschitz SOCP) — with maps like the paper's fig. 4,
-and the parametric baseline of section 2 that fails on a non-constant field."""
+"""Paper 001 demo: a simulated 3-D network of four radars (geodetic sites at their own
+heights, slant ranges, each radar's own north; traffic at 3-12 km with climbs, descents
+and holding patterns) with smooth bias fields, end to end — plots → track fits → cells →
+uncertainty sets → the smoothest field (closed form (11), the QP with and without the box
+(8), the Lipschitz SOCP) — with maps like the paper's fig. 4; the parametric baseline of
+section 2 that fails on a non-constant field; and the use of the field (issue 17): the
+plots corrected with the smoothest field and with the ADS-B-referenced field, the
+cross-radar disagreement and the absolute error against ADS-B before and after each, in
+sample and on held-out aircraft."""
 
 from __future__ import annotations
 
@@ -14,10 +19,15 @@ import numpy as np
 from optmodels import biasfield as bf
 from optmodels import plots
 from optmodels.biasfield import selection as sel
+from optmodels.biasfield.referee import adsb_field, compare_fields
+from optmodels.biasfield.usage import score
 from optmodels.io import markdown_table, write_json
 from optmodels.scenarios.radar_network import radar_network
 
 __all__ = ["run_biasfield_demo"]
+
+#: ADS-B horizontal position error of the demo (m, 1σ per axis; 95 % radial 24 m, NACp 9).
+SIGMA_ADSB = 10.0
 
 
 def _true_at_cells(sc: Any, fd: bf.FieldData) -> np.ndarray:
@@ -36,7 +46,7 @@ def _baseline_rows(seed: int) -> list[dict[str, Any]]:
     out = []
     for kind in ("constant", "smooth"):
         sc = radar_network(seed + 10, n_aircraft=30, duration=1800.0, turn_rate=(0.0, 0.0),
-                           fields=kind)  # type: ignore[arg-type]
+                           fields=kind, geometry="3d", holding=0.0)  # type: ignore[arg-type]
         res = bf.azimuth_bias_baseline(sc.plots, sc.radars)
         ids = np.unique(sc.plots.object)
         h1 = bf.azimuth_bias_baseline(sc.plots, sc.radars, objects=ids[::2])
@@ -53,14 +63,58 @@ def _baseline_rows(seed: int) -> list[dict[str, Any]]:
     return out
 
 
+def _use_rows(sc: Any, fd: bf.FieldData, cf: Any, seed: int
+              ) -> tuple[list[dict[str, Any]], dict[str, Any], Any]:
+    """The field in use: ADS-B-referenced field on the same cells, the plots corrected with
+    each field, registration and absolute error before/after (in sample: every aircraft;
+    held out: fields from the even-numbered aircraft, figures on the odd ones)."""
+    names = sc.radars.names
+    ref = sc.adsb_positions(seed + 1000, sigma=SIGMA_ADSB)
+    af = adsb_field(fd, sc.plots, sc.radars, ref, sigma_reference=SIGMA_ADSB)
+    fields = {"smoothest (11)": cf.map(names=names), "ADS-B-referenced": af.map(fd, names=names)}
+    inside = compare_fields(sc.plots, sc.radars, ref, fields)
+    train = sc.plots.object % 2 == 0
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)  # cells without every radar dropped
+        fd_t, _ = bf.build_field_data(sc.plots.subset(train), sc.radars, cells=fd.k,
+                                      seed=seed)
+    cf_t = bf.closed_form(fd_t)
+    af_t = adsb_field(fd_t, sc.plots.subset(train), sc.radars, ref[train],
+                      sigma_reference=SIGMA_ADSB)
+    held = compare_fields(sc.plots.subset(~train), sc.radars, ref[~train],
+                          {"smoothest (11)": cf_t.map(names=names),
+                           "ADS-B-referenced": af_t.map(fd_t, names=names)})
+    rows = []
+    for key, label in (("before", "none (plots as read)"), ("smoothest (11)", "smoothest (11)"),
+                       ("ADS-B-referenced", "ADS-B-referenced")):
+        reg, ab = inside[key]["registration"], inside[key]["absolute"]
+        row: dict[str, Any] = {"correction": label,
+                               "registration, m": reg["overall_m"]}
+        for pair, v in reg["pairs"].items():
+            row[f"reg {pair}, m"] = v["rms_m"]
+        row["absolute, m"] = ab["overall_m"]
+        row["held-out registration, m"] = held[key]["registration"]["overall_m"]
+        row["held-out absolute, m"] = held[key]["absolute"]["overall_m"]
+        rows.append(row)
+    floors = {"registration noise, m": inside["before"]["registration"]["noise_m"],
+              "absolute noise, m": inside["before"]["absolute"]["noise_m"],
+              "held-out registration noise, m": held["before"]["registration"]["noise_m"],
+              "held-out absolute noise, m": held["before"]["absolute"]["noise_m"],
+              "plots compared": inside["plots"], "held-out plots compared": held["plots"],
+              "adsb status": af.status.value, "adsb chi2/dof": af.chi2 / af.dof}
+    return rows, {"in_sample": inside, "held_out": held, **floors}, af
+
+
 def run_biasfield_demo(out: Path, *, seed: int = 0, n_aircraft: int = 80,
                        duration: float = 2400.0, cells: int = 150,
                        progress: bool = False) -> dict[str, Any]:
-    """Writes ``out/azimuth_maps.png``, ``out/range_maps.png``, ``out/report.md`` and
-    ``out/summary.json``; returns the summary."""
+    """Writes ``out/azimuth_maps.png``, ``out/range_maps.png``, ``out/use_azimuth_maps.png``,
+    ``out/use_range_maps.png`` (true, smoothest and ADS-B-referenced fields),
+    ``out/report.md`` and ``out/summary.json``; returns the summary."""
     del progress  # every step takes a second or less
     out.mkdir(parents=True, exist_ok=True)
-    sc = radar_network(seed, n_aircraft=n_aircraft, duration=duration, fields="smooth")
+    sc = radar_network(seed, n_aircraft=n_aircraft, duration=duration, fields="smooth",
+                       geometry="3d")
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         fd, diag = bf.build_field_data(sc.plots, sc.radars, cells=cells, seed=seed)
@@ -70,16 +124,21 @@ def run_biasfield_demo(out: Path, *, seed: int = 0, n_aircraft: int = 80,
     qp = bf.solve(fd)
     qpc = bf.solve(fd, formulation="constrained")
     big = np.abs(cf.field).max(axis=(0, 1))
-    box = (0.6 * float(big[0]), 0.6 * float(big[1]))
-    frac = 0.6
-    while sel.box_feasibility(fd, box).size and frac < 1.0:
-        frac += 0.05
-        box = (frac * float(big[0]), frac * float(big[1]))
+    # the tightest box (8) that every cell's set still meets: fractions of the unconstrained
+    # field's largest |f| per component on a 5 % grid (in 3-D the sets couple the range and
+    # azimuth of a cell, so one common fraction would often have to be ~100 %)
+    grid = np.round(np.arange(0.6, 1.0001, 0.05), 2)
+    cands = sorted(((fr, fa) for fr in grid for fa in grid if min(fr, fa) < 1.0),
+                   key=lambda p: (p[0] * p[1], p))
+    frac_r, frac_a = next((p for p in cands if not sel.box_feasibility(
+        fd, (p[0] * float(big[0]), p[1] * float(big[1]))).size), (1.0, 1.0))
+    box = (frac_r * float(big[0]), frac_a * float(big[1]))
+    frac = f"{frac_r:.0%} range, {frac_a:.0%} azimuth"
     qb = bf.solve(fd, box=box)
     lip = bf.solve_lipschitz(fd)
     idf = sel.identifiability(fd)
     methods = {"closed form (11)": cf, "QP reduced (Clarabel)": qp,
-               "QP constrained (Clarabel)": qpc, f"QP + box at {frac:.0%}": qb,
+               "QP constrained (Clarabel)": qpc, f"QP + box at {frac}": qb,
                "Lipschitz SOCP": lip}
     rows = []
     for name, s in methods.items():
@@ -98,13 +157,25 @@ def run_biasfield_demo(out: Path, *, seed: int = 0, n_aircraft: int = 80,
     gxx, gyy = np.meshgrid(gx, gy)
     pts = np.stack([gxx, gyy], axis=-1)
     gv = np.stack([sc.fields[i](pts) for i in range(fd.m)], axis=-2)  # (ny, nx, m, 2)
-    panels = {"smoothest (11)": cf.field, f"with box {frac:.0%}": qb.field}
+    panels = {"smoothest (11)": cf.field, f"with box {frac}": qb.field}
     fig_a = plots.bias_maps(out / "azimuth_maps.png", fd.centers, panels, fd.radars,
                             component=1, truth_grid=(gx, gy, gv[..., 1]),
                             names=sc.radars.names)
     fig_r = plots.bias_maps(out / "range_maps.png", fd.centers, panels, fd.radars,
                             component=0, truth_grid=(gx, gy, gv[..., 0]),
                             names=sc.radars.names)
+    use_rows, use, af = _use_rows(sc, fd, cf, seed)
+    use_panels = {"smoothest (11)": cf.field, "ADS-B-referenced": af.field}
+    fig_ua = plots.bias_maps(out / "use_azimuth_maps.png", fd.centers, use_panels, fd.radars,
+                             component=1, truth_grid=(gx, gy, gv[..., 1]),
+                             names=sc.radars.names)
+    fig_ur = plots.bias_maps(out / "use_range_maps.png", fd.centers, use_panels, fd.radars,
+                             component=0, truth_grid=(gx, gy, gv[..., 0]),
+                             names=sc.radars.names)
+    scores = {name: score(f, truth, fd).to_dict() for name, f in use_panels.items()}
+    score_rows = [{"field": name, "total, m": v["total"]["horizontal_m"],
+                   "common shift, m": v["shift"]["horizontal_m"],
+                   "rest, m": v["rest"]["horizontal_m"]} for name, v in scores.items()]
     base = _baseline_rows(seed)
     chk_rows = [{"radar": sc.radars.names[i], "χ²/dof": float(chk.chi2[i] / chk.dof[i]),
                  "mean whitened residual": f"{chk.mean[i, 0]:+.3f}, {chk.mean[i, 1]:+.3f}",
@@ -113,18 +184,27 @@ def run_biasfield_demo(out: Path, *, seed: int = 0, n_aircraft: int = 80,
     summary = {"seed": seed, "cells": fd.k, "dropped_cells": diag.dropped_cells,
                "dropped_plots": diag.dropped_plots, "plots": len(sc.plots),
                "methods": rows, "baseline": base, "condition": idf.condition,
-               "residual_check": chk_rows, "box": box}
+               "residual_check": chk_rows, "box": box,
+               "use": {"rows": use_rows, "score": scores,
+                       **{k: v for k, v in use.items() if k not in ("in_sample", "held_out")},
+                       "in_sample": use["in_sample"], "held_out": use["held_out"]}}
     write_json(out / "summary.json", summary)
     fmt = {"J = φᵀRφ": ".4g", "J / J(11)": ".6f", "max |Δ vs (11)|, m": ".1e",
            "L (max jump)": ".3g", "RMS error range, m": ".1f", "RMS error azimuth, deg": ".4f",
            "solve, s": ".3f", "χ²/dof": ".3f", "p-value": ".3g", "max |halves z|": ".1f"}
+    fmt.update({k: ".0f" for k in use_rows[0] if k.endswith(", m")})
+    fmt.update({k: ".1f" for k in score_rows[0] if k.endswith(", m")})
     warn_text = "; ".join(str(w.message) for w in caught) or "none"
     worst = idf.worst[:5]
     report = f"""# Radar bias fields (paper 001)
 
-Four radars (crosses), {n_aircraft} aircraft over {duration / 60:.0f} min, smooth bias fields
-(range ±150 m, azimuth ±0.3° scale), σ_r = {sc.radars.sigma_range[0]:.0f} m,
-σ_az = {np.rad2deg(sc.radars.sigma_azimuth[0]):.2f}°: {len(sc.plots)} plots.
+Four radars (crosses; geodetic sites {", ".join(f"{h:.0f}" for h in sc.radars.geodetic[:, 2])} m
+above the ellipsoid around ({sc.radars.origin[0]:.1f}°N, {sc.radars.origin[1]:.1f}°E), each
+measuring slant range and azimuth from its own north), {n_aircraft} aircraft over
+{duration / 60:.0f} min at 3-12 km (levels, climbs, descents, holding patterns), smooth bias
+fields (range ±150 m, azimuth ±0.3° scale), σ_r = {sc.radars.sigma_range[0]:.0f} m,
+σ_az = {np.rad2deg(sc.radars.sigma_azimuth[0]):.2f}°: {len(sc.plots)} plots. The field lives
+on the common plane (East, North of each target's footprint in the ENU frame of the origin).
 
 ## Pipeline (part 1)
 
@@ -139,8 +219,10 @@ Plots dropped: {diag.dropped_plots or "none"}. Residual check of the track model
 
 Uncertainty sets (10) (Φ¹ block-diagonal), J = φᵀ(Q ⊗ P)φ with P = diag(1/σ_r², 1/σ_az²)
 per radar. RMS of the true field over the cells: {tr_r:.1f} m, {tr_a:.4f}°. The error
-includes the per-cell common shift that no method can recover; the box is the smallest of
-60 %, 65 %, … of the unconstrained field's largest |f| that every cell's set meets.
+includes the per-cell common shift that no method can recover; the box ({frac} of the
+unconstrained field's largest |f|) is the tightest on a 5 % grid of fractions per component
+(60-100 %) that every cell's set meets: in 3-D a cell's set couples its range and azimuth
+biases, so one common fraction would have to be ≈ 100 %.
 
 {markdown_table(rows, list(rows[0]), fmt)}
 ![azimuth]({fig_a.name})
@@ -151,6 +233,30 @@ Identifiability: cond(Φ¹ᵀRΦ¹) = {idf.condition:.3g}; the least determined 
 spread of their common shift per unit √J) are {worst.tolist()}, at
 {", ".join(f"({c[0] / 1e3:.0f}, {c[1] / 1e3:.0f}) km" for c in fd.centers[worst])} — at the
 edge of the traffic, with few neighbours.
+
+## Using the field: correction, registration, ADS-B as the referee (issue 17)
+
+The plots corrected with the smoothest field (11) and with the ADS-B-referenced field (per-cell
+radar-minus-ADS-B means, ADS-B = truth + N(0, {SIGMA_ADSB:.0f} m) per axis, then the smoothest
+field at the χ² discrepancy level; status {use["adsb status"]}, χ²/dof
+{use["adsb chi2/dof"]:.4f}). Both figures are RMS over 25 km areas of the systematic part of
+the per-area mean (the mean's noise, estimated from the scatter of the per-aircraft means,
+removed; 0 = below the noise): "registration" the horizontal distance between two radars'
+positions of the same aircraft at the same time, "absolute" between a radar's position and
+ADS-B. In sample: fields and figures on the same {use["plots compared"]} plots (those in the
+area every field covers); held out: fields from the even-numbered aircraft, figures on the
+{use["held-out plots compared"]} plots of the others. Noise of the area means: registration
+{use["registration noise, m"]:.0f} m, absolute {use["absolute noise, m"]:.0f} m (held out
+{use["held-out registration noise, m"]:.0f} m, {use["held-out absolute noise, m"]:.0f} m).
+
+{markdown_table(use_rows, list(use_rows[0]), fmt)}
+Error against the true field at the cells, split into the per-cell common shift (unobservable
+without a reference, paper section 3) and the rest (horizontal metres):
+
+{markdown_table(score_rows, list(score_rows[0]), fmt)}
+![azimuth, in use]({fig_ua.name})
+
+![range, in use]({fig_ur.name})
 
 ## The parametric baseline (section 2)
 

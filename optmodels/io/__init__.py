@@ -16,11 +16,23 @@ Modules (the public names are re-exported here unchanged, ``from optmodels.io im
 - :mod:`~optmodels.io.tables` — CSV: :func:`read_csv_rows`, :func:`csv_numbers`, the plane
   (paper 000) and trajectory (paper 002) track files;
 - :mod:`~optmodels.io.binary` — ``.npz`` / ``.npy`` arrays and JSON documents;
-- :mod:`~optmodels.io.writers` — CSV, plane CSV, JSON and Markdown writers.
+- :mod:`~optmodels.io.writers` — CSV, plane CSV, JSON and Markdown writers;
+- :mod:`~optmodels.io.asterix` — ASTERIX recordings: CAT048 (monoradar target reports) and
+  CAT021 (ADS-B reports) read into SI arrays (the format tables from libasterix, imported
+  lazily), :func:`is_asterix` (content detection), and the encoders the tests use.
 """
 
 from __future__ import annotations
 
+from optmodels.io.asterix import (
+    AsterixData,
+    Cat021Reports,
+    Cat048Reports,
+    encode_cat021,
+    encode_cat048,
+    is_asterix,
+    read_asterix,
+)
 from optmodels.io.binary import _ZIP_MAGIC as _ZIP_MAGIC
 from optmodels.io.binary import _file_head as _file_head
 from optmodels.io.binary import read_json, read_npy, read_npz
@@ -49,16 +61,23 @@ from optmodels.io.writers import (
 )
 
 __all__ = [
+    "AsterixData",
+    "Cat021Reports",
+    "Cat048Reports",
     "CsvRows",
     "PlaneCsv",
     "as_path",
     "csv_cell",
     "csv_numbers",
+    "encode_cat021",
+    "encode_cat048",
     "input_file",
+    "is_asterix",
     "json_default",
     "markdown_table",
     "output_dir",
     "output_file",
+    "read_asterix",
     "read_csv_rows",
     "read_json",
     "read_npy",

@@ -140,22 +140,28 @@ class PlaneCsv(dict):
     ((N, 3, 3) from ``cxx, cxy, cxz, cyy, cyz, czz``)."""
 
 
-def read_plane_csv(path: str | os.PathLike[str]) -> PlaneCsv:
+def read_plane_csv(path: str | os.PathLike[str], *, require_time: bool = False) -> PlaneCsv:
     """Read a plane-of-maneuver track (paper 000, the points x_i of (1.2)).
 
     Columns ``x, y, z`` (m) and optional ``t`` (s), ``alpha2`` (the α_i² of D_i = α_i² D)
     or the per-point covariance ``cxx, cxy, cxz, cyy, cyz, czz`` (m²). Column order is
     free; names are case-blind; other columns are ignored. UTF-8 with or without a BOM.
+    With ``require_time`` (``optmodels plane track``) the ``t`` column must be present
+    and strictly increasing.
 
     Raises
     ------
     ProblemError
         Naming the file: see :func:`read_csv_rows`; a missing column; a cell that is not
-        a finite number (with its line and column); an incomplete covariance.
+        a finite number (with its line and column); an incomplete covariance; with
+        ``require_time``, no ``t`` or a time not after the previous one (with its line).
     """
     p = as_path("io.read_plane_csv path", path)
     table = read_csv_rows(p, what="plane CSV")
     col = set(table.header)
+    if require_time and "t" not in col:
+        raise ProblemError(f"{p}: missing column t (the measurement times, s, are needed "
+                           f"for a track; have {', '.join(table.header)})")
     missing = [c for c in ("x", "y", "z") if c not in col]
     if missing:
         raise ProblemError(f"{p}: missing column(s) {', '.join(missing)} (need x, y, z; "
@@ -169,6 +175,14 @@ def read_plane_csv(path: str | os.PathLike[str]) -> PlaneCsv:
     out = PlaneCsv(points=np.column_stack([v["x"], v["y"], v["z"]]))
     if "t" in v:
         out["t"] = v["t"]
+        if require_time:
+            back = np.flatnonzero(np.diff(v["t"]) <= 0)
+            if back.size:
+                i = int(back[0]) + 1
+                raise ProblemError(
+                    f"{p}: line {table.lines[i]}, column 't': {v['t'][i]:.17g} s is not after "
+                    f"the previous row's {v['t'][i - 1]:.17g} s (times must be strictly "
+                    "increasing; sort the file by t)")
     if "alpha2" in v:
         out["alpha2"] = v["alpha2"]
     if present:

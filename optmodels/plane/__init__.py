@@ -61,6 +61,17 @@ Modules
 * :mod:`~optmodels.plane.statistics`: :func:`planarity_test`, :func:`cramer_rao_bound`,
   :func:`angle_error`, :func:`plane_errors`.
 * :mod:`~optmodels.plane.sequence`: :func:`identify_sequence`.
+* :mod:`~optmodels.plane.tracking`: :func:`track` / :class:`PlaneTrack`, the plane on a
+  stream: sliding windows (:mod:`~optmodels.plane.windows`, running sums with removal), the
+  plane-change test (:mod:`~optmodels.plane.detector`: a Chow-type likelihood-ratio test
+  with its false-alarm rate per hour bounded, and the detectable tilt), general D_i
+  through :func:`fit_general`. Named ``tracking`` so that it does not shadow the function.
+* :mod:`~optmodels.plane.general`: :func:`fit_general`, the ML plane for general SPD D_i
+  (Newton on the sphere for the profile of (1.12)), warm-startable, with its own
+  resolved test; :mod:`~optmodels.plane.radar`: :func:`radar_covariances` (range, azimuth,
+  elevation noise → ENU, first order), :func:`to_polar`, :func:`from_polar`.
+* :mod:`~optmodels.plane.simulate`: :func:`plane_change_track` and the Monte Carlo helpers
+  of the detector.
 """
 
 from optmodels.plane.closedform import _scaled_sums as _scaled_sums
@@ -76,9 +87,12 @@ from optmodels.plane.data import (
     project,
     reduced_objective,
 )
+from optmodels.plane.general import GeneralFit, fit_general
 from optmodels.plane.nlp import Formulation as Formulation
 from optmodels.plane.nlp import clear_nlp_cache, solve
+from optmodels.plane.radar import from_polar, radar_covariances, to_polar
 from optmodels.plane.sequence import PlaneSequence, identify_sequence
+from optmodels.plane.simulate import plane_change_track as plane_change_track
 from optmodels.plane.statistics import (
     CramerRao,
     PlanarityTest,
@@ -87,27 +101,35 @@ from optmodels.plane.statistics import (
     planarity_test,
     plane_errors,
 )
+from optmodels.plane.tracking import PlaneTrack, track
 from optmodels.plane.verify import _rayleigh_check as _rayleigh_check
 from optmodels.plane.verify import _tangent_basis as _tangent_basis
 
 __all__ = [
     "CramerRao",
+    "GeneralFit",
     "PlanarityTest",
     "PlaneData",
     "PlaneSequence",
     "PlaneSolution",
+    "PlaneTrack",
     "angle_error",
     "clear_nlp_cache",
     "closed_form",
     "constraint_residuals",
     "cramer_rao_bound",
+    "fit_general",
+    "from_polar",
     "identify_sequence",
     "objective",
     "optimal_offset",
     "planarity_test",
     "plane_errors",
     "project",
+    "radar_covariances",
     "reduced_objective",
     "solve",
     "svd_fit",
+    "to_polar",
+    "track",
 ]

@@ -16,13 +16,17 @@ from optmodels.core import (
     as_choice,
     as_count,
     as_finite_array,
+    as_generator,
     as_number,
     as_positive,
 )
+from optmodels.plane.radar import radar_covariances as _plane_radar_covariances
 
 __all__ = [
     "PAPER_RADIUS",
     "ManeuverScenario",
+    "ManeuverTrack",
+    "climb_turn_track",
     "paper_plane_example",
     "radar_covariances",
     "radar_plane",
@@ -61,16 +65,7 @@ class ManeuverScenario:
 
 def _rng(seed: int | np.random.Generator, where: str = "scenarios") -> np.random.Generator:
     """A Generator as given, or seeded from a whole number >= 0 (or a sequence of them)."""
-    if isinstance(seed, np.random.Generator):
-        return seed
-    if isinstance(seed, bool | np.bool_ | float | str | bytes) or seed is None:
-        raise ProblemError(f"{where} seed: expected a whole number >= 0 or a "
-                           f"numpy.random.Generator, got {seed!r}")
-    try:
-        return np.random.default_rng(seed)
-    except (TypeError, ValueError) as exc:
-        raise ProblemError(f"{where} seed: expected a whole number >= 0 or a "
-                           f"numpy.random.Generator, got {seed!r} ({exc})") from None
+    return as_generator(where, seed)
 
 
 def paper_plane_example(
@@ -162,31 +157,11 @@ def radar_covariances(
     sigma_el: float,
 ) -> FloatArray:
     """Cartesian error covariances (N, 3, 3) of a radar at ``site`` measuring range,
-    azimuth and elevation with independent errors: ``J diag(σ_r², σ_az², σ_el²) J^T`` with
-    ``J`` the Jacobian of the spherical-to-Cartesian map (azimuth clockwise from North,
-    ENU axes). Points (m), standard deviations in m and rad."""
-    w = "scenarios.radar_covariances"
-    pts = as_finite_array(f"{w} points", points, shape=(None, 3), max_abs=1e100)
-    st = as_finite_array(f"{w} site", site, shape=(3,), max_abs=1e100)
-    s_r = as_positive(f"{w} sigma_range", sigma_range)
-    s_az = as_positive(f"{w} sigma_az", sigma_az)
-    s_el = as_positive(f"{w} sigma_el", sigma_el)
-    d = pts - st
-    r = np.linalg.norm(d, axis=1)
-    if np.any(r == 0):
-        raise ProblemError(f"{w} points: {int(np.sum(r == 0))} coincide with the site "
-                           "(azimuth and elevation undefined)")
-    az = np.arctan2(d[:, 0], d[:, 1])
-    el = np.arcsin(d[:, 2] / r)
-    caz, saz = np.cos(az), np.sin(az)
-    ce, se = np.cos(el), np.sin(el)
-    # x = r ce saz, y = r ce caz, z = r se; columns: d/dr, d/daz, d/del
-    jac = np.empty((len(r), 3, 3))
-    jac[:, :, 0] = np.column_stack([ce * saz, ce * caz, se])
-    jac[:, :, 1] = np.column_stack([r * ce * caz, -r * ce * saz, np.zeros_like(r)])
-    jac[:, :, 2] = np.column_stack([-r * se * saz, -r * se * caz, r * ce])
-    s = np.array([s_r, s_az, s_el]) ** 2
-    return np.einsum("nij,j,nkj->nik", jac, s, jac)
+    azimuth and elevation with independent errors (m, rad, rad; azimuth clockwise from
+    north, ENU axes). Moved to :func:`optmodels.plane.radar.radar_covariances` (the
+    problem's API, where its frame and first-order error are documented); this is that
+    function under its former argument names."""
+    return _plane_radar_covariances(points, site, sigma_range, sigma_az, sigma_el)
 
 
 def radar_plane(
@@ -233,3 +208,126 @@ def radar_plane(
         normal, offset = -normal, -offset
     return ManeuverScenario(times=np.arange(n, dtype=float), truth=truth, points=points,
                             cov=cov, alpha2=None, normal=normal, offset=offset)
+
+
+@dataclass(frozen=True)
+class ManeuverTrack:
+    """A straight climb, then a climbing turn, then a level turn, seen by one radar.
+
+    Attributes
+    ----------
+    times : (N,) s; truth, points : (N, 3) true and measured positions, m, in the radar's
+    local flat ENU frame; cov : (N, 3, 3) the radar covariances
+    (:func:`optmodels.plane.radar.radar_covariances` at the true points), m²;
+    site : (3,) the radar, m; transitions : (2,) s, the true times the climbing turn and
+    the level turn begin; segment : (N,) int, 0 climb, 1 climbing turn, 2 level turn;
+    normals : (3, 3) unit normal of each segment's plane (row 0 NaN: a straight line has
+    no plane), offsets : (3,) m (NaN for the line); tilt_deg : (3,) tilt of each plane
+    from the horizontal, degrees (NaN for the line).
+    """
+
+    times: FloatArray
+    truth: FloatArray
+    points: FloatArray
+    cov: FloatArray
+    site: FloatArray
+    transitions: FloatArray
+    segment: np.ndarray
+    normals: FloatArray
+    offsets: FloatArray
+    tilt_deg: FloatArray
+
+
+def climb_turn_track(
+    seed: int | np.random.Generator = 0,
+    *,
+    speed: float = 150.0,
+    climb_deg: float = 6.0,
+    turn_rate_deg: float = 3.0,
+    durations: tuple[float, float, float] = (60.0, 30.0, 60.0),
+    rate_hz: float = 2.0,
+    start: tuple[float, float, float] = (20e3, 25e3, 3000.0),
+    heading_deg: float = 0.0,
+    sigma_range: float = 30.0,
+    sigma_azimuth: float = 1e-3,
+    sigma_elevation: float = 1e-3,
+) -> ManeuverTrack:
+    """A straight climb → climbing turn → level turn at constant speed, one radar at the
+    ENU origin measuring range, azimuth and elevation (issue 19's demo track).
+
+    Segment 0 (``durations[0]`` s): a straight line climbing at ``climb_deg`` on heading
+    ``heading_deg`` (clockwise from north). Segment 1: a turn to the right at
+    ``turn_rate_deg`` (°/s) in the plane spanned by the climbing velocity and the
+    horizontal right-hand direction: a planar manoeuvre whose plane is tilted by
+    ``climb_deg`` from the horizontal; the climb rate falls from ``speed sin γ`` to
+    ``speed sin γ cos(ω t)``. Segment 2: a level turn (horizontal plane through the end
+    of segment 1) at the same rate, entered along the horizontal part of the
+    velocity at the end of segment 1, so position is continuous and the path is planar
+    in each segment (the heading is continuous; the climb rate jumps to 0 at the second transition).
+
+    Units: m, s, m/s; angles in degrees where named ``_deg``; ``sigma_azimuth``,
+    ``sigma_elevation`` in rad. Measurements: truth + N(0, D_i) with D_i the radar
+    covariances at the true points (the first-order model; the polar noise itself is
+    not simulated).
+    """
+    w = "scenarios.climb_turn_track"
+    speed = as_positive(f"{w} speed (m/s)", speed)
+    climb = np.deg2rad(as_number(f"{w} climb_deg", climb_deg, low=-60.0, high=60.0))
+    omega = np.deg2rad(as_positive(f"{w} turn_rate_deg (deg/s)", turn_rate_deg))
+    if not isinstance(durations, tuple | list) or len(durations) != 3:
+        raise ProblemError(f"{w} durations: expected three durations (s), got {durations!r}")
+    dur = [as_positive(f"{w} durations[{k}] (s)", v) for k, v in enumerate(durations)]
+    rate_hz = as_positive(f"{w} rate_hz", rate_hz)
+    p0 = as_finite_array(f"{w} start (m)", start, shape=(3,), max_abs=1e8)
+    heading = np.deg2rad(as_number(f"{w} heading_deg", heading_deg))
+    total = sum(dur)
+    n = int(np.floor(total * rate_hz))
+    if n < 10 or n > 10**7:
+        raise ProblemError(f"{w} rate_hz, durations: {n} samples; need 10 ... 1e7")
+    rng = _rng(seed, w)
+    times = np.arange(n) / rate_hz
+    hdir = np.array([np.sin(heading), np.cos(heading), 0.0])
+    right = np.array([np.cos(heading), -np.sin(heading), 0.0])
+    up = np.array([0.0, 0.0, 1.0])
+    v0 = np.cos(climb) * hdir + np.sin(climb) * up  # unit velocity of the climb
+    t1, t2 = dur[0], dur[0] + dur[1]
+    radius = speed / omega
+    p1 = p0 + speed * t1 * v0
+    # segment 1: circle in the plane (v0, right), turning towards `right`
+    n1 = np.cross(v0, right)
+    ang1 = omega * dur[1]
+    p2 = p1 + radius * (np.sin(ang1) * v0 + (1 - np.cos(ang1)) * right)
+    v2 = np.cos(ang1) * v0 + np.sin(ang1) * right  # unit velocity at the end of segment 1
+    # segment 2: level turn, entered along the horizontal part of v2, same sense
+    h2 = v2 - (v2 @ up) * up
+    h2 = h2 / np.linalg.norm(h2)
+    r2 = np.cross(h2, up)  # right of h2
+    truth = np.empty((n, 3))
+    seg = np.zeros(n, dtype=int)
+    for i, t in enumerate(times):
+        if t < t1:
+            truth[i] = p0 + speed * t * v0
+        elif t < t2:
+            a = omega * (t - t1)
+            truth[i] = p1 + radius * (np.sin(a) * v0 + (1 - np.cos(a)) * right)
+            seg[i] = 1
+        else:
+            a = omega * (t - t2)
+            truth[i] = p2 + radius * (np.sin(a) * h2 + (1 - np.cos(a)) * r2)
+            seg[i] = 2
+    site = np.zeros(3)
+    cov = _plane_radar_covariances(truth, site, sigma_range, sigma_azimuth, sigma_elevation)
+    chol = np.linalg.cholesky(cov)
+    points = truth + (chol @ rng.normal(size=(n, 3, 1)))[..., 0]
+    normals = np.full((3, 3), np.nan)
+    offsets = np.full(3, np.nan)
+    for k, (nv, p) in enumerate(((n1, p1), (up, p2)), start=1):
+        nv = nv / np.linalg.norm(nv)
+        off = float(nv @ p)
+        if off < 0:
+            nv, off = -nv, -off
+        normals[k], offsets[k] = nv, off
+    tilt = np.degrees(np.arccos(np.clip(np.abs(normals[:, 2]), 0.0, 1.0)))
+    return ManeuverTrack(times=times, truth=truth, points=points, cov=cov, site=site,
+                         transitions=np.array([t1, t2]), segment=seg, normals=normals,
+                         offsets=offsets, tilt_deg=tilt)

@@ -21,11 +21,15 @@ DEMO_TITLE = ("- [Joint assignment with unresolved groups (paper 004)]"
 
 
 _CASE_FIELDS = ("means", "covs", "measurements", "meas_cov", "volume", "pd", "rho",
-                "max_group_size", "group_gate")
+                "max_group_size", "group_gate", "sensor")
+#: Required in every case; ``rho`` too unless a ``sensor`` block is given (then not).
+_REQUIRED = ("means", "covs", "measurements", "meas_cov", "volume", "pd")
+_SENSOR_KEYS = ("range", "azimuth_deg", "site", "ellipse", "weights")
 
 
 def _read_case(path_text: str) -> dict[str, Any]:
-    """``CASE.json``: a JSON object with the :class:`AssignmentData` fields."""
+    """``CASE.json``: a JSON object with the :class:`AssignmentData` fields (``sensor``: a
+    JSON object, read by :func:`_sensor`)."""
     from optmodels.io import read_text
 
     with _reading(path_text):
@@ -41,10 +45,40 @@ def _read_case(path_text: str) -> dict[str, Any]:
     unknown = sorted(set(case) - set(_CASE_FIELDS))
     if unknown:
         raise ProblemError(f"{path_text}: unknown fields {unknown} (expected {_CASE_FIELDS})")
-    missing = sorted(set(_CASE_FIELDS[:7]) - set(case))
+    required = _REQUIRED if case.get("sensor") is not None else (*_REQUIRED, "rho")
+    missing = sorted(set(required) - set(case))
     if missing:
-        raise ProblemError(f"{path_text}: missing fields {missing}")
+        raise ProblemError(f"{path_text}: missing fields {missing}"
+                           + (" (or a sensor block instead of rho)" if "rho" in missing
+                              else ""))
+    if case.get("sensor") is not None:
+        case["sensor"] = _sensor(path_text, case["sensor"])
     return case
+
+
+def _sensor(path_text: str, block: Any) -> Any:
+    """The case's ``sensor`` block as a :class:`~optmodels.assignment.sensor.Resolution`:
+    ``{"range": m, "azimuth_deg": deg, "site": [x, y]}`` (polar cell; site default the
+    origin) or ``{"ellipse": [[m², ...], ...]}``, each with an optional ``weights``
+    ("equal" or one positive amplitude per object)."""
+    import math
+
+    from optmodels.assignment.sensor import Resolution
+    from optmodels.core import as_number
+
+    where = f"{path_text}: sensor"
+    if not isinstance(block, dict):
+        raise ProblemError(f"{where}: expected a JSON object with range and azimuth_deg, or "
+                           f"ellipse; got a JSON {type(block).__name__}")
+    unknown = sorted(set(block) - set(_SENSOR_KEYS))
+    if unknown:
+        raise ProblemError(f"{where}: unknown keys {unknown} (expected {_SENSOR_KEYS})")
+    az = block.get("azimuth_deg")
+    if az is not None:
+        az = math.radians(as_number(f"{where} azimuth_deg", az))
+    with _reading(where):
+        return Resolution(range=block.get("range"), azimuth=az, site=block.get("site"),
+                          ellipse=block.get("ellipse"), weights=block.get("weights", "equal"))
 
 
 def _assignment_solve(args: argparse.Namespace) -> Outcome:
@@ -68,6 +102,8 @@ def _assignment_solve(args: argparse.Namespace) -> Outcome:
                            "assignment": sol.assignment, "log_score": sol.log_score,
                            "mip_gap": sol.mip_gap, "solve_time": sol.solve_time,
                            "build_time": sol.build_time, "hypotheses_total": total}
+    if data.sensor is not None:
+        res["pair_unresolved"] = data.pair_unresolved()
     if args.k and sol.ok:
         kb = asg.k_best(data, args.k, solver=args.solver)
         res["k_best"] = [{"partition": h.partition, "assignment": h.assignment,
@@ -135,8 +171,11 @@ def register(sub: Any) -> None:
     asp = sub.add_parser("assignment", help="joint assignment with merges (paper 004)")
     asub = asp.add_subparsers(dest="verb", required=True)
     aso = _leaf(asub, "solve", "the MAP hypothesis of a CASE.json")
-    aso.add_argument("case", help="JSON with means, covs, measurements, meas_cov, volume, pd, "
-                                  "rho [, max_group_size, group_gate]")
+    aso.add_argument("case", help="JSON with means, covs, measurements, meas_cov (one d×d or "
+                                  "a list of N), volume, pd, and rho or a sensor block "
+                                  "({range: m, azimuth_deg: deg, site: [x, y]} or "
+                                  "{ellipse: [[m²]]}, weights) [, max_group_size, "
+                                  "group_gate]")
     aso.add_argument("--method", choices=("milp", "brute-force", "linear"), default="milp")
     aso.add_argument("--solver", default="HIGHS", help="MILP solver (HIGHS, SCIP, ...)")
     aso.add_argument("--time-limit", type=positive, help="MILP time limit, s (> 0)")

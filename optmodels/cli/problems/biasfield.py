@@ -1,4 +1,5 @@
-"""``optmodels biasfield build`` (plots -> tracks -> cells -> the FieldData of paper 001)
+"""``optmodels biasfield build`` (a recording -> cleaned plots -> tracks -> cells -> the
+FieldData of paper 001)
 and ``optmodels biasfield solve`` (the smoothest field (9)-(10) with the box (8), the
 closed form (11), or the Lipschitz class; field.csv/.npz and maps); and the bias-field
 part of ``optmodels demo`` and ``optmodels compare --details``."""
@@ -26,50 +27,183 @@ def _npz_name(path: Path) -> Path:
     return path if path.name.endswith(".npz") else path.with_name(path.name + ".npz")
 
 
+def _parse_origin(text: str) -> tuple[float, float, float]:
+    """``--origin LAT,LON,H``: degrees, degrees, metres above the WGS-84 ellipsoid."""
+    parts = text.split(",")
+    try:
+        vals = [float(v) for v in parts]
+    except ValueError:
+        vals = []
+    if len(vals) != 3:
+        raise ProblemError(f"--origin: expected LAT,LON,H (degrees, degrees, metres above the "
+                           f"WGS-84 ellipsoid), got {text!r}")
+    from optmodels.core import as_number
+
+    return (as_number("--origin LAT (deg)", vals[0], low=-90.0, high=90.0),
+            as_number("--origin LON (deg)", vals[1], low=-180.0, high=360.0, high_open=True),
+            as_number("--origin H (m)", vals[2]))
+
+
+def _is_asterix(path: Path) -> bool:
+    """Content detection (B2's :func:`optmodels.io.asterix.is_asterix`); a file that is
+    not there is left to the CSV reader's message."""
+    try:
+        from optmodels.io.asterix import is_asterix
+    except ImportError:  # pragma: no cover - the module ships with the package
+        return False
+    return bool(path.is_file() and is_asterix(path))
+
+
+def _asterix_recording(files: list[Path], args: argparse.Namespace,
+                       origin: tuple[float, float, float] | None) -> Any:
+    """ASTERIX CAT048 (+ CAT021) through :func:`optmodels.biasfield.recording.read_recording`:
+    the 3-D radars of the sites CSV (keyed by SAC/SIC; ``--origin`` or the mean of the
+    sites), the plots (heights from CAT021, else from the flight level), the ADS-B reports
+    and the recording's report."""
+    from optmodels.biasfield.recording import read_recording, read_sites
+
+    with _reading(str(args.radars)):
+        radars = read_sites(args.radars, origin=origin)
+    with _reading(str(files[0])):
+        return read_recording([str(f) for f in files], radars, date=args.date)
+
+
+def _read_input(args: argparse.Namespace, *, clean: bool) -> dict[str, Any]:
+    """RECORDING [RECORDING2] (+ ``--adsb``) and ``--radars`` → the radar set and the plots
+    (ASTERIX or CSV/Parquet, told apart by content), what was read and dropped, and the
+    ADS-B reports of an ASTERIX recording (CAT021) — shared by ``build``, ``correct`` and
+    ``registration``. With ``clean``, plots that cannot be placed and the cleaning's drops
+    (gaps, glitches, ground traffic) are removed and reported."""
+    from optmodels import biasfield as bf
+    from optmodels.biasfield.cleaning import clean_plots
+    from optmodels.biasfield.ingest import read_tracks
+
+    origin = _parse_origin(args.origin) if args.origin else None
+    files = list(args.recording) + ([args.adsb] if getattr(args, "adsb", None) else [])
+    if len(args.recording) > 2:
+        raise ProblemError(f"RECORDING: at most two files (plots, then ADS-B), got "
+                           f"{len(args.recording)}")
+    kinds = ["asterix" if _is_asterix(f) else "table" for f in files]
+    adsb_report: dict[str, Any] | None = None
+    adsb = None
+    read_dropped: dict[str, int] = {}
+    if "asterix" in kinds:
+        if kinds[0] != "asterix":
+            raise ProblemError(f"{files[0]}: the plots are CSV/Parquet and {files[1]} is "
+                               "ASTERIX; give either ASTERIX files or tables")
+        tables = [f for f, k in zip(files, kinds, strict=True) if k == "table"]
+        if tables:
+            raise ProblemError(f"{tables[0]}: mixing an ASTERIX recording with a CSV/Parquet "
+                               "file is not supported; give the CAT021 ADS-B as ASTERIX")
+        rec = _asterix_recording(files, args, origin)
+        radars, plots, adsb = rec.radars, rec.plots, rec.adsb
+        adsb_report = {"reports": len(rec.adsb), **rec.report.as_dict()}
+        read_dropped = {str(k): int(v) for k, v in rec.report.dropped.items()}
+        source, org_used = "asterix", [float(v) for v in radars.origin]
+    else:
+        source = "table"
+        with _reading(str(args.radars)):
+            org_arg: Any = origin if origin is not None else "mean"
+            radars, org_used = bf.read_radars(args.radars, origin=org_arg)
+        with _reading(str(files[0])):
+            plots, read_dropped = bf.read_plots(files[0], radars,
+                                                azimuth_unit=args.azimuth_unit,
+                                                drop_out_of_range=args.drop_out_of_range)
+        geometry = args.geometry
+        if geometry == "auto":
+            geometry = "3d" if (org_used is not None and plots.height is not None) else "2d"
+        if geometry == "3d":
+            if org_used is None:
+                raise ProblemError(f"--geometry 3d: {args.radars} gives x, y sites; 3-D "
+                                   "needs lat, lon, alt (m above the WGS-84 ellipsoid)")
+            with _reading(str(args.radars)):
+                radars, org_used = bf.read_radars(args.radars, origin=org_used,
+                                                  geometry="3d")
+            if plots.height is None:
+                raise ProblemError(f"--geometry 3d: {files[0]} has no 'height' column "
+                                   "(target height, m above the WGS-84 ellipsoid)")
+        if len(files) > 1:
+            if org_used is None:
+                raise ProblemError(f"{files[1]}: ADS-B positions need geodetic radar sites "
+                                   f"(lat, lon, alt in {args.radars}) or --origin")
+            with _reading(str(files[1])):
+                _, rep = read_tracks(files[1], org_used, report=True)
+            adsb_report = rep.to_dict(max_rows=args.max_rows)
+    n_read = len(plots)
+    dropped = dict(read_dropped)
+    cleaning = None
+    if clean:
+        if getattr(radars, "is_3d", False):
+            ok = plots.locatable(radars)
+            if not ok.all():
+                dropped["no height or slant range below height"] = int(np.sum(~ok))
+                plots = plots.subset(ok)
+        if args.clean:
+            plots, crep = clean_plots(plots, radars)
+            dropped.update(crep.counts)
+            cleaning = crep.to_dict(max_rows=args.max_rows)
+    return {"radars": radars, "plots": plots, "source": source, "org_used": org_used,
+            "origin": origin, "adsb_report": adsb_report, "adsb": adsb,
+            "dropped": dropped, "cleaning": cleaning, "n_read": n_read}
+
+
 def _biasfield_build(args: argparse.Namespace) -> Outcome:
     import warnings
 
     from optmodels import biasfield as bf
 
     out = _out_file("--out", _npz_name(Path(args.out)))
-    with _reading(str(args.radars)):
-        radars, origin = bf.read_radars(args.radars)
-    with _reading(str(args.plots)):
-        plots, dropped = bf.read_plots(args.plots, radars, azimuth_unit=args.azimuth_unit,
-                                       drop_out_of_range=args.drop_out_of_range)
+    inp = _read_input(args, clean=True)
+    radars, plots, dropped = inp["radars"], inp["plots"], inp["dropped"]
+    org_used = inp["org_used"]
+    extra = {} if args.scheduler == "serial" else {"scheduler": args.scheduler}
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         fd, diag = bf.build_field_data(plots, radars, cells=args.cells,
-                                       knot_spacing=args.knot_spacing)
+                                       knot_spacing=args.knot_spacing, **extra)
     with _reading(f"--out {out}"):
         fd.save(out)
     chk = bf.residual_check(diag.fits, radars.m)
+    for reason, n in diag.dropped_plots.items():
+        dropped[reason] = dropped.get(reason, 0) + int(n)
     return {"out": str(out), "cells": fd.k, "radars": list(radars.names),
-            "plots": len(plots), "dropped_plots": {**dropped, **diag.dropped_plots},
+            "source": inp["source"],
+            "geometry": "3d" if getattr(radars, "is_3d", False) else "2d",
+            "plots": inp["n_read"], "plots_used": int(sum(f.rows.size for f in diag.fits)),
+            "dropped_plots": dropped, "cleaning": inp["cleaning"], "adsb": inp["adsb_report"],
             "dropped_cells": diag.dropped_cells, "warnings": [str(w.message) for w in caught],
             "track_chi2_per_dof": (chk.chi2 / np.maximum(chk.dof, 1)).tolist(),
-            "origin": origin}, True
+            "origin": None if org_used is None else [float(v) for v in org_used],
+            "origin_source": ("--origin" if inp["origin"] is not None else
+                              None if org_used is None else "mean of the sites")}, True
 
 
 def _print_biasfield_build(res: dict[str, Any]) -> None:
-    print(f"wrote {res['out']}: {res['cells']} cells, radars {', '.join(res['radars'])}, "
-          f"{res['plots']} plots; dropped plots {res['dropped_plots'] or 'none'}, "
+    print(f"wrote {res['out']}: {res['cells']} cells, radars {', '.join(res['radars'])} "
+          f"({res['geometry']}), {res['plots']} plots read, {res['plots_used']} used; "
+          f"dropped plots {res['dropped_plots'] or 'none'}, "
           f"dropped cells {res['dropped_cells']}")
+    if res["origin"] is not None:
+        print(f"origin {res['origin']} ({res['origin_source']})")
+    if res["adsb"]:
+        print(f"ADS-B: {res['adsb']}")
     print("track model χ²/dof per radar: "
           + ", ".join(f"{v:.3f}" for v in res["track_chi2_per_dof"]))
 
 
 def _parse_box(text: str) -> tuple[float, float]:
-    """``--box K1,K2``: metres and degrees, both positive -> (K1 m, K2 rad)."""
+    """``--box-deg K1,K2``: metres and degrees, both positive -> (K1 m, K2 rad), the unit
+    of the API's ``box``."""
     parts = text.split(",")
     if len(parts) != 2:
-        raise ProblemError(f"--box: expected K1,K2 (metres, degrees), got {text!r}")
+        raise ProblemError(f"--box-deg: expected K1,K2 (metres, degrees), got {text!r}")
     try:
         k1, k2 = (float(v) for v in parts)
     except ValueError:
-        raise ProblemError(f"--box: expected K1,K2 (metres, degrees), got {text!r}") from None
-    k1 = as_positive("--box K1 (m)", k1)
-    k2 = as_positive("--box K2 (deg)", k2)
+        raise ProblemError(f"--box-deg: expected K1,K2 (metres, degrees), got "
+                           f"{text!r}") from None
+    k1 = as_positive("--box-deg K1 (m)", k1)
+    k2 = as_positive("--box-deg K2 (deg)", k2)
     return k1, float(np.deg2rad(k2))
 
 
@@ -77,12 +211,16 @@ def _biasfield_solve(args: argparse.Namespace) -> Outcome:
     from optmodels import biasfield as bf
     from optmodels import plots as plt_
 
-    box = _parse_box(args.box) if args.box else None
+    if args.box is not None:
+        raise ProblemError(f"--box {args.box}: renamed --box-deg K1,K2 (K1 in metres, K2 in "
+                           "DEGREES; the Python API's box=(K1 m, K2 rad) takes radians), so "
+                           "that the unit is in the flag's name")
+    box = _parse_box(args.box_deg) if args.box_deg else None
     if args.lipschitz and args.solver == "closed-form":
         raise ProblemError("--solver closed-form: the Lipschitz problem (--lipschitz) has no "
                            "closed form; choose a CVXPY conic solver (CLARABEL, SCS, ...)")
     if args.solver == "closed-form" and box is not None:
-        raise ProblemError("--box: the closed form (11) has no box; choose a --solver")
+        raise ProblemError("--box-deg: the closed form (11) has no box; choose a --solver")
     out = _out_dir("--out", args.out)
     with _reading(str(args.file)):
         fd = bf.FieldData.load(args.file)
@@ -98,8 +236,13 @@ def _biasfield_solve(args: argparse.Namespace) -> Outcome:
                            "cells": fd.k, "out": str(out)}
     if sol.status.ok:
         with _reading(f"--out {out}"):
+            # the frame, so that `biasfield correct` can check the radar set it is applied to
+            frame: dict[str, Any] = {"chain": np.array("3d" if fd.is_3d else "2d")}
+            if fd.is_3d:
+                frame.update(geodetic=fd.geodetic, origin=fd.origin)
             np.savez_compressed(out / "field.npz", field=sol.field, eta=sol.eta,
-                                centers=fd.centers, radars=fd.radars, active=sol.active)
+                                centers=fd.centers, radars=fd.radars, active=sol.active,
+                                **frame)
             with (out / "field.csv").open("w", encoding="utf-8") as fh:
                 fh.write("cell,x,y,radar,range_bias_m,azimuth_bias_deg,active_range,"
                          "active_azimuth\n")
@@ -125,6 +268,121 @@ def _print_biasfield_solve(res: dict[str, Any]) -> None:
               f"wrote {', '.join(res['files'])} to {res['out']}")
 
 
+def _load_field(args: argparse.Namespace, radars: Any) -> Any:
+    """``--field DIR/field.npz`` (written by ``biasfield solve``), checked against the
+    radar set it is applied to (same radars, sites, and for a 3-D field the same origin)."""
+    from optmodels.biasfield.usage import FieldMap
+
+    with _reading(str(args.field)):
+        fm = FieldMap.load(args.field)
+    fm.check_radars(radars, where=f"--field {args.field}")
+    return fm
+
+
+def _biasfield_correct(args: argparse.Namespace) -> Outcome:
+    from optmodels.biasfield.usage import correct_plots
+
+    out = _out_file("--out", Path(args.out))
+    inp = _read_input(args, clean=False)
+    radars, plots = inp["radars"], inp["plots"]
+    fm = _load_field(args, radars)
+    # plots a 3-D radar set cannot place (no height, slant range below the height
+    # difference) are written as read, with covered = 0
+    ok = plots.locatable(radars) if getattr(radars, "is_3d", False) else np.ones(
+        len(plots), dtype=bool)
+    rng, az = plots.range.copy(), plots.azimuth.copy()
+    covered = np.zeros(len(plots), dtype=bool)
+    if ok.any():
+        cor = correct_plots(plots.subset(ok), radars, fm)
+        rng[ok], az[ok] = cor.plots.range, cor.plots.azimuth
+        covered[ok] = cor.covered
+    height = (np.full(len(plots), np.nan) if plots.height is None
+              else np.asarray(plots.height, dtype=float))
+    names = radars.names
+    with _reading(f"--out {out}"), out.open("w", encoding="utf-8") as fh:
+        fh.write("time,radar,object,range,azimuth,height,covered\n")
+        for k in range(len(plots)):
+            h = "" if not np.isfinite(height[k]) else repr(float(height[k]))
+            fh.write(f"{float(plots.time[k])!r},{names[int(plots.radar[k])]},"
+                     f"{int(plots.object[k])},{float(rng[k])!r},"
+                     f"{float(np.rad2deg(az[k]))!r},{h},{int(covered[k])}\n")
+    n_cov = int(covered.sum())
+    return {"out": str(out), "field": str(args.field), "source": inp["source"],
+            "geometry": "3d" if getattr(radars, "is_3d", False) else "2d",
+            "plots": len(plots), "corrected": n_cov, "not_covered": int(len(plots) - n_cov),
+            "not_locatable": int(np.sum(~ok)), "radars": list(names),
+            "units": {"time": "s", "range": "m", "azimuth": "deg clockwise from the radar's "
+                      "own north", "height": "m above the WGS-84 ellipsoid"},
+            "origin": inp["org_used"]}, n_cov > 0
+
+
+def _print_biasfield_correct(res: dict[str, Any]) -> None:
+    print(f"wrote {res['out']}: {res['plots']} plots, {res['corrected']} corrected, "
+          f"{res['not_covered']} outside the field's area (written as read)")
+
+
+def _biasfield_registration(args: argparse.Namespace) -> Outcome:
+    from optmodels.biasfield.referee import absolute_error, adsb_reference
+    from optmodels.biasfield.usage import registration_error
+
+    inp = _read_input(args, clean=args.clean)
+    radars, plots = inp["radars"], inp["plots"]
+    if getattr(radars, "is_3d", False):
+        ok = plots.locatable(radars)
+        plots = plots.subset(ok)
+    within = _load_field(args, radars) if args.field else None
+    reg = registration_error(plots, radars, area=args.area, within=within)
+    res: dict[str, Any] = {"source": inp["source"],
+                           "geometry": "3d" if getattr(radars, "is_3d", False) else "2d",
+                           "plots": len(plots), "dropped_plots": inp["dropped"],
+                           "registration": reg.to_dict(), "absolute": None,
+                           "units": "m, on the common horizontal plane"}
+    if inp["adsb"] is not None and len(inp["adsb"]) and getattr(radars, "is_3d", False):
+        ref = adsb_reference(plots, inp["adsb"], radars.origin)
+        if np.isfinite(ref).all(axis=1).any():
+            res["absolute"] = absolute_error(plots, radars, ref, area=args.area,
+                                             within=within).to_dict()
+    return res, bool(np.isfinite(reg.overall))
+
+
+def _print_biasfield_registration(res: dict[str, Any]) -> None:
+    reg = res["registration"]
+    print(f"cross-radar registration error {reg['overall_m']:.1f} m (per-area means, noise "
+          f"{reg['noise_m']:.1f} m; raw {reg['raw_overall_m']:.1f} m) on {res['plots']} plots")
+    for pair, v in reg["pairs"].items():
+        print(f"  {pair}: {v['rms_m']:.1f} m ({v['samples']} samples, {v['areas']} areas)")
+    if res["absolute"]:
+        ab = res["absolute"]
+        print(f"absolute error against ADS-B {ab['overall_m']:.1f} m (noise "
+              f"{ab['noise_m']:.1f} m): " + ", ".join(f"{k} {v:.1f} m"
+                                                    for k, v in ab["radars_m"].items()))
+
+
+def _recording_args(p: Any, positive: Any) -> None:
+    """The input flags ``build``, ``correct`` and ``registration`` share."""
+    p.add_argument("recording", type=Path, nargs="+", metavar="RECORDING",
+                   help="ASTERIX (CAT048 plots [+ CAT021 ADS-B], or a second file with the "
+                   "CAT021) or CSV/Parquet (time,radar,range,azimuth[,object][,height]); "
+                   "told apart by content")
+    p.add_argument("--radars", type=Path, required=True,
+                   help="sites CSV: name,[sac,sic,]lat,lon,alt (alt m above the WGS-84 "
+                   "ellipsoid) | name,x,y; sigma_range (m), sigma_azimuth (deg), max_range (m)")
+    p.add_argument("--origin", metavar="LAT,LON,H",
+                   help="origin of the common plane (deg, deg, m above the ellipsoid); "
+                   "default: the mean of the sites, as `build` (the field's origin must "
+                   "match)")
+    p.add_argument("--geometry", choices=("auto", "2d", "3d"), default="auto",
+                   help="auto: 3-D (slant range, each radar's own north) when the sites are "
+                   "geodetic and the plots have heights")
+    p.add_argument("--azimuth-unit", choices=("deg", "rad"), default="deg",
+                   help="azimuth unit of CSV/Parquet plots")
+    p.add_argument("--drop-out-of-range", action="store_true")
+    p.add_argument("--date", help="UTC date of an ASTERIX recording (YYYY-MM-DD; time of "
+                   "day rolls over at midnight)")
+    p.add_argument("--max-rows", type=_count(0), default=100,
+                   help="dropped rows listed per reason in --json")
+
+
 def run_demo(out: Path, args: argparse.Namespace, progress: bool) -> dict[str, Any]:
     """``optmodels demo``: the radar-network example of paper 001 in ``out/biasfield``
     (it shows no progress bar)."""
@@ -145,24 +403,48 @@ def run_details(out: Path, *, sizes: list[int], runs: int, repeats: int, seed: i
 
 
 def register(sub: Any) -> None:
-    """Add ``optmodels biasfield build`` and ``solve`` to the top-level sub-commands
-    ``sub``."""
+    """Add ``optmodels biasfield build``, ``solve``, ``correct`` and ``registration`` to
+    the top-level sub-commands ``sub``."""
     positive = _positive()
     bfp = sub.add_parser("biasfield", help="radar bias fields (paper 001)")
     bsub = bfp.add_subparsers(dest="verb", required=True)
-    bb = _leaf(bsub, "build", "plots -> FieldData .npz (track fits, cells, averaging)")
-    bb.add_argument("plots", type=Path, help="CSV/Parquet: time,radar,range,azimuth[,object]")
+    bb = _leaf(bsub, "build", "plots -> FieldData .npz (cleaning, track fits, cells, "
+                              "averaging)")
+    bb.add_argument("recording", type=Path, nargs="+", metavar="RECORDING",
+                    help="ASTERIX (CAT048 plots, optionally CAT021 ADS-B in the same or a "
+                         "second file) or CSV/Parquet plots time,radar,range,azimuth[,object]"
+                         "[,height] (then an optional second CSV/Parquet: ADS-B object,time,"
+                         "lat,lon[,alt]); the format is detected from the content")
+    bb.add_argument("--adsb", type=Path, help="ADS-B file (same as a second RECORDING)")
     bb.add_argument("--radars", type=Path, required=True,
-                    help="CSV: name,x,y|lat,lon[,alt],sigma_range,sigma_azimuth(deg),max_range")
+                    help="sites CSV: name,[sac,sic,]x,y|lat,lon[,alt] (alt m above the WGS-84 "
+                         "ellipsoid),sigma_range (m),sigma_azimuth (deg),max_range (m)")
+    bb.add_argument("--origin", metavar="LAT,LON,H",
+                    help="origin of the common plane: degrees, degrees, m above the "
+                         "ellipsoid (default: the mean of the sites' lat, lon, alt)")
+    bb.add_argument("--geometry", choices=("auto", "2d", "3d"), default="auto",
+                    help="3d: slant ranges, each radar's own north, plot heights (auto: 3d "
+                         "when the sites are geodetic and the plots have a height column)")
     bb.add_argument("--cells", type=_count(2), default=200, help="number of k-means cells")
     bb.add_argument("--knot-spacing", type=positive, default=20.0, help="polyline knots, s")
     bb.add_argument("--azimuth-unit", choices=("deg", "rad"), default="deg")
     bb.add_argument("--drop-out-of-range", action="store_true")
+    bb.add_argument("--no-clean", dest="clean", action="store_false",
+                    help="skip the cleaning (glitches, track jumps, ground traffic)")
+    bb.add_argument("--max-rows", type=_count(0), default=100,
+                    help="dropped rows listed per reason in the report (default 100)")
+    bb.add_argument("--date", help="UTC date of an ASTERIX recording (YYYY-MM-DD; time of "
+                                   "day rolls over at midnight)")
+    bb.add_argument("--scheduler", choices=("serial", "processes"), default="serial",
+                    help="where the track fits run (processes: all local cores)")
     bb.add_argument("--out", type=Path, default=Path("fielddata.npz"))
     bb.set_defaults(func=_biasfield_build, printer=_print_biasfield_build)
     bs = _leaf(bsub, "solve", "the smoothest field on a FieldData .npz")
     bs.add_argument("file", type=Path)
-    bs.add_argument("--box", help="K1,K2: |range bias| ≤ K1 m, |azimuth bias| ≤ K2 deg (8)")
+    bs.add_argument("--box-deg", metavar="K1,K2",
+                    help="the box (8): |range bias| ≤ K1 metres, |azimuth bias| ≤ K2 DEGREES "
+                         "(the API's box=(K1, K2) takes radians)")
+    bs.add_argument("--box", help=argparse.SUPPRESS)
     bs.add_argument("--solver", default="CLARABEL",
                     help="closed-form, or a CVXPY solver (CLARABEL, OSQP, SCS, ...)")
     bs.add_argument("--formulation", choices=("reduced", "constrained"), default="reduced")
@@ -170,3 +452,22 @@ def register(sub: Any) -> None:
                     help="smallest Lipschitz constant instead of the quadratic criterion")
     bs.add_argument("--out", default="biasfield_out", help="folder for field.csv/.npz, maps")
     bs.set_defaults(func=_biasfield_solve, printer=_print_biasfield_solve)
+    bc = _leaf(bsub, "correct", "plots corrected with a field: one CSV row per plot read")
+    _recording_args(bc, positive)
+    bc.add_argument("--field", type=Path, required=True,
+                    help="DIR/field.npz written by `biasfield solve`")
+    bc.add_argument("--out", type=Path, default=Path("corrected.csv"),
+                    help="CSV: time (s), radar, object, range (m), azimuth (deg, clockwise "
+                    "from the radar's own north), height (m above the ellipsoid), covered")
+    bc.set_defaults(func=_biasfield_correct, printer=_print_biasfield_correct, adsb=None,
+                    clean=False)
+    br = _leaf(bsub, "registration", "cross-radar registration error (and against ADS-B)")
+    _recording_args(br, positive)
+    br.add_argument("--field", type=Path,
+                    help="measure only where this DIR/field.npz is defined (its covered area)")
+    br.add_argument("--area", type=positive, default=25e3,
+                    help="side of the square areas of the per-area means, m")
+    br.add_argument("--no-clean", dest="clean", action="store_false",
+                    help="do not drop glitches, gaps and ground traffic first")
+    br.set_defaults(func=_biasfield_registration, printer=_print_biasfield_registration,
+                    adsb=None)

@@ -1,20 +1,24 @@
 """``optmodels plane fit``: the ML plane of maneuver (1.2)-(1.3) of paper 000 fitted to a
 CSV of positions (IPOPT on the full or reduced (1.12) form, or the closed form
-(1.5)-(1.8)) with the χ² planarity test; and the plane part of ``optmodels demo`` and
-``optmodels compare --details``."""
+(1.5)-(1.8)) with the χ² planarity test; ``optmodels plane track``: the plane along a
+track in sliding windows with plane-change detection (:func:`optmodels.plane.tracking.track`),
+one row per step; and the plane part of ``optmodels demo`` and ``optmodels compare
+--details``."""
 
 from __future__ import annotations
 
 import argparse
+import csv
+import io as _stdio
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from optmodels import plane
-from optmodels.cli.args import _level, _positive
-from optmodels.cli.contract import _OK_STATUSES, Outcome, _leaf, _reading
-from optmodels.core import ProblemError
+from optmodels.cli.args import _finite, _level, _positive
+from optmodels.cli.contract import _OK_STATUSES, Outcome, _leaf, _out_file, _reading
+from optmodels.core import VERIFY_TOL, ProblemError
 
 #: This problem's line in the demo's report/index.md.
 DEMO_TITLE = ("- [Plane of maneuver (paper 000)](plane/report.md): figures 1-4, Monte "
@@ -40,6 +44,7 @@ def _plane_fit(args: argparse.Namespace) -> Outcome:
 
     with _reading(str(args.file)):
         cols = read_plane_csv(args.file)
+        cols = _time_range(cols, args.file, args.start, args.end)
         if "cov" in cols:
             if args.sigma2 is not None or args.cov is not None:
                 raise ProblemError("--sigma2/--cov: the file has per-point covariances "
@@ -61,6 +66,8 @@ def _plane_fit(args: argparse.Namespace) -> Outcome:
     out: dict[str, Any] = {
         "file": str(args.file),
         "n_points": data.n_points,
+        "time_span": ([float(cols["t"][0]), float(cols["t"][-1])] if "t" in cols
+                      else None),
         "formulation": args.formulation,
         "status": sol.status.value,
         "method": sol.method,
@@ -80,7 +87,9 @@ def _plane_fit(args: argparse.Namespace) -> Outcome:
 
 def _print_plane_fit(res: dict[str, Any]) -> None:
     n = res["normal"]
-    print(f"{res['file']}: N = {res['n_points']}, {res['method']} -> {res['status']}")
+    span = res.get("time_span")
+    when = f", t = {span[0]:g} ... {span[1]:g} s" if span else ""
+    print(f"{res['file']}: N = {res['n_points']}{when}, {res['method']} -> {res['status']}")
     if res["status"] not in _OK_STATUSES:
         print(f"  {res['message']}")
         return
@@ -98,6 +107,180 @@ def _print_plane_fit(res: dict[str, Any]) -> None:
               f"{t['paper_threshold']:.4f} -> {pv}")
 
 
+def _time_range(cols: dict[str, Any], file: Path, start: float | None,
+                end: float | None) -> dict[str, Any]:
+    """The rows with ``start <= t <= end`` (s) when ``--start``/``--end`` are given."""
+    if start is None and end is None:
+        return cols
+    if "t" not in cols:
+        raise ProblemError(f"--start/--end: {file} has no t column (times, s)")
+    t = cols["t"]
+    keep = np.ones(len(t), dtype=bool)
+    if start is not None:
+        keep &= t >= start
+    if end is not None:
+        keep &= t <= end
+    if int(np.sum(keep)) < 3:
+        raise ProblemError(f"--start/--end: {int(np.sum(keep))} rows of {file} have "
+                           f"{start if start is not None else '-inf'} <= t <= "
+                           f"{end if end is not None else 'inf'} s; a plane needs 3")
+    out = {k: (v[keep] if isinstance(v, np.ndarray) and len(v) == len(t) else v)
+           for k, v in cols.items()}
+    return out
+
+
+def _parse_window(text: str) -> float | int | None:
+    """``--window``: ``40s`` (seconds), ``100`` (points) or ``growing``."""
+    raw = text.strip().lower()
+    if raw in ("growing", "none", "all"):
+        return None
+    try:
+        if raw.endswith("s"):
+            v = float(raw[:-1])
+            if not (np.isfinite(v) and v > 0):
+                raise ValueError
+            return v
+        return int(raw)
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expected seconds like 40s, a number of points like 100, or growing; got "
+            f"{text!r}") from None
+
+
+def _parse_site(text: str) -> np.ndarray:
+    """``--site``: three numbers x,y,z (m)."""
+    try:
+        v = [float(x) for x in text.replace(";", ",").split(",") if x.strip()]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected x,y,z in metres, got {text!r}") from None
+    if len(v) != 3 or not np.all(np.isfinite(v)):
+        raise argparse.ArgumentTypeError(f"expected three finite numbers x,y,z (m), got "
+                                         f"{text!r}")
+    return np.array(v)
+
+
+def _track_cov(args: argparse.Namespace, cols: dict[str, Any]
+               ) -> tuple[np.ndarray, np.ndarray | None, str]:
+    """The covariances of ``plane track``: the file's columns, a radar (``--site`` and
+    the three sigmas), ``--cov`` or ``--sigma2``; exactly one source."""
+    radar = [args.sigma_range, args.sigma_azimuth, args.sigma_elevation]
+    given = [name for name, on in (("the file's cxx..czz columns", "cov" in cols),
+                                   ("--site", args.site is not None),
+                                   ("--cov", args.cov is not None),
+                                   ("--sigma2", args.sigma2 is not None)) if on]
+    if len(given) > 1:
+        raise ProblemError(f"covariance: give one source, got {' and '.join(given)}")
+    if args.site is None and any(v is not None for v in radar):
+        raise ProblemError("--sigma-range/--sigma-azimuth/--sigma-elevation: need --site "
+                           "x,y,z (the radar, m)")
+    alpha2 = cols.get("alpha2")
+    if args.site is not None:
+        if any(v is None for v in radar):
+            raise ProblemError("--site: give all of --sigma-range (m), --sigma-azimuth (deg)"
+                               " and --sigma-elevation (deg)")
+        from optmodels.plane.radar import radar_covariances
+
+        if alpha2 is not None:
+            raise ProblemError("--site: the file's alpha2 column applies to a common --cov/"
+                               "--sigma2 only")
+        cov = radar_covariances(cols["points"], args.site, args.sigma_range,
+                                np.deg2rad(args.sigma_azimuth),
+                                np.deg2rad(args.sigma_elevation))
+        return cov, None, "radar"
+    if "cov" in cols:
+        return cols["cov"], None, "file"
+    if args.cov is not None:
+        return _parse_cov(args.cov), alpha2, "cov"
+    if args.sigma2 is not None:
+        return float(args.sigma2) * np.eye(3), alpha2, "sigma2"
+    raise ProblemError("covariance: give --site x,y,z with --sigma-range/--sigma-azimuth/"
+                       "--sigma-elevation, --cov ..., --sigma2 S, or cxx..czz columns in "
+                       "the file")
+
+
+def _step_status(trk: Any) -> list[str]:
+    """Per step: ``optimal`` (resolved, normal's estimated error ≤ 1e-6 rad),
+    ``optimal_inaccurate`` (≤ 1e-3), ``unresolved`` (the points are on a line at the
+    level: the answer is the line, a valid one) or ``error`` (the line is rejected yet no
+    plane passed the re-check)."""
+    out = []
+    for k in range(trk.n_steps):
+        if bool(trk.resolved[k]):
+            out.append("optimal" if float(trk.numerical_error[k]) <= VERIFY_TOL
+                       else "optimal_inaccurate")
+        elif not float(trk.line_statistic[k]) > float(trk.line_threshold[k]):
+            out.append("unresolved")
+        else:
+            out.append("error")
+    return out
+
+
+def _csv_text(rows: list[dict[str, Any]]) -> str:
+    """The step rows as CSV (floats with 17 significant digits: they read back exactly;
+    NaN as ``nan``; booleans ``True``/``False``)."""
+    buf = _stdio.StringIO(newline="")
+    if not rows:
+        return ""
+    w = csv.DictWriter(buf, fieldnames=list(rows[0]), lineterminator="\n")
+    w.writeheader()
+    for r in rows:
+        w.writerow({k: (f"{v:.17g}" if isinstance(v, float) else v) for k, v in r.items()})
+    return buf.getvalue()
+
+
+def _plane_track(args: argparse.Namespace) -> Outcome:
+    from optmodels.io import read_plane_csv
+    from optmodels.io.paths import _write_text
+    from optmodels.plane.tracking import track
+
+    out_path = _out_file("--out", args.out) if args.out is not None else None
+    with _reading(str(args.file)):
+        cols = read_plane_csv(args.file, require_time=True)
+        cov, alpha2, source = _track_cov(args, cols)
+    trk = track(cols["t"], cols["points"], cov, window=args.window, level=args.level,
+                false_alarm_rate=args.false_alarm_rate / 3600.0, alpha2=alpha2,
+                power=args.power, start=args.start)
+    status = _step_status(trk)
+    rows = [{**r, "status": s} for r, s in zip(trk.to_rows(), status, strict=True)]
+    if out_path is not None:
+        _write_text(out_path, _csv_text(rows), newline="")
+    counts = {s: status.count(s) for s in ("optimal", "optimal_inaccurate", "unresolved",
+                                           "error")}
+    ok = counts["error"] == 0
+    settings = {k: v for k, v in trk.to_dict().items()
+                if k in ("level", "false_alarm_rate", "power", "window", "scales",
+                         "method", "test_level", "solve_time", "n_steps", "change_times")}
+    doc: dict[str, Any] = {
+        "file": str(args.file),
+        "n_points": len(cols["t"]),
+        "covariance": source,
+        "window": args.window,
+        "units": {"time": "s", "offset": "m", "normal": "unit vector in the file's frame",
+                  "detectable_tilt": "rad", "false_alarm_rate": "per second",
+                  "statistic": "dimensionless, chi2(n_points - 3) if planar"},
+        **settings,
+        "status_counts": counts,
+        "status": "optimal" if ok else "error",
+        "out": str(out_path) if out_path is not None else None,
+        "steps": rows,
+    }
+    return doc, ok
+
+
+def _print_plane_track(res: dict[str, Any]) -> None:
+    if res["out"] is None:
+        print(_csv_text(res["steps"]), end="")
+        return
+    c = res["status_counts"]
+    ch = ", ".join(f"{t:g}" for t in res["change_times"]) or "none"
+    print(f"{res['file']}: N = {res['n_points']}, {res['n_steps']} steps ({res['method']}, "
+          f"window {res['window'] if res['window'] is not None else 'growing'}) -> "
+          f"{res['out']}")
+    print(f"  steps: {c['optimal']} optimal, {c['optimal_inaccurate']} inaccurate, "
+          f"{c['unresolved']} unresolved (on a line), {c['error']} error")
+    print(f"  plane changes detected at t = {ch} s")
+
+
 def run_demo(out: Path, args: argparse.Namespace, progress: bool) -> dict[str, Any]:
     """``optmodels demo``: the example of paper 000 in ``out/plane``."""
     from optmodels.demo import run_plane_demo
@@ -107,19 +290,23 @@ def run_demo(out: Path, args: argparse.Namespace, progress: bool) -> dict[str, A
 
 def run_details(out: Path, *, sizes: list[int], runs: int, repeats: int, seed: int,
                 progress: bool) -> tuple[str, dict[str, Any]]:
-    """``optmodels compare --details``: timing and Monte Carlo accuracy per size and the
-    benchmark (:mod:`solvers_cmp.plane`); the report section and the result entry."""
+    """``optmodels compare --details``: timing and Monte Carlo accuracy per size, the
+    benchmark and the full NLP's scaling (:mod:`solvers_cmp.plane`); the report section
+    and the result entry."""
     from solvers_cmp import plane as cmp_plane
 
     timing = cmp_plane.timing_rows(sizes, seed=seed, repeats=repeats, progress=progress)
     acc = cmp_plane.accuracy_rows(sizes, runs=runs, seed=seed, progress=progress)
     bench = cmp_plane.benchmark(max(sizes), repeats=repeats, seed=seed)
-    md = cmp_plane.write_report(out, timing, acc, bench)
-    return md, {"timing": timing, "accuracy": acc, "benchmark": bench}
+    # the full NLP's linear-time scaling (issue 19): cold, 3 starts, general D_i
+    scaling = cmp_plane.full_nlp_scaling((1_000, 10_000, 20_000), repeats=repeats, seed=seed)
+    md = cmp_plane.write_report(out, timing, acc, bench, scaling)
+    return md, {"timing": timing, "accuracy": acc, "benchmark": bench, "scaling": scaling}
 
 
 def register(sub: Any) -> None:
-    """Add ``optmodels plane fit`` to the top-level sub-commands ``sub``."""
+    """Add ``optmodels plane fit`` and ``optmodels plane track`` to the top-level
+    sub-commands ``sub``."""
     positive = _positive()
     pl = sub.add_parser("plane", help="plane of maneuver (paper 000)")
     plsub = pl.add_subparsers(dest="verb", required=True)
@@ -132,4 +319,39 @@ def register(sub: Any) -> None:
                      default="full")
     fit.add_argument("--level", type=_level(), default=0.997,
                      help="χ² test level, in (0, 1)")
+    fit.add_argument("--start", type=_finite(), help="fit only rows with t >= START (s)")
+    fit.add_argument("--end", type=_finite(), help="fit only rows with t <= END (s)")
     fit.set_defaults(func=_plane_fit, printer=_print_plane_fit)
+
+    tr = _leaf(plsub, "track", "the plane along a track: sliding windows, plane-change "
+               "detection, one row per step")
+    tr.epilog = ("One row per step: time (s), nx, ny, nz (unit normal, the file's frame; "
+                 "empty/nan where not resolved), offset (m), statistic and threshold (χ², "
+                 "dimensionless), resolved, planar, change, detector, detector_threshold, "
+                 "change_time (s), detectable_tilt (rad), n_points, window_start (s), "
+                 "line_x..line_z, numerical_error (rad), p_value, status. Exit 0: no step "
+                 "in error; 1: some step's plane failed its re-check; 2: bad input.")
+    tr.add_argument("file", type=Path,
+                    help="CSV with t (s, increasing), x,y,z (m) [,alpha2] [,cxx..czz (m²)]")
+    tr.add_argument("--window", type=_parse_window, required=True,
+                    help="window: seconds like 40s, a number of points like 100, or growing")
+    tr.add_argument("--level", type=_level(), default=0.997,
+                    help="level of the χ² planarity and line tests, in (0, 1)")
+    tr.add_argument("--false-alarm-rate", type=positive, default=1.0,
+                    help="detector false alarms per HOUR of planar track (default 1)")
+    tr.add_argument("--power", type=_level(), default=0.9,
+                    help="detection probability behind detectable_tilt, in (0, 1)")
+    tr.add_argument("--start", type=_finite(), help="first reported time, s")
+    tr.add_argument("--site", type=_parse_site,
+                    help="radar position x,y,z (m, the file's local flat ENU frame): "
+                         "covariances from range/azimuth/elevation errors (first order, at "
+                         "the measured points)")
+    tr.add_argument("--sigma-range", type=positive, help="radar range error std, m")
+    tr.add_argument("--sigma-azimuth", type=positive,
+                    help="radar azimuth error std, DEGREES (azimuth clockwise from north)")
+    tr.add_argument("--sigma-elevation", type=positive,
+                    help="radar elevation error std, DEGREES")
+    tr.add_argument("--cov", help="common D, m²: cxx,cxy,cxz,cyy,cyz,czz (or 9 numbers)")
+    tr.add_argument("--sigma2", type=positive, help="error variance per axis, m² (D = σ² I)")
+    tr.add_argument("--out", help="write the steps to this CSV file (else CSV on stdout)")
+    tr.set_defaults(func=_plane_track, printer=_print_plane_track)

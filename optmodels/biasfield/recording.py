@@ -1,0 +1,340 @@
+"""ASTERIX recordings → the bias-field tables (paper 001, the plots of (1)).
+
+:func:`read_recording` reads CAT048 plots and CAT021 ADS-B reports
+(:func:`optmodels.io.asterix.read_asterix`) and builds a 3-D :class:`PlotTable` (slant
+range, azimuth from each radar's own north, target height) for a 3-D :class:`RadarSet`
+keyed by SAC/SIC (:func:`read_sites`), the ADS-B reports (:class:`AdsbReports`) and a
+report of what was read, dropped and where each height came from (:class:`RecordingReport`).
+
+Heights of the plots (m above the WGS-84 ellipsoid), in this order:
+
+1. ``"adsb"``: the CAT021 geometric height (I021/140) of the same 24-bit address
+   (I048/220 = I021/080), linearly interpolated at the plot time between the two
+   bracketing ADS-B reports when they are at most ``max_gap`` s apart;
+2. ``"flight level"``: the plot's flight level (I048/090) through the ICAO standard
+   atmosphere: pressure altitude H_p = FL · 30.48 m is, in the ISA, the geopotential
+   altitude above mean sea level; the geometric altitude is h = R·H_p / (R − H_p)
+   (R = 6 356 766 m, ICAO Doc 7488), plus ``geoid_undulation`` N (m, default 0) to put it
+   above the ellipsoid. Its error is the atmosphere's departure from the ISA (the
+   hypsometric equation): (R_d/g)·ln(p₀/p) per K of mean temperature deviation — 11, 23,
+   35, 49 m/K at FL 100, 200, 300, 400 — and ≈ 8.3 m per hPa of sea-level pressure
+   deviation; ±10 K and ±15 hPa give up to ±480 m at FL 300. Add the geoid undulation if
+   not given (40-55 m over Europe). The geopotential → geometric step itself is 13 m at
+   FL 300. Use it only where no ADS-B height exists;
+3. NaN (counted) when neither exists; such plots cannot be placed on the plane by a 3-D
+   radar set (:meth:`PlotTable.locatable`).
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Iterable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from optmodels.biasfield.data import PlotTable, RadarSet
+from optmodels.core import (
+    FloatArray,
+    ProblemError,
+    as_flag,
+    as_instance,
+    as_number,
+    as_positive,
+)
+
+__all__ = ["AdsbReports", "Recording", "RecordingReport", "fl_to_height", "read_recording",
+           "read_sites"]
+
+#: Earth radius of the ISA geopotential ↔ geometric conversion (m, ICAO Doc 7488).
+R_ISA = 6_356_766.0
+#: Height sources of :attr:`Recording.height_source`.
+HEIGHT_SOURCES = ("none", "adsb", "flight level")
+
+
+def fl_to_height(pressure_altitude: Any, geoid_undulation: float = 0.0) -> FloatArray:
+    """Standard-atmosphere height (m above the ellipsoid) of a pressure altitude (m).
+
+    H_p (= FL · 30.48 m) is the ISA geopotential altitude; h = R·H_p/(R − H_p) with
+    R = 6 356 766 m is the geometric altitude above mean sea level; + N (the geoid
+    undulation, m) above the WGS-84 ellipsoid. Exact only in the standard atmosphere.
+    """
+    hp = np.asarray(pressure_altitude, dtype=float)
+    n = as_number("biasfield.fl_to_height geoid_undulation", geoid_undulation,
+                  low=-120.0, high=120.0)
+    return R_ISA * hp / (R_ISA - hp) + n
+
+
+@dataclass(frozen=True)
+class AdsbReports:
+    """ADS-B reports (CAT021), one row each, sorted by (object, time).
+
+    ``time`` (s since the recording's epoch), ``object`` (index into
+    :attr:`Recording.addresses`), ``address`` (24-bit ICAO address, −1 if unknown),
+    ``latitude``/``longitude`` (deg WGS-84), ``height`` (m above the WGS-84 ellipsoid,
+    geometric height I021/140; NaN if absent), ``pressure_altitude`` (m, I021/145 FL ×
+    30.48; NaN if absent).
+    """
+
+    time: FloatArray
+    object: np.ndarray
+    address: np.ndarray
+    latitude: FloatArray
+    longitude: FloatArray
+    height: FloatArray
+    pressure_altitude: FloatArray
+
+    def __len__(self) -> int:
+        return int(self.time.shape[0])
+
+
+@dataclass(frozen=True)
+class RecordingReport:
+    """Counts: ``plots_read`` (CAT048 records with a radar position), ``plots_kept``,
+    ``dropped`` (plots by reason), ``heights`` (kept plots by height source),
+    ``adsb_read``, ``adsb_kept``, ``adsb_dropped`` (by reason), ``records`` (records per
+    ASTERIX category read), ``decoder`` (reports the decoder itself discarded),
+    ``unknown_ids`` (the SAC/SIC pairs of the plots dropped as "unknown SAC/SIC")."""
+
+    plots_read: int
+    plots_kept: int
+    dropped: dict[str, int] = field(default_factory=dict)
+    heights: dict[str, int] = field(default_factory=dict)
+    adsb_read: int = 0
+    adsb_kept: int = 0
+    adsb_dropped: dict[str, int] = field(default_factory=dict)
+    records: dict[int, int] = field(default_factory=dict)
+    decoder: dict[str, int] = field(default_factory=dict)
+    unknown_ids: tuple[tuple[int, int], ...] = ()
+
+    def as_dict(self) -> dict[str, Any]:
+        """JSON-ready (for ``--json``)."""
+        return {"plots_read": self.plots_read, "plots_kept": self.plots_kept,
+                "plots_dropped": dict(self.dropped), "heights": dict(self.heights),
+                "adsb_read": self.adsb_read, "adsb_kept": self.adsb_kept,
+                "adsb_dropped": dict(self.adsb_dropped),
+                "records": {f"CAT{k:03d}": v for k, v in self.records.items()},
+                "decoder_dropped": dict(self.decoder),
+                "unknown_sac_sic": [list(i) for i in self.unknown_ids]}
+
+
+@dataclass(frozen=True)
+class Recording:
+    """What :func:`read_recording` gives: ``plots`` (3-D :class:`PlotTable`, sorted by
+    time; ``object`` indexes :attr:`addresses`), ``adsb`` (:class:`AdsbReports`, same
+    object numbering), ``radars`` (the 3-D :class:`RadarSet`), ``addresses`` (per object
+    its 24-bit ICAO address), ``height_source`` (per plot an index into
+    :data:`HEIGHT_SOURCES`), ``mode3a`` (per plot, −1 if absent), ``epoch``
+    (``datetime64[ns]`` of the UTC midnight the times count from, or None), ``report``."""
+
+    plots: PlotTable
+    adsb: AdsbReports
+    radars: RadarSet
+    addresses: np.ndarray
+    height_source: np.ndarray
+    mode3a: np.ndarray
+    epoch: np.datetime64 | None
+    report: RecordingReport
+
+    @property
+    def dropped(self) -> dict[str, int]:
+        """Every report dropped, by reason, in one flat dict: the plots' reasons, the
+        decoder's (``cat048 …``, ``cat021 …``) and the ADS-B ones (``adsb: …``)."""
+        out = dict(self.report.dropped)
+        out.update(self.report.decoder)
+        out.update({f"adsb: {k}": v for k, v in self.report.adsb_dropped.items()})
+        return out
+
+    @property
+    def icao24(self) -> list[str]:
+        """Per object its address as the usual 6-digit lower-case hex string."""
+        return [f"{int(a):06x}" for a in self.addresses]
+
+
+def read_sites(path: str | os.PathLike[str], *,
+               origin: tuple[float, float, float] | str | None = None) -> RadarSet:
+    """Radar sites of a recording: a CSV (or Parquet) with ``name, sac, sic, lat, lon,
+    alt`` (deg, deg, m above the WGS-84 ellipsoid) and the noise columns ``sigma_range``
+    (m), ``sigma_azimuth`` (deg), ``max_range`` (m) → a 3-D :class:`RadarSet` with
+    ``geodetic``, ``origin`` and ``ids`` (SAC, SIC).
+
+    ``origin``: (lat °, lon °, h m) of the common plane; default ``"mean"`` (the sites'
+    mean latitude, longitude and height); ``"first"``: the first site.
+
+    Raises
+    ------
+    ProblemError
+        Naming the file, line and column (as :func:`~optmodels.biasfield.ingest.read_radars`),
+        and if ``sac``/``sic`` or ``lat``/``lon`` are missing.
+    """
+    from optmodels.biasfield.ingest import _table, read_radars
+
+    tab = _table(path, "radars")
+    for col in ("sac", "sic", "lat", "lon", "alt"):
+        tab.need(col)
+    radars, _ = read_radars(path, origin="mean" if origin is None else origin,
+                            geometry="3d")
+    return radars
+
+
+def _paths(paths: Any) -> list[Any]:
+    if isinstance(paths, str | os.PathLike):
+        return [paths]
+    if isinstance(paths, Iterable):
+        return list(paths)
+    raise ProblemError(f"biasfield.read_recording paths: expected a file path or a list of "
+                       f"paths, got {type(paths).__name__}")
+
+
+def read_recording(paths: str | os.PathLike[str] | Iterable[str | os.PathLike[str]],
+                   radars: RadarSet | str | os.PathLike[str], *,
+                   origin: tuple[float, float, float] | str | None = None,
+                   date: Any = None, max_gap: float = 20.0, geoid_undulation: float = 0.0,
+                   drop_out_of_range: bool = True,
+                   editions: dict[int, tuple[int, int]] | None = None) -> Recording:
+    """Read an ASTERIX recording (CAT048 plots, CAT021 ADS-B; one file or several) into the
+    bias-field tables.
+
+    Parameters
+    ----------
+    paths
+        The ASTERIX file(s) (raw datablocks), read in order.
+    radars
+        A 3-D :class:`RadarSet` with ``ids`` (SAC, SIC), or the sites CSV of
+        :func:`read_sites`.
+    origin
+        With a sites CSV: the common plane's origin (see :func:`read_sites`); with a
+        RadarSet it must equal the set's own origin (or be None).
+    date
+        UTC date of the first record (see :func:`~optmodels.io.asterix.read_asterix`).
+    max_gap
+        Largest interval (s) between the two ADS-B reports an ADS-B height is interpolated
+        in (default 20 s); beyond, the flight level is used.
+    geoid_undulation
+        N (m) added to the standard-atmosphere height from a flight level (see
+        :func:`fl_to_height`).
+    drop_out_of_range
+        Drop (and count) plots beyond their radar's ``max_range`` (default) instead of
+        refusing the recording.
+
+    Drops (counted in ``report.dropped``): plots of a SAC/SIC not in ``radars``, plots
+    without an aircraft address (I220: no object to build a track of), plots beyond
+    ``max_range``; the decoder's own drops (no I010/I140/I040) are in ``report.decoder``.
+    ADS-B reports without an address are dropped (``report.adsb_dropped``).
+
+    Raises
+    ------
+    ProblemError
+        For an unreadable or foreign file (naming it and the byte offset), a radar set
+        that is not 3-D or has no SAC/SIC ids, and bad arguments.
+    """
+    from optmodels.io.asterix import read_asterix
+
+    fn = "biasfield.read_recording"
+    if isinstance(radars, str | os.PathLike):
+        radars = read_sites(radars, origin=origin)
+    radars = as_instance(f"{fn} radars", radars, RadarSet)
+    if origin is not None and not isinstance(origin, str) and radars.origin is not None:
+        try:
+            same = np.allclose(np.asarray(origin, dtype=float), radars.origin, rtol=0,
+                               atol=1e-9)
+        except (TypeError, ValueError):
+            same = False
+        if not same:
+            raise ProblemError(f"{fn} origin: {origin!r:.60} differs from the RadarSet's "
+                               f"origin {tuple(map(float, radars.origin))}; give the origin "
+                               "to read_sites (a RadarSet carries its own)")
+    if not radars.is_3d or not radars.ids:
+        raise ProblemError(f"{fn} radars: need a 3-D RadarSet (geodetic sites) with SAC/SIC "
+                           "ids, e.g. from read_sites")
+    max_gap = as_positive(f"{fn} max_gap", max_gap)
+    drop_out_of_range = as_flag(f"{fn} drop_out_of_range", drop_out_of_range)
+    fl_to_height(0.0, geoid_undulation)  # checks it
+    data = read_asterix([Path(p) if isinstance(p, str) else p for p in _paths(paths)],
+                        date=date, editions=editions)
+    c, a = data.cat048, data.cat021
+    dropped: dict[str, int] = {}
+
+    def drop(reason: str, mask: np.ndarray) -> None:
+        if mask.any():
+            dropped[reason] = dropped.get(reason, 0) + int(mask.sum())
+
+    # --- plots: radar by SAC/SIC
+    lut = np.full(256 * 256, -1, np.int64)
+    for i, (sac, sic) in enumerate(radars.ids):
+        lut[256 * sac + sic] = i
+    radar = lut[256 * c.sac + c.sic] if len(c) else np.zeros(0, np.int64)
+    keep = radar >= 0
+    unknown = tuple(sorted({(int(s), int(t)) for s, t in zip(c.sac[~keep], c.sic[~keep],
+                                                            strict=True)}))
+    drop("unknown SAC/SIC", ~keep)
+    no_addr = keep & (c.address < 0)
+    drop("no aircraft address (I048/220)", no_addr)
+    keep &= ~no_addr
+    over = keep & (c.range > radars.max_range[np.maximum(radar, 0)])
+    if over.any() and not drop_out_of_range:
+        raise ProblemError(f"{fn}: {int(over.sum())} plots beyond their radar's max_range "
+                           "(drop_out_of_range=False)")
+    drop("beyond max_range", over)
+    keep &= ~over
+
+    # --- ADS-B reports
+    a_keep = a.address >= 0
+    adsb_dropped: dict[str, int] = {}
+    if (~a_keep).any():
+        adsb_dropped["no target address (I021/080)"] = int((~a_keep).sum())
+    addresses = np.unique(np.concatenate([c.address[keep], a.address[a_keep]]))
+    a_obj = np.searchsorted(addresses, a.address[a_keep])
+    a_t = a.time[a_keep]
+    order = np.lexsort((a_t, a_obj))
+    adsb = AdsbReports(a_t[order], a_obj[order], a.address[a_keep][order],
+                       a.latitude[a_keep][order], a.longitude[a_keep][order],
+                       a.height[a_keep][order], a.pressure_altitude[a_keep][order])
+
+    # --- plot heights
+    p_t = c.time[keep]
+    p_obj = np.searchsorted(addresses, c.address[keep])
+    h_adsb = _interp_by_object(adsb.object, adsb.time, adsb.height, p_obj, p_t, max_gap)
+    h_fl = fl_to_height(c.pressure_altitude[keep], geoid_undulation)
+    source = np.where(np.isfinite(h_adsb), 1, np.where(np.isfinite(h_fl), 2, 0))
+    height = np.where(source == 1, h_adsb, np.where(source == 2, h_fl, np.nan))
+    order_p = np.argsort(p_t, kind="stable")
+    plots = PlotTable(p_t[order_p], radar[keep][order_p], c.range[keep][order_p],
+                      c.azimuth[keep][order_p], p_obj[order_p], height[order_p])
+    heights = {HEIGHT_SOURCES[k]: int(np.sum(source == k)) for k in (1, 2, 0)}
+    report = RecordingReport(len(c), len(plots), dropped, heights, len(a), len(adsb),
+                             adsb_dropped, dict(data.records), dict(data.dropped), unknown)
+    return Recording(plots, adsb, radars, addresses, source[order_p],
+                     c.mode3a[keep][order_p], data.epoch, report)
+
+
+def _interp_by_object(obj: np.ndarray, t: FloatArray, v: FloatArray, q_obj: np.ndarray,
+                      q_t: FloatArray, max_gap: float) -> FloatArray:
+    """Per query (object, time) the linear interpolation of ``v`` between the two
+    bracketing reports of the same object with finite ``v``, if they are at most
+    ``max_gap`` apart (a query at a report's own time takes its value); NaN otherwise.
+    ``obj``/``t`` sorted by (object, time)."""
+    out = np.full(q_t.shape, np.nan)
+    ok = np.isfinite(v)
+    obj, t, v = obj[ok], t[ok], v[ok]
+    if t.size == 0 or q_t.size == 0:
+        return out
+    span = float(max(t.max(), q_t.max()) - min(t.min(), q_t.min())) + 2 * max_gap + 1.0
+    base = min(float(t.min()), float(q_t.min())) - max_gap
+    key = obj * span + (t - base)
+    qkey = q_obj * span + (q_t - base)
+    j = np.searchsorted(key, qkey, side="right")          # first report after the query
+    lo, hi = j - 1, j
+    valid = (lo >= 0) & (hi < t.size)
+    lo_c, hi_c = np.clip(lo, 0, t.size - 1), np.clip(hi, 0, t.size - 1)
+    valid &= (obj[lo_c] == q_obj) & (obj[hi_c] == q_obj)
+    valid &= (t[hi_c] - t[lo_c]) <= max_gap
+    dt = np.where(valid, t[hi_c] - t[lo_c], 1.0)
+    w = np.where(valid, (q_t - t[lo_c]) / np.where(dt > 0, dt, 1.0), 0.0)
+    out = np.where(valid, v[lo_c] + w * (v[hi_c] - v[lo_c]), np.nan)
+    # a query exactly at a report's time (also the last report of an object)
+    exact = (lo >= 0) & (obj[lo_c] == q_obj) & (t[lo_c] == q_t)
+    out = np.where(exact, v[lo_c], out)
+    return out

@@ -1,0 +1,556 @@
+r"""The ML plane for general (non-proportional) covariances :math:`D_i`, fast and warm-startable.
+
+:func:`fit_general` minimises the reduced problem (1.12)-(1.13) of paper 000 -- equivalent
+to the original (1.2)-(1.3) for any SPD :math:`D_i` (1.11) -- by Newton's method on the
+unit sphere for the *profile*
+
+.. math::
+    \Phi(n) = \min_a \sum_i \frac{(\langle n, x_i\rangle - a)^2}{\langle D_i n, n\rangle}
+            = \sum_i w_i r_i^2,\qquad w_i = \frac1{\langle D_i n, n\rangle},\quad
+              r_i = \langle n, x_i\rangle - a(n),\quad a(n) = \frac{\sum w_i \langle n,
+              x_i\rangle}{\sum w_i},
+
+with the analytic gradient and Hessian (below) and a backtracking line search, then a
+re-check of the result (the Newton step with round-off floors, as
+:func:`optmodels.plane.verify._profile_check` does for the generic
+:func:`optmodels.plane.solve`, which :meth:`GeneralFit.to_solution` runs too). It needs no
+CasADi and costs O(N) per iteration: a warm-started step of a sliding window of 100 points
+takes about 3 iterations, 0.6 ms (``solvers_cmp/plane_sequential.py``). Under (1.4) its
+minimiser is the closed form's (1.5)-(1.8).
+
+Stationarity (the fixed point of the reweighted closed form). :math:`\Phi` is homogeneous
+of degree 0 in ``n``; by the envelope theorem (``a`` optimal, :math:`\sum_i w_i r_i = 0`)
+
+.. math::
+    \nabla\Phi = 2\,(Q_w - M_w)\,n,\qquad Q_w = \sum_i w_i (x_i - \bar x_w)(x_i - \bar
+    x_w)^T,\quad M_w = \sum_i w_i^2 r_i^2 D_i ,
+
+and :math:`n^TQ_wn = n^TM_wn = \Phi`, so :math:`n^T\nabla\Phi = 0` (Euler). A unit ``n`` is
+stationary for (1.12)-(1.13) iff :math:`Q_w n = M_w n`: ``n`` is a generalized eigenvector
+of the reweighted scatter :math:`Q_w` in the metric :math:`M_w`, with eigenvalue 1. Under
+(1.4), :math:`D_i = \alpha_i^2 D`, :math:`M_w = (\Phi / n^TDn)\,D` and the condition is
+:math:`Q n = \rho D n` (1.14)-(1.15): the paper's closed form is the case where the metric
+does not depend on ``n``. For general :math:`D_i` the fixed-point iteration on that
+eigenproblem (weights and metric from the last ``n``) converges at best linearly, hence
+Newton (``tests/test_plane_general.py`` checks :math:`Q_wn = M_wn` at the result).
+
+Hessian of the profile (``a`` eliminated, :math:`u_i = D_i n`):
+
+.. math::
+    \varphi_{nn} &= \sum_i 2w_i x_ix_i^T - 4w_i^2r_i(x_iu_i^T + u_ix_i^T) + 8w_i^3r_i^2u_iu_i^T
+                   - 2w_i^2r_i^2 D_i,\\
+    \varphi_{na} &= \sum_i -2w_ix_i + 4w_i^2 r_i u_i,\qquad \varphi_{aa} = 2\sum_i w_i,\\
+    \nabla^2\Phi &= \varphi_{nn} - \varphi_{na}\varphi_{na}^T/\varphi_{aa},
+
+and, since :math:`n^T\nabla\Phi = 0`, the Riemannian Hessian on the sphere is
+:math:`P\,\nabla^2\Phi\,P` (``P`` the tangent projector; no curvature term).
+
+Resolved or not (the analogue of the two-smallest-eigenvalue test Λ₁ + Λ₂ of
+:func:`optmodels.plane.planarity_test` under (1.4)): the minimum of (1.2) over *lines*,
+:math:`L = \min_{p,d,t_i} \sum_i (x_i - p - t_id)^TD_i^{-1}(x_i - p - t_id)`, is χ² with
+2N − 4 degrees of freedom if the points are on a line; the plane is ``resolved`` when
+``L > chi2.ppf(level, 2N - 4)`` and the normal passes its numerical re-check. Decided in
+two stages: a lower bound (:math:`D_i \preceq \mathrm{tr}(D_i) I`: the isotropic weighted
+line fit, two eigenvalues) settles clearly curved tracks at once; otherwise ``L`` itself
+is computed (the point of the line eliminated in closed form, Newton on the sphere for
+the direction). Under (1.4) ``L`` is exactly Λ₁ + Λ₂.
+"""
+
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike
+from scipy import special
+
+from optmodels.core import (
+    MAX_MAGNITUDE,
+    REJECT_TOL,
+    VERIFY_TOL,
+    FloatArray,
+    ProblemError,
+    Status,
+    as_count,
+    as_finite_array,
+    as_instance,
+    as_number,
+    as_probability,
+    check_spd_stack,
+    verified_status,
+)
+from optmodels.plane.data import PlaneData, PlaneSolution, _canonical_sign
+from optmodels.plane.verify import _finish, _profile_check
+
+__all__ = ["GeneralFit", "fit_general"]
+
+_WHERE = "plane.fit_general"
+_EPS = float(np.finfo(float).eps)
+
+
+@dataclass(frozen=True)
+class GeneralFit:
+    """The ML plane (1.12)-(1.13) for general :math:`D_i` (:func:`fit_general`).
+
+    Attributes
+    ----------
+    normal : ndarray (3,)
+        Unit normal; sign convention of :func:`optmodels.plane.closed_form` (``offset >=
+        0``; if 0, first non-zero component positive). Not determined by the data where
+        ``resolved`` is False (every plane through ``line_direction`` fits about equally).
+    offset : float
+        ``a`` of (1.1), m.
+    objective : float
+        Minimum of (1.12) = minimum of (1.2) (dimensionless), χ²(N − 3) for planar motion.
+    iterations : int
+        Newton iterations (all starts).
+    converged : bool
+        The last Newton step was below ``tol`` (rad) with a positive definite tangent
+        Hessian (a strict local minimum of the profile).
+    resolved : bool
+        The data determine the plane at ``level``: ``line_statistic > line_threshold`` and
+        ``numerical_error <= 1e-3`` rad.
+    line_statistic : float
+        Minimum of (1.2) over lines, χ²(2N − 4) if the points are on a line -- computed
+        exactly whenever it could be below ``line_threshold``; where a lower bound of it
+        already exceeds the threshold (a clearly curved track) that lower bound is
+        reported instead (then ``resolved`` is certain and the exact value not needed).
+    line_direction : ndarray (3,)
+        Unit direction of that best line (what the data determine when not ``resolved``:
+        the planes containing it all fit about equally); sign: largest component > 0.
+    numerical_error : float
+        Estimated error (rad) of ``normal``: the Newton step of the package's re-check
+        :func:`optmodels.plane.verify._profile_check` with its round-off floor (inf if
+        the curvature does not clear it).
+    status : Status
+        OPTIMAL if converged and ``numerical_error <= 1e-6``; OPTIMAL_INACCURATE up to
+        1e-3; ITERATION_LIMIT if not converged (never OK); ERROR above 1e-3 or at a saddle.
+    level, line_dof, line_threshold : float, int, float
+        Level of the line test, ``2N − 4`` and ``chi2.ppf(level, 2N − 4)``.
+    curvature : float
+        Smallest tangent curvature of the profile over the largest (> 0 at a minimum).
+    message : str
+    """
+
+    normal: FloatArray
+    offset: float
+    objective: float
+    iterations: int
+    converged: bool
+    resolved: bool
+    line_statistic: float
+    line_direction: FloatArray
+    numerical_error: float
+    status: Status = Status.OPTIMAL
+    level: float = 0.997
+    line_dof: int = 0
+    line_threshold: float = float("nan")
+    curvature: float = float("nan")
+    message: str = ""
+
+    @property
+    def ok(self) -> bool:
+        return self.status.ok
+
+    def to_solution(self, data: PlaneData) -> PlaneSolution:
+        """This fit as a :class:`PlaneSolution` of ``data`` (the same points and
+        covariances), through the package's own re-check: the finite-difference Newton
+        step of :func:`optmodels.plane.verify._profile_check` (independent of the analytic
+        Hessian used here; the larger of the two estimates is the ``stationarity``), then
+        :func:`optmodels.plane.verify._finish` (projection (1.8), residuals of (1.3), the
+        gate :func:`optmodels.core.finish`). A fit that is not converged or not OK is
+        returned in the failure form (NaN normal; the numbers in ``info["rejected"]``)."""
+        as_instance(f"{_WHERE} data", data, PlaneData)
+        status = self.status if self.converged else Status.ITERATION_LIMIT
+        step = self.numerical_error
+        if np.all(np.isfinite(self.normal)):
+            centre = data.points.mean(axis=0)
+            y = data.points - centre
+            sc = float(np.sqrt(np.mean(np.sum(y * y, axis=1))))
+            chk = _profile_check(y / sc, data.covs / sc**2, self.normal)
+            step = max(step, float(chk.step[0]))
+        return _finish(data, self.normal, self.offset, status=status, method="general",
+                       stationarity=step, iterations=self.iterations, message=self.message,
+                       info={"resolved": self.resolved, "line_statistic": self.line_statistic,
+                             "line_direction": self.line_direction,
+                             "min_curvature": self.curvature,
+                             "numerical_error": self.numerical_error})
+
+
+# --------------------------------------------------------------------------- profile
+def _profile(y: FloatArray, c: FloatArray, n: FloatArray) -> float:
+    u = np.einsum("ijk,k->ij", c, n)
+    w = 1.0 / (u @ n)
+    p = y @ n
+    a = float(w @ p) / float(np.sum(w))
+    r = p - a
+    return float(w @ (r * r))
+
+
+def _derivatives(y: FloatArray, c: FloatArray, n: FloatArray
+                 ) -> tuple[float, float, FloatArray, FloatArray]:
+    """``(Φ, a, ∇Φ, ∇²Φ)`` at ``n`` (see the module docstring)."""
+    u = np.einsum("ijk,k->ij", c, n)
+    w = 1.0 / (u @ n)
+    p = y @ n
+    sw = float(np.sum(w))
+    a = float(w @ p) / sw
+    r = p - a
+    wr = w * r
+    w2r = w * wr
+    w2r2 = w2r * r
+    phi = float(wr @ r)
+    g = 2.0 * (wr @ y) - 2.0 * (w2r2 @ u)
+    yu = (y * w2r[:, None]).T @ u
+    hnn = (2.0 * (y * w[:, None]).T @ y - 4.0 * (yu + yu.T)
+           + 8.0 * (u * (w2r2 * w)[:, None]).T @ u
+           - 2.0 * np.einsum("i,ijk->jk", w2r2, c))
+    hna = -2.0 * (w @ y) + 4.0 * (w2r @ u)
+    h = hnn - np.outer(hna, hna) / (2.0 * sw)
+    return phi, a, g, 0.5 * (h + h.T)
+
+
+def _check(y: FloatArray, c: FloatArray, n: FloatArray) -> tuple[float, float, float]:
+    r"""Re-check of a final normal: ``(numerical_error, curvature, a)``.
+
+    ``numerical_error`` is the estimated angle (rad) to the exact stationary point of
+    (1.12)-(1.13): the Newton step :math:`\|H^{-1}g\|` of the analytic tangent gradient
+    and Hessian plus what the round-off of ``g`` could hide, ``g_floor / (h_min -
+    h_floor)`` (inf when the smallest curvature does not clear its floor: the normal is
+    not determined to working precision) -- the estimate of
+    :func:`optmodels.plane.verify._profile_check` with an analytic instead of a
+    finite-difference Hessian. ``curvature``: smallest tangent curvature over the
+    largest.
+    """
+    _, a, g, h = _derivatives(y, c, n)
+    t = _tangent(n)
+    gt = t @ g
+    ht = t @ h @ t.T
+    hl = _eig2(ht)
+    u = np.einsum("ijk,k->ij", c, n)
+    w = 1.0 / (u @ n)
+    absy = np.abs(y)
+    r = y @ n - a
+    err = 2.0 * (w * (absy @ np.abs(n) + abs(a) + np.abs(r))) @ absy \
+        + 2.0 * (w * w * r * r) @ np.abs(u)
+    fl = 8.0 * np.finfo(float).eps * np.sqrt(len(y))
+    gfloor = 2.0 * fl * float(np.linalg.norm(err))
+    hfloor = fl * max(abs(hl[0]), abs(hl[1])) + gfloor
+    hmin = hl[0] - hfloor
+    curv = hl[0] / max(abs(hl[1]), np.finfo(float).tiny)
+    if not hmin > 0:
+        return float("inf"), curv, a
+    step = float(np.linalg.norm(np.linalg.solve(ht, gt))) + gfloor / hmin
+    return step, curv, a
+
+
+def _eig2(h: FloatArray) -> tuple[float, float]:
+    """Eigenvalues (ascending) of a symmetric 2x2 matrix (``eigvalsh`` costs ~20x more)."""
+    m = 0.5 * (float(h[0, 0]) + float(h[1, 1]))
+    d = 0.5 * (float(h[0, 0]) - float(h[1, 1]))
+    rad = (d * d + float(h[0, 1]) ** 2) ** 0.5
+    return m - rad, m + rad
+
+
+def _tangent(n: FloatArray) -> FloatArray:
+    """Orthonormal basis (2, 3) of the plane orthogonal to unit ``n`` (the basis of
+    :func:`optmodels.plane.verify._tangent_basis`, without its stack overhead)."""
+    x, y, z = (float(v) for v in n)
+    k = int(np.argmin(np.abs(n)))
+    # n x e_k (np.cross costs ~40 us per call on 3-vectors)
+    a = (0.0, z, -y) if k == 0 else (-z, 0.0, x) if k == 1 else (y, -x, 0.0)
+    s = (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]) ** 0.5
+    u = (a[0] / s, a[1] / s, a[2] / s)
+    v = (y * u[2] - z * u[1], z * u[0] - x * u[2], x * u[1] - y * u[0])
+    return np.array([u, v])
+
+
+def _newton(y: FloatArray, c: FloatArray, n0: FloatArray, tol: float, max_iter: int
+            ) -> tuple[FloatArray, int, bool, float]:
+    """Newton on the sphere with backtracking; ``(n, iterations, converged, curvature)``."""
+    n = n0 / np.linalg.norm(n0)
+    phi, _, g, h = _derivatives(y, c, n)
+    curv = float("nan")
+    tiny = np.finfo(float).tiny
+    stalls = 0
+    for it in range(1, max_iter + 1):
+        t = _tangent(n)
+        gt = t @ g
+        ht = t @ h @ t.T
+        hl = _eig2(ht)
+        curv = hl[0] / max(abs(hl[1]), tiny)
+        convex = bool(hl[0] > 1e-12 * max(abs(hl[1]), tiny))
+        if convex:
+            delta = -np.linalg.solve(ht, gt)
+        else:  # not locally convex: saddle-free Newton (|curvatures|, floored at 1e-8
+            # of the largest: big steps along a flat direction), then the cap and the
+            # line search below
+            lam, vec = np.linalg.eigh(ht)
+            lam_abs = np.maximum(np.abs(lam), 1e-8 * max(float(np.max(np.abs(lam))), tiny))
+            delta = -vec @ ((vec.T @ gt) / lam_abs)
+            if lam[0] < 0:  # near a saddle or maximum the gradient vanishes: leave it
+                # along the direction of negative curvature (0.5 rad, downhill sign)
+                v0 = vec[:, 0]
+                delta = delta + (0.5 if float(gt @ v0) <= 0 else -0.5) * v0
+        size = float(np.linalg.norm(delta))
+        if size > 0.5:  # at most ~30° per step
+            delta *= 0.5 / size
+            size = 0.5
+        if size < tol and convex:  # the last (tiny) step taken: error ~ size²
+            cand = n + delta @ t
+            return cand / np.linalg.norm(cand), it, True, curv
+        step = 1.0
+        while True:
+            cand = n + step * (delta @ t)
+            cand = cand / np.linalg.norm(cand)
+            phi_c = _profile(y, c, cand)
+            if phi_c <= phi + 1e-14 * abs(phi) or step < 1e-8:
+                break
+            step *= 0.5
+        if step < 1e-8:  # no descent at round-off: stationary to working precision
+            return n + 0.0, it, convex, curv
+        # a flat, non-convex profile (points on a line to round-off): steps that change
+        # Φ only at round-off lead nowhere; give up after 5 of them (not converged)
+        stalls = stalls + 1 if (not convex and phi - phi_c <= 8 * _EPS * abs(phi)) else 0
+        if stalls >= 5:
+            return cand, it, False, curv
+        n = cand
+        phi, _, g, h = _derivatives(y, c, n)
+    return n, max_iter, False, curv
+
+
+# --------------------------------------------------------------------------- line test
+def _line_lower_bound(y: FloatArray, trace: FloatArray) -> tuple[float, FloatArray]:
+    r"""A lower bound of the minimum of (1.2) over lines, and its line's direction:
+    :math:`D_i \preceq \mathrm{tr}(D_i)\, I`, so each point's distance to a line is at
+    least its Euclidean one over :math:`\mathrm{tr}\,D_i`, and the best line of that
+    isotropic weighted problem is given by the weighted scatter's eigenvalues (the two
+    smallest sum to its minimum)."""
+    w = 1.0 / trace
+    yc = y - (w @ y) / np.sum(w)
+    lam, vec = np.linalg.eigh((yc * w[:, None]).T @ yc)
+    return float(lam[0] + lam[1]), vec[:, 2]
+
+
+def _line_value(y: FloatArray, c: FloatArray, d: FloatArray) -> float:
+    r"""Minimum of (1.2) over the lines of direction ``d`` (unit).
+
+    The minimum over ``t`` of :math:`(e - td)^TD^{-1}(e - td)` is :math:`z^TS^{-1}z` with
+    :math:`z = B^Te`, :math:`S = B^TDB` (``B`` an orthonormal basis of :math:`d^\perp`:
+    the marginal of the noise across the line), and the best point of the line is the
+    :math:`S_i^{-1}`-weighted mean of the :math:`B^Ty_i`. Invariant to the choice of ``B``.
+    """
+    b = _tangent(d)
+    s = np.einsum("aj,ijk,bk->iab", b, c, b)
+    det = s[:, 0, 0] * s[:, 1, 1] - s[:, 0, 1] ** 2
+    i00, i11, i01 = s[:, 1, 1] / det, s[:, 0, 0] / det, -s[:, 0, 1] / det
+    z = y @ b.T
+    a = np.array([[np.sum(i00), np.sum(i01)], [np.sum(i01), np.sum(i11)]])
+    rhs = np.array([i00 @ z[:, 0] + i01 @ z[:, 1], i01 @ z[:, 0] + i11 @ z[:, 1]])
+    q = np.linalg.solve(a, rhs)
+    r0, r1 = z[:, 0] - q[0], z[:, 1] - q[1]
+    return float(np.sum(i00 * r0 * r0 + 2.0 * i01 * r0 * r1 + i11 * r1 * r1))
+
+
+def _line_fit(y: FloatArray, c: FloatArray, d0: FloatArray, *, max_iter: int = 50,
+              tol: float = 1e-8) -> tuple[float, FloatArray, bool]:
+    """Minimum of (1.2) over lines: Newton on the sphere for :func:`_line_value` (the
+    point of the line eliminated), with central-difference gradient and Hessian (step
+    1e-4 rad: relative truncation ~1e-8 of the derivatives, so the value is exact to
+    round-off at the minimum) and backtracking, from ``d0``. ``(L, direction,
+    converged)``."""
+    d = d0 / np.linalg.norm(d0)
+    hs = 1e-4
+    val = _line_value(y, c, d)
+    for _ in range(max_iter):
+        t = _tangent(d)
+
+        def f(u: float, v: float, d: FloatArray = d, t: FloatArray = t) -> float:
+            m = d + u * t[0] + v * t[1]
+            return _line_value(y, c, m / np.linalg.norm(m))
+
+        fp0, fm0, f0p, f0m = f(hs, 0.0), f(-hs, 0.0), f(0.0, hs), f(0.0, -hs)
+        fpp, fmm = f(hs, hs), f(-hs, -hs)
+        g = np.array([fp0 - fm0, f0p - f0m]) / (2 * hs)
+        h00 = (fp0 - 2 * val + fm0) / hs**2
+        h11 = (f0p - 2 * val + f0m) / hs**2
+        h01 = (fpp + fmm + 2 * val - fp0 - fm0 - f0p - f0m) / (2 * hs**2)
+        hm = np.array([[h00, h01], [h01, h11]])
+        lo, hi = _eig2(hm)
+        if lo > 1e-12 * abs(hi):
+            delta = -np.linalg.solve(hm, g)
+        else:
+            delta = -g / max(abs(hi), abs(lo), 1e-300)
+        size = float(np.linalg.norm(delta))
+        if size > 0.5:
+            delta *= 0.5 / size
+            size = 0.5
+        if size < tol and lo > 0:
+            return val, d, True
+        step = 1.0
+        while True:
+            m = d + step * (delta @ t)
+            cand = m / np.linalg.norm(m)
+            vc = _line_value(y, c, cand)
+            if vc <= val or step < 1e-6:
+                break
+            step *= 0.5
+        if vc > val:  # no descent left at the difference step's accuracy
+            return val, d, bool(lo > 0)
+        d, val = cand, vc
+    return val, d, False
+
+
+@functools.lru_cache(maxsize=256)
+def _chi2_ppf(level: float, dof: int) -> float:
+    """``chi2.ppf(level, dof)`` through the special function (≈ 50x faster than
+    ``scipy.stats``, which matters per step of a track)."""
+    return float(special.chdtri(dof, 1.0 - level))
+
+
+# --------------------------------------------------------------------------- entry
+def fit_general(
+    points: ArrayLike,
+    cov: ArrayLike,
+    *,
+    normal0: ArrayLike | None = None,
+    tol: float = 1e-10,
+    max_iter: int = 100,
+    level: float = 0.997,
+) -> GeneralFit:
+    r"""The ML plane (1.12)-(1.13) = (1.2)-(1.3) for general SPD :math:`D_i`, by Newton's
+    method on the sphere for the profile of (1.12) (see the module docstring).
+
+    Parameters
+    ----------
+    points : array_like (N, 3)
+        Measured positions :math:`x_i^*` (m), N >= 3, any Cartesian frame.
+    cov : array_like (N, 3, 3) or (3, 3)
+        Error covariances :math:`D_i` (m², same frame), SPD; a (3, 3) is used for every
+        point.
+    normal0 : array_like (3,), optional
+        Warm start (e.g. the previous step's normal in a sliding window): one Newton run
+        from it. Default (cold): runs from the closed form with the mean covariance and
+        from the three principal axes of the scatter; the lowest converged (1.12) is kept.
+    tol : float
+        Convergence: Newton step (rad) below ``tol``, in (0, 1e-3].
+    max_iter : int
+        Newton iterations per start, >= 1.
+    level : float
+        Level of the line test behind ``resolved``, in (0, 1).
+
+    Returns
+    -------
+    GeneralFit
+        ``status`` from the re-check: never OK unless ``converged`` and the independent
+        Newton-step estimate ``numerical_error`` is ≤ 1e-3 rad (OPTIMAL ≤ 1e-6).
+        :meth:`GeneralFit.to_solution` gives the :class:`PlaneSolution` of the package's
+        gate.
+
+    Raises
+    ------
+    ProblemError
+        Naming the argument: shapes, non-finite values, covariances not SPD, identical or
+        collinear-to-round-off points, ``tol``/``max_iter``/``level`` out of range.
+    """
+    pts = as_finite_array(f"{_WHERE} points", points, shape=(None, 3), max_abs=MAX_MAGNITUDE)
+    npts = pts.shape[0]
+    if npts < 3:
+        raise ProblemError(f"{_WHERE} points: a plane needs at least 3 points, got {npts}")
+    cv = as_finite_array(f"{_WHERE} cov", cov, ndim=(2, 3), max_abs=MAX_MAGNITUDE)
+    if cv.shape == (3, 3):
+        cv = np.broadcast_to(cv, (npts, 3, 3))
+    elif cv.shape != (npts, 3, 3):
+        raise ProblemError(f"{_WHERE} cov: expected shape ({npts}, 3, 3) or (3, 3), got "
+                           f"{cv.shape}")
+    check_spd_stack(f"{_WHERE} cov", cv)
+    tol = as_number(f"{_WHERE} tol", tol, low=0.0, low_open=True, high=REJECT_TOL)
+    max_iter = as_count(f"{_WHERE} max_iter", max_iter, minimum=1, maximum=10**6)
+    lv = as_probability(f"{_WHERE} level", level, low_open=True, high_open=True)
+    start: FloatArray | None = None
+    if normal0 is not None:
+        start = as_finite_array(f"{_WHERE} normal0", normal0, shape=(3,), max_abs=MAX_MAGNITUDE)
+        if not float(np.linalg.norm(start)) > 0:
+            raise ProblemError(f"{_WHERE} normal0: must be non-zero")
+
+    # centre and scale (translation and scaling map planes to planes; (1.2) unchanged
+    # when the covariances are scaled with the points)
+    centre = pts.mean(axis=0)
+    y = pts - centre
+    scale = float(np.sqrt(np.mean(np.sum(y * y, axis=1))))
+    spread = np.linalg.svd(y, compute_uv=False) if start is None else None
+    big = float(np.max(np.abs(pts)))
+    floor = 64.0 * np.finfo(float).eps * np.sqrt(npts) * big
+    if not scale > floor / np.sqrt(npts):
+        raise ProblemError(f"{_WHERE} points: all points are identical; no plane is defined")
+    if spread is not None and spread[1] <= floor:
+        raise ProblemError(f"{_WHERE} points: the points are collinear to round-off; every "
+                           "plane through the line fits, the plane is not unique")
+    y = y / scale
+    c = 0.5 * (cv + cv.transpose(0, 2, 1)) / scale**2
+    tr = np.trace(c, axis1=1, axis2=2)  # SPD: λ_max ≤ tr ≤ 3 λ_max
+    if float(tr.min()) < 1e-100 or float(tr.max()) > 1e100:
+        raise ProblemError(f"{_WHERE} cov: variances outside 1e±100 of the spread² of the "
+                           "points (float64 cannot hold the weights); check units")
+
+    if start is not None:
+        starts = [start / np.linalg.norm(start)]
+    else:
+        _, axes = np.linalg.eigh(y.T @ y)
+        dm = np.mean(c, axis=0)
+        m, h = np.linalg.eigh(dm)
+        tw = h / np.sqrt(m)
+        _, gv = np.linalg.eigh(tw.T @ (y.T @ y) @ tw)
+        n_cf = tw @ gv[:, 0]
+        starts = [n_cf / np.linalg.norm(n_cf), axes[:, 0], axes[:, 1], axes[:, 2]]
+
+    best: tuple[float, FloatArray, bool, float] | None = None
+    iters = 0
+    for s in starts:
+        n, it, conv, curv = _newton(y, c, s, tol, max_iter)
+        iters += it
+        val = _profile(y, c, n)
+        key = (not conv, val)
+        if best is None or key < (not best[2], best[0]):
+            best = (val, n, conv, curv)
+    assert best is not None
+    phi, n, converged, curv = best
+
+    num_err, curv_chk, a_scaled = _check(y, c, n)
+    curv = curv_chk if np.isfinite(curv_chk) else curv
+    normal, offset = _canonical_sign(n, scale * a_scaled + float(n @ centre))
+
+    status = verified_status(Status.OPTIMAL, num_err)
+    message = ""
+    if not converged:
+        status = Status.ITERATION_LIMIT
+        message = (f"Newton did not converge ({iters} iterations, at most {max_iter} per "
+                   "start; a flat profile: points on a line?)")
+    elif curv < -1e-6:
+        status = Status.ERROR
+        message = f"not a minimum of (1.12)-(1.13): profile curvature {curv:.2g}"
+    elif not status.ok:
+        message = (f"normal not determined to working precision (estimated error "
+                   f"{num_err:.2g} rad)")
+    elif num_err > VERIFY_TOL:
+        message = f"estimated error of the normal {num_err:.2g} rad (NumPy re-check)"
+
+    line_dof = 2 * npts - 4
+    line_thr = _chi2_ppf(lv, line_dof)
+    lower, lower_dir = _line_lower_bound(y, tr)
+    if lower > line_thr:  # resolved beyond doubt: no need for the exact line fit
+        line_stat, line_dir, above = lower, lower_dir, True
+    else:
+        line_stat, line_dir, line_conv = _line_fit(y, c, lower_dir)
+        above = (line_stat > line_thr) if line_conv else None
+    line_dir = line_dir / np.linalg.norm(line_dir)
+    line_dir = line_dir if line_dir[np.argmax(np.abs(line_dir))] > 0 else -line_dir
+    # undecided (iterations ran out near the threshold): not resolved, the safe side
+    resolved = bool(above is True and num_err <= REJECT_TOL and converged)
+    return GeneralFit(
+        normal=normal, offset=float(offset), objective=phi, iterations=iters,
+        converged=bool(converged), resolved=resolved, line_statistic=line_stat,
+        line_direction=line_dir, numerical_error=num_err, status=status, level=lv,
+        line_dof=line_dof, line_threshold=line_thr, curvature=curv, message=message,
+    )

@@ -1,0 +1,613 @@
+r"""The plane of maneuver along a track (paper 000): sliding windows, plane-change
+detection, resolved/unresolved steps and the detector's power, one record per step.
+
+:func:`track` re-estimates the ML plane (1.2)-(1.3) after every measurement from the
+points of a window -- growing (``window=None``, as :func:`identify_sequence`), the last
+``window`` seconds (a float) or the last ``window`` points (an int) -- and runs the
+plane-change detector of :mod:`optmodels.plane.detector` on the stream. After an alarm
+the detector restarts: the windows forget every point before the estimated change
+(the split of the alarming test), so that the next plane is estimated from the new
+motion only.
+
+* Proportional covariances (1.4), :math:`D_i = \alpha_i^2 D` (``cov`` (3, 3), or a stack
+  detected as proportional): the closed form (1.5)-(1.7) of every window from running
+  weighted sums with removal (:mod:`optmodels.plane.windows`), the re-check of
+  :func:`optmodels.plane.closed_form` on every step, all steps at once.
+* General :math:`D_i` (e.g. one radar): :func:`optmodels.plane.general.fit_general` on
+  each window, warm-started from the previous step's normal (re-solved cold when the warm
+  run does not converge), with its own line test and re-check.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from optmodels.core import (
+    REJECT_TOL,
+    FloatArray,
+    ProblemError,
+    as_count,
+    as_finite_array,
+    as_number,
+    as_positive,
+    as_probability,
+    timed,
+)
+from optmodels.plane.closedform import _closed_form_from_sums
+from optmodels.plane.data import PlaneData
+from optmodels.plane.detector import (
+    chow_statistic,
+    detectable_tilt,
+    detector_threshold,
+    noncentrality_for_power,
+    reference_tilt_sd,
+    score_info_moments,
+    score_info_points,
+    velocity_direction,
+)
+from optmodels.plane.statistics import _planarity_arrays
+from optmodels.plane.verify import _tangent_basis
+from optmodels.plane.windows import Moments, range_moments, track_spread
+
+__all__ = ["PlaneTrack", "track"]
+
+_W = "plane.track"
+#: Default test-segment lengths as fractions of the window (time or count).
+_SCALE_FRACTIONS = (0.125, 0.25, 0.5)
+#: Default scales (s) for a growing window.
+_GROWING_SCALES = (5.0, 10.0, 20.0)
+
+_ARRAYS = ("times", "n_points", "window_start", "normals", "offsets", "statistic", "dof",
+           "threshold", "p_value", "resolved", "planar", "line_statistic",
+           "line_threshold", "line_direction", "numerical_error", "change", "detector",
+           "detector_threshold", "change_time", "detectable_tilt", "detectable_tilt_any")
+
+
+@dataclass
+class PlaneTrack:
+    """The plane along a track, one record per step (K steps: the measurements from
+    ``start`` on). Arrays over steps; angles in rad, lengths in m, times in s.
+
+    Attributes
+    ----------
+    times : (K,) time of the step (its newest measurement).
+    n_points : (K,) points in the step's window; window_start : (K,) time of its oldest.
+    normals : (K, 3), offsets : (K,)
+        The ML plane ⟨n, x⟩ = a of the window (offset ≥ 0); NaN where not ``resolved``.
+    statistic : (K,) Λ_min (1.16), the minimum of (1.2) on the window (χ²(n − 3) if
+        planar); dof : (K,) n − 3; threshold : (K,) ``chi2.ppf(level, dof)``;
+        p_value : (K,) NaN where not resolved.
+    resolved : (K,) bool
+        The window determines the plane: its points are not on a line at ``level``
+        (``line_statistic > line_threshold``, Λ₁ + Λ₂ vs χ²(2n − 4)) and the normal passes
+        its numerical re-check (``numerical_error`` ≤ 1e-3 rad). Where False: NaN normal
+        and offset, ``planar`` False, ``line_direction`` the line the data determine.
+    planar : (K,) bool, resolved and ``statistic <= threshold``.
+    line_statistic, line_threshold : (K,); line_direction : (K, 3) NaN where resolved.
+    numerical_error : (K,) estimated error (rad) of the normal (re-check).
+    change : (K,) bool
+        The detector fires at this step (``detector > detector_threshold``); it then
+        restarts from the estimated change.
+    detector : (K,) the largest Chow statistic U over the test scales (χ²(3) if the plane
+        did not change; NaN where no test was possible: no resolved reference window).
+    detector_threshold : (K,) its threshold c (constant along the track).
+    change_time : (K,) at an alarm, the estimated time of the change (the last point of
+        the reference window of the alarming test); NaN elsewhere.
+    detectable_tilt : (K,) rad
+        The power figure: the tilt of the plane about the velocity at the split (a bank
+        change -- the plane of a continuous maneuver always contains the velocity) that
+        this step's test detects with probability ``power``, best over the scales; NaN
+        where no test, inf where no tilt is. "With these covariances and this window the
+        detector cannot reliably see a bank change below this."
+    detectable_tilt_any : (K,) rad
+        The same for the least informed direction of rotation (≥ ``detectable_tilt``).
+    level, false_alarm_rate, power : the settings (``false_alarm_rate`` per second).
+    window : None, float (s) or int (points); scales : the test-segment lengths (s, or
+        points with an int window).
+    method : "closed_form" (1.4) or "general" (:func:`fit_general`).
+    test_level : the level p of each test (``false_alarm_rate · dt / len(scales)``).
+    solve_time : float, s for the whole track.
+    """
+
+    times: FloatArray
+    n_points: FloatArray
+    window_start: FloatArray
+    normals: FloatArray
+    offsets: FloatArray
+    statistic: FloatArray
+    dof: FloatArray
+    threshold: FloatArray
+    p_value: FloatArray
+    resolved: np.ndarray
+    planar: np.ndarray
+    line_statistic: FloatArray
+    line_threshold: FloatArray
+    line_direction: FloatArray
+    numerical_error: FloatArray
+    change: np.ndarray
+    detector: FloatArray
+    detector_threshold: FloatArray
+    change_time: FloatArray
+    detectable_tilt: FloatArray
+    detectable_tilt_any: FloatArray
+    level: float = 0.997
+    false_alarm_rate: float = 1.0 / 3600.0
+    power: float = 0.9
+    window: float | int | None = None
+    scales: tuple[float, ...] = ()
+    method: str = "closed_form"
+    test_level: float = float("nan")
+    solve_time: float = 0.0
+    info: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def n_steps(self) -> int:
+        return len(self.times)
+
+    @property
+    def change_times(self) -> FloatArray:
+        """Times (s) of the steps at which the detector fired."""
+        return self.times[self.change]
+
+    def to_rows(self) -> list[dict[str, Any]]:
+        """One plain dict per step (floats, bools; NaN kept) for a CSV writer: ``time,
+        nx, ny, nz, offset, statistic, threshold, resolved, planar, change, detector,
+        detector_threshold, change_time, detectable_tilt, detectable_tilt_any, n_points,
+        window_start,
+        line_x, line_y, line_z, numerical_error, p_value``."""
+        rows = []
+        for k in range(self.n_steps):
+            n = self.normals[k]
+            ld = self.line_direction[k]
+            rows.append({
+                "time": float(self.times[k]), "nx": float(n[0]), "ny": float(n[1]),
+                "nz": float(n[2]), "offset": float(self.offsets[k]),
+                "statistic": float(self.statistic[k]),
+                "threshold": float(self.threshold[k]),
+                "resolved": bool(self.resolved[k]), "planar": bool(self.planar[k]),
+                "change": bool(self.change[k]), "detector": float(self.detector[k]),
+                "detector_threshold": float(self.detector_threshold[k]),
+                "change_time": float(self.change_time[k]),
+                "detectable_tilt": float(self.detectable_tilt[k]),
+                "detectable_tilt_any": float(self.detectable_tilt_any[k]),
+                "n_points": int(self.n_points[k]),
+                "window_start": float(self.window_start[k]),
+                "line_x": float(ld[0]), "line_y": float(ld[1]), "line_z": float(ld[2]),
+                "numerical_error": float(self.numerical_error[k]),
+                "p_value": float(self.p_value[k]),
+            })
+        return rows
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain lists for JSON: every array over steps, NaN and ±inf as ``None``, plus
+        the settings."""
+        def clean(a: np.ndarray) -> Any:
+            if a.dtype == bool:
+                return a.tolist()
+            obj = a.astype(object)
+            obj[~np.isfinite(a)] = None
+            return obj.tolist()
+        out: dict[str, Any] = {k: clean(np.asarray(getattr(self, k))) for k in _ARRAYS}
+        out.update(level=self.level, false_alarm_rate=self.false_alarm_rate,
+                   power=self.power, window=self.window, scales=list(self.scales),
+                   method=self.method, test_level=self.test_level,
+                   solve_time=self.solve_time, n_steps=self.n_steps,
+                   change_times=self.change_times.tolist())
+        return out
+
+
+# =========================================================================== helpers
+def _window_arg(window: Any) -> float | int | None:
+    if window is None:
+        return None
+    if isinstance(window, bool | np.bool_):
+        raise ProblemError(f"{_W} window: expected None, seconds (a float) or a number of "
+                           f"points (an int), got {window!r}")
+    if isinstance(window, int | np.integer):
+        return as_count(f"{_W} window", window, minimum=4)
+    return as_positive(f"{_W} window", window)
+
+
+def _scales_arg(scales: Any, window: float | int | None) -> tuple[float, ...]:
+    if scales is None:
+        if window is None:
+            return _GROWING_SCALES
+        if isinstance(window, int):
+            return tuple(sorted({max(3, round(f * window)) for f in _SCALE_FRACTIONS}))
+        return tuple(f * window for f in _SCALE_FRACTIONS)
+    try:
+        items = list(scales)
+    except TypeError:
+        raise ProblemError(f"{_W} scales: expected a sequence of lengths, got "
+                           f"{scales!r}") from None
+    if not items:
+        raise ProblemError(f"{_W} scales: at least one test-segment length is needed")
+    if isinstance(window, int):
+        out = tuple(float(as_count(f"{_W} scales[{i}]", s, minimum=3))
+                    for i, s in enumerate(items))
+    else:
+        out = tuple(as_positive(f"{_W} scales[{i}]", s) for i, s in enumerate(items))
+    return tuple(sorted(set(out)))
+
+
+def _lows(t: FloatArray, window: float | int | None, origin: int) -> np.ndarray:
+    """First index of each step's window (all N steps), clipped at ``origin``."""
+    n = len(t)
+    if window is None:
+        lo = np.zeros(n, dtype=np.int64)
+    elif isinstance(window, int):
+        lo = np.arange(n, dtype=np.int64) - window + 1
+    else:
+        lo = np.searchsorted(t, t - window, side="right").astype(np.int64)
+    return np.maximum(lo, origin)
+
+
+def _splits(t: FloatArray, scale: float, window: float | int | None) -> np.ndarray:
+    """Split index s_j (last point of the reference) of every step j for one scale."""
+    n = len(t)
+    if isinstance(window, int):
+        return np.arange(n, dtype=np.int64) - int(scale)
+    return (np.searchsorted(t, t - scale, side="right") - 1).astype(np.int64)
+
+
+@dataclass
+class _Fits:
+    """Window fits of the indices ``base..end-1`` (row r ↔ index base + r)."""
+
+    normal: FloatArray
+    offset: FloatArray
+    stat: FloatArray
+    count: FloatArray
+    line_stat: FloatArray
+    line_dir: FloatArray
+    err: FloatArray
+    resolved: np.ndarray
+    base: int = 0
+    moments: Moments | None = None
+    info_cold: int = 0
+    warm: FloatArray | None = None
+
+
+def _fits_proportional(data: PlaneData, lo: np.ndarray, base: int, end: int,
+                       spread: float, lv: float) -> _Fits:
+    """Closed form of the windows ``[lo_i, i]``, ``base <= i < end``."""
+    assert data.base_cov is not None and data.alpha2 is not None
+    hi = np.arange(base, end)
+    lo = lo[base:end]
+    w = 1.0 / data.alpha2
+    mom = range_moments(data.points, w, lo, hi, origin=int(lo.min()), spread=spread)
+    count = mom.count
+    eig = _closed_form_from_sums(mom.s0, np.zeros_like(mom.mean), mom.q, mom.qabs,
+                                 count, data.base_cov / spread**2)
+    normal = eig.normal
+    offset = np.sum(normal * mom.mean, axis=1)  # (1.7) about the window's weighted mean
+    lead = np.take_along_axis(normal, np.argmax(normal != 0, axis=-1)[:, None], -1)[:, 0]
+    flip = (offset < 0) | ((offset == 0) & (lead < 0))
+    normal = np.where(flip[:, None], -normal, normal)
+    offset = np.abs(offset)
+    stat = eig.check.rho
+    line_stat = eig.lam[:, 0] + eig.lam[:, 1]
+    err = eig.check.step
+    small = count < 4
+    with np.errstate(invalid="ignore", divide="ignore"):
+        arr = _planarity_arrays(stat, np.maximum(count, 4.0), lv, line_stat,
+                                (err <= REJECT_TOL) & ~small)
+    return _Fits(normal=normal, offset=offset, stat=np.where(small, np.nan, stat),
+                 count=count, line_stat=line_stat, line_dir=eig.line, err=err,
+                 resolved=arr["resolved"], base=base, moments=mom)
+
+
+def _fits_general(data: PlaneData, lo: np.ndarray, base: int, end: int, lv: float,
+                  warm: FloatArray | None) -> _Fits:
+    """fit_general on every window ``[lo_i, i]``, ``base <= i < end``, warm-started from
+    the previous window's normal (cold again where the warm run is not OK)."""
+    from optmodels.plane.general import fit_general
+
+    m = end - base
+    out = _Fits(normal=np.full((m, 3), np.nan), offset=np.full(m, np.nan),
+                stat=np.full(m, np.nan), count=np.zeros(m), line_stat=np.full(m, np.nan),
+                line_dir=np.full((m, 3), np.nan), err=np.full(m, np.inf),
+                resolved=np.zeros(m, dtype=bool), base=base)
+    for r in range(m):
+        i = base + r
+        a = int(lo[i])
+        out.count[r] = i - a + 1
+        if out.count[r] < 4:
+            continue
+        x = data.points[a: i + 1]
+        c = data.covs[a: i + 1]
+        try:
+            fit = fit_general(x, c, normal0=warm, level=lv)
+            cold = warm is None
+            if warm is not None and not fit.ok:
+                fit = fit_general(x, c, level=lv)
+                cold = True
+        except ProblemError:  # collinear (or identical) to round-off: no plane
+            y = x - x.mean(axis=0)
+            d = np.linalg.svd(y, full_matrices=False)[2][0]
+            out.line_dir[r] = d if d[np.argmax(np.abs(d))] > 0 else -d
+            out.stat[r] = 0.0
+            out.line_stat[r] = 0.0
+            warm = None
+            continue
+        out.normal[r] = fit.normal
+        out.offset[r] = fit.offset
+        out.stat[r] = fit.objective
+        out.line_stat[r] = fit.line_statistic
+        out.line_dir[r] = fit.line_direction
+        out.err[r] = fit.numerical_error
+        out.resolved[r] = bool(fit.resolved and fit.ok)
+        if fit.ok:
+            warm = fit.normal
+        out.info_cold += int(cold)
+    out.warm = warm
+    return out
+
+
+# =========================================================================== entry
+def track(
+    times: ArrayLike,
+    points: ArrayLike,
+    cov: ArrayLike,
+    *,
+    window: float | int | None = None,
+    level: float = 0.997,
+    false_alarm_rate: float = 1.0 / 3600.0,
+    alpha2: ArrayLike | None = None,
+    start: float | None = None,
+    scales: Any = None,
+    power: float = 0.9,
+    min_reference: int = 8,
+    max_reference_sd: float = 0.1,
+) -> PlaneTrack:
+    r"""The plane of maneuver along a track, with plane-change detection.
+
+    Parameters
+    ----------
+    times : (N,) strictly increasing measurement times (s).
+    points : (N, 3) measured positions (m), any Cartesian frame.
+    cov : (3, 3) or (N, 3, 3)
+        Error covariances D_i (m², same frame): a (3, 3) ``D`` with ``alpha2`` for (1.4),
+        or one per point (proportional stacks are detected; others use
+        :func:`optmodels.plane.general.fit_general`).
+    window : None, float or int
+        ``None``: growing window (all points since the start or the last change); a float:
+        the last ``window`` seconds (points with t > t_k − window); an int: the last
+        ``window`` points (≥ 4).
+    level : float
+        Level of the χ²(n − 3) planarity test and of the line test behind ``resolved``,
+        in (0, 1) (default 0.997 as in the paper).
+    false_alarm_rate : float
+        Bound on the detector's false alarms per second of planar track (default 1/3600:
+        at most one per hour). Each of the ``len(scales)`` tests of a step has level
+        ``false_alarm_rate · dt / len(scales)`` (``dt`` the median sampling interval);
+        their union bounds the rate (see :mod:`optmodels.plane.detector`).
+    alpha2 : (N,), optional
+        The factors α_i² of (1.4) with a (3, 3) ``cov``.
+    start : float, optional
+        First time (s) reported (default: the 4th measurement).
+    scales : sequence, optional
+        Test-segment lengths of the detector: seconds (float or ``None`` window) or points
+        (int window). Default: 1/8, 1/4, 1/2 of the window; (5, 10, 20) s for a growing
+        window.
+    power : float
+        Detection probability behind ``detectable_tilt``, in (0, 1).
+    min_reference : int
+        Fewest points (≥ 4) in a reference window for a test.
+    max_reference_sd : float
+        A test is made only when the reference plane is firm: the largest standard
+        deviation of its tilts (Cramér–Rao, rad) is at most this (default 0.1 rad ≈ 6°).
+        A barely resolved reference (nearly straight, or just after a restart) fits
+        its rotation about the line to the noise, and U is then not χ²(3).
+
+    Returns
+    -------
+    PlaneTrack
+        One record per step; ``to_rows()`` / ``to_dict()`` for CSV / JSON.
+
+    Raises
+    ------
+    ProblemError
+        Naming the argument (``"plane.track <argument>"``; the points and covariances are
+        checked by :class:`PlaneData`).
+    """
+    try:
+        data = PlaneData(points, cov, alpha2)
+    except ProblemError as exc:
+        raise ProblemError(f"{_W}: {exc}") from None
+    n = data.n_points
+    t = as_finite_array(f"{_W} times", times, shape=(n,), max_abs=1e100)
+    if np.any(np.diff(t) <= 0):
+        raise ProblemError(f"{_W} times: must be strictly increasing")
+    win = _window_arg(window)
+    lv = as_probability(f"{_W} level", level, low_open=True, high_open=True)
+    far = as_positive(f"{_W} false_alarm_rate", false_alarm_rate)
+    pw = as_probability(f"{_W} power", power, low_open=True, high_open=True)
+    min_ref = as_count(f"{_W} min_reference", min_reference, minimum=4)
+    max_sd = as_positive(f"{_W} max_reference_sd", max_reference_sd, allow_inf=True)
+    sc = _scales_arg(scales, win)
+    if start is None:
+        first = 3
+    else:
+        t0 = as_number(f"{_W} start", start)
+        first = max(int(np.searchsorted(t, t0, side="left")), 3)
+    if first >= n:
+        raise ProblemError(f"{_W} start: no step with at least 4 measurements at or after "
+                           f"t = {start}")
+    dt = float(np.median(np.diff(t)))
+    thr, p_test = detector_threshold(far, dt, len(sc))
+    if not p_test < 0.5:
+        raise ProblemError(f"{_W} false_alarm_rate: {far:g} per second with a sampling "
+                           f"interval of {dt:g} s and {len(sc)} scales gives a per-test "
+                           f"level {p_test:.3g}; must be < 0.5")
+    lam_star = noncentrality_for_power(thr, pw)
+    general = not data.proportional
+    spread = track_spread(data.points)
+    splits = [_splits(t, s, win) for s in sc]
+
+    k_all = n - first
+    rec: dict[str, Any] = {
+        "normal": np.full((k_all, 3), np.nan), "offset": np.full(k_all, np.nan),
+        "stat": np.full(k_all, np.nan), "count": np.zeros(k_all),
+        "wstart": np.full(k_all, np.nan), "line_stat": np.full(k_all, np.nan),
+        "line_dir": np.full((k_all, 3), np.nan), "err": np.full(k_all, np.inf),
+        "resolved": np.zeros(k_all, dtype=bool), "det": np.full(k_all, np.nan),
+        "change": np.zeros(k_all, dtype=bool), "ctime": np.full(k_all, np.nan),
+        "tilt": np.full(k_all, np.nan), "tilt_any": np.full(k_all, np.nan),
+    }
+    restarts: list[int] = []
+    # steps are evaluated in chunks, so that a restart costs O(chunk), not O(N): a chunk
+    # needs the fits of its steps and of the reference windows of its splits
+    lo0 = _lows(t, win, 0)
+    reach = max(int(np.max(np.arange(n) - sp_idx)) for sp_idx in splits)
+    w_max = 0 if win is None else int(np.max(np.arange(n) - lo0)) + 1
+    # (general D_i: a fit per step, so a smaller chunk wastes less after an alarm)
+    chunk0 = max(64, 2 * (reach + w_max)) if general else max(512, 4 * (reach + w_max))
+    with timed() as tm:
+        origin = 0
+        report = first
+        warm: FloatArray | None = None
+        while report < n:
+            lo = np.maximum(lo0, origin)
+            size = chunk0 if win is not None else max(chunk0, report - origin)
+            end = min(n, report + size)
+            base = max(origin, min(int(sp_idx[report]) for sp_idx in splits))
+            base = min(base, report)
+            fits = (_fits_general(data, lo, base, end, lv, warm) if general
+                    else _fits_proportional(data, lo, base, end, spread, lv))
+            det, arg_s, tilt, tilt_any = _detect(data, t, fits, origin, report, end,
+                                                 splits, min_ref, spread, lam_star,
+                                                 general, max_sd)
+            alarms = np.flatnonzero(det > thr)
+            stop = end if alarms.size == 0 else report + int(alarms[0]) + 1
+            rows = np.arange(report, stop)
+            r_fit = rows - base
+            r_out = rows - first
+            for key, src in (("normal", fits.normal), ("offset", fits.offset),
+                             ("stat", fits.stat), ("count", fits.count),
+                             ("line_stat", fits.line_stat), ("line_dir", fits.line_dir),
+                             ("err", fits.err), ("resolved", fits.resolved)):
+                rec[key][r_out] = src[r_fit]
+            rec["wstart"][r_out] = t[lo[rows]]
+            rec["det"][r_out] = det[: stop - report]
+            rec["tilt"][r_out] = tilt[: stop - report]
+            rec["tilt_any"][r_out] = tilt_any[: stop - report]
+            warm = fits.warm
+            if alarms.size == 0:
+                report = end
+                continue
+            j = stop - 1
+            s_hat = int(arg_s[stop - 1 - report])
+            rec["change"][j - first] = True
+            rec["ctime"][j - first] = t[s_hat]
+            restarts.append(s_hat + 1)
+            origin = s_hat + 1
+            report = j + 1
+
+    resolved = rec["resolved"]
+    count = rec["count"]
+    with np.errstate(invalid="ignore"):
+        arr = _planarity_arrays(np.nan_to_num(rec["stat"], nan=0.0), np.maximum(count, 4.0),
+                                lv, np.nan_to_num(rec["line_stat"], nan=0.0), resolved)
+    normal = np.where(resolved[:, None], rec["normal"], np.nan)
+    offset = np.where(resolved, rec["offset"], np.nan)
+    line_dir = np.where(resolved[:, None], np.nan, rec["line_dir"])
+    k = k_all
+    return PlaneTrack(
+        times=t[first:], n_points=count, window_start=rec["wstart"], normals=normal,
+        offsets=offset, statistic=rec["stat"], dof=count - 3.0,
+        threshold=np.asarray(arr["threshold"], dtype=float), p_value=arr["p_value"],
+        resolved=resolved, planar=arr["planar"] & np.isfinite(rec["stat"]),
+        line_statistic=rec["line_stat"],
+        line_threshold=np.asarray(arr["line_threshold"], dtype=float),
+        line_direction=line_dir, numerical_error=rec["err"], change=rec["change"],
+        detector=rec["det"], detector_threshold=np.full(k, thr),
+        change_time=rec["ctime"], detectable_tilt=rec["tilt"],
+        detectable_tilt_any=rec["tilt_any"], level=lv,
+        false_alarm_rate=far, power=pw, window=win, scales=sc,
+        method="general" if general else "closed_form", test_level=p_test,
+        solve_time=tm.elapsed, info={"restarts": restarts, "noncentrality": lam_star,
+                                     "dt": dt},
+    )
+
+
+def _detect(data: PlaneData, t: FloatArray, fits: _Fits, origin: int, report: int,
+            end: int, splits: list[np.ndarray], min_ref: int, spread: float,
+            lam_star: float, general: bool, max_sd: float
+            ) -> tuple[FloatArray, np.ndarray, FloatArray, FloatArray]:
+    """Detector statistic (max over scales), its split index and the detectable tilts for
+    the steps ``report..end-1`` (the fits hold the windows ``fits.base..end-1``)."""
+    steps = np.arange(report, end)
+    best = np.full(len(steps), -np.inf)
+    arg = np.full(len(steps), -1, dtype=np.int64)
+    tilt = np.full(len(steps), np.inf)
+    tilt_any = np.full(len(steps), np.inf)
+    any_test = np.zeros(len(steps), dtype=bool)
+    for sp_idx in splits:
+        s = sp_idx[steps]
+        ok = (s >= origin) & (steps - s >= 3)
+        rows = np.where(ok, s - fits.base, 0)
+        ok &= fits.resolved[rows] & (fits.count[rows] >= min_ref)
+        if not np.any(ok):
+            continue
+        jj = steps[ok]
+        ss = s[ok]
+        ra = ss - fits.base
+        na = fits.normal[ra]
+        aa = fits.offset[ra]
+        junction = data.points[ss]
+        if general:
+            ja = np.empty((len(jj), 3, 3))
+            ba = np.empty((len(jj), 3))
+            jb = np.empty_like(ja)
+            bb = np.empty_like(ba)
+            ell = np.empty(len(jj))
+            frames = _tangent_basis(na)
+            for q, (j, s_, nrm, off) in enumerate(zip(jj, ss, na, aa, strict=True)):
+                a0 = int(s_ - fits.count[s_ - fits.base] + 1)
+                xa = data.points[a0: s_ + 1]
+                ell[q] = max(float(np.sqrt(np.mean(np.sum((xa - xa.mean(0)) ** 2, 1))))
+                             / spread, 1e-300)
+                ja[q], ba[q] = score_info_points(nrm, off, junction[q], xa,
+                                                 data.covs[a0: s_ + 1], spread, ell[q],
+                                                 frames[q])
+                jb[q], bb[q] = score_info_points(nrm, off, junction[q],
+                                                 data.points[s_ + 1: j + 1],
+                                                 data.covs[s_ + 1: j + 1], spread, ell[q],
+                                                 frames[q])
+        else:
+            assert fits.moments is not None and data.base_cov is not None
+            assert data.alpha2 is not None
+            ma = fits.moments
+            mom_a = Moments(s0=ma.s0[ra], mean=ma.mean[ra], q=ma.q[ra], qabs=ma.qabs[ra],
+                            count=ma.count[ra], spread=spread,
+                            recomputed=ma.recomputed[ra])
+            mom_b = range_moments(data.points, 1.0 / data.alpha2, ss + 1, jj,
+                                  origin=int(ss.min()) + 1, spread=spread)
+            ell = np.sqrt(np.maximum(np.trace(mom_a.q, axis1=1, axis2=2) / mom_a.s0,
+                                     1e-300))
+            ja, ba = score_info_moments(na, aa, junction, mom_a, data.base_cov, ell)
+            jb, bb = score_info_moments(na, aa, junction, mom_b, data.base_cov, ell)
+        firm = reference_tilt_sd(ja, ell) <= max_sd
+        ja = np.where(firm[:, None, None], ja, np.eye(3))  # (placeholder where not firm)
+        u = np.where(firm, chow_statistic(ja, ba, jb, bb), -np.inf)
+        back = np.minimum(5, fits.count[ra].astype(np.int64) - 1)
+        vel = velocity_direction(na, _tangent_basis(na), data.points, ss, back)
+        th = np.where(firm, detectable_tilt(ja, jb, ell, lam_star, vel), np.inf)
+        th_any = np.where(firm, detectable_tilt(ja, jb, ell, lam_star), np.inf)
+        pos = np.flatnonzero(ok)
+        better = u > best[pos]
+        best[pos[better]] = u[better]
+        arg[pos[better]] = ss[better]
+        tilt[pos] = np.minimum(tilt[pos], th)
+        tilt_any[pos] = np.minimum(tilt_any[pos], th_any)
+        any_test[pos] |= firm
+    best = np.where(any_test, best, np.nan)
+    tilt = np.where(any_test, tilt, np.nan)
+    tilt_any = np.where(any_test, tilt_any, np.nan)
+    return best, arg, tilt, tilt_any
+

@@ -1,0 +1,130 @@
+"""Using the field from the command line (issue 17): build → solve → correct → registration,
+the installed console script in subprocesses, on simulated 3-D traffic encoded as ASTERIX
+(CAT048 plots + CAT021 ADS-B). The numbers are checked against the library on the same
+files (read_recording, FieldMap, correct_plots, registration_error, absolute_error)."""
+
+from __future__ import annotations
+
+import csv
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from tests.test_cli import assert_error, run_cli, run_many
+
+ORG = (55.0, 83.0, 150.0)
+
+
+@pytest.fixture(scope="module")
+def recording(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
+    """A 3-D network (smooth bias field, 30 aircraft, 25 min) as a sites CSV keyed by
+    SAC/SIC and one ASTERIX file (CAT048 of every radar + CAT021 of every aircraft)."""
+    from optmodels.io import asterix as ax
+    from optmodels.scenarios.radar_network import radar_network
+
+    tmp = tmp_path_factory.mktemp("use")
+    sc = radar_network(4, n_aircraft=30, duration=1500.0, geometry="3d", origin=ORG)
+    r, p = sc.radars, sc.plots
+    assert r.geodetic is not None
+    sites = tmp / "sites.csv"
+    sites.write_text("name,sac,sic,lat,lon,alt,sigma_range,sigma_azimuth,max_range\n" + "".join(
+        f"{r.names[i]},25,{10 + i},"
+        + ",".join(repr(float(v)) for v in (*r.geodetic[i], r.sigma_range[i],
+                                            np.rad2deg(r.sigma_azimuth[i]), r.max_range[i]))
+        + "\n" for i in range(r.m)))
+    tod0 = 30000.0
+    addr = 0x3C0000 + np.arange(30)
+    cat048 = b"".join(ax.encode_cat048(p.time[p.radar == i] + tod0, 25, 10 + i,
+                                       p.range[p.radar == i], p.azimuth[p.radar == i],
+                                       address=addr[p.object[p.radar == i]])
+                      for i in range(r.m))
+    parts = [sc.paths.track(a) for a in range(len(sc.paths))]
+    t21 = np.concatenate([q[0] for q in parts]) + tod0
+    geo = np.vstack([q[2] for q in parts if q[2] is not None])
+    who = np.concatenate([np.full(q[0].size, addr[a]) for a, q in enumerate(parts)])
+    rec = tmp / "recording.ast"
+    rec.write_bytes(cat048 + ax.encode_cat021(t21, 25, 99, geo[:, 0], geo[:, 1],
+                                              height=geo[:, 2], address=who))
+    fd, out = tmp / "fd.npz", tmp / "solved"
+    run_cli("biasfield", "build", rec, "--radars", sites, "--cells", "30", "--out", fd)
+    run_cli("biasfield", "solve", fd, "--solver", "closed-form", "--out", out)
+    return {"tmp": tmp, "sites": sites, "recording": rec, "fd": fd,
+            "field": out / "field.npz"}
+
+
+def test_round_trip_build_solve_correct_registration(recording: dict[str, Path]) -> None:
+    """``correct`` writes one row per plot read, equal to the library's correct_plots on the
+    same recording; ``registration`` of the corrected plots is ≤ 20 % of the original's
+    (on the field's area), and the same figures as the library's; with CAT021 in the
+    recording the absolute error against ADS-B is reported too."""
+    from optmodels.biasfield.recording import read_recording
+    from optmodels.biasfield.referee import absolute_error, adsb_reference
+    from optmodels.biasfield.usage import FieldMap, correct_plots, registration_error
+
+    tmp, sites, rec, field = (recording[k] for k in ("tmp", "sites", "recording", "field"))
+    corrected = tmp / "corrected.csv"
+    cor = run_cli("biasfield", "correct", rec, "--radars", sites, "--field", field,
+                  "--out", corrected, "--json")
+    assert cor.code == 0, cor.err
+    doc = cor.json()
+    lib = read_recording([rec], sites)
+    assert doc["plots"] == len(lib.plots) and doc["geometry"] == "3d"
+    with corrected.open(encoding="utf-8") as fh:
+        rows = list(csv.DictReader(fh))
+    assert len(rows) == len(lib.plots)
+    assert list(rows[0]) == ["time", "radar", "object", "range", "azimuth", "height",
+                             "covered"]
+    fm = FieldMap.load(field)
+    ok = lib.plots.locatable(lib.radars)
+    ref = correct_plots(lib.plots.subset(ok), lib.radars, fm)
+    got_r = np.array([float(r["range"]) for r in rows])[ok]
+    got_a = np.deg2rad(np.array([float(r["azimuth"]) for r in rows]))[ok]
+    np.testing.assert_allclose(got_r, ref.plots.range, rtol=0, atol=1e-6)
+    np.testing.assert_allclose(got_a, ref.plots.azimuth, rtol=0, atol=1e-12)
+    covered = np.array([int(r["covered"]) for r in rows])[ok].astype(bool)
+    np.testing.assert_array_equal(covered, ref.covered)
+    # the field exists where all four radars see the traffic: about a third of the plots
+    assert doc["corrected"] == int(ref.covered.sum()) > 0.2 * len(rows)
+
+    before, after = run_many([
+        ["biasfield", "registration", rec, "--radars", sites, "--field", field, "--json"],
+        ["biasfield", "registration", corrected, "--radars", sites, "--field", field,
+         "--json"],
+    ])
+    b, a = before.json(), after.json()
+    assert b["registration"]["overall_m"] > 100.0
+    assert a["registration"]["overall_m"] <= 0.2 * b["registration"]["overall_m"]
+    for pair, v in b["registration"]["pairs"].items():
+        assert a["registration"]["pairs"][pair]["rms_m"] <= 0.2 * v["rms_m"], pair
+    # the library on the same plots (cleaned as the CLI does) gives the same figures
+    from optmodels.biasfield.cleaning import clean_plots
+
+    kept, _ = clean_plots(lib.plots.subset(ok), lib.radars)
+    reg = registration_error(kept, lib.radars, within=fm)
+    assert b["registration"]["overall_m"] == pytest.approx(reg.overall, rel=1e-9, abs=1e-9)
+    assert b["absolute"] is not None and a["absolute"] is None  # CAT021 only in the recording
+    ab = absolute_error(kept, lib.radars, adsb_reference(kept, lib.adsb, lib.radars.origin),
+                        within=fm)
+    assert b["absolute"]["overall_m"] == pytest.approx(ab.overall, rel=1e-9, abs=1e-9)
+
+
+def test_correct_and_registration_refuse_what_does_not_fit(recording: dict[str, Path]
+                                                           ) -> None:
+    """A field of other radars, a missing field file, bad flags: exit 2, one line."""
+    tmp, sites, rec, field = (recording[k] for k in ("tmp", "sites", "recording", "field"))
+    moved = tmp / "moved.csv"
+    lines = sites.read_text().splitlines()
+    head, first = lines[0], lines[1].split(",")
+    first[3] = repr(float(first[3]) + 0.05)  # radar R1 5.5 km further north
+    moved.write_text("\n".join([head, ",".join(first), *lines[2:]]) + "\n")
+    other, missing, area = run_many([
+        ["biasfield", "correct", rec, "--radars", moved, "--field", field, "--out",
+         tmp / "x.csv", "--json"],
+        ["biasfield", "correct", rec, "--radars", sites, "--field", tmp / "none.npz",
+         "--out", tmp / "y.csv"],
+        ["biasfield", "registration", rec, "--radars", sites, "--area", "-5"],
+    ], expect=None)
+    assert_error(other, 2, "--field", "differs")  # the moved site moves the mean origin too
+    assert_error(missing, 2, "none.npz")
+    assert_error(area, 2, "--area")

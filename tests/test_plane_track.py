@@ -1,0 +1,485 @@
+"""Plane of maneuver along a track (paper 000, issue 19): sliding windows with removal,
+resolved/unresolved steps, the plane-change detector (its χ²(3) null, false-alarm rate,
+detection delay, power figure) and the ``plane.track`` API."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from scipy import stats
+
+from optmodels import ProblemError, plane
+from optmodels.plane import detector as det
+from optmodels.plane.general import fit_general
+from optmodels.plane.simulate import detection_runs, false_alarm_runs, plane_change_track
+from optmodels.plane.tracking import track
+from optmodels.plane.windows import direct_moments, range_moments, track_spread
+from optmodels.scenarios import radar_covariances
+
+# closed form per window vs the sliding sums: both are eigenvectors of the same 3x3 pencil
+# built from sums that agree to ~1e-14 relative; the issue asks for ~1e-10 rad.
+WINDOW_ANGLE_TOL = 1e-10
+
+
+def _long_track(n: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """A 1 Hz level turn of 7 km radius 100 km from the origin, σ = 30 m."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(n, dtype=float)
+    ph = 200.0 / 7000.0 * t
+    truth = np.column_stack([1e5 + 7000 * np.cos(ph), 5e4 + 7000 * np.sin(ph),
+                             9000.0 + 0 * t])
+    return t, truth + 30.0 * rng.normal(size=truth.shape)
+
+
+# --------------------------------------------------------------------------- windows
+def test_window_moments_match_from_scratch_and_naive_removal_does_not() -> None:
+    # 2e4 points of a weaving flight over 4000 km, weights α⁻² in [0.5, 2], windows of
+    # 100 points (naive removal: 1.8e-7 relative; the epochs: 1e-14)
+    rng = np.random.default_rng(2)
+    t = np.arange(20000.0)
+    pts = np.column_stack([1e5 + 200 * t, 3e4 + 5000 * np.sin(t / 30),
+                           8000 + 30 * rng.normal(size=len(t))])
+    w = 1.0 / rng.uniform(0.5, 2.0, len(t))
+    hi = np.arange(10, len(t))
+    lo = np.maximum(hi - 99, 0)
+    mom = range_moments(pts, w, lo, hi)
+    ref = direct_moments(pts, w, lo, hi, mom.spread)
+    scale = np.max(np.abs(ref.q), axis=(1, 2))[:, None, None]
+    ours = float(np.max(np.abs(mom.q - ref.q) / scale))
+    assert ours <= 1e-12
+    assert float(np.max(np.abs(mom.mean - ref.mean))) <= 1e-8 * 4e6  # m, at 4e6 m
+    # the plain running sums with removal (cumsum about one origin, differenced) lose
+    # ~eps·(track/window)²: the reason for the epochs
+    y = (pts - pts[0]) / mom.spread
+    c0 = np.concatenate([[0.0], np.cumsum(w)])
+    c1 = np.concatenate([np.zeros((1, 3)), np.cumsum(w[:, None] * y, axis=0)])
+    c2 = np.concatenate([np.zeros((1, 3, 3)),
+                         np.cumsum(w[:, None, None] * y[:, :, None] * y[:, None, :], axis=0)])
+    a0, a1, a2 = c0[hi + 1] - c0[lo], c1[hi + 1] - c1[lo], c2[hi + 1] - c2[lo]
+    naive = a2 - a1[:, :, None] * a1[:, None, :] / a0[:, None, None]
+    assert float(np.max(np.abs(naive - ref.q) / scale)) > 1e5 * max(ours, 1e-16)
+
+
+def test_window_moments_recompute_when_the_prefix_dominates() -> None:
+    # a 3-point window near its epoch's reference point, 220 points into an epoch of 500:
+    # the prefix it subtracts is > 1e3 times larger, so it is recomputed from scratch
+    t, pts = _long_track(2000, 3)
+    # (the circle's period is 220 s: points 1219-1221 pass the epoch's reference, 1000)
+    hi = np.array([1221, 1999, 700])
+    lo = np.array([1219, 1500, 201])
+    mom = range_moments(pts, np.ones(len(t)), lo, hi)
+    ref = direct_moments(pts, np.ones(len(t)), lo, hi, mom.spread)
+    assert mom.recomputed.tolist() == [True, False, False]
+    assert np.allclose(mom.q, ref.q, rtol=1e-12, atol=1e-14 * np.max(np.abs(ref.q)))
+
+
+@pytest.mark.parametrize("window", [40.0, 60, 25.5])
+def test_sliding_windows_equal_the_closed_form_of_each_window(window: float | int) -> None:
+    t, pts = _long_track(400, 4)
+    alpha2 = np.random.default_rng(5).uniform(0.5, 3.0, len(t))
+    cov = np.diag([900.0, 400.0, 1600.0])
+    tr = track(t, pts, cov, alpha2=alpha2, window=window, false_alarm_rate=1e-12)
+    assert not tr.change.any() and tr.method == "closed_form"
+    if isinstance(window, int):
+        assert np.all(tr.n_points[window:] == window)
+    for k in range(0, tr.n_steps, 7):
+        m = (t <= tr.times[k]) & (t >= tr.window_start[k])
+        assert m.sum() == tr.n_points[k]
+        if isinstance(window, float):
+            assert np.all(tr.times[k] - t[m] < window)
+        data = plane.PlaneData(pts[m], cov, alpha2[m])
+        cf = plane.closed_form(data)
+        pt = plane.planarity_test(data, cf, level=tr.level)
+        assert tr.resolved[k] == pt.resolved
+        assert tr.statistic[k] == pytest.approx(cf.info["lambda_min"], rel=1e-9)
+        assert tr.line_statistic[k] == pytest.approx(pt.line_statistic, rel=1e-9)
+        if tr.resolved[k]:
+            assert plane.angle_error(tr.normals[k], cf.normal) <= WINDOW_ANGLE_TOL
+            assert tr.offsets[k] == pytest.approx(cf.offset, abs=1e-10 * 1.2e5)
+            assert tr.planar[k] == pt.planar
+
+
+def test_growing_window_equals_identify_sequence() -> None:
+    sc = plane_change_track(6, tilt_deg=0.0, before=150.0, after=0.0)
+    tr = track(sc.times, sc.points, sc.cov, false_alarm_rate=1e-12)
+    seq = plane.identify_sequence(sc.times, sc.points, sc.cov)
+    assert np.array_equal(tr.resolved, seq.resolved)
+    assert np.array_equal(tr.planar, seq.planar)
+    assert np.allclose(tr.statistic, seq.statistic, rtol=1e-10)
+    r = seq.resolved
+    assert np.max(plane.angle_error(tr.normals[r], seq.normal[r])) <= 1e-12
+    assert np.allclose(tr.offsets[r], seq.offset[r], rtol=1e-12, atol=1e-9)
+
+
+# --------------------------------------------------------------------------- resolved
+def _line_then_arc(sigma: float, rng: np.random.Generator | None = None,
+                   n_line: int = 20, n_arc: int = 30) -> tuple[np.ndarray, np.ndarray]:
+    line = np.column_stack([np.linspace(-1000.0, 0.0, n_line), np.zeros(n_line),
+                            np.zeros(n_line)])
+    ph = 0.075 * np.arange(1, n_arc + 1)
+    arc = np.column_stack([1000 * np.sin(ph), np.zeros(n_arc), 1000 * (1 - np.cos(ph))])
+    pts = np.vstack([line, arc]) + np.array([5000.0, 2000.0, 3000.0])
+    if rng is not None:
+        pts = pts + sigma * rng.normal(size=pts.shape)
+    return 0.1 * np.arange(len(pts)), pts
+
+
+@pytest.mark.parametrize("general", [False, True])
+def test_collinear_steps_are_unresolved_and_report_the_line(general: bool) -> None:
+    # 20 exactly collinear points then an arc; proportional (closed form) and
+    # non-proportional (fit_general) covariances
+    t, pts = _line_then_arc(0.0)
+    if general:
+        cov = np.array([np.diag([1e-6, 2e-6 + 1e-7 * i, 3e-6]) for i in range(len(t))])
+    else:
+        cov = 1e-6 * np.eye(3)
+    for window in (None, 12):
+        tr = track(t, pts, cov, window=window)
+        assert tr.method == ("general" if general else "closed_form")
+        line = tr.times <= t[19]
+        assert line.sum() == 17
+        assert not tr.resolved[line].any() and not tr.planar[line].any()
+        assert np.all(np.isnan(tr.normals[line])) and np.all(np.isnan(tr.offsets[line]))
+        assert np.max(plane.angle_error(tr.line_direction[line], [1.0, 0.0, 0.0])) <= 1e-9
+        late = tr.times >= t[22]
+        assert np.all(tr.resolved[late])
+        assert np.max(plane.angle_error(tr.normals[late], [0.0, 1.0, 0.0])) <= 1e-8
+        assert np.all(np.isnan(tr.line_direction[late]))
+
+
+def test_noisy_straight_segment_is_unresolved_at_level() -> None:
+    # σ = 1 m: on the line a step is wrongly "resolved" with probability ≤ 1 − level
+    rng = np.random.default_rng(41)
+    t, pts = _line_then_arc(1.0, rng, n_line=40, n_arc=30)
+    tr = track(t, pts, np.eye(3), window=15)
+    line = tr.times <= t[39]
+    assert np.sum(tr.resolved[line]) <= 1
+    assert not np.any(tr.planar[line & ~tr.resolved])
+    assert np.all(np.isnan(tr.normals[~tr.resolved]))
+
+
+# --------------------------------------------------------------------------- detector
+def _regression_rss(h: np.ndarray, r: np.ndarray, v: np.ndarray) -> float:
+    """Weighted least-squares residual sum of r on the columns of h (weights 1/v)."""
+    sw = 1.0 / np.sqrt(v)
+    beta = np.linalg.lstsq(h * sw[:, None], r * sw, rcond=None)[0]
+    return float(np.sum((r - h @ beta) ** 2 / v))
+
+
+@pytest.mark.parametrize("tilt", [0.0, 10.0, 30.0])
+def test_chow_statistic_is_the_linear_glr_and_close_to_the_exact_one(tilt: float) -> None:
+    # U = RSS(A ∪ B, one plane) − RSS(A) − RSS(B) of the regression of the residuals to
+    # A's plane on h_i = (E(x_i − x_s)/ℓ, −1) (an independent lstsq), to round-off; and
+    # close to the exact GLR Λ(A ∪ B) − Λ(A) − Λ(B) of (1.16): the linearisation uses
+    # the noisy in-plane coordinates (errors in variables) and A's fitted plane, so it is
+    # within ~12 % (H1) or 0.6 (H0, χ²(3) units) of it (measured over seeds 0-8)
+    sc = plane_change_track(7, tilt_deg=tilt, before=60.0, after=20.0)
+    x, cov = sc.points, sc.cov
+    a_idx, b_idx = np.arange(20, 61), np.arange(61, 80)
+    cf = plane.closed_form(plane.PlaneData(x[a_idx], cov))
+    sp = track_spread(x)
+    covs = np.broadcast_to(cov, (len(x), 3, 3))
+    ell = 0.7
+    ja, ba = det.score_info_points(cf.normal, cf.offset, x[60], x[a_idx], covs[a_idx], sp, ell)
+    jb, bb = det.score_info_points(cf.normal, cf.offset, x[60], x[b_idx], covs[b_idx], sp, ell)
+    u = float(det.chow_statistic(ja[None], ba[None], jb[None], bb[None])[0])
+    e = plane.verify._tangent_basis(cf.normal[None])[0]
+    def design(idx: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        h = np.column_stack([(x[idx] - x[60]) @ e.T / (sp * ell), -np.ones(len(idx))])
+        r = (x[idx] @ cf.normal - cf.offset) / sp
+        return h, r, np.full(len(idx), float(cf.normal @ cov @ cf.normal) / sp**2)
+    both = np.concatenate([a_idx, b_idx])
+    lin = (_regression_rss(*design(both)) - _regression_rss(*design(a_idx))
+           - _regression_rss(*design(b_idx)))
+    assert u == pytest.approx(lin, rel=1e-8, abs=1e-9)
+    lam = [plane.closed_form(plane.PlaneData(x[i], cov)).info["lambda_min"]
+           for i in (both, a_idx, b_idx)]
+    exact = lam[0] - lam[1] - lam[2]
+    assert abs(u - exact) <= 0.12 * exact + 0.6
+    # the moments route (the closed-form path of track) gives the same J, b and U
+    w = np.ones(len(x))
+    ma = range_moments(x, w, a_idx[:1], a_idx[-1:], spread=sp)
+    mb = range_moments(x, w, b_idx[:1], b_idx[-1:], spread=sp)
+    args = (cf.normal[None], np.array([cf.offset]), x[60][None])
+    ja2, ba2 = det.score_info_moments(*args, ma, cov, np.full(1, ell))
+    jb2, bb2 = det.score_info_moments(*args, mb, cov, np.full(1, ell))
+    assert np.allclose(ja2[0], ja, rtol=1e-9) and np.allclose(jb2[0], jb, rtol=1e-9)
+    assert float(det.chow_statistic(ja2, ba2, jb2, bb2)[0]) == pytest.approx(u, rel=1e-8,
+                                                                             abs=1e-9)
+
+
+def test_detector_statistic_is_chi2_3_on_planar_tracks() -> None:
+    # 300 planar tracks (level turn, σ = 50 m, 40 s window, one scale of 10 s): U at one
+    # step per track, independent across tracks. χ²(3): mean 3 (se √6/√300 = 0.14),
+    # P(U > χ²₃(0.95)) = 0.05 (se 0.013); KS against χ²(3).
+    rng = np.random.default_rng(8)
+    u = []
+    for _ in range(300):
+        sc = plane_change_track(rng, tilt_deg=0.0, before=60.0, after=0.0)
+        tr = track(sc.times, sc.points, sc.cov, window=40.0, scales=[10.0],
+                   false_alarm_rate=1e-12)
+        u.append(tr.detector[-1])
+    u = np.asarray(u)
+    assert np.all(np.isfinite(u))
+    assert abs(u.mean() - 3.0) <= 3 * np.sqrt(6.0 / len(u))
+    tail = np.mean(u > stats.chi2.ppf(0.95, 3))
+    assert abs(tail - 0.05) <= 3 * np.sqrt(0.05 * 0.95 / len(u))
+    assert stats.kstest(u, stats.chi2(3).cdf).pvalue > 1e-3
+
+
+def test_false_alarm_rate_within_its_bound_fast() -> None:
+    # stated 60 per hour (1 per minute) so that 2 h give enough alarms; the union bound
+    # makes the rate an upper bound: measured within [0, stated + 3 se] (Poisson se)
+    r = false_alarm_runs(2.0, 12, window=40.0, false_alarm_rate=1.0 / 60.0, run_hours=0.5)
+    assert r["alarms"] > 0
+    assert r["rate"] <= r["stated"] + 3 * r["se"]
+
+
+@pytest.mark.slow
+def test_false_alarm_rate_one_per_hour() -> None:
+    # the default 1/3600 per second over 30 hours of planar track (≈ 8 s per window kind)
+    for window in (40.0, None):
+        r = false_alarm_runs(30.0, 11, window=window)
+        assert r["rate"] <= r["stated"] + 3 * r["se"], (window, r)
+
+
+def test_detection_of_a_turn_into_a_climbing_turn() -> None:
+    # level turn (7 km, 200 m/s) → turn in a plane tilted by 30° about the velocity,
+    # σ = 50 m, 1 Hz, 40 s window, one false alarm per hour: detected in ≥ 90 % of 40
+    # runs within 20 s (measured: all, median 13 s, 90th percentile 15 s)
+    r = detection_runs(40, 1, tilt_deg=30.0, sigma=50.0, window=40.0)
+    assert r["detected"] >= 0.9
+    assert r["p90"] <= 20.0
+    assert r["early"].sum() <= 2  # 40 × 120 s = 1.3 h before the change: ~1 allowed
+    # and with 30 m, even a 10° tilt within 25 s
+    r = detection_runs(20, 2, tilt_deg=10.0, sigma=30.0, window=40.0)
+    assert r["detected"] >= 0.9 and r["p90"] <= 25.0
+
+
+@pytest.mark.slow
+def test_detection_with_radar_covariances() -> None:
+    # one radar 42 km away (σ_range 10 m, σ_az = σ_el = 2 mrad: 85 m across the beam),
+    # the general-covariance path (fit_general per window): 30° tilt in ≥ 90 % of 20 runs
+    # within 35 s (measured: all, median 21 s, 90th percentile 27 s)
+    r = detection_runs(20, 2, tilt_deg=30.0, errors="radar", window=40.0)
+    assert r["detected"] >= 0.9 and r["p90"] <= 35.0
+
+
+def test_detection_with_radar_covariances_fast() -> None:
+    r = detection_runs(3, 2, tilt_deg=90.0, errors="radar", window=40.0)
+    assert r["detected"] == 1.0 and r["p90"] <= 35.0
+
+
+@pytest.mark.parametrize("about", ["least informed", "velocity"])
+def test_detectable_tilt_has_the_stated_power(about: str) -> None:
+    # A 40 s reference arc and a 20 s test segment rotated by θ* (the reported detectable
+    # tilt) about an axis through the junction -- in the least informed direction, or
+    # about the velocity (a bank change): the detector fires with probability 0.9 (400
+    # runs, se 0.015). σ = 10 m keeps θ* small (3-6°), where the linear theory holds (at
+    # σ = 50 m, θ* = 33° in the least informed direction, the measured power is 0.80).
+    sig = 10.0
+    sc = plane_change_track(0, tilt_deg=0.0, before=80.0, after=0.0, sigma=sig)
+    x, cov = sc.truth, sig**2 * np.eye(3)
+    a_pts, b_pts, c = x[:41], x[41:61], x[40]
+    n, a = sc.normals[0], sc.offsets[0]
+    covs = np.broadcast_to(cov, (61, 3, 3))
+    ja, _ = det.score_info_points(n, a, c, a_pts, covs[:41], 1000.0, 1.0)
+    jb, _ = det.score_info_points(n, a, c, b_pts, covs[41:], 1000.0, 1.0)
+    thr, _ = det.detector_threshold(1.0 / 3600.0, 1.0, 3)
+    lam = det.noncentrality_for_power(thr, 0.9)
+    assert stats.ncx2.sf(thr, 3, lam) == pytest.approx(0.9, abs=1e-9)
+    e = plane.verify._tangent_basis(n[None])[0]
+    if about == "velocity":
+        u = det.velocity_direction(n[None], e[None], x, np.array([40]), np.array([5]))[0]
+        theta = float(det.detectable_tilt(ja[None], jb[None], np.ones(1), lam, u[None])[0])
+        # the axis k = n × (change of the normal) is the tangent, up to the lag of the 5 s
+        # chord that estimates it (half its arc: 2.5 s × 0.0286 rad/s = 4°, cos = 0.9974)
+        tangent = (x[41] - x[39]) / np.linalg.norm(x[41] - x[39])
+        assert abs(float(np.cross(n, e.T @ u) @ tangent)) == pytest.approx(
+            np.cos(2.5 * 200.0 / 7000.0), abs=1e-4)
+    else:
+        theta = float(det.detectable_tilt(ja[None], jb[None], np.ones(1), lam)[0])
+        f = ja @ np.linalg.solve(ja + jb, jb)
+        u = np.linalg.eigh(0.5 * (f + f.T)[:2, :2])[1][:, 0]
+    assert 0.03 < theta < 0.15
+    k = np.cross(n, e.T @ u)
+    k /= np.linalg.norm(k)
+    v = b_pts - c
+    b_rot = c + (v * np.cos(theta) + np.cross(k, v) * np.sin(theta)
+                 + np.outer(v @ k, k) * (1 - np.cos(theta)))
+    rng = np.random.default_rng(3)
+    hits = 0
+    runs = 400
+    for _ in range(runs):
+        an = a_pts + sig * rng.normal(size=a_pts.shape)
+        bn = b_rot + sig * rng.normal(size=b_rot.shape)
+        cf = plane.closed_form(plane.PlaneData(an, cov))
+        j1, b1 = det.score_info_points(cf.normal, cf.offset, an[-1], an, covs[:41], 1e3, 1.0)
+        j2, b2 = det.score_info_points(cf.normal, cf.offset, an[-1], bn, covs[41:], 1e3, 1.0)
+        hits += bool(det.chow_statistic(j1[None], b1[None], j2[None], b2[None])[0] > thr)
+    assert abs(hits / runs - 0.9) <= 3 * np.sqrt(0.09 / runs)
+
+
+def test_track_reports_both_power_figures() -> None:
+    sc = plane_change_track(15, tilt_deg=0.0, before=120.0, after=0.0, sigma=30.0)
+    tr = track(sc.times, sc.points, sc.cov, window=40.0)
+    ok = np.isfinite(tr.detectable_tilt_any)
+    assert ok.sum() > 50
+    assert np.all(tr.detectable_tilt[ok] <= tr.detectable_tilt_any[ok] + 1e-12)
+    # σ = 30 m, 40 s window, 1/h: a bank change of ~10° (measured: 10° is detected in all
+    # of 50 runs within 22 s), any rotation of ~17°
+    assert np.deg2rad(5.0) < np.median(tr.detectable_tilt[ok]) < np.deg2rad(15.0)
+
+
+def test_detectable_tilt_grows_with_the_noise() -> None:
+    # the power figure scales with σ (information ∝ 1/σ²: sin θ* ∝ σ)
+    sc = plane_change_track(9, tilt_deg=0.0, before=100.0, after=0.0, sigma=1.0)
+    out = []
+    for sig in (10.0, 40.0):
+        tr = track(sc.times, sc.truth, sig**2 * np.eye(3), window=40.0,
+                   false_alarm_rate=1e-12)
+        th = tr.detectable_tilt
+        out.append(np.median(np.sin(th[np.isfinite(th)])))
+    assert out[1] / out[0] == pytest.approx(4.0, rel=1e-6)
+
+
+def test_restart_forgets_the_old_plane() -> None:
+    sc = plane_change_track(10, tilt_deg=45.0, sigma=30.0)
+    tr = track(sc.times, sc.points, sc.cov, window=None)
+    k = int(np.flatnonzero(tr.change)[0])
+    assert sc.change_time < tr.times[k] <= sc.change_time + 20.0
+    assert np.isfinite(tr.change_time[k]) and np.isnan(tr.change_time[~tr.change]).all()
+    after = np.arange(tr.n_steps) > k
+    assert np.all(tr.window_start[after] > tr.change_time[k])
+    # the last step's plane is the new one (CRB-sized error, σ = 30 m, 60 s of arc)
+    assert plane.angle_error(tr.normals[-1], sc.normals[1]) <= np.deg2rad(3.0)
+    assert plane.angle_error(tr.normals[k - 1], sc.normals[0]) <= np.deg2rad(3.0)
+
+
+# --------------------------------------------------------------------------- general D_i
+def test_general_covariances_use_fit_general_per_window() -> None:
+    sc = plane_change_track(11, tilt_deg=0.0, before=90.0, after=0.0, errors="radar")
+    tr = track(sc.times, sc.points, sc.cov, window=30, false_alarm_rate=1e-12)
+    assert tr.method == "general"
+    for k in (5, 40, tr.n_steps - 1):
+        m = (sc.times <= tr.times[k]) & (sc.times >= tr.window_start[k])
+        assert m.sum() == 30 or k < 30
+        ref = plane.solve(plane.PlaneData(sc.points[m], sc.cov[m]), "reduced")
+        fit = fit_general(sc.points[m], sc.cov[m], level=tr.level)
+        assert tr.resolved[k] == fit.resolved
+        if tr.resolved[k]:
+            assert plane.angle_error(tr.normals[k], ref.normal) <= 1e-7
+            assert tr.statistic[k] == pytest.approx(ref.objective, rel=1e-7)
+
+
+def test_radar_covariance_builder_agrees_with_simulation() -> None:
+    sc = plane_change_track(12, errors="radar", before=20.0, after=0.0)
+    cov = radar_covariances(sc.truth, np.array([-30e3, -30e3, 0.0]), 10.0, 2e-3, 2e-3)
+    assert np.allclose(sc.cov, cov)
+
+
+# --------------------------------------------------------------------------- API
+def test_rows_and_json() -> None:
+    sc = plane_change_track(13, tilt_deg=60.0, sigma=40.0, before=60.0, after=30.0)
+    tr = track(sc.times, sc.points, sc.cov, window=40.0)
+    rows = tr.to_rows()
+    assert len(rows) == tr.n_steps
+    assert {"time", "nx", "ny", "nz", "offset", "statistic", "threshold", "resolved",
+            "planar", "change", "detector", "detectable_tilt"} <= set(rows[0])
+    assert [r["change"] for r in rows] == tr.change.tolist()
+    d = tr.to_dict()
+    text = json.dumps(d, allow_nan=False)
+    back = json.loads(text)
+    assert len(back["normals"]) == tr.n_steps and len(back["normals"][0]) == 3
+    assert back["change_times"] == tr.change_times.tolist()
+    nan_rows = ~tr.resolved
+    assert all(v is None for row in np.asarray(back["normals"], dtype=object)[nan_rows]
+               for v in row)
+
+
+@pytest.mark.parametrize(("kwargs", "match"), [
+    ({"window": True}, "plane.track window"),
+    ({"window": 3}, "plane.track window"),
+    ({"window": -5.0}, "plane.track window"),
+    ({"window": "40s"}, "plane.track window"),
+    ({"level": 1.0}, "plane.track level"),
+    ({"false_alarm_rate": 0.0}, "plane.track false_alarm_rate"),
+    ({"false_alarm_rate": 10.0}, "plane.track false_alarm_rate"),
+    ({"scales": []}, "plane.track scales"),
+    ({"scales": [5.0, -1.0]}, r"plane.track scales\[1\]"),
+    ({"window": 40, "scales": [2.5]}, r"plane.track scales\[0\]"),
+    ({"start": 1e9}, "plane.track start"),
+    ({"power": 0.0}, "plane.track power"),
+    ({"min_reference": 2}, "plane.track min_reference"),
+    ({"max_reference_sd": 0.0}, "plane.track max_reference_sd"),
+])
+def test_bad_arguments_are_problem_errors(kwargs: dict, match: str) -> None:
+    sc = plane_change_track(14, before=30.0, after=0.0)
+    with pytest.raises(ProblemError, match=match):
+        track(sc.times, sc.points, sc.cov, **kwargs)
+
+
+def test_bad_arrays_are_problem_errors() -> None:
+    sc = plane_change_track(14, before=30.0, after=0.0)
+    with pytest.raises(ProblemError, match=r"plane.track times"):
+        track(sc.times[::-1], sc.points, sc.cov)
+    with pytest.raises(ProblemError, match=r"plane.track times"):
+        track(sc.times[:-1], sc.points, sc.cov)
+    with pytest.raises(ProblemError, match=r"plane.track: plane.PlaneData cov"):
+        track(sc.times, sc.points, np.eye(2))
+    with pytest.raises(ProblemError, match=r"plane.track: plane.PlaneData points"):
+        track(sc.times, sc.points[:, :2], sc.cov)
+
+
+def test_score_has_mean_zero_for_anisotropic_covariances() -> None:
+    # D with its long axis tilted 30° out of the plane: the in-plane error of a measured
+    # point is correlated with its distance to the plane. With the measured coordinates in
+    # h_i the score b would have mean Σ E D n / v ≠ 0 (radar false alarms: 1.6 per hour at
+    # a bound of 1, 48 in 30 h); with the oblique projections (1.8) it is zero (0.9 per
+    # hour, 27 in 30 h). 2000 draws of a
+    # 20-point segment on the true plane: each mean within 4 se of 0; and the moments route
+    # (1.4) equals the per-point route to 1e-9.
+    rng = np.random.default_rng(16)
+    sc = plane_change_track(16, tilt_deg=0.0, before=40.0, after=0.0)
+    x = sc.truth[:20]
+    n, a = sc.normals[0], sc.offsets[0]
+    e = plane.verify._tangent_basis(n[None])[0]
+    axis = np.cos(np.deg2rad(30.0)) * e[0] + np.sin(np.deg2rad(30.0)) * n
+    cov = 80.0**2 * np.outer(axis, axis) + 15.0**2 * np.eye(3)
+    alpha2 = rng.uniform(0.5, 2.0, len(x))
+    covs = alpha2[:, None, None] * cov
+    chol = np.linalg.cholesky(covs)
+    c = x[0]
+    bs, naive = [], []
+    for _ in range(2000):
+        xn = x + (chol @ rng.normal(size=(len(x), 3, 1)))[..., 0]
+        _, b = det.score_info_points(n, a, c, xn, covs, 1000.0, 1.0)
+        bs.append(b)
+        u = (xn - c) / 1000.0
+        r = (xn @ n - a) / 1000.0
+        v = np.einsum("i,kij,j->k", n, covs, n) / 1e6
+        naive.append(np.column_stack([u @ e.T, -np.ones(len(u))]).T @ (r / v))
+    bs, naive = np.asarray(bs), np.asarray(naive)
+    se = bs.std(axis=0) / np.sqrt(len(bs))
+    assert np.all(np.abs(bs.mean(axis=0)) <= 4 * se)
+    assert np.abs(naive.mean(axis=0)[0]) > 10 * se[0]  # what the correction removes
+    xn = x + (chol @ rng.normal(size=(len(x), 3, 1)))[..., 0]
+    jp, bp = det.score_info_points(n, a, c, xn, covs, 1000.0, 0.7)
+    mom = range_moments(xn, 1.0 / alpha2, np.array([0]), np.array([len(x) - 1]),
+                        spread=1000.0)
+    jm, bm = det.score_info_moments(n[None], np.array([a]), c[None], mom, cov,
+                                    np.array([0.7]))
+    assert np.allclose(jm[0], jp, rtol=1e-9, atol=1e-12 * np.abs(jp).max())
+    assert np.allclose(bm[0], bp, rtol=1e-9, atol=1e-12 * np.abs(bp).max())
+
+
+@pytest.mark.slow
+def test_false_alarm_rate_with_radar_covariances() -> None:
+    # general D_i (fit_general per window), stated 60 per hour over 1 h of planar track
+    # (≈ 20 s); measured 17-27 per hour
+    r = false_alarm_runs(1.0, 13, window=40.0, errors="radar", false_alarm_rate=1.0 / 60.0,
+                         run_hours=0.25)
+    assert r["alarms"] > 0
+    assert r["rate"] <= r["stated"] + 3 * r["se"]

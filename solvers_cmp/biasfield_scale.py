@@ -78,6 +78,18 @@ class RssTrace:
                 return
             self.samples.append((time.perf_counter() - self._t0, rss))
 
+    def per_stage(self, ends: dict[str, float]) -> dict[str, float]:
+        """The largest sampled RSS (MB) in each stage; ``ends`` stage → its end (s since
+        the start, in order)."""
+        out: dict[str, float] = {}
+        lo = 0.0
+        for key, hi in ends.items():
+            seg = [mb for t, mb in self.samples if lo <= t < hi]
+            if seg:
+                out[key] = round(max(seg), 1)
+            lo = hi
+        return out
+
     def stop(self) -> dict[str, float]:
         self._stop.set()
         self._thread.join()
@@ -231,13 +243,16 @@ def run(*, small: bool = False, scheduler: str = "serial", workers: int | None =
         seed: int = 0, fast_centers: bool = False, clean: bool = True,
         separate_fit: bool = False, child_generator: bool = True) -> dict[str, Any]:
     """The chain, stage by stage: simulate (in a child process unless
-    ``child_generator=False``, so that ``peak_rss_mb`` is the pipeline's own), clean, the
-    plots' positions on the plane (once: passed to the fits), FieldData (its own fits with
-    ``scheduler``, centres by :func:`~optmodels.biasfield.cells.place_centers` on the
-    sampled positions unless ``fast_centers`` (this module's :func:`kmeans_tree` on up to
-    2·10⁶ plot positions, the previous benchmark's choice), averaging; its stage seconds
-    from ``Diagnostics.timings``). ``separate_fit`` adds a separate pass of the fits (to
-    time the scheduler alone). Returns the figures (seconds, MB, sizes)."""
+    ``child_generator=False``, so that ``peak_rss_mb`` is the pipeline's own), clean,
+    FieldData (its own fits with ``scheduler``; centres by
+    :func:`~optmodels.biasfield.cells.place_centers` on the sampled positions, or with
+    ``fast_centers`` by this module's :func:`kmeans_tree` on up to 2·10⁶ plot positions,
+    the previous benchmark's choice; averaging; its stage seconds from
+    ``Diagnostics.timings``). ``separate_fit`` adds a separate pass of the fits (to time
+    the scheduler alone); with it or ``fast_centers`` the plots' positions are computed
+    once here and passed on (``positions=``; otherwise build_field_data's fits compute
+    them and free them after the fits: −16 B per plot at the peak). Returns the figures
+    (seconds, MB, sizes, the RSS trace per stage)."""
     cfg = dict(SMALL if small else FULL)
     for key, val in (("aircraft", aircraft), ("hours", hours), ("cells", cells)):
         if val is not None:
@@ -259,9 +274,11 @@ def run(*, small: bool = False, scheduler: str = "serial", workers: int | None =
         plots, rep = clean_plots(plots, radars)
         _stage(res, "t_clean_s", t)
         res["cleaning_dropped"] = rep.counts
-    t = time.perf_counter()
-    z = plots.cartesian(radars)
-    _stage(res, "t_positions_s", t)
+    z = None  # the plots' positions, computed here only if this benchmark needs them too
+    if separate_fit or fast_centers:
+        t = time.perf_counter()
+        z = plots.cartesian(radars)
+        _stage(res, "t_positions_s", t)
     if separate_fit:
         t = time.perf_counter()
         fits, dropped = fit_tracks(plots, radars, scheduler=scheduler, workers=workers,
@@ -276,7 +293,7 @@ def run(*, small: bool = False, scheduler: str = "serial", workers: int | None =
         t = time.perf_counter()
         sample = np.random.default_rng(seed).choice(len(z), min(len(z), 2_000_000),
                                                      replace=False)
-        centres = kmeans_tree(z[sample], int(cfg["cells"]), seed)
+        centres = kmeans_tree(z[sample], int(cfg["cells"]), seed)  # type: ignore[index]
         del sample
         _stage(res, "t_centres_tree_s", t)
     t = time.perf_counter()
@@ -292,6 +309,17 @@ def run(*, small: bool = False, scheduler: str = "serial", workers: int | None =
     res["t_total_s"] = time.perf_counter() - t_all
     res["peak_rss_mb"], res["peak_rss_children_mb"] = _rss_mb()
     res["rss_trace_peak"] = trace.stop()  # when (s since the start) the peak was reached
+    ends: dict[str, float] = {}
+    clock = 0.0
+    for key in ("t_simulate_s", "t_clean_s", "t_positions_s", "t_fit_s", "t_centres_tree_s"):
+        if key in res:
+            clock += res[key]
+            ends[key] = clock
+    for key, sec in diag.timings.items():
+        clock += sec
+        ends[f"field_data.{key}"] = clock
+    ends["field_data.rest"] = res["t_total_s"] + 1.0
+    res["rss_max_per_stage_mb"] = trace.per_stage(ends)
     return res
 
 

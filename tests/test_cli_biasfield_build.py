@@ -16,6 +16,37 @@ from tests.test_cli import assert_error, run_cli, run_many
 ORG = (55.0, 83.0, 150.0)
 
 
+def write_sites(path: Path, r: bf.RadarSet) -> Path:
+    """The sites CSV of a 3-D radar set, keyed by SAC/SIC (SAC 25, SIC 10 + i)."""
+    assert r.geodetic is not None
+    path.write_text("name,sac,sic,lat,lon,alt,sigma_range,sigma_azimuth,max_range\n" + "".join(
+        f"{r.names[i]},25,{10 + i},"
+        + ",".join(repr(float(v)) for v in (*r.geodetic[i], r.sigma_range[i],
+                                            np.rad2deg(r.sigma_azimuth[i]), r.max_range[i]))
+        + "\n" for i in range(r.m)))
+    return path
+
+
+def encode_scene(sc: object, tod0: float, addr: np.ndarray) -> tuple[bytes, bytes, int]:
+    """A simulated 3-D scene as ASTERIX: CAT048 of every radar (SAC 25, SIC 10 + i; the
+    aircraft addresses ``addr``) and CAT021 of every aircraft's true track (geometric
+    height); times of day from ``tod0`` s. Returns (cat048, cat021, CAT021 reports)."""
+    from optmodels.io import asterix as ax
+
+    r, p, paths = sc.radars, sc.plots, sc.paths  # type: ignore[attr-defined]
+    cat048 = b"".join(ax.encode_cat048(p.time[p.radar == i] + tod0, 25, 10 + i,
+                                       p.range[p.radar == i], p.azimuth[p.radar == i],
+                                       address=addr[p.object[p.radar == i]])
+                      for i in range(r.m))
+    parts = [paths.track(a) for a in range(len(paths))]
+    t21 = np.concatenate([q[0] for q in parts]) + tod0
+    geo = np.vstack([q[2] for q in parts if q[2] is not None])
+    who = np.concatenate([np.full(q[0].size, addr[a]) for a, q in enumerate(parts)])
+    cat021 = ax.encode_cat021(t21, 25, 99, geo[:, 0], geo[:, 1], height=geo[:, 2],
+                              address=who)
+    return cat048, cat021, int(t21.size)
+
+
 def _files(tmp_path: Path) -> tuple[Path, Path, Path, Path, int, int]:
     """A 3-D network as a sites CSV (SAC/SIC, lat, lon, alt) and a plots CSV with heights,
     4 glitch plots (8 km off, 1 s after a real plot) appended; an ADS-B CSV of the truth
@@ -26,12 +57,7 @@ def _files(tmp_path: Path) -> tuple[Path, Path, Path, Path, int, int]:
     sc = radar_network(9, n_aircraft=16, duration=900.0, geometry="3d", origin=ORG)
     r = sc.radars
     assert r.geodetic is not None
-    sites = tmp_path / "sites.csv"
-    sites.write_text("name,sac,sic,lat,lon,alt,sigma_range,sigma_azimuth,max_range\n" + "".join(
-        f"{r.names[i]},25,{10 + i},"
-        + ",".join(repr(float(v)) for v in (*r.geodetic[i], r.sigma_range[i],
-                                            np.rad2deg(r.sigma_azimuth[i]), r.max_range[i]))
-        + "\n" for i in range(r.m)))
+    sites = write_sites(tmp_path / "sites.csv", r)
     flat = tmp_path / "flat.csv"
     flat.write_text("name,x,y,sigma_range,sigma_azimuth,max_range\n" + "".join(
         f"{r.names[i]},{float(r.sites[i, 0])!r},{float(r.sites[i, 1])!r},50,0.08,250000\n"
@@ -133,30 +159,13 @@ def test_build_from_asterix_one_or_two_files(tmp_path: Path) -> None:
     FieldData as the library chain (read_recording → locatable → clean_plots →
     build_field_data), exit 0, one JSON document counting what was read and dropped."""
     from optmodels.biasfield.recording import read_recording
-    from optmodels.io import asterix as ax
     from optmodels.scenarios.radar_network import radar_network
 
     sc = radar_network(9, n_aircraft=12, duration=900.0, geometry="3d", origin=ORG)
     r, p = sc.radars, sc.plots
     assert r.geodetic is not None
-    sites = tmp_path / "sites.csv"
-    sites.write_text("name,sac,sic,lat,lon,alt,sigma_range,sigma_azimuth,max_range\n" + "".join(
-        f"{r.names[i]},25,{10 + i},"
-        + ",".join(repr(float(v)) for v in (*r.geodetic[i], r.sigma_range[i],
-                                            np.rad2deg(r.sigma_azimuth[i]), r.max_range[i]))
-        + "\n" for i in range(r.m)))
-    tod0 = 36000.0
-    addr = 0x400000 + np.arange(12)
-    cat048 = b"".join(ax.encode_cat048(p.time[p.radar == i] + tod0, 25, 10 + i,
-                                       p.range[p.radar == i], p.azimuth[p.radar == i],
-                                       address=addr[p.object[p.radar == i]])
-                      for i in range(r.m))
-    parts = [sc.paths.track(a) for a in range(len(sc.paths))]
-    t21 = np.concatenate([q[0] for q in parts]) + tod0
-    geo = np.vstack([q[2] for q in parts if q[2] is not None])
-    who = np.concatenate([np.full(q[0].size, addr[a]) for a, q in enumerate(parts)])
-    cat021 = ax.encode_cat021(t21, 25, 99, geo[:, 0], geo[:, 1], height=geo[:, 2],
-                              address=who)
+    sites = write_sites(tmp_path / "sites.csv", r)
+    cat048, cat021, n21 = encode_scene(sc, 36000.0, 0x400000 + np.arange(12))
     both, f48, f21 = tmp_path / "rec.bin", tmp_path / "plots.dat", tmp_path / "adsb.dat"
     both.write_bytes(cat048 + cat021)
     f48.write_bytes(cat048)
@@ -171,8 +180,8 @@ def test_build_from_asterix_one_or_two_files(tmp_path: Path) -> None:
     assert two.code == 0, two.err
     res = one.json()
     assert res["source"] == "asterix" and res["geometry"] == "3d"
-    assert res["plots"] == len(p) and res["adsb"]["reports"] == t21.size
-    assert res["adsb"]["records"] == {"CAT048": len(p), "CAT021": t21.size}
+    assert res["plots"] == len(p) and res["adsb"]["reports"] == n21
+    assert res["adsb"]["records"] == {"CAT048": len(p), "CAT021": n21}
     rec = read_recording([both], sites)
     plots = rec.plots.subset(rec.plots.locatable(rec.radars))
     kept, _ = clean_plots(plots, rec.radars)

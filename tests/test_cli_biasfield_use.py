@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from tests.test_cli import assert_error, run_cli, run_many
+from tests.test_cli_biasfield_build import encode_scene, write_sites
 
 ORG = (55.0, 83.0, 150.0)
 
@@ -20,32 +21,15 @@ ORG = (55.0, 83.0, 150.0)
 def recording(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     """A 3-D network (smooth bias field, 30 aircraft, 25 min) as a sites CSV keyed by
     SAC/SIC and one ASTERIX file (CAT048 of every radar + CAT021 of every aircraft)."""
-    from optmodels.io import asterix as ax
     from optmodels.scenarios.radar_network import radar_network
 
     tmp = tmp_path_factory.mktemp("use")
     sc = radar_network(4, n_aircraft=30, duration=1500.0, geometry="3d", origin=ORG)
-    r, p = sc.radars, sc.plots
-    assert r.geodetic is not None
-    sites = tmp / "sites.csv"
-    sites.write_text("name,sac,sic,lat,lon,alt,sigma_range,sigma_azimuth,max_range\n" + "".join(
-        f"{r.names[i]},25,{10 + i},"
-        + ",".join(repr(float(v)) for v in (*r.geodetic[i], r.sigma_range[i],
-                                            np.rad2deg(r.sigma_azimuth[i]), r.max_range[i]))
-        + "\n" for i in range(r.m)))
-    tod0 = 30000.0
-    addr = 0x3C0000 + np.arange(30)
-    cat048 = b"".join(ax.encode_cat048(p.time[p.radar == i] + tod0, 25, 10 + i,
-                                       p.range[p.radar == i], p.azimuth[p.radar == i],
-                                       address=addr[p.object[p.radar == i]])
-                      for i in range(r.m))
-    parts = [sc.paths.track(a) for a in range(len(sc.paths))]
-    t21 = np.concatenate([q[0] for q in parts]) + tod0
-    geo = np.vstack([q[2] for q in parts if q[2] is not None])
-    who = np.concatenate([np.full(q[0].size, addr[a]) for a, q in enumerate(parts)])
+    r = sc.radars
+    sites = write_sites(tmp / "sites.csv", r)
+    cat048, cat021, _ = encode_scene(sc, 30000.0, 0x3C0000 + np.arange(30))
     rec = tmp / "recording.ast"
-    rec.write_bytes(cat048 + ax.encode_cat021(t21, 25, 99, geo[:, 0], geo[:, 1],
-                                              height=geo[:, 2], address=who))
+    rec.write_bytes(cat048 + cat021)
     fd, out = tmp / "fd.npz", tmp / "solved"
     run_cli("biasfield", "build", rec, "--radars", sites, "--cells", "30", "--out", fd)
     run_cli("biasfield", "solve", fd, "--solver", "closed-form", "--out", out)

@@ -530,8 +530,12 @@ def fit_tracks(plots: PlotTable, radars: RadarSet, *, knot_spacing: float = 20.0
              for task in _tasks(plots, radars, z_all, chunk)]
     results: list[tuple[list[TrackFit], int] | None] = [None] * len(tasks)
 
+    trim = _heap_trimmer() if engine != "serial" else None
+
     def keep(k: int, res: tuple[list[TrackFit], int]) -> None:
         results[k] = res
+        if trim is not None:
+            trim(0)  # the unpickling buffers of each result, back to the OS
 
     execute(_fit_chunk, tasks, on_result=keep, scheduler=engine, workers=workers,
             what=fn)
@@ -541,6 +545,19 @@ def fit_tracks(plots: PlotTable, radars: RadarSet, *, knot_spacing: float = 20.0
         fits.extend(res[0])
         dropped.add("too few plots for the polyline", res[1])
     return fits, dropped
+
+
+def _heap_trimmer() -> Any:
+    """glibc's ``malloc_trim`` (None elsewhere). Results received from workers are
+    unpickled between freed receive buffers; without trimming, the freed heap stays in
+    the process (measured: +40 % of the fits' own size in resident memory)."""
+    import ctypes
+    import ctypes.util
+
+    try:
+        return ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6").malloc_trim
+    except (OSError, AttributeError):  # pragma: no cover - not glibc
+        return None
 
 
 def _knots(t: FloatArray, spacing: float) -> FloatArray:

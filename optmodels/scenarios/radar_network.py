@@ -160,6 +160,16 @@ def fly_paths3d(rng: np.random.Generator, n_aircraft: int, duration: float, *,
     return AircraftPaths.from_plane(ts, ens, hs, org)
 
 
+def _time_ordered(rows: list[tuple[FloatArray, ...]]) -> list[FloatArray]:
+    """The per-(radar, aircraft) column tuples of a simulation joined and sorted by plot
+    time (the first column), stably."""
+    if not rows:
+        raise ProblemError("radars: no aircraft within any radar's range")
+    cols = [np.concatenate(c) for c in zip(*rows, strict=True)]
+    order = np.argsort(cols[0], kind="stable")
+    return [c[order] for c in cols]
+
+
 def _visible(site: FloatArray, slant: FloatArray, h: FloatArray) -> np.ndarray:
     """Straight line of sight from a site (lat, lon, h) to targets at slant range and
     height h clears a sphere of radius :data:`EARTH_RADIUS` (no refraction), and the
@@ -207,11 +217,7 @@ def _simulate_plots3d(rng: np.random.Generator, radars: RadarSet, paths: Aircraf
                 continue
             rows.append((tk[seen], np.full(int(seen.sum()), i), meas[seen, 0], meas[seen, 1],
                          np.full(int(seen.sum()), a), xk[seen], f[seen], gk[seen, 2]))
-    if not rows:
-        raise ProblemError("radars: no aircraft within any radar's range")
-    cols = [np.concatenate(c) for c in zip(*rows, strict=True)]
-    order = np.argsort(cols[0], kind="stable")
-    cols = [c[order] for c in cols]
+    cols = _time_ordered(rows)
     plots = PlotTable(cols[0], cols[1].astype(np.int64), cols[2], cols[3],
                       cols[4].astype(np.int64), cols[7])
     return plots, cols[5], cols[6]
@@ -276,11 +282,7 @@ def simulate_plots(rng: np.random.Generator, radars: RadarSet, paths: AircraftPa
             tk, xk, f, meas = tk[seen], xk[seen], f[seen], meas[seen]
             rows.append((tk, np.full(tk.size, i), meas[:, 0], meas[:, 1],
                          np.full(tk.size, a), xk, f))
-    if not rows:
-        raise ProblemError("radars: no aircraft within any radar's range")
-    cols = [np.concatenate(c) for c in zip(*rows, strict=True)]
-    order = np.argsort(cols[0], kind="stable")
-    cols = [c[order] for c in cols]
+    cols = _time_ordered(rows)
     plots = PlotTable(cols[0], cols[1].astype(np.int64), cols[2], cols[3],
                       cols[4].astype(np.int64))
     return plots, cols[5], cols[6]

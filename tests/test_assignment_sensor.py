@@ -421,6 +421,7 @@ def test_bad_input_is_one_problem_error() -> None:
         (lambda: polar.unresolved_probability([[1.0, 0.0]], np.eye(2)), "covs"),
         (lambda: polar_measurement_covs([[1.0, 2.0]], [0, 0], -1.0, 0.1), "sigma_range"),
         (lambda: polar_measurement_covs([[1.0, 2.0]], [0, 0], 1.0, 0.0), "sigma_azimuth"),
+        (lambda: polar_measurement_covs([[1.0, 2.0]], [0, 0], 1.0, 10.0), "degrees given"),
         (lambda: polar_measurement_covs([[1.0, 2.0, 3.0]], [0, 0], 1.0, 0.1), "measurements"),
         (lambda: polar_measurement_covs([[0.0, 0.0]], [0, 0], 1.0, 0.1), "range 0"),
         (lambda: polar_measurement_covs([[1.0, 0.0]], [0, 0], 1.0, 0.1, coordinates="geo"),

@@ -30,11 +30,12 @@ def recording(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     cat048, cat021, _ = encode_scene(sc, 30000.0, 0x3C0000 + np.arange(30))
     rec = tmp / "recording.ast"
     rec.write_bytes(cat048 + cat021)
+    (tmp / "adsb_only.ast").write_bytes(cat021)
     fd, out = tmp / "fd.npz", tmp / "solved"
     run_cli("biasfield", "build", rec, "--radars", sites, "--cells", "30", "--out", fd)
     run_cli("biasfield", "solve", fd, "--solver", "closed-form", "--out", out)
     return {"tmp": tmp, "sites": sites, "recording": rec, "fd": fd,
-            "field": out / "field.npz"}
+            "field": out / "field.npz", "adsb_only": tmp / "adsb_only.ast"}
 
 
 def test_round_trip_build_solve_correct_registration(recording: dict[str, Path]) -> None:
@@ -95,13 +96,28 @@ def test_round_trip_build_solve_correct_registration(recording: dict[str, Path])
 
 def test_correct_and_registration_refuse_what_does_not_fit(recording: dict[str, Path]
                                                            ) -> None:
-    """A field of other radars, a missing field file, bad flags: exit 2, one line."""
+    """A field of other radars, a missing field file, bad flags, a recording without
+    CAT048, sites whose SAC/SIC no plot carries, 2-D asked of ASTERIX: exit 2, one line."""
     tmp, sites, rec, field = (recording[k] for k in ("tmp", "sites", "recording", "field"))
     moved = tmp / "moved.csv"
     lines = sites.read_text().splitlines()
     head, first = lines[0], lines[1].split(",")
     first[3] = repr(float(first[3]) + 0.05)  # radar R1 5.5 km further north
     moved.write_text("\n".join([head, ",".join(first), *lines[2:]]) + "\n")
+    wrong = tmp / "wrong_ids.csv"
+    first = lines[1].split(",")
+    first[2] = "99"  # R1's SIC: no plot of the recording carries it
+    wrong.write_text("\n".join([head, ",".join(first), *lines[2:]]) + "\n")
+    no_plots, silent, flat = run_many([
+        ["biasfield", "correct", recording["adsb_only"], "--radars", sites, "--field", field,
+         "--out", tmp / "z.csv", "--json"],
+        ["biasfield", "build", rec, "--radars", wrong, "--out", tmp / "w.npz"],
+        ["biasfield", "build", rec, "--radars", sites, "--geometry", "2d", "--out",
+         tmp / "v.npz"],
+    ], expect=None)
+    assert_error(no_plots, 2, "no CAT048 plot")
+    assert_error(silent, 2, "R1", "99", "[25, 10]")
+    assert_error(flat, 2, "--geometry 2d", "ASTERIX")
     other, missing, area = run_many([
         ["biasfield", "correct", rec, "--radars", moved, "--field", field, "--out",
          tmp / "x.csv", "--json"],

@@ -186,3 +186,20 @@ def test_step_status_rules() -> None:
         line_statistic=np.array([500.0, 500.0, 50.0, 500.0]),
         line_threshold=np.full(4, 100.0))
     assert _step_status(trk) == ["optimal", "optimal_inaccurate", "unresolved", "error"]
+
+
+def test_plane_fit_on_a_line_is_unresolved(tmp_path: Path) -> None:
+    """The straight climb of climb_turn_track (its first 30 s) is a line: `plane fit` reports
+    no plane (status unresolved, exit 1, normal null) and the line's direction, which is the
+    climb's velocity direction to within the noise (independent: the true positions)."""
+    tr = climb_turn_track(3, durations=(30.0, 30.0, 40.0))
+    path = tmp_path / "line.csv"
+    write_plane_csv(path, tr.points, t=tr.times)
+    run = run_cli("plane", "fit", path, "--sigma2", "900", "--end", "29", "--json", expect=1)
+    res = run.json()
+    assert res["status"] == "unresolved" and res["normal"] == [None, None, None]
+    assert res["planarity_test"]["resolved"] is False
+    seg = tr.truth[tr.times <= 29.0]
+    true_dir = (seg[-1] - seg[0]) / np.linalg.norm(seg[-1] - seg[0])
+    assert abs(float(np.dot(res["line_direction"], true_dir))) > 1 - 1e-4
+    assert "not OK: status unresolved" in run.err

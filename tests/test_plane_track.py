@@ -403,6 +403,8 @@ def test_rows_and_json() -> None:
     ({"window": True}, "plane.track window"),
     ({"window": 3}, "plane.track window"),
     ({"window": -5.0}, "plane.track window"),
+    ({"window": 1e-3}, "plane.track window"),
+    ({"window": 40.0, "scales": [30.0]}, "plane.track scales"),
     ({"window": "40s"}, "plane.track window"),
     ({"level": 1.0}, "plane.track level"),
     ({"false_alarm_rate": 0.0}, "plane.track false_alarm_rate"),

@@ -204,6 +204,9 @@ def polar_measurement_covs(measurements: Any, site: Any, sigma_range: Any,
     s = as_finite_array(f"{w} site", site, shape=(2,))
     sr = as_positive(f"{w} sigma_range (m)", sigma_range)
     sa = as_positive(f"{w} sigma_azimuth (rad)", sigma_azimuth)
+    if sa > 0.5:  # ~29°: no radar's angle noise; found by review (10 "rad" accepted)
+        raise ProblemError(f"{w} sigma_azimuth (rad): {sa:g} rad is {np.rad2deg(sa):.3g}°, "
+                           "not an angle noise (degrees given as radians?)")
     if kind == "cartesian":
         pol = cartesian_to_polar(meas, s)
     else:

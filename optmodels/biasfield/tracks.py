@@ -526,6 +526,9 @@ def fit_tracks(plots: PlotTable, radars: RadarSet, *, knot_spacing: float = 20.0
         f"{fn} positions (m)", positions, shape=(len(plots), 2), max_abs=MAX_MAGNITUDE)
     dropped = Dropped()
     dropped.add("no object id", int(np.sum(plots.object < 0)))
+    if not np.any(plots.object >= 0):
+        raise ProblemError(f"{fn} plots: no plot with an object id is left ({len(plots)} "
+                           "plots; were they all dropped by the reader or the cleaning?)")
     tasks = [(*task, knot_spacing, gap, min_redundancy)
              for task in _tasks(plots, radars, z_all, chunk)]
     results: list[tuple[list[TrackFit], int] | None] = [None] * len(tasks)

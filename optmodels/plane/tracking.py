@@ -231,6 +231,12 @@ def _scales_arg(scales: Any, window: float | int | None) -> tuple[float, ...]:
                     for i, s in enumerate(items))
     else:
         out = tuple(as_positive(f"{_W} scales[{i}]", s) for i, s in enumerate(items))
+    if window is not None and max(out) > 0.5 * window:
+        # the reference is the window's part before the test segment: a segment longer than
+        # half the window leaves a reference too short to be firm (false alarms, found by review)
+        raise ProblemError(f"{_W} scales: test segments of at most half the window "
+                           f"({0.5 * window:g} {'points' if isinstance(window, int) else 's'})"
+                           f" are allowed, got {max(out):g}")
     return tuple(sorted(set(out)))
 
 
@@ -430,6 +436,12 @@ def track(
     min_ref = as_count(f"{_W} min_reference", min_reference, minimum=4)
     max_sd = as_positive(f"{_W} max_reference_sd", max_reference_sd, allow_inf=True)
     sc = _scales_arg(scales, win)
+    if isinstance(win, float) and n > 1:
+        dt = float(np.median(np.diff(t)))
+        if win < 3.0 * dt:  # a plane needs 4 points: found by review (n_points = 1 per step)
+            raise ProblemError(f"{_W} window: {win:g} s holds fewer than 4 measurements at "
+                               f"the median sampling interval {dt:g} s; give at least "
+                               f"{3.0 * dt:g} s")
     if start is None:
         first = 3
     else:

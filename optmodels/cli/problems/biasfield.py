@@ -68,12 +68,15 @@ def _asterix_recording(files: list[Path], args: argparse.Namespace,
         return read_recording([str(f) for f in files], radars, date=args.date)
 
 
-def _read_input(args: argparse.Namespace, *, clean: bool) -> dict[str, Any]:
+def _read_input(args: argparse.Namespace, *, clean: bool, require_all: bool = False
+                ) -> dict[str, Any]:
     """RECORDING [RECORDING2] (+ ``--adsb``) and ``--radars`` → the radar set and the plots
     (ASTERIX or CSV/Parquet, told apart by content), what was read and dropped, and the
     ADS-B reports of an ASTERIX recording (CAT021) — shared by ``build``, ``correct`` and
     ``registration``. With ``clean``, plots that cannot be placed and the cleaning's drops
-    (gaps, glitches, ground traffic) are removed and reported."""
+    (gaps, glitches, ground traffic) are removed and reported; ``require_all`` (build):
+    a radar of the sites without a plot in an ASTERIX recording is refused, naming its
+    SAC/SIC and the recording's unknown ones."""
     from optmodels import biasfield as bf
     from optmodels.biasfield.cleaning import clean_plots
     from optmodels.biasfield.ingest import read_tracks
@@ -95,8 +98,24 @@ def _read_input(args: argparse.Namespace, *, clean: bool) -> dict[str, Any]:
         if tables:
             raise ProblemError(f"{tables[0]}: mixing an ASTERIX recording with a CSV/Parquet "
                                "file is not supported; give the CAT021 ADS-B as ASTERIX")
+        if args.geometry == "2d":
+            raise ProblemError(f"--geometry 2d: {files[0]} is ASTERIX, whose plots are slant "
+                               "ranges from geodetic sites: always the exact 3-D chain")
         rec = _asterix_recording(files, args, origin)
         radars, plots, adsb = rec.radars, rec.plots, rec.adsb
+        if len(plots) == 0:
+            raise ProblemError(f"{files[0]}: no CAT048 plot of the sites in {args.radars} "
+                               f"(dropped: {dict(rec.report.dropped) or 'none'}; SAC/SIC in "
+                               f"the recording but not in the sites: "
+                               f"{[list(i) for i in rec.report.unknown_ids] or 'none'})")
+        silent = [radars.names[i] for i in range(radars.m)
+                  if not np.any(plots.radar == i)]
+        if silent and require_all:  # build: every cell needs all m radars
+            raise ProblemError(f"--radars {args.radars}: radars {silent} (SAC/SIC "
+                               f"{[list(radars.ids[radars.names.index(n)]) for n in silent]}) "
+                               f"have no plot in {files[0]}; SAC/SIC in the recording but "
+                               f"not in the sites: "
+                               f"{[list(i) for i in rec.report.unknown_ids] or 'none'}")
         adsb_report = {"reports": len(rec.adsb), **rec.report.as_dict()}
         read_dropped = {str(k): int(v) for k, v in rec.report.dropped.items()}
         source, org_used = "asterix", [float(v) for v in radars.origin]
@@ -153,7 +172,7 @@ def _biasfield_build(args: argparse.Namespace) -> Outcome:
     from optmodels import biasfield as bf
 
     out = _out_file("--out", _npz_name(Path(args.out)))
-    inp = _read_input(args, clean=True)
+    inp = _read_input(args, clean=True, require_all=True)
     radars, plots, dropped = inp["radars"], inp["plots"], inp["dropped"]
     org_used = inp["org_used"]
     extra = {} if args.scheduler == "serial" else {"scheduler": args.scheduler}

@@ -81,7 +81,20 @@ def _plane_fit(args: argparse.Namespace) -> Outcome:
         "message": sol.message,
     }
     if sol.ok and data.n_points >= 4:
-        out["planarity_test"] = plane.planarity_test(data, sol, level=args.level).to_dict()
+        test = plane.planarity_test(data, sol, level=args.level)
+        out["planarity_test"] = test.to_dict()
+        if not test.resolved:
+            # the points lie on a line at `level`: every plane through it fits as well, so no
+            # plane is reported (never an arbitrary normal with an OK status)
+            pts = np.asarray(data.points, dtype=float)
+            direction = np.linalg.svd(pts - pts.mean(axis=0), full_matrices=False)[2][0]
+            out.update(status="unresolved", normal=[float("nan")] * 3, offset=float("nan"),
+                       line_direction=direction.tolist(),
+                       message=(f"the points lie on a line at level {args.level} (line test "
+                                f"{test.line_statistic:.6g} ≤ {test.line_threshold:.6g}): "
+                                "the plane is not determined; line_direction is the "
+                                "unweighted principal axis"))
+            return out, False
     return out, sol.ok
 
 
@@ -92,6 +105,9 @@ def _print_plane_fit(res: dict[str, Any]) -> None:
     print(f"{res['file']}: N = {res['n_points']}{when}, {res['method']} -> {res['status']}")
     if res["status"] not in _OK_STATUSES:
         print(f"  {res['message']}")
+        if res.get("line_direction"):
+            d = res["line_direction"]
+            print(f"  line direction = ({d[0]:.9f}, {d[1]:.9f}, {d[2]:.9f})")
         return
     print(f"  normal  = ({n[0]:.9f}, {n[1]:.9f}, {n[2]:.9f})")
     print(f"  offset  = {res['offset']:.6f} m")

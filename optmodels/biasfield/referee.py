@@ -48,6 +48,7 @@ from optmodels.biasfield.problem import _check_graph, _r_matrix
 from optmodels.biasfield.usage import (
     FieldMap,
     RegistrationError,
+    _plane_positions,
     _systematic_square,
     _Triangles,
     correct_plots,
@@ -370,17 +371,19 @@ class AbsoluteError:
 
 def absolute_error(plots: PlotTable, radars: RadarSet, reference: ArrayLike, *,
                    area: float = 25e3, min_samples: int = 20,
-                   within: FieldMap | None = None) -> AbsoluteError:
+                   within: FieldMap | None = None,
+                   positions: ArrayLike | None = None) -> AbsoluteError:
     """RMS over areas of the systematic part of z − y, z a plot's position on the common
     plane and y its ADS-B position (per-area means less their noise, estimated from the
     scatter of the per-aircraft means; areas of ≥ ``min_samples`` plots of ≥ 2 aircraft),
-    per radar and overall. ``within``: only plots in the covered area of a field."""
+    per radar and overall. ``within``: only plots in the covered area of a field;
+    ``positions`` (n, 2) m: the plots' plane positions if already computed."""
     fn = "biasfield.absolute_error"
     plots = as_instance(f"{fn} plots", plots, PlotTable)
     radars = as_instance(f"{fn} radars", radars, RadarSet)
     area = as_positive(f"{fn} area (m)", area)
     ref = _reference(fn, plots, reference)
-    z = plots.cartesian(radars)
+    z = _plane_positions(fn, plots, radars, positions)
     ok = np.all(np.isfinite(ref), axis=1) & (plots.object >= 0)
     if within is not None:
         within = as_instance(f"{fn} within", within, FieldMap)
@@ -440,12 +443,15 @@ def compare_fields(plots: PlotTable, radars: RadarSet, reference: ArrayLike,
     sub = plots.subset(covered_all)
     ref_sub = ref[covered_all]
 
-    def figures(p: PlotTable) -> dict[str, Any]:
-        reg: RegistrationError = registration_error(p, radars, area=area, within=first)
-        ab = absolute_error(p, radars, ref_sub, area=area)
+    def figures(p: PlotTable, zp: FloatArray | None = None) -> dict[str, Any]:
+        zp = p.cartesian(radars) if zp is None else zp  # placed once for both figures
+        reg: RegistrationError = registration_error(p, radars, area=area, within=first,
+                                                    positions=zp)
+        ab = absolute_error(p, radars, ref_sub, area=area, positions=zp)
         return {"registration": reg.to_dict(), "absolute": ab.to_dict()}
 
-    out: dict[str, Any] = {"before": figures(sub), "plots": int(covered_all.sum())}
+    out: dict[str, Any] = {"before": figures(sub, z[covered_all]),
+                           "plots": int(covered_all.sum())}
     for name, fm in maps.items():
         out[name] = figures(correct_plots(sub, radars, fm).plots)
     return out

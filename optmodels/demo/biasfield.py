@@ -158,20 +158,17 @@ def run_biasfield_demo(out: Path, *, seed: int = 0, n_aircraft: int = 80,
     pts = np.stack([gxx, gyy], axis=-1)
     gv = np.stack([sc.fields[i](pts) for i in range(fd.m)], axis=-2)  # (ny, nx, m, 2)
     panels = {"smoothest (11)": cf.field, f"with box {frac}": qb.field}
-    fig_a = plots.bias_maps(out / "azimuth_maps.png", fd.centers, panels, fd.radars,
-                            component=1, truth_grid=(gx, gy, gv[..., 1]),
-                            names=sc.radars.names)
-    fig_r = plots.bias_maps(out / "range_maps.png", fd.centers, panels, fd.radars,
-                            component=0, truth_grid=(gx, gy, gv[..., 0]),
-                            names=sc.radars.names)
+    def maps(stem: str, component: int, fields: dict[str, Any]) -> Any:
+        """One figure of ``component`` (0 range, 1 azimuth) with the true field beneath."""
+        return plots.bias_maps(out / f"{stem}.png", fd.centers, fields, fd.radars,
+                               component=component, truth_grid=(gx, gy, gv[..., component]),
+                               names=sc.radars.names)
+
+    fig_a, fig_r = maps("azimuth_maps", 1, panels), maps("range_maps", 0, panels)
     use_rows, use, af = _use_rows(sc, fd, cf, seed)
     use_panels = {"smoothest (11)": cf.field, "ADS-B-referenced": af.field}
-    fig_ua = plots.bias_maps(out / "use_azimuth_maps.png", fd.centers, use_panels, fd.radars,
-                             component=1, truth_grid=(gx, gy, gv[..., 1]),
-                             names=sc.radars.names)
-    fig_ur = plots.bias_maps(out / "use_range_maps.png", fd.centers, use_panels, fd.radars,
-                             component=0, truth_grid=(gx, gy, gv[..., 0]),
-                             names=sc.radars.names)
+    fig_ua = maps("use_azimuth_maps", 1, use_panels)
+    fig_ur = maps("use_range_maps", 0, use_panels)
     scores = {name: score(f, truth, fd).to_dict() for name, f in use_panels.items()}
     score_rows = [{"field": name, "total, m": v["total"]["horizontal_m"],
                    "common shift, m": v["shift"]["horizontal_m"],

@@ -86,14 +86,15 @@ def _plane_fit(args: argparse.Namespace) -> Outcome:
         if not test.resolved:
             # the points lie on a line at `level`: every plane through it fits as well, so no
             # plane is reported (never an arbitrary normal with an OK status)
-            pts = np.asarray(data.points, dtype=float)
-            direction = np.linalg.svd(pts - pts.mean(axis=0), full_matrices=False)[2][0]
+            # the ML line of the package's general fit (what `plane track` reports)
+            direction = plane.fit_general(data.points, data.covs,
+                                          level=args.level).line_direction
             out.update(status="unresolved", normal=[float("nan")] * 3, offset=float("nan"),
-                       line_direction=direction.tolist(),
+                       line_direction=np.asarray(direction, dtype=float).tolist(),
                        message=(f"the points lie on a line at level {args.level} (line test "
                                 f"{test.line_statistic:.6g} ≤ {test.line_threshold:.6g}): "
                                 "the plane is not determined; line_direction is the "
-                                "unweighted principal axis"))
+                                "maximum-likelihood line"))
             return out, False
     return out, sol.ok
 

@@ -9,12 +9,12 @@ STAMP  := $(VENV)/.installed-stamp
 LOCK   := requirements/lock.txt
 LATEST := .venv-latest
 
-.PHONY: demo test test-all test-latest lint compare lock clean
+.PHONY: demo test test-all test-latest lint compare lock clean docs
 
 $(STAMP): pyproject.toml $(LOCK)
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet -c $(LOCK) pip
-	$(BIN)/python -m pip install --quiet -c $(LOCK) -e '.[test]'
+	$(BIN)/python -m pip install --quiet -c $(LOCK) -e '.[test,docs]'
 	touch $(STAMP)
 
 ## main job: the papers' examples and the default solver comparison, written to report/
@@ -24,7 +24,12 @@ demo: $(STAMP)
 ## default test suite (no `slow` tests) plus the linter
 test: $(STAMP)
 	$(BIN)/ruff check optmodels solvers_cmp tests
+	$(BIN)/mkdocs build --strict --quiet
 	$(BIN)/python -m pytest
+
+## the user guide and API reference as a site in build/site (warnings are errors)
+docs: $(STAMP)
+	$(BIN)/mkdocs build --strict
 
 ## everything, including the long Monte Carlo / scaling runs
 test-all: $(STAMP)

@@ -279,15 +279,19 @@ def test_effective_gate_is_the_half_weight_distance() -> None:
 
 
 def _jump_run(method: str, seed: int, jump: float) -> float:
-    """One object at 250 m/s seen for 30 scans (σ 50 m, P_D 0.9, clutter); the prediction
-    is corrupted every 8th scan by an along-track jump of ``jump`` m in the detections
-    (an ADS-B-like position glitch, then back); the final position error (m)."""
+    """One object at 250 m/s seen for 30 scans (σ 50 m, P_D 0.9, clutter); from scan 10 on
+    its detections are shifted along track by ``jump`` m (a position jump of the source,
+    e.g. ADS-B switching its position source), so the track's prediction is suddenly
+    bad; the track's mean position error (m) against the shifted position over the
+    scans from the jump on (a track that refuses the shifted detections coasts until
+    its covariance has grown enough to take them)."""
     comps = at._components(1.0)
     pred, upd, lg = comps["predictor"], comps["updater"], comps["LinearGaussian"]
     rng = np.random.default_rng([29, seed])
     lam = 2.0 / (20_000.0 * 20_000.0)
     tracks = _tracks([[0.0, 250.0, 0.0, 0.0]], var=50.0**2)
     x = np.array([0.0, 0.0])
+    errors = []
     assoc: Any
     if method == "GNN":
         from stonesoup.dataassociator.neighbour import GNNWith2DAssignment
@@ -299,14 +303,21 @@ def _jump_run(method: str, seed: int, jump: float) -> float:
     else:
         pda = PDAHypothesiser(pred, upd, clutter_spatial_density=lam, prob_detect=0.9,
                               prob_gate=float(chi2.cdf(25.0, 2)))
-        assoc = SoftMergedAssociator(pda, merges=False) if method == "soft" else JPDA(
-            PDAHypothesiser(pred, upd, clutter_spatial_density=lam, prob_detect=0.9))
+        plain = PDAHypothesiser(pred, upd, clutter_spatial_density=lam, prob_detect=0.9)
+        if method == "soft":
+            assoc = SoftMergedAssociator(pda, merges=False)
+        elif method == "MAP":
+            from optmodels.assignment.stonesoup import MergedMeasurementAssociator
+
+            assoc = MergedMeasurementAssociator(plain, merges=False)
+        else:
+            assoc = JPDA(plain)
     for t in range(1, 31):
         when = T0 + timedelta(seconds=5 * t)
         x = np.array([250.0 * 5 * t, 0.0])
         pts = []
         if rng.random() < 0.9:
-            off = np.array([jump, 0.0]) if t % 8 in (4, 5) else 0.0
+            off = np.array([jump, 0.0]) if t >= 10 else 0.0
             pts.append(x + off + rng.normal(0, 50, 2))
         for _ in range(rng.poisson(2.0)):
             pts.append(x + rng.uniform(-10_000, 10_000, 2))
@@ -314,25 +325,26 @@ def _jump_run(method: str, seed: int, jump: float) -> float:
         hyps = assoc.associate(set(tracks), dets, when)
         tr = tracks[0]
         h = hyps[tr]
-        if method == "GNN":
+        if method in ("GNN", "MAP"):
             tr.append(upd.update(h) if h else h.prediction)
         else:
             tr.append(GaussianState(*_reduce(h, upd), timestamp=when))
-    est = np.asarray(tracks[0].state_vector, float).ravel()[[0, 2]]
-    return float(np.linalg.norm(est - x))
+        if t >= 10:
+            est = np.asarray(tr.state_vector, float).ravel()[[0, 2]]
+            errors.append(float(np.linalg.norm(est - x - [jump, 0.0])))
+    return float(np.mean(errors))
 
 
 def test_track_with_position_jumps_forgiven_no_worse_than_gnn() -> None:
-    """Along-track jumps of 300 m (≈ 4σ of the innovation) for two scans: the soft
-    associator with GNN's 5σ gate keeps the track (final error < 500 m) in every run
-    where GNN does."""
-    lost = {m: 0 for m in ("GNN", "soft")}
-    for seed in range(6):
-        err = {m: _jump_run(m, seed, 300.0) for m in lost}
-        for m, e in err.items():
-            lost[m] += e > 500.0
-        assert not (err["soft"] > 500.0 and err["GNN"] <= 500.0), (seed, err)
-    assert lost["soft"] <= lost["GNN"]
+    """A 300 m along-track step of the detections (≈ 5σ of the innovation): with GNN's 5σ
+    gate (prob_gate = P(χ²_2 ≤ 25)) the soft associator re-acquires as GNN does (mean
+    error after the jump within 10 % of GNN's over 6 seeded runs; measured 67 vs 65 m),
+    while Stone Soup's JPDA with its default gate (√χ²_2(0.95) = 2.45σ) refuses the
+    shifted detections for longer (123 m: the assertion shows the gate matters)."""
+    err = {m: np.mean([_jump_run(m, seed, 300.0) for seed in range(6)])
+           for m in ("GNN", "soft", "JPDA")}
+    assert err["soft"] <= 1.10 * err["GNN"], err
+    assert err["JPDA"] >= 1.5 * err["GNN"], err
 
 
 def test_bad_input_is_one_problem_error() -> None:

@@ -62,7 +62,8 @@ from optmodels.core import (
     check_spd,
 )
 
-__all__ = ["SoftMarginals", "chi2_gate_probability", "effective_gate", "reduce_mixture", "soft_marginals"]
+__all__ = ["SoftMarginals", "chi2_gate_probability", "effective_gate", "reduce_mixture",
+           "soft_marginals"]
 
 #: A cluster with more hypotheses than this is not enumerated (k-best instead).
 MAX_ENUMERATED = 20_000

@@ -58,8 +58,7 @@ from optmodels.assignment.stonesoup import (
     cell_covariance,
     merged_update_inputs,
 )
-from optmodels.core import ProblemError, as_count, as_finite_array, as_positive, \
-    as_probability
+from optmodels.core import ProblemError, as_count, as_finite_array, as_positive, as_probability
 
 try:
     from stonesoup.base import Property

@@ -416,7 +416,9 @@ def test_in_multitargetmixturetracker_unchanged() -> None:
         tracker.update_tracker(when, dets)
         merged_mass += sum(assoc.last_marginals.merged(j) for j in range(2))
         for tr in tracker.tracks:  # a detection that beat the miss is not passed on
-            hyps = tr.states[-1].hypothesis
+            hyps = getattr(tr.states[-1], "hypothesis", None)
+            if hyps is None:  # the tracker's "prediction" branch: nothing beat the miss
+                continue
             miss = next(h.weight for h in hyps if not h)
             for h in hyps:
                 if h and h.weight > miss:

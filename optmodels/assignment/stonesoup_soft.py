@@ -131,6 +131,11 @@ class SoftMergedAssociator(MergedMeasurementAssociator):
         self.k = as_count(f"{_W} k", self.k, minimum=1)
         self.last_marginals: SoftMarginals | None = None
 
+    def _meas_model(self, detection: Any) -> Any:
+        """The detection's measurement model, else the updater's."""
+        model = getattr(detection, "measurement_model", None)
+        return model if model is not None else self.hypothesiser.updater.measurement_model
+
     def gate_parameters(self, d: int) -> tuple[float | None, float]:
         """(gate, P_G) in a d-dimensional measurement space (class docstring)."""
         h = self.hypothesiser
@@ -161,7 +166,7 @@ class SoftMergedAssociator(MergedMeasurementAssociator):
             return {}
         pred = self.hypothesiser.predictor
         upd = self.hypothesiser.updater
-        model0 = self._model(dets[0]) if dets else upd.measurement_model
+        model0 = self._meas_model(dets[0]) if dets else upd.measurement_model
         preds, mpreds = [], []
         for tr in tracks:
             p = pred.predict(tr, timestamp=timestamp, **kwargs)
@@ -179,7 +184,7 @@ class SoftMergedAssociator(MergedMeasurementAssociator):
         z = np.array([np.asarray(dt.state_vector, dtype=float).ravel() for dt in dets]
                      ).reshape(len(dets), d)
         z = as_finite_array(f"{_W} detections", z, shape=(len(dets), d))
-        noises = np.array([np.asarray(self._model(dt).covar(), dtype=float) for dt in dets]
+        noises = np.array([np.asarray(self._meas_model(dt).covar(), dtype=float) for dt in dets]
                           ).reshape(len(dets), d, d)
         sensor = self.resolution if self.merges else None
         data = AssignmentData(
@@ -227,7 +232,7 @@ class SoftMergedAssociator(MergedMeasurementAssociator):
                                       cell)
         if self.information_split:
             rs = rs * len(members)
-        model = self._model(det)
+        model = self._meas_model(det)
         return {j: MergedDetection(StateVector(zs[b]), timestamp=det.timestamp,
                                    measurement_model=_with_noise(model, rs[b]),
                                    metadata=dict(det.metadata), merged_from=det,

@@ -40,6 +40,8 @@ Usage::
 
     .venv/bin/python -m solvers_cmp.assignment_tracking [--runs 20] [--q 2]
         [--kind crossing] [--ratios 0.25 0.5 0.75 1.5 2 3]
+    .venv/bin/python -m solvers_cmp.assignment_tracking --traffic --runs 12 [--seed 2029]
+    .venv/bin/python -m solvers_cmp.assignment_tracking --bench 3
 """
 
 from __future__ import annotations
@@ -473,7 +475,8 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--runs", type=int, default=20)
     ap.add_argument("--q", type=int, default=2)
     ap.add_argument("--kind", default="crossing", choices=("crossing", "parallel"))
-    ap.add_argument("--seed", type=int, default=2026)
+    ap.add_argument("--seed", type=int, default=None,
+                    help="default 2026 (crossing study), 2029 (--traffic, --bench)")
     ap.add_argument("--ratios", type=float, nargs="*", default=list(RATIOS))
     ap.add_argument("--scans", type=int, default=24)
     ap.add_argument("--half-angle", type=float, default=5.0, help="crossing half-angle, deg")
@@ -483,8 +486,33 @@ def main(argv: list[str] | None = None) -> None:
                     help="MAP+merges without the one-cell constraint on merged members")
     ap.add_argument("--methods", nargs="*", default=list(METHODS), choices=METHODS)
     ap.add_argument("--json", action="store_true")
+    ap.add_argument("--traffic", action="store_true",
+                    help="issue 29: the traffic encounters (--runs per kind), five methods")
+    ap.add_argument("--kinds", nargs="*", default=list(TRAFFIC_KINDS), choices=TRAFFIC_KINDS)
+    ap.add_argument("--bench", type=int, default=0, metavar="RUNS",
+                    help="issue 29: per-scan cost soft vs JPDA on RUNS encounters per kind")
     a = ap.parse_args(argv)
     t0 = time.perf_counter()
+    if a.seed is None:
+        a.seed = 2029 if (a.traffic or a.bench) else 2026
+    if a.bench:
+        print(json.dumps(benchmark(traffic_encounters(tuple(a.kinds), a.bench, a.seed)),
+                         indent=1))
+        return
+    if a.traffic:
+        trows = summarise_traffic(traffic_study(kinds=tuple(a.kinds), runs=a.runs,
+                                                seed=a.seed))
+        if a.json:
+            print(json.dumps({"rows": trows, "done_when": done_when_traffic(trows),
+                              "wall_s": time.perf_counter() - t0}, indent=1))
+            return
+        print(f"{'kind':>13} {'method':>10} {'GOSPA':>7} {'se':>5} {'merged':>7} "
+              f"{'swaps':>5} {'breaks':>6}")
+        for r in trows:
+            print(f"{r['kind']:>13} {r['method']:>10} {r['gospa']:7.1f} {r['gospa_se']:5.1f} "
+                  f"{r['gospa_merged']:7.1f} {r['swaps']:5d} {r['breaks']:6d}")
+        print(json.dumps(done_when_traffic(trows)))
+        return
     res = study(ratios=tuple(a.ratios), runs=a.runs, q=a.q, kind=a.kind, seed=a.seed,
                 use_resolution=not a.no_resolution, scans=a.scans,
                 half_angle_deg=a.half_angle, cell_information=not a.no_cell,

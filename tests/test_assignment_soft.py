@@ -277,6 +277,12 @@ def test_effective_gate_is_the_half_weight_distance() -> None:
     assert got.beta[0][((0,), 0)] == pytest.approx(0.5, abs=1e-12)
     # the MAP's (hard) decision flips at d*; GNN's 5σ gate is beyond it here
     assert 3.0 < dstar < 5.0
+    from optmodels.assignment.linear import linear_assignment
+
+    for f, taken in ((0.99, True), (1.01, False)):
+        d2 = AssignmentData(np.zeros((1, 2)), k[None], z * f, r[None], volume=1 / lam,
+                            pd=pd, rho=0.3)
+        assert bool(linear_assignment(d2).assignment[0] == 0) == taken
     with pytest.raises(ProblemError):
         effective_gate(-s, pd, lam)
 
@@ -361,6 +367,16 @@ def test_bad_input_is_one_problem_error() -> None:
                           clutter_spatial_density=1e-6, prob_detect=0.9)
     with pytest.raises(ProblemError, match="prob_gate"):
         SoftMergedAssociator(pda, prob_gate=1.5)
+    # gate parameters: the PDAHypothesiser's, or a DistanceHypothesiser's missed_distance
+    g, pg = SoftMergedAssociator(pda).gate_parameters(2)
+    assert g == pytest.approx(math.sqrt(chi2.ppf(0.95, 2))) and pg == pytest.approx(0.95)
+    from stonesoup.hypothesiser.distance import DistanceHypothesiser
+    from stonesoup.measures import Mahalanobis
+
+    dh = DistanceHypothesiser(comps["predictor"], comps["updater"], measure=Mahalanobis(),
+                              missed_distance=5.0)
+    g, pg = SoftMergedAssociator(dh, clutter_density=1e-6).gate_parameters(2)
+    assert g == 5.0 and pg == pytest.approx(chi2.cdf(25.0, 2), rel=1e-12)
 
 
 class _KnownStart(Initiator):

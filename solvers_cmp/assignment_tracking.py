@@ -8,7 +8,18 @@ Kalman tracker (constant velocity, the same initial tracks, per-measurement nois
 * ``resolved``: the same MAP with merges disallowed (``merges=False``);
 * ``GNN``: Stone Soup ``GNNWith2DAssignment`` (Mahalanobis ``DistanceHypothesiser``);
 * ``JPDA``: Stone Soup ``JPDA`` (``PDAHypothesiser``; posterior = Gaussian-mixture
-  reduction).
+  reduction);
+* ``JPDA5``: the same JPDA with GNN's 5σ gate (prob_gate = P(χ²_2 ≤ 25)), to separate
+  the gate's effect from the merged hypotheses';
+* ``soft`` (issue 29, :func:`traffic_study` and on request): :class:`optmodels.assignment.
+  stonesoup_soft.SoftMergedAssociator` (JPDA over the joint hypotheses with merges, the
+  sensor's resolution model, GNN's 5σ gate: prob_gate = P(χ²_2 ≤ 25)).
+
+Issue 29's encounters that look like real traffic (:func:`optmodels.scenarios.encounters.
+traffic_encounter`: fast crossings with 1-3 merged scans, slow formations, long merges;
+49 scans) are run by :func:`traffic_study`, reported per kind and together
+(:func:`summarise_traffic`, the done-when :func:`done_when_traffic`); the per-scan cost of
+the soft associator against Stone Soup's JPDA on the same scans is :func:`benchmark`.
 
 Metrics per run (positions only, m):
 
@@ -29,6 +40,8 @@ Usage::
 
     .venv/bin/python -m solvers_cmp.assignment_tracking [--runs 20] [--q 2]
         [--kind crossing] [--ratios 0.25 0.5 0.75 1.5 2 3]
+    .venv/bin/python -m solvers_cmp.assignment_tracking --traffic --runs 12 [--seed 2029]
+    .venv/bin/python -m solvers_cmp.assignment_tracking --bench 3
 """
 
 from __future__ import annotations
@@ -43,9 +56,19 @@ from typing import Any
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from optmodels.scenarios.encounters import Encounter, RadarCell, encounter
+from optmodels.scenarios.encounters import (
+    TRAFFIC_KINDS,
+    Encounter,
+    RadarCell,
+    encounter,
+    traffic_encounter,
+)
 
 METHODS = ("MAP+merges", "resolved", "GNN", "JPDA")
+#: Every method, the soft associator of issue 29 included.
+ALL_METHODS = (*METHODS, "JPDA5", "soft")
+#: The soft mixture methods (the tracker reduces a MultipleHypothesis per track).
+MIXTURE = ("JPDA", "JPDA5", "soft")
 RATIOS = (0.25, 0.5, 0.75, 1.5, 2.0, 3.0)
 T0 = datetime(2026, 1, 1)
 
@@ -97,13 +120,28 @@ def associator(method: str, enc: Encounter, comps: dict[str, Any], *, gate: floa
     pda = PDAHypothesiser(pred, upd, clutter_spatial_density=lam, prob_detect=pd)
     if method == "JPDA":
         return JPDA(pda)
+    if method == "JPDA5":  # Stone Soup's JPDA with GNN's 5σ gate (the soft one's)
+        from scipy.stats import chi2
+
+        return JPDA(PDAHypothesiser(pred, upd, clutter_spatial_density=lam, prob_detect=pd,
+                                    prob_gate=float(chi2.cdf(gate**2, 2))))
+    if method == "soft":
+        from scipy.stats import chi2
+
+        from optmodels.assignment.stonesoup_soft import SoftMergedAssociator
+
+        wide = PDAHypothesiser(pred, upd, clutter_spatial_density=lam, prob_detect=pd,
+                               prob_gate=float(chi2.cdf(gate**2, 2)))
+        res = resolution_model(enc.sensor) if use_resolution else None
+        return SoftMergedAssociator(wide, resolution=res, rho=rho,
+                                    cell_information=cell_information)
     if method in ("MAP+merges", "resolved"):
         res = resolution_model(enc.sensor) if use_resolution else None
         return MergedMeasurementAssociator(pda, merges=method == "MAP+merges",
                                            resolution=res if method == "MAP+merges"
                                            else None, rho=rho,
                                            cell_information=cell_information)
-    raise ValueError(f"method: expected one of {METHODS}, got {method!r}")
+    raise ValueError(f"method: expected one of {ALL_METHODS}, got {method!r}")
 
 
 def run_tracking(enc: Encounter, method: str, *, accel: float = 1.0, gate: float = 5.0,
@@ -134,7 +172,7 @@ def run_tracking(enc: Encounter, method: str, *, accel: float = 1.0, gate: float
                           measurement_model=lg(ndim_state=4, mapping=(0, 2), noise_covar=r))
                 for z, r in zip(s.measurements, s.covs, strict=True)]
         hyps = assoc.associate(set(tracks), set(dets), when)
-        if log is not None and method != "JPDA":
+        if log is not None and method not in MIXTURE:
             index = {id(d): i for i, d in enumerate(dets)}
             claimed: dict[int, list[int]] = {}
             for j, tr in enumerate(tracks):
@@ -144,7 +182,7 @@ def run_tracking(enc: Encounter, method: str, *, accel: float = 1.0, gate: float
             log.append([tuple(sorted(claimed.get(i, ()))) for i in range(len(dets))])
         for tr in tracks:
             h = hyps[tr]
-            if method != "JPDA":
+            if method not in MIXTURE:
                 tr.append(upd.update(h) if h else h.prediction)
                 continue
             states = [upd.update(hh) if hh else hh.prediction for hh in h]
@@ -167,6 +205,12 @@ def _truth_paths(enc: Encounter) -> list[Any]:
 def mean_gospa(enc: Encounter, tracks: list[Any], *, c: float = 500.0, p: float = 2.0
                ) -> float:
     """Mean over the scans of Stone Soup's GOSPA distance (positions, m)."""
+    return float(np.mean(gospa_per_scan(enc, tracks, c=c, p=p)))
+
+
+def gospa_per_scan(enc: Encounter, tracks: list[Any], *, c: float = 500.0, p: float = 2.0
+                   ) -> list[float]:
+    """Stone Soup's GOSPA distance (positions, m) at each scan."""
     from stonesoup.measures import Euclidean
     from stonesoup.metricgenerator.ospametric import GOSPAMetric
 
@@ -174,7 +218,7 @@ def mean_gospa(enc: Encounter, tracks: list[Any], *, c: float = 500.0, p: float 
     m = gen.compute_over_time(*gen.extract_states(tracks, True),
                               *gen.extract_states(_truth_paths(enc), True))
     values = m.value if isinstance(m.value, list) else [m]
-    return float(np.mean([v.value["distance"] for v in values]))
+    return [float(v.value["distance"]) for v in values]
 
 
 def track_labels(enc: Encounter, tracks: list[Any], *, c: float = 500.0
@@ -290,12 +334,149 @@ def done_when(rows: list[dict[str, Any]]) -> dict[str, Any]:
     return {"below": below, "above": above}
 
 
+# ----------------------------------------------------------------------------- issue 29
+@dataclasses.dataclass
+class TrafficResult:
+    method: str
+    kind: str
+    seed: int
+    gospa: float
+    gospa_merged: float
+    swaps: int
+    breaks: int
+    merged_scans: int
+    seconds: float
+
+
+def traffic_encounters(kinds: tuple[str, ...] = TRAFFIC_KINDS, runs: int = 8,
+                       seed: int = 2029) -> list[Encounter]:
+    """The encounter set: ``runs`` per kind, encounter r of kind k from
+    ``default_rng([seed, k, r])`` (:func:`~optmodels.scenarios.encounters.
+    traffic_encounter`, 49 scans 5 s apart)."""
+    return [traffic_encounter(np.random.default_rng([seed, TRAFFIC_KINDS.index(k), r]), k)
+            for k in kinds for r in range(runs)]
+
+
+def traffic_study(*, kinds: tuple[str, ...] = TRAFFIC_KINDS, runs: int = 8,
+                  seed: int = 2029, methods: tuple[str, ...] = ("MAP+merges", "GNN",
+                                                                "JPDA", "JPDA5", "soft"),
+                  c: float = 500.0) -> list[TrafficResult]:
+    """Every method on the same traffic encounters (:func:`traffic_encounters`): mean
+    GOSPA over all scans and over the scans with a merged return, swaps, breaks."""
+    out = []
+    for idx, enc in enumerate(traffic_encounters(kinds, runs, seed)):
+        merged = [t for t, s in enumerate(enc.scans) if any(len(g) > 1 for g in s.groups)]
+        for m in methods:
+            t0 = time.perf_counter()
+            tracks = run_tracking(enc, m)
+            per = gospa_per_scan(enc, tracks, c=c)
+            sw, br = swaps_and_breaks(enc, tracks, c=c)
+            out.append(TrafficResult(m, enc.kind, idx % runs, float(
+                np.mean(per)), float(np.mean([per[t] for t in merged])) if merged else
+                float("nan"), sw, br, enc.merged_scans, time.perf_counter() - t0))
+    return out
+
+
+def summarise_traffic(results: list[TrafficResult]) -> list[dict[str, Any]]:
+    """One row per (kind, method) and per ("all", method): mean GOSPA ± standard error,
+    mean GOSPA on the merged scans, swaps and breaks (sums), merged scans per run."""
+    rows = []
+    for kind in [*dict.fromkeys(r.kind for r in results), "all"]:
+        for m in dict.fromkeys(r.method for r in results):
+            sel = [r for r in results if r.method == m and kind in (r.kind, "all")]
+            g = np.array([r.gospa for r in sel])
+            gm = np.array([r.gospa_merged for r in sel if np.isfinite(r.gospa_merged)])
+            rows.append({"kind": kind, "method": m, "runs": len(sel),
+                         "gospa": float(g.mean()),
+                         "gospa_se": float(g.std(ddof=1) / np.sqrt(len(g))) if len(g) > 1
+                         else float("nan"),
+                         "gospa_merged": float(gm.mean()) if len(gm) else float("nan"),
+                         "swaps": int(sum(r.swaps for r in sel)),
+                         "breaks": int(sum(r.breaks for r in sel)),
+                         "merged_scans": float(np.mean([r.merged_scans for r in sel])),
+                         "s_per_run": float(np.median([r.seconds for r in sel]))})
+    return rows
+
+
+def done_when_traffic(rows: list[dict[str, Any]]) -> dict[str, Any]:
+    """Issue 29's done-when: on the fast crossings the soft associator's mean GOSPA
+    ≤ 0.95 × JPDA's with no more swaps; on the long merges within 5 % of the MAP's."""
+    by = {(r["kind"], r["method"]): r for r in rows}
+    out: dict[str, Any] = {}
+    if ("fast_crossing", "soft") in by and ("fast_crossing", "JPDA") in by:
+        s, j = by[("fast_crossing", "soft")], by[("fast_crossing", "JPDA")]
+        out["fast_crossing"] = {"ratio_vs_jpda": s["gospa"] / j["gospa"],
+                                "target": 0.95, "ok": s["gospa"] <= 0.95 * j["gospa"]
+                                and s["swaps"] <= j["swaps"],
+                                "swaps": (s["swaps"], j["swaps"])}
+    if ("long_merge", "soft") in by and ("long_merge", "MAP+merges") in by:
+        s, mp = by[("long_merge", "soft")], by[("long_merge", "MAP+merges")]
+        out["long_merge"] = {"ratio_vs_map": s["gospa"] / mp["gospa"], "target": 1.05,
+                             "ok": s["gospa"] <= 1.05 * mp["gospa"]}
+    return out
+
+
+def benchmark(encs: list[Encounter], *, rounds: int = 3) -> dict[str, Any]:
+    """Per-scan cost of the soft associator against Stone Soup's JPDA on the same scans:
+    the soft tracker's run, and at every scan both associators called on the same tracks
+    and detections, ``rounds`` times, interleaved (the order alternating); medians over
+    the rounds, then over the scans. Returns the median seconds per scan of each and the
+    median and 90th percentile of the per-scan ratio soft/JPDA."""
+    from stonesoup.functions import gm_reduce_single
+    from stonesoup.types.array import StateVectors
+    from stonesoup.types.detection import Detection
+    from stonesoup.types.state import GaussianState
+    from stonesoup.types.track import Track
+    from stonesoup.types.update import GaussianStateUpdate
+
+    t_soft, t_jpda = [], []
+    for enc in encs:
+        comps = _components(1.0)
+        upd, lg = comps["updater"], comps["LinearGaussian"]
+        soft, jpda = associator("soft", enc, comps), associator("JPDA", enc, comps)
+        tracks = [Track([GaussianState(enc.initial[j].reshape(-1, 1), enc.initial_covar,
+                                       timestamp=T0)]) for j in range(enc.q)]
+        for s in enc.scans:
+            when = T0 + timedelta(seconds=s.time)
+            dets = {Detection(z.reshape(-1, 1), timestamp=when, measurement_model=lg(
+                ndim_state=4, mapping=(0, 2), noise_covar=r))
+                for z, r in zip(s.measurements, s.covs, strict=True)}
+            a, b = [], []
+            hyps = None
+            for k in range(rounds):
+                for which in ((0, 1) if k % 2 == 0 else (1, 0)):
+                    t0 = time.perf_counter()
+                    if which == 0:
+                        hyps = soft.associate(set(tracks), dets, when)
+                        a.append(time.perf_counter() - t0)
+                    else:
+                        jpda.associate(set(tracks), dets, when)
+                        b.append(time.perf_counter() - t0)
+            t_soft.append(float(np.median(a)))
+            t_jpda.append(float(np.median(b)))
+            assert hyps is not None
+            for tr in tracks:
+                h = hyps[tr]
+                states = [upd.update(hh) if hh else hh.prediction for hh in h]
+                w = np.array([float(hh.probability) for hh in h])
+                mean, cov = gm_reduce_single(StateVectors([x.state_vector for x in states]),
+                                             np.stack([x.covar for x in states], axis=2), w)
+                tr.append(GaussianStateUpdate(mean, cov, h, when))
+    ratio = np.array(t_soft) / np.array(t_jpda)
+    return {"scans": len(t_soft), "soft_s": float(np.median(t_soft)),
+            "jpda_s": float(np.median(t_jpda)),
+            "ratio_of_medians": float(np.median(t_soft) / np.median(t_jpda)),
+            "median_ratio": float(np.median(ratio)),
+            "p90_ratio": float(np.percentile(ratio, 90)), "rounds": rounds}
+
+
 def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--runs", type=int, default=20)
     ap.add_argument("--q", type=int, default=2)
     ap.add_argument("--kind", default="crossing", choices=("crossing", "parallel"))
-    ap.add_argument("--seed", type=int, default=2026)
+    ap.add_argument("--seed", type=int, default=None,
+                    help="default 2026 (crossing study), 2029 (--traffic, --bench)")
     ap.add_argument("--ratios", type=float, nargs="*", default=list(RATIOS))
     ap.add_argument("--scans", type=int, default=24)
     ap.add_argument("--half-angle", type=float, default=5.0, help="crossing half-angle, deg")
@@ -305,8 +486,33 @@ def main(argv: list[str] | None = None) -> None:
                     help="MAP+merges without the one-cell constraint on merged members")
     ap.add_argument("--methods", nargs="*", default=list(METHODS), choices=METHODS)
     ap.add_argument("--json", action="store_true")
+    ap.add_argument("--traffic", action="store_true",
+                    help="issue 29: the traffic encounters (--runs per kind), five methods")
+    ap.add_argument("--kinds", nargs="*", default=list(TRAFFIC_KINDS), choices=TRAFFIC_KINDS)
+    ap.add_argument("--bench", type=int, default=0, metavar="RUNS",
+                    help="issue 29: per-scan cost soft vs JPDA on RUNS encounters per kind")
     a = ap.parse_args(argv)
     t0 = time.perf_counter()
+    if a.seed is None:
+        a.seed = 2029 if (a.traffic or a.bench) else 2026
+    if a.bench:
+        print(json.dumps(benchmark(traffic_encounters(tuple(a.kinds), a.bench, a.seed)),
+                         indent=1))
+        return
+    if a.traffic:
+        trows = summarise_traffic(traffic_study(kinds=tuple(a.kinds), runs=a.runs,
+                                                seed=a.seed))
+        if a.json:
+            print(json.dumps({"rows": trows, "done_when": done_when_traffic(trows),
+                              "wall_s": time.perf_counter() - t0}, indent=1))
+            return
+        print(f"{'kind':>13} {'method':>10} {'GOSPA':>7} {'se':>5} {'merged':>7} "
+              f"{'swaps':>5} {'breaks':>6}")
+        for r in trows:
+            print(f"{r['kind']:>13} {r['method']:>10} {r['gospa']:7.1f} {r['gospa_se']:5.1f} "
+                  f"{r['gospa_merged']:7.1f} {r['swaps']:5d} {r['breaks']:6d}")
+        print(json.dumps(done_when_traffic(trows)))
+        return
     res = study(ratios=tuple(a.ratios), runs=a.runs, q=a.q, kind=a.kind, seed=a.seed,
                 use_resolution=not a.no_resolution, scans=a.scans,
                 half_angle_deg=a.half_angle, cell_information=not a.no_cell,

@@ -104,3 +104,14 @@ __all__ = [
     "set_partitions",
     "solve",
 ]
+
+# issue 29: soft association with merged measurements (optmodels.assignment.soft; the Stone
+# Soup associator is optmodels.assignment.stonesoup_soft.SoftMergedAssociator)
+from optmodels.assignment.soft import (
+    SoftMarginals,
+    effective_gate,
+    reduce_mixture,
+    soft_marginals,
+)
+
+__all__ += ["SoftMarginals", "effective_gate", "reduce_mixture", "soft_marginals"]

@@ -21,6 +21,11 @@ with probability P_D per group; polar noise σ_r, σ_az on the centroid's polar 
 each measurement is converted to Cartesian with its own covariance J diag(σ_r², σ_az²) Jᵀ
 (J the Jacobian of (r, az) → (x, y) at the measurement). Clutter: Poisson, mean
 ``clutter_mean`` per scan, uniform in the box ``region`` around the scene.
+
+Issue 29: :func:`traffic_encounter` draws pairs that look like real close encounters
+(fast crossings with 1-3 merged scans, slow formations, long merges; 49 scans, the
+150 m × 1.4° radar of :func:`traffic_sensor`); its docstring states how they differ from
+real traffic.
 """
 
 from __future__ import annotations
@@ -42,7 +47,8 @@ from optmodels.core import (
     as_probability,
 )
 
-__all__ = ["Encounter", "RadarCell", "Scan", "encounter", "observe", "polar_to_cartesian"]
+__all__ = ["TRAFFIC_KINDS", "Encounter", "RadarCell", "Scan", "encounter", "observe",
+           "polar_to_cartesian", "traffic_encounter", "traffic_sensor"]
 
 _W = "scenarios.encounter"
 
@@ -243,3 +249,109 @@ def encounter(rng: np.random.Generator, *, kind: str = "crossing", q: int = 2,
     initial = truth[:, 0, :] + rng.multivariate_normal(np.zeros(4), p0, size=q)
     obs = [observe(sensor, truth[:, t, :][:, [0, 2]], times[t], rng) for t in range(scans)]
     return Encounter(kind, separation, times, truth, obs, sensor, initial, p0)
+
+
+# ----------------------------------------------------------------------------- traffic
+#: The encounter kinds of :func:`traffic_encounter` (issue 29).
+TRAFFIC_KINDS = ("fast_crossing", "formation", "long_merge")
+
+
+def traffic_sensor() -> RadarCell:
+    """The issue-29 radar: cell 150 m × 1.4°, σ 50 m / 0.1°, P_D 0.9, 2 clutter returns
+    per scan in the scene box."""
+    return RadarCell(range_res=150.0, azimuth_res=math.radians(1.4), sigma_range=50.0,
+                     sigma_azimuth=math.radians(0.1), pd=0.9, clutter_mean=2.0)
+
+
+def _pair_paths(rng: np.random.Generator, times: FloatArray, tc: float, centre: FloatArray,
+                v_rel: float, miss: float, speed: float) -> FloatArray:
+    """Two constant-velocity paths: object 0 at ``speed`` with a random heading through
+    ``centre`` at ``tc``; object 1 with relative velocity of magnitude ``v_rel`` at a
+    random angle, passing object 0 at the miss distance ``miss`` at ``tc``."""
+    h0 = rng.uniform(0.0, 2 * math.pi)
+    v0 = speed * np.array([math.cos(h0), math.sin(h0)])
+    hr = rng.uniform(0.0, 2 * math.pi)
+    ur = np.array([math.cos(hr), math.sin(hr)])
+    v1 = v0 + v_rel * ur
+    side = np.array([-ur[1], ur[0]]) * miss * (1.0 if rng.random() < 0.5 else -1.0)
+    truth = np.empty((2, len(times), 4))
+    for k, (p, v) in enumerate(((centre, v0), (centre + side, v1))):
+        truth[k, :, 0] = p[0] + v[0] * (times - tc)
+        truth[k, :, 2] = p[1] + v[1] * (times - tc)
+        truth[k, :, 1], truth[k, :, 3] = v[0], v[1]
+    return truth
+
+
+def traffic_encounter(rng: np.random.Generator, kind: str = "fast_crossing", *,
+                      sensor: RadarCell | None = None, scans: int = 49, dt: float = 5.0,
+                      init_sigma: tuple[float, float] = (30.0, 5.0),
+                      max_tries: int = 200) -> Encounter:
+    """A pair encounter drawn to look like real close encounters of air traffic (issue
+    29), seen by :func:`traffic_sensor` (or ``sensor``) for ``scans`` scans ``dt`` apart.
+
+    Kinds (parameters uniform; closest approach at the middle scan; the scene at a
+    random azimuth and a range uniform in 20-120 km from the site; object 0's speed
+    uniform in 120-250 m/s with a random heading):
+
+    * ``"fast_crossing"``: relative speed 30-340 m/s at a random angle, miss distance
+      0-300 m; redrawn (same generator) until 1-3 scans are merged;
+    * ``"formation"``: the same heading, relative speed 0-3 m/s, miss distance 100-600 m
+      (a formation or one aircraft following another on an airway); any number of
+      merged scans;
+    * ``"long_merge"``: relative speed 3-30 m/s, miss distance 0-200 m (slow overtaking,
+      converging on a route); redrawn until at least 8 scans are merged.
+
+    How this differs from real traffic: straight constant-velocity paths (no turns,
+    climbs or speed changes); 2-D positions only (many real pairs in one 2-D cell are
+    separated in altitude, which changes nothing for a 2-D radar but much for the
+    pilots); a merged return at the members' centroid with equal weights (a real plot
+    extractor weighs by amplitude and may split or drop a merged plot); P_D independent
+    per scan and per group; clutter Poisson and uniform; no position jumps of the
+    source (ADS-B) and no track initiation or deletion; the parameter ranges are
+    plausible, not fitted to recorded traffic, and the rejection on the number of
+    merged scans selects the encounter set by construction.
+
+    Raises
+    ------
+    ProblemError
+        Bad arguments, or no draw with the wanted number of merged scans in
+        ``max_tries``.
+    """
+    w = "scenarios.traffic_encounter"
+    kind = as_choice(f"{w} kind", kind, TRAFFIC_KINDS)
+    sensor = traffic_sensor() if sensor is None else as_instance(f"{w} sensor", sensor,
+                                                                 RadarCell)
+    scans = as_count(f"{w} scans", scans, minimum=3)
+    dt = as_positive(f"{w} dt (s)", dt)
+    sp, sv = (as_positive(f"{w} init_sigma", v) for v in init_sigma)
+    max_tries = as_count(f"{w} max_tries", max_tries, minimum=1)
+    times = np.arange(scans) * dt
+    tc = float(times[scans // 2])
+    for _ in range(max_tries):
+        rng_0, az0 = rng.uniform(20_000.0, 120_000.0), rng.uniform(-math.pi, math.pi)
+        centre = sensor.site + rng_0 * np.array([math.cos(az0), math.sin(az0)])
+        speed = rng.uniform(120.0, 250.0)
+        if kind == "fast_crossing":
+            v_rel, miss = rng.uniform(30.0, 340.0), rng.uniform(0.0, 300.0)
+        elif kind == "formation":
+            v_rel, miss = rng.uniform(0.0, 3.0), rng.uniform(100.0, 600.0)
+        else:
+            v_rel, miss = rng.uniform(3.0, 30.0), rng.uniform(0.0, 200.0)
+        truth = _pair_paths(rng, times, tc, centre, v_rel, miss, speed)
+        merged = sum(any(len(g) > 1 for g in sensor.groups(truth[:, t][:, [0, 2]]))
+                     for t in range(scans))
+        if (kind == "fast_crossing" and 1 <= merged <= 3) or kind == "formation" or (
+                kind == "long_merge" and merged >= 8):
+            break
+    else:
+        raise ProblemError(f"{w}: no {kind} draw with the wanted merged scans in "
+                           f"{max_tries} tries")
+    pos = truth[:, :, [0, 2]].reshape(-1, 2)
+    lo, hi = pos.min(axis=0) - 2000.0, pos.max(axis=0) + 2000.0
+    sensor = RadarCell(sensor.range_res, sensor.azimuth_res, sensor.sigma_range,
+                       sensor.sigma_azimuth, sensor.pd, sensor.clutter_mean,
+                       sensor.site.copy(), (lo[0], hi[0], lo[1], hi[1]))
+    p0 = np.diag([sp**2, sv**2, sp**2, sv**2])
+    initial = truth[:, 0, :] + rng.multivariate_normal(np.zeros(4), p0, size=2)
+    obs = [observe(sensor, truth[:, t, :][:, [0, 2]], times[t], rng) for t in range(scans)]
+    return Encounter(kind, float(miss), times, truth, obs, sensor, initial, p0)

@@ -87,7 +87,7 @@ from optmodels.plane.data import (
     project,
     reduced_objective,
 )
-from optmodels.plane.general import GeneralFit, fit_general
+from optmodels.plane.general import GeneralFit, LineTest, fit_general, line_test
 from optmodels.plane.nlp import Formulation as Formulation
 from optmodels.plane.nlp import clear_nlp_cache, solve
 from optmodels.plane.radar import from_polar, radar_covariances, to_polar
@@ -108,6 +108,7 @@ from optmodels.plane.verify import _tangent_basis as _tangent_basis
 __all__ = [
     "CramerRao",
     "GeneralFit",
+    "LineTest",
     "PlanarityTest",
     "PlaneData",
     "PlaneSequence",
@@ -121,6 +122,7 @@ __all__ = [
     "fit_general",
     "from_polar",
     "identify_sequence",
+    "line_test",
     "objective",
     "optimal_offset",
     "planarity_test",

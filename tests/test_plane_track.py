@@ -431,7 +431,7 @@ def test_a_bare_number_window_is_refused_saying_what_to_write(window: float) -> 
     """Issue 26: ``window=40`` (points) and ``window=40.0`` (seconds) read alike; both are
     refused, and the message names the two keywords that say the unit."""
     sc = plane_change_track(14, before=30.0, after=0.0)
-    with pytest.raises(ProblemError, match="window_seconds=40.0.*window_points=100"):
+    with pytest.raises(ProblemError, match=r"window_seconds=40\.0.*window_points=100"):
         track(sc.times, sc.points, sc.cov, window=window)
 
 

@@ -235,7 +235,7 @@ class _Help(argparse.RawDescriptionHelpFormatter):
 
     def _get_help_string(self, action: argparse.Action) -> str:
         text = action.help or ""
-        if _shows_default(action) and "%(default)" not in text:
+        if _shows_default(action) and "%(default)" not in text and "(default" not in text:
             text = f"{text.rstrip()} (default: %(default)s)".lstrip()
         return text
 

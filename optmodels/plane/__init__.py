@@ -74,7 +74,6 @@ Modules
   of the detector.
 """
 
-from optmodels.plane.closedform import _scaled_sums as _scaled_sums
 from optmodels.plane.closedform import change_of_basis as change_of_basis
 from optmodels.plane.closedform import closed_form, svd_fit
 from optmodels.plane.closedform import scatter_matrix as scatter_matrix
@@ -102,8 +101,6 @@ from optmodels.plane.statistics import (
     plane_errors,
 )
 from optmodels.plane.tracking import PlaneTrack, track
-from optmodels.plane.verify import _rayleigh_check as _rayleigh_check
-from optmodels.plane.verify import _tangent_basis as _tangent_basis
 
 __all__ = [
     "CramerRao",

@@ -156,7 +156,11 @@ def test_plane_track_window_needs_its_unit(tmp_path: Path) -> None:
     path = tmp_path / "trk.csv"
     write_plane_csv(path, tr.points, t=tr.times)
     runs = run_many([["plane", "track", path, "--window", w, "--sigma2", "900", "--json"]
-                     for w in ("40", "40.0", "40s", "80pts")], expect=None)
+                     for w in ("40", "40.0", "40s", "80pts")]
+                    + [["plane", "track", path, "--window", "40s", "--sigma2", "900",
+                        "--false-alarm-rate", "2", "--json"]], expect=None)
+    # the former flag name: the same unit (per hour), the same number
+    assert runs[4].json()["false_alarm_rate_per_h"] == 2.0
     for run in runs[:2]:
         assert_error(run, 2, "--window", "40s", "100pts")
     a, b = runs[2].json(), runs[3].json()

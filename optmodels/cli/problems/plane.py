@@ -415,13 +415,15 @@ def register(sub: Any) -> None:
     tr.add_argument("file", type=Path,
                     help="CSV with t (s, increasing), x,y,z (m) [,alpha2] [,cxx..czz (m²)]")
     tr.add_argument("--window", type=_parse_window, required=True,
+                    metavar="40s|100pts|growing",
                     help="window with its unit: seconds like 40s, a number of points like "
                          "100pts, or growing (a bare 40 is refused: points or seconds?)")
     tr.add_argument("--level", type=_level(), default=0.997,
                     help="level of the χ² planarity and line tests, in (0, 1)")
-    tr.add_argument("--false-alarm-rate-per-h", "--false-alarm-rate", type=positive,
-                    default=1.0, dest="false_alarm_rate_per_h",
-                    help="detector false alarms per HOUR of planar track")
+    tr.add_argument("--false-alarm-rate-per-h", type=positive, default=1.0,
+                    metavar="PER_HOUR", help="detector false alarms per HOUR of planar track")
+    tr.add_argument("--false-alarm-rate", type=positive, dest="false_alarm_rate_per_h",
+                    default=argparse.SUPPRESS, help=argparse.SUPPRESS)  # the former name
     tr.add_argument("--power", type=_level(), default=0.9,
                     help="detection probability behind detectable_tilt_deg, in (0, 1)")
     tr.add_argument("--start", type=_finite(), help="first reported time, s")

@@ -99,12 +99,14 @@ def assert_error(run: CliRun, code: int, *fragments: str) -> str:
     return line
 
 
-@pytest.mark.parametrize("formulation", ["full", "reduced", "closed-form"])
-def test_plane_fit_round_trip(tmp_path: Path, formulation: str) -> None:
+@pytest.mark.parametrize("flags", [("--formulation", "full"), ("--formulation", "reduced"),
+                                   ("--method", "closed-form"),
+                                   ("--formulation", "closed-form")])  # the former spelling
+def test_plane_fit_round_trip(tmp_path: Path, flags: tuple[str, str]) -> None:
     sc = scenarios.paper_plane_example(1, duration=3.0)
     path = tmp_path / "track.csv"
     write_plane_csv(path, sc.points, t=sc.times)
-    res = run_json("plane", "fit", path, "--sigma2", "625", "--formulation", formulation)
+    res = run_json("plane", "fit", path, "--sigma2", "625", *flags)
     ref = plane.closed_form(plane.PlaneData(sc.points, 625 * np.eye(3)))
     assert res["status"] == "optimal"
     # CSV written with 17 significant digits: the file round trip is exact; the solvers
@@ -129,7 +131,7 @@ def test_plane_fit_per_point_covariance_and_alpha2(tmp_path: Path) -> None:
     path2 = tmp_path / "two.csv"
     write_plane_csv(path2, sc2.points, alpha2=sc2.alpha2)
     res2 = run_json("plane", "fit", path2, "--cov", "100,0,0,100,0,100",
-                    "--formulation", "closed-form")
+                    "--method", "closed-form")
     ref2 = plane.closed_form(plane.PlaneData(sc2.points, 100 * np.eye(3), sc2.alpha2))
     assert plane.angle_error(res2["normal"], ref2.normal) <= 1e-12
 

@@ -37,7 +37,7 @@ def _read_steps(path: Path) -> list[dict[str, str]]:
         return list(csv.DictReader(fh))
 
 
-def _reference(path: Path, window: float | int, **cov_kw: float) -> plane.PlaneTrack:
+def _reference(path: Path, window: str | None, **cov_kw: float) -> plane.PlaneTrack:
     """The library's own answer on the file as read back (exact: 17 digits)."""
     cols = read_plane_csv(path)
     if cov_kw:
@@ -53,10 +53,17 @@ def test_track_json_matches_the_library_with_radar_flags(tmp_path: Path) -> None
     res = run_json("plane", "track", path, "--window", "40s", "--site", "0,0,0",
                    "--sigma-range", "30", "--sigma-azimuth", str(SIG_DEG),
                    "--sigma-elevation", str(SIG_DEG))
-    ref = _reference(path, 40.0, sigma_range=30.0)
+    ref = _reference(path, "40s", sigma_range=30.0)
     assert res["n_steps"] == ref.n_steps == len(res["steps"])
     assert res["method"] == "general" and res["covariance"] == "radar"
-    assert res["window"] == 40.0
+    assert res["window"] == "40s" and res["false_alarm_rate_per_h"] == 1.0
+    assert res["units"]["detectable_tilt_deg"] == "deg"
+    got_tilt = np.array([np.nan if s["detectable_tilt_deg"] is None
+                         else s["detectable_tilt_deg"] for s in res["steps"]], dtype=float)
+    fin = np.isfinite(ref.detectable_tilt)  # inf/NaN (no test possible) -> JSON null
+    assert fin.any() and np.all(np.isnan(got_tilt[~fin]))
+    np.testing.assert_allclose(got_tilt[fin], np.degrees(ref.detectable_tilt[fin]),
+                               rtol=1e-12)
     steps = res["steps"]
     got_t = np.array([s["time"] for s in steps])
     np.testing.assert_allclose(got_t, ref.times, rtol=0, atol=0)
@@ -83,22 +90,23 @@ def test_track_json_matches_the_library_with_radar_flags(tmp_path: Path) -> None
 def test_track_csv_out_and_file_covariances(tmp_path: Path) -> None:
     path = _track_file(tmp_path, cov_columns=True)
     out = tmp_path / "sub" / "steps.csv"
-    run = run_cli("plane", "track", path, "--window", "100", "--out", out)
-    assert "steps:" in run.out and str(out) in run.out
+    run = run_cli("plane", "track", path, "--window", "100pts", "--out", out)
+    assert "steps:" in run.out and f"wrote {out.resolve()}" in run.out
     rows = _read_steps(out)
-    ref = _reference(path, 100)
+    ref = _reference(path, "100pts")
     assert len(rows) == ref.n_steps
     assert list(rows[0])[:10] == ["time", "nx", "ny", "nz", "offset", "statistic",
                                   "threshold", "resolved", "planar", "change"]
-    assert "detectable_tilt" in rows[0] and "status" in rows[0]
+    assert "detectable_tilt_deg" in rows[0] and "status" in rows[0]
+    assert "detectable_tilt" not in rows[0] and "numerical_error_rad" in rows[0]
     n = np.array([[float(r["nx"]), float(r["ny"]), float(r["nz"])] for r in rows])
     ok = ref.resolved
     assert float(np.max(plane.angle_error(n[ok], ref.normals[ok]))) <= 1e-12
     np.testing.assert_allclose([float(r["offset"]) for r in rows], ref.offsets, rtol=1e-12,
                                equal_nan=True)
     np.testing.assert_array_equal([r["resolved"] == "True" for r in rows], ref.resolved)
-    np.testing.assert_allclose([float(r["detectable_tilt"]) for r in rows],
-                               ref.detectable_tilt, rtol=1e-12, equal_nan=True)
+    np.testing.assert_allclose([float(r["detectable_tilt_deg"]) for r in rows],
+                               np.degrees(ref.detectable_tilt), rtol=1e-12, equal_nan=True)
 
 
 def test_track_stdout_is_the_csv(tmp_path: Path) -> None:
@@ -129,8 +137,8 @@ def test_track_bad_input_exits_2(tmp_path: Path) -> None:
     write_plane_csv(back, np.random.default_rng(0).normal(size=(10, 3)),
                     t=np.array([0, 1, 2, 3, 2.5, 5, 6, 7, 8, 9.0]))
     runs = run_many([
-        ["plane", "track", no_t, "--window", "5", "--sigma2", "1"],
-        ["plane", "track", back, "--window", "5", "--sigma2", "1", "--json"],
+        ["plane", "track", no_t, "--window", "5pts", "--sigma2", "1"],
+        ["plane", "track", back, "--window", "5pts", "--sigma2", "1", "--json"],
         ["plane", "track", path, "--window", "40s"],
         ["plane", "track", path, "--window", "40s", "--site", "0,0,0", "--sigma-range", "30"],
         ["plane", "track", path, "--window", "40s", "--sigma2", "1", "--out", tmp_path],

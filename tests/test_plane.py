@@ -653,16 +653,18 @@ def test_closed_form_recheck_estimates_the_error() -> None:
     cf = plane.closed_form(data)
     ver = cf.info["verification"]
     assert ver["stationarity"] <= 1e-10 and ver["unit_normal"] <= 1e-14
-    s0, s1, s2, s2abs, _, spread = plane._scaled_sums(data.points, data.alpha2,
-                                                     cumulative=False)
+    from optmodels.plane.closedform import _scaled_sums
+    from optmodels.plane.verify import _rayleigh_check, _tangent_basis
+
+    s0, s1, s2, s2abs, _, spread = _scaled_sums(data.points, data.alpha2, cumulative=False)
     q = s2 - s1[..., :, None] * s1[..., None, :] / s0[..., None, None]
     qabs = s2abs + np.abs(s1)[..., :, None] * np.abs(s1)[..., None, :] / s0[..., None, None]
-    t = plane._tangent_basis(cf.normal[None])[0]
+    t = _tangent_basis(cf.normal[None])[0]
     for delta in (1e-7, 1e-5, 1e-3):
         tilted = cf.normal + delta * t[0]
         tilted /= np.linalg.norm(tilted)
-        chk = plane._rayleigh_check(q, qabs, data.base_cov / spread**2, tilted[None],
-                                    np.array([200.0]))
+        chk = _rayleigh_check(q, qabs, data.base_cov / spread**2, tilted[None],
+                              np.array([200.0]))
         assert chk.step[0] == pytest.approx(delta, rel=0.01)
 
 

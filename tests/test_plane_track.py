@@ -75,20 +75,20 @@ def test_window_moments_recompute_when_the_prefix_dominates() -> None:
     assert np.allclose(mom.q, ref.q, rtol=1e-12, atol=1e-14 * np.max(np.abs(ref.q)))
 
 
-@pytest.mark.parametrize("window", [40.0, 60, 25.5])
-def test_sliding_windows_equal_the_closed_form_of_each_window(window: float | int) -> None:
+@pytest.mark.parametrize("window", ["40s", "60pts", "25.5s"])
+def test_sliding_windows_equal_the_closed_form_of_each_window(window: str) -> None:
     t, pts = _long_track(400, 4)
     alpha2 = np.random.default_rng(5).uniform(0.5, 3.0, len(t))
     cov = np.diag([900.0, 400.0, 1600.0])
-    tr = track(t, pts, cov, alpha2=alpha2, window=window, false_alarm_rate=1e-12)
+    tr = track(t, pts, cov, alpha2=alpha2, window=window, false_alarm_rate_per_h=3.6e-9)
     assert not tr.change.any() and tr.method == "closed_form"
-    if isinstance(window, int):
-        assert np.all(tr.n_points[window:] == window)
+    if isinstance(tr.window, int):
+        assert np.all(tr.n_points[tr.window:] == tr.window)
     for k in range(0, tr.n_steps, 7):
         m = (t <= tr.times[k]) & (t >= tr.window_start[k])
         assert m.sum() == tr.n_points[k]
-        if isinstance(window, float):
-            assert np.all(tr.times[k] - t[m] < window)
+        if isinstance(tr.window, float):
+            assert np.all(tr.times[k] - t[m] < tr.window)
         data = plane.PlaneData(pts[m], cov, alpha2[m])
         cf = plane.closed_form(data)
         pt = plane.planarity_test(data, cf, level=tr.level)
@@ -103,7 +103,7 @@ def test_sliding_windows_equal_the_closed_form_of_each_window(window: float | in
 
 def test_growing_window_equals_identify_sequence() -> None:
     sc = plane_change_track(6, tilt_deg=0.0, before=150.0, after=0.0)
-    tr = track(sc.times, sc.points, sc.cov, false_alarm_rate=1e-12)
+    tr = track(sc.times, sc.points, sc.cov, false_alarm_rate_per_h=3.6e-9)
     seq = plane.identify_sequence(sc.times, sc.points, sc.cov)
     assert np.array_equal(tr.resolved, seq.resolved)
     assert np.array_equal(tr.planar, seq.planar)
@@ -135,7 +135,7 @@ def test_collinear_steps_are_unresolved_and_report_the_line(general: bool) -> No
         cov = np.array([np.diag([1e-6, 2e-6 + 1e-7 * i, 3e-6]) for i in range(len(t))])
     else:
         cov = 1e-6 * np.eye(3)
-    for window in (None, 12):
+    for window in (None, "12pts"):
         tr = track(t, pts, cov, window=window)
         assert tr.method == ("general" if general else "closed_form")
         line = tr.times <= t[19]
@@ -153,7 +153,7 @@ def test_noisy_straight_segment_is_unresolved_at_level() -> None:
     # σ = 1 m: on the line a step is wrongly "resolved" with probability ≤ 1 − level
     rng = np.random.default_rng(41)
     t, pts = _line_then_arc(1.0, rng, n_line=40, n_arc=30)
-    tr = track(t, pts, np.eye(3), window=15)
+    tr = track(t, pts, np.eye(3), window_points=15)
     line = tr.times <= t[39]
     assert np.sum(tr.resolved[line]) <= 1
     assert not np.any(tr.planar[line & ~tr.resolved])
@@ -218,8 +218,8 @@ def test_detector_statistic_is_chi2_3_on_planar_tracks() -> None:
     u = []
     for _ in range(300):
         sc = plane_change_track(rng, tilt_deg=0.0, before=60.0, after=0.0)
-        tr = track(sc.times, sc.points, sc.cov, window=40.0, scales=[10.0],
-                   false_alarm_rate=1e-12)
+        tr = track(sc.times, sc.points, sc.cov, window_seconds=40.0, scales=[10.0],
+                   false_alarm_rate_per_h=3.6e-9)
         u.append(tr.detector[-1])
     u = np.asarray(u)
     assert np.all(np.isfinite(u))
@@ -232,7 +232,7 @@ def test_detector_statistic_is_chi2_3_on_planar_tracks() -> None:
 def test_false_alarm_rate_within_its_bound_fast() -> None:
     # stated 60 per hour (1 per minute) so that 2 h give enough alarms; the union bound
     # makes the rate an upper bound: measured within [0, stated + 3 se] (Poisson se)
-    r = false_alarm_runs(2.0, 12, window=40.0, false_alarm_rate=1.0 / 60.0, run_hours=0.5)
+    r = false_alarm_runs(2.0, 12, window="40s", false_alarm_rate_per_h=60.0, run_hours=0.5)
     assert r["alarms"] > 0
     assert r["rate"] <= r["stated"] + 3 * r["se"]
 
@@ -240,7 +240,7 @@ def test_false_alarm_rate_within_its_bound_fast() -> None:
 @pytest.mark.slow
 def test_false_alarm_rate_one_per_hour() -> None:
     # the default 1/3600 per second over 30 hours of planar track (≈ 8 s per window kind)
-    for window in (40.0, None):
+    for window in ("40s", None):
         r = false_alarm_runs(30.0, 11, window=window)
         assert r["rate"] <= r["stated"] + 3 * r["se"], (window, r)
 
@@ -249,12 +249,12 @@ def test_detection_of_a_turn_into_a_climbing_turn() -> None:
     # level turn (7 km, 200 m/s) → turn in a plane tilted by 30° about the velocity,
     # σ = 50 m, 1 Hz, 40 s window, one false alarm per hour: detected in ≥ 90 % of 40
     # runs within 20 s (measured: all, median 13 s, 90th percentile 15 s)
-    r = detection_runs(40, 1, tilt_deg=30.0, sigma=50.0, window=40.0)
+    r = detection_runs(40, 1, tilt_deg=30.0, sigma=50.0, window="40s")
     assert r["detected"] >= 0.9
     assert r["p90"] <= 20.0
     assert r["early"].sum() <= 2  # 40 × 120 s = 1.3 h before the change: ~1 allowed
     # and with 30 m, even a 10° tilt within 25 s
-    r = detection_runs(20, 2, tilt_deg=10.0, sigma=30.0, window=40.0)
+    r = detection_runs(20, 2, tilt_deg=10.0, sigma=30.0, window="40s")
     assert r["detected"] >= 0.9 and r["p90"] <= 25.0
 
 
@@ -263,12 +263,12 @@ def test_detection_with_radar_covariances() -> None:
     # one radar 42 km away (σ_range 10 m, σ_az = σ_el = 2 mrad: 85 m across the beam),
     # the general-covariance path (fit_general per window): 30° tilt in ≥ 90 % of 20 runs
     # within 35 s (measured: all, median 21 s, 90th percentile 27 s)
-    r = detection_runs(20, 2, tilt_deg=30.0, errors="radar", window=40.0)
+    r = detection_runs(20, 2, tilt_deg=30.0, errors="radar", window="40s")
     assert r["detected"] >= 0.9 and r["p90"] <= 35.0
 
 
 def test_detection_with_radar_covariances_fast() -> None:
-    r = detection_runs(3, 2, tilt_deg=90.0, errors="radar", window=40.0)
+    r = detection_runs(3, 2, tilt_deg=90.0, errors="radar", window="40s")
     assert r["detected"] == 1.0 and r["p90"] <= 35.0
 
 
@@ -324,7 +324,7 @@ def test_detectable_tilt_has_the_stated_power(about: str) -> None:
 
 def test_track_reports_both_power_figures() -> None:
     sc = plane_change_track(15, tilt_deg=0.0, before=120.0, after=0.0, sigma=30.0)
-    tr = track(sc.times, sc.points, sc.cov, window=40.0)
+    tr = track(sc.times, sc.points, sc.cov, window_seconds=40.0)
     ok = np.isfinite(tr.detectable_tilt_any)
     assert ok.sum() > 50
     assert np.all(tr.detectable_tilt[ok] <= tr.detectable_tilt_any[ok] + 1e-12)
@@ -338,8 +338,8 @@ def test_detectable_tilt_grows_with_the_noise() -> None:
     sc = plane_change_track(9, tilt_deg=0.0, before=100.0, after=0.0, sigma=1.0)
     out = []
     for sig in (10.0, 40.0):
-        tr = track(sc.times, sc.truth, sig**2 * np.eye(3), window=40.0,
-                   false_alarm_rate=1e-12)
+        tr = track(sc.times, sc.truth, sig**2 * np.eye(3), window_seconds=40.0,
+                   false_alarm_rate_per_h=3.6e-9)
         th = tr.detectable_tilt
         out.append(np.median(np.sin(th[np.isfinite(th)])))
     assert out[1] / out[0] == pytest.approx(4.0, rel=1e-6)
@@ -361,7 +361,7 @@ def test_restart_forgets_the_old_plane() -> None:
 # --------------------------------------------------------------------------- general D_i
 def test_general_covariances_use_fit_general_per_window() -> None:
     sc = plane_change_track(11, tilt_deg=0.0, before=90.0, after=0.0, errors="radar")
-    tr = track(sc.times, sc.points, sc.cov, window=30, false_alarm_rate=1e-12)
+    tr = track(sc.times, sc.points, sc.cov, window_points=30, false_alarm_rate_per_h=3.6e-9)
     assert tr.method == "general"
     for k in (5, 40, tr.n_steps - 1):
         m = (sc.times <= tr.times[k]) & (sc.times >= tr.window_start[k])
@@ -383,7 +383,7 @@ def test_radar_covariance_builder_agrees_with_simulation() -> None:
 # --------------------------------------------------------------------------- API
 def test_rows_and_json() -> None:
     sc = plane_change_track(13, tilt_deg=60.0, sigma=40.0, before=60.0, after=30.0)
-    tr = track(sc.times, sc.points, sc.cov, window=40.0)
+    tr = track(sc.times, sc.points, sc.cov, window_seconds=40.0)
     rows = tr.to_rows()
     assert len(rows) == tr.n_steps
     assert {"time", "nx", "ny", "nz", "offset", "statistic", "threshold", "resolved",
@@ -401,17 +401,20 @@ def test_rows_and_json() -> None:
 
 @pytest.mark.parametrize(("kwargs", "match"), [
     ({"window": True}, "plane.track window"),
-    ({"window": 3}, "plane.track window"),
-    ({"window": -5.0}, "plane.track window"),
-    ({"window": 1e-3}, "plane.track window"),
-    ({"window": 40.0, "scales": [30.0]}, "plane.track scales"),
-    ({"window": "40s"}, "plane.track window"),
+    ({"window_points": 3}, "plane.track window_points"),
+    ({"window_points": 40.0}, "plane.track window_points"),
+    ({"window_seconds": -5.0}, "plane.track window_seconds"),
+    ({"window_seconds": 1e-3}, "plane.track window_seconds"),
+    ({"window_seconds": 40.0, "scales": [30.0]}, "plane.track scales"),
+    ({"window": "40s", "window_points": 40}, "give one window"),
+    ({"window": "40"}, "does not say its unit"),
+    ({"window": "3pts"}, r"plane.track window \(points\)"),
     ({"level": 1.0}, "plane.track level"),
-    ({"false_alarm_rate": 0.0}, "plane.track false_alarm_rate"),
-    ({"false_alarm_rate": 10.0}, "plane.track false_alarm_rate"),
+    ({"false_alarm_rate_per_h": 0.0}, "plane.track false_alarm_rate_per_h"),
+    ({"false_alarm_rate_per_h": 36000.0}, "plane.track false_alarm_rate_per_h"),
     ({"scales": []}, "plane.track scales"),
     ({"scales": [5.0, -1.0]}, r"plane.track scales\[1\]"),
-    ({"window": 40, "scales": [2.5]}, r"plane.track scales\[0\]"),
+    ({"window_points": 40, "scales": [2.5]}, r"plane.track scales\[0\]"),
     ({"start": 1e9}, "plane.track start"),
     ({"power": 0.0}, "plane.track power"),
     ({"min_reference": 2}, "plane.track min_reference"),
@@ -421,6 +424,40 @@ def test_bad_arguments_are_problem_errors(kwargs: dict, match: str) -> None:
     sc = plane_change_track(14, before=30.0, after=0.0)
     with pytest.raises(ProblemError, match=match):
         track(sc.times, sc.points, sc.cov, **kwargs)
+
+
+@pytest.mark.parametrize("window", [40, 40.0, np.int64(40), np.float64(40.0)])
+def test_a_bare_number_window_is_refused_saying_what_to_write(window: float) -> None:
+    """Issue 26: ``window=40`` (points) and ``window=40.0`` (seconds) read alike; both are
+    refused, and the message names the two keywords that say the unit."""
+    sc = plane_change_track(14, before=30.0, after=0.0)
+    with pytest.raises(ProblemError, match=r"window_seconds=40\.0.*window_points=100"):
+        track(sc.times, sc.points, sc.cov, window=window)
+
+
+def test_window_keywords_and_text_are_the_same_window() -> None:
+    sc = plane_change_track(14, before=60.0, after=0.0)
+    a = track(sc.times, sc.points, sc.cov, window_seconds=20.0)
+    b = track(sc.times, sc.points, sc.cov, window="20 s")
+    c = track(sc.times, sc.points, sc.cov, window_points=41)
+    d = track(sc.times, sc.points, sc.cov, window="41pts")
+    assert a.window == 20.0 and c.window == 41
+    np.testing.assert_array_equal(a.n_points, b.n_points)
+    np.testing.assert_array_equal(c.n_points, d.n_points)
+    assert a.to_dict()["window"] == "20s" and c.to_dict()["window"] == "41pts"
+    # a seconds window and a points window differ (2 Hz: 20 s holds 40 or 41 points)
+    assert int(np.max(a.n_points)) <= 41 and int(np.max(c.n_points)) == 41
+
+
+def test_false_alarm_rate_is_per_hour_and_the_old_keyword_is_refused() -> None:
+    sc = plane_change_track(14, before=30.0, after=0.0)
+    tr = track(sc.times, sc.points, sc.cov, false_alarm_rate_per_h=2.0)
+    assert tr.false_alarm_rate_per_h == 2.0 and tr.to_dict()["false_alarm_rate_per_h"] == 2.0
+    dt = float(np.median(np.diff(sc.times)))
+    # each test's level is rate (per s) · dt / scales
+    assert tr.test_level == pytest.approx(2.0 / 3600.0 * dt / len(tr.scales), rel=1e-12)
+    with pytest.raises(ProblemError, match="false_alarm_rate_per_h=1 "):
+        track(sc.times, sc.points, sc.cov, false_alarm_rate=1.0 / 3600.0)
 
 
 def test_bad_arrays_are_problem_errors() -> None:
@@ -481,7 +518,7 @@ def test_score_has_mean_zero_for_anisotropic_covariances() -> None:
 def test_false_alarm_rate_with_radar_covariances() -> None:
     # general D_i (fit_general per window), stated 60 per hour over 1 h of planar track
     # (≈ 20 s); measured 17-27 per hour
-    r = false_alarm_runs(1.0, 13, window=40.0, errors="radar", false_alarm_rate=1.0 / 60.0,
+    r = false_alarm_runs(1.0, 13, window="40s", errors="radar", false_alarm_rate_per_h=60.0,
                          run_hours=0.25)
     assert r["alarms"] > 0
     assert r["rate"] <= r["stated"] + 3 * r["se"]

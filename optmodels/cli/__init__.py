@@ -14,17 +14,23 @@ The contract (README, "Command line"):
   130 interrupted (Ctrl-C).
 - Every error is one line on stderr, ``optmodels: error: <message>``, never a traceback;
   with ``--json`` stdout then holds ``{"error": <message>, "exit_code": <code>}``.
+- One grammar: every ``--help`` shows the defaults; ``--out`` is a FOLDER for the verbs
+  that write several files (``demo``, ``compare``, ``biasfield solve``) and a FILE for
+  those that write one (named in each verb's help); a verb that writes prints the path
+  it wrote; the closed form is ``closed-form``, a value of ``--method`` wherever a verb
+  offers it.
 """
 
-# The package (issue 15, phase 1; docs/architecture.md):
+# The package (docs/architecture.md):
 #   contract.py    exit statuses, error mapping (_execute), _reading, output paths, the
 #                  fd-1 redirect, strict JSON printing, the one-line-error argparse class
+#                  and the help formatter every parser inherits
 #   args.py        argparse types built on optmodels.core's as_* checks
 #   problems/      one module per problem: its verbs (register), demo hook, --details hook;
-#                  discovered by name through the registry -- no list of problem names here
+#                  discovered by name through the registry -- no list of problem names here.
+#                  They import their problem package only inside the handlers, so that
+#                  `optmodels --help` imports no problem (issue 23 item 4).
 #   demo.py, compare.py, montecarlo.py   the multi-problem commands
-# Every name the single-module cli.py had is re-exported below (hence the file-wide F401).
-# ruff: noqa: F401
 
 from __future__ import annotations
 
@@ -32,81 +38,46 @@ import argparse
 import sys
 from collections.abc import Sequence
 
-from optmodels import fusion, plane, trajectories
-from optmodels.cli import compare, demo, montecarlo, problems
-from optmodels.cli.args import (
-    _count,
-    _finite,
-    _flag_type,
-    _int_list,
-    _level,
-    _names,
-    _positive,
-    _whole,
-)
-from optmodels.cli.compare import (
-    _check_selection,
-    _compare,
-    _print_written,
-    _run_compare,
-    _run_harness,
-)
+from optmodels.cli import problems
 from optmodels.cli.contract import (
-    _OK_STATUSES,
     EXIT_INPUT,
     EXIT_INTERNAL,
     EXIT_INTERRUPTED,
     EXIT_NOT_OK,
     EXIT_OK,
     Outcome,
-    _dumps,
-    _emit,
     _execute,
-    _fail,
-    _flush_c_stdio,
-    _jsonable,
-    _leaf,
-    _Lines,
-    _out_dir,
-    _out_file,
     _Parser,
-    _reading,
-    _stdout_to_stderr,
 )
-from optmodels.cli.demo import _demo
-from optmodels.cli.montecarlo import _montecarlo, _print_montecarlo
-from optmodels.cli.problems.assignment import (
-    _CASE_FIELDS,
-    _assignment_count,
-    _assignment_solve,
-    _print_assignment_count,
-    _print_assignment_solve,
-    _read_case,
-)
-from optmodels.cli.problems.biasfield import (
-    _biasfield_build,
-    _biasfield_solve,
-    _npz_name,
-    _parse_box,
-    _print_biasfield_build,
-    _print_biasfield_solve,
-)
-from optmodels.cli.problems.fusion import _fusion_weights, _matrix_arg, _print_fusion_weights
-from optmodels.cli.problems.plane import _parse_cov, _plane_fit, _print_plane_fit
-from optmodels.cli.problems.trajectories import _print_trajectories_fit, _trajectories_fit
 
 #: The problems with a CLI module (:mod:`optmodels.cli.problems`), in the harness's order.
 PROBLEMS = problems.names()
 
 
+def _version() -> str:
+    """The installed distribution's version (:mod:`importlib.metadata`), else the
+    package's ``__version__`` (a source tree that is not installed)."""
+    from importlib import metadata
+
+    try:
+        return metadata.version("optmodels")
+    except metadata.PackageNotFoundError:
+        from optmodels import __version__
+
+        return __version__
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The whole command line: the multi-problem commands, then each problem module's
-    verbs (:func:`optmodels.cli.problems.modules`, sorted by name)."""
-    ap = _Parser(prog="optmodels", description=__doc__,
-                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    verbs (:func:`optmodels.cli.problems.modules`, sorted by name). Every parser is a
+    :class:`~optmodels.cli.contract._Parser` (one-line errors, defaults in ``--help``)."""
+    from optmodels.cli import compare, demo, montecarlo
+
+    ap = _Parser(prog="optmodels", description=__doc__)
+    ap.add_argument("--version", action="version", version=f"optmodels {_version()}")
     ap.add_argument("--debug", action="store_true",
                     help="show the traceback of an internal error")
-    sub = ap.add_subparsers(dest="command", required=True)
+    sub = ap.add_subparsers(dest="command", required=True, metavar="COMMAND")
     demo.register(sub)
     compare.register(sub)
     montecarlo.register(sub)
@@ -119,8 +90,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line; return the exit status (module docstring). Usage errors
     raise ``SystemExit(2)`` from argparse after one line on stderr."""
     argv = list(sys.argv[1:] if argv is None else argv)
-    ap = build_parser()
     _Parser.json_errors = "--json" in argv
+    ap = build_parser()
     args = ap.parse_args(argv)
     return _execute(args)
 

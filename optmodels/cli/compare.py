@@ -179,7 +179,7 @@ def register(sub: Any) -> None:
     cmp_.add_argument("--time-limit", type=positive,
                       help="per run, s (> 0; default: the profile's)")
     cmp_.add_argument("--seed", type=count0, default=0)
-    cmp_.add_argument("--out", default="report/compare")
+    cmp_.add_argument("--out", default="report/compare", help="output FOLDER (report.md, results)")
     cmp_.add_argument("--scheduler", default="local",
                       help="'local' (default: one isolated worker process here) or a Dask "
                            "scheduler address, e.g. tcp://host:8786: each run is a task on "

@@ -221,16 +221,49 @@ class _Lines:
 
 
 # --------------------------------------------------------------------------- parser
+class _Help(argparse.RawDescriptionHelpFormatter):
+    """The one help formatter (every :class:`_Parser`, hence every sub-command, uses it):
+    descriptions and epilogs as written, and each option's default appended as
+    ``(default: X)`` -- as :class:`argparse.ArgumentDefaultsHelpFormatter`, but also for
+    options without a help text, and not for flags whose default is "off" (``None``,
+    ``False``) or whose help already states it."""
+
+    def _format_action(self, action: argparse.Action) -> str:
+        if not action.help and action.option_strings and _shows_default(action):
+            action.help = "(default: %(default)s)"
+        return super()._format_action(action)
+
+    def _get_help_string(self, action: argparse.Action) -> str:
+        text = action.help or ""
+        if _shows_default(action) and "%(default)" not in text and "(default" not in text:
+            text = f"{text.rstrip()} (default: %(default)s)".lstrip()
+        return text
+
+
+def _shows_default(action: argparse.Action) -> bool:
+    """Whether ``--help`` states ``action``'s default (options only; a default that is
+    "off" -- ``None``, ``False``, suppressed -- is not a value worth showing)."""
+    return (bool(action.option_strings) and action.default is not None
+            and action.default is not False and action.default is not argparse.SUPPRESS
+            and not isinstance(action, argparse._HelpAction | argparse._VersionAction))
+
+
 class _Parser(argparse.ArgumentParser):
-    """argparse with one-line errors: ``optmodels plane fit: error: argument --sigma2:
-    must be > 0, got -1 (see optmodels plane fit --help)``, exit 2."""
+    """argparse with one-line errors and one prefix: ``optmodels: error: plane fit:
+    argument --sigma2: must be > 0, got -1 (see optmodels plane fit --help)``, exit 2;
+    every parser (sub-commands included) shows its defaults (:class:`_Help`)."""
 
     #: set by :func:`main` when ``--json`` is on the command line: the usage error is
     #: then also the one JSON document on stdout
     json_errors = False
 
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        kwargs.setdefault("formatter_class", _Help)
+        super().__init__(*args, **kwargs)
+
     def error(self, message: str) -> NoReturn:
-        line = " ".join(f"{self.prog}: {message}".split())
+        where = self.prog.removeprefix("optmodels").strip()
+        line = " ".join(f"{where + ': ' if where else ''}{message}".split())
         if _Parser.json_errors:
             _emit(_dumps({"error": line, "exit_code": EXIT_INPUT}))
         self.exit(EXIT_INPUT, f"optmodels: error: {line} (see {self.prog} --help)\n")
@@ -238,10 +271,20 @@ class _Parser(argparse.ArgumentParser):
 
 def _leaf(sub: Any, name: str, help_: str) -> argparse.ArgumentParser:
     """A command parser with the common flags --json and --debug."""
-    p = sub.add_parser(name, help=help_)
+    p = sub.add_parser(name, help=help_, description=help_)
     p.add_argument("--json", action="store_true",
                    help="print exactly one JSON document on stdout")
     p.add_argument("--debug", action="store_true", default=argparse.SUPPRESS,
                    help="show the traceback of an internal error")
     return p
 
+
+def _group(sub: Any, name: str, help_: str) -> Any:
+    """A problem's sub-command ``optmodels <name>`` and the sub-parsers of its verbs."""
+    p = sub.add_parser(name, help=help_, description=help_)
+    return p.add_subparsers(dest="verb", required=True, metavar="VERB")
+
+
+def _wrote(path: str | Path | None) -> str:
+    """The absolute path a verb wrote, for its printed text (never a silent write)."""
+    return str(Path(path).resolve()) if path is not None else ""

@@ -45,6 +45,8 @@ def _montecarlo(args: argparse.Namespace) -> Outcome:
            "means": {k: res.mean(k) for k in res.values},
            "standard_errors": {k: res.se(k) for k in res.values} if res.n_ok > 1
            else {}}
+    out["out"] = str(out_path.resolve()) if out_path is not None else None
+    out["checkpoint"] = str(checkpoint.resolve()) if checkpoint is not None else None
     if out_path is not None:
         write_json(out_path, {**out, "values": res.values})
     finite = all(bool(np.all(np.isfinite(np.asarray(v, dtype=float))))
@@ -55,6 +57,9 @@ def _montecarlo(args: argparse.Namespace) -> Outcome:
 def _print_montecarlo(res: dict[str, Any]) -> None:
     print(f"{res['study']}: {res['trials']} trials (seed {res['seed']}, {res['resumed']} "
           f"from the checkpoint), engine {res['engine']}")
+    for key, what in (("out", "values and summary"), ("checkpoint", "checkpoint")):
+        if res.get(key):
+            print(f"  wrote {res[key]} ({what})")
     if res["failed"]:
         print(f"  {res['failed']} of {res['requested']} trials failed (recorded; "
               "--retry-failed runs them again), e.g.")
@@ -76,15 +81,18 @@ def register(sub: Any) -> None:
     mcp = _leaf(sub, "montecarlo", "run a seeded Monte Carlo study (local or Dask)")
     mcp.add_argument("study", help="plane-angle, trajectories-eta, fusion-weight, "
                                    "biasfield-recovery, assignment-separation")
-    mcp.add_argument("--trials", type=count1, default=1000)
-    mcp.add_argument("--seed", type=count0, default=0)
+    mcp.add_argument("--trials", type=count1, default=1000, help="trials to run (>= 1)")
+    mcp.add_argument("--seed", type=count0, default=0,
+                     help="seed of the study's numpy.random.Generator streams")
     mcp.add_argument("--param", action="append", metavar="NAME=VALUE",
                      help="study parameter (repeatable), e.g. --param n=100")
     mcp.add_argument("--scheduler", default=None,
                      help="processes (default), serial, or a Dask address tcp://host:8786")
     mcp.add_argument("--workers", type=count1, help="local processes (default: all cores)")
-    mcp.add_argument("--checkpoint", help="JSON-lines file; a rerun resumes from it")
+    mcp.add_argument("--checkpoint", metavar="FILE",
+                     help="JSON-lines FILE; a rerun resumes from it")
     mcp.add_argument("--retry-failed", action="store_true",
                      help="run again the trials the checkpoint records as failed")
-    mcp.add_argument("--out", help="write the per-trial values and summary to this JSON")
+    mcp.add_argument("--out", metavar="FILE",
+                     help="write the per-trial values and summary to this JSON FILE")
     mcp.set_defaults(func=_montecarlo, printer=_print_montecarlo)

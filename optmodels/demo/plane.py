@@ -78,7 +78,7 @@ def run_track_demo(out: Path, *, seed: int = 0) -> tuple[str, dict[str, Any]]:
 
     out.mkdir(parents=True, exist_ok=True)
     tr = climb_turn_track(seed)
-    trk = track(tr.times, tr.points, tr.cov, window=TRACK_WINDOW)
+    trk = track(tr.times, tr.points, tr.cov, window_seconds=TRACK_WINDOW)
     fig = _track_figure(out / "track.png", trk, tr)
     write_csv(out / "track_steps.csv", trk.to_rows())
     t1, t2 = (float(x) for x in tr.transitions)

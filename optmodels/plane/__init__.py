@@ -74,7 +74,6 @@ Modules
   of the detector.
 """
 
-from optmodels.plane.closedform import _scaled_sums as _scaled_sums
 from optmodels.plane.closedform import change_of_basis as change_of_basis
 from optmodels.plane.closedform import closed_form, svd_fit
 from optmodels.plane.closedform import scatter_matrix as scatter_matrix
@@ -87,7 +86,7 @@ from optmodels.plane.data import (
     project,
     reduced_objective,
 )
-from optmodels.plane.general import GeneralFit, fit_general
+from optmodels.plane.general import GeneralFit, LineTest, fit_general, line_test
 from optmodels.plane.nlp import Formulation as Formulation
 from optmodels.plane.nlp import clear_nlp_cache, solve
 from optmodels.plane.radar import from_polar, radar_covariances, to_polar
@@ -102,12 +101,11 @@ from optmodels.plane.statistics import (
     plane_errors,
 )
 from optmodels.plane.tracking import PlaneTrack, track
-from optmodels.plane.verify import _rayleigh_check as _rayleigh_check
-from optmodels.plane.verify import _tangent_basis as _tangent_basis
 
 __all__ = [
     "CramerRao",
     "GeneralFit",
+    "LineTest",
     "PlanarityTest",
     "PlaneData",
     "PlaneSequence",
@@ -121,6 +119,7 @@ __all__ = [
     "fit_general",
     "from_polar",
     "identify_sequence",
+    "line_test",
     "objective",
     "optimal_offset",
     "planarity_test",

@@ -31,7 +31,7 @@ from optmodels.core import (
     timed,
 )
 from optmodels.plane.data import PlaneData, PlaneSolution, _check_data
-from optmodels.plane.verify import _Check, _finish, _rayleigh_check
+from optmodels.plane.verify import _Check, _finish, _rayleigh_check, _resolve
 
 
 @dataclass(frozen=True)
@@ -114,7 +114,7 @@ def _scaled_sums(
     return s0, s1, s2, s2abs, ref, spread
 
 
-def closed_form(data: PlaneData) -> PlaneSolution:
+def closed_form(data: PlaneData, *, level: float | None = 0.997) -> PlaneSolution:
     """The paper's closed form (1.5)-(1.8), valid under (1.4) :math:`D_i = \alpha_i^2 D`.
 
     Route: ``Q`` (1.5); ``D = h M h^T``; ``R = M^{-1/2} h^T Q h M^{-1/2} = g Λ g^T`` (1.7);
@@ -133,7 +133,10 @@ def closed_form(data: PlaneData) -> PlaneSolution:
 
     ``info["line_statistic"]``: the two smallest eigenvalues Λ₁ + Λ₂, the minimum of (1.2)
     over *lines*, χ² with ``info["line_dof"]`` = 2N − 4 degrees of freedom if the points
-    are on a line (see :func:`planarity_test`, ``resolved``).
+    are on a line (see :func:`planarity_test`, ``resolved``). At ``level`` (default
+    0.997; ``None``: no test) points on a line give the unresolved form: status ERROR,
+    ``resolved=False``, NaN normal and offset, the ML ``line_direction`` (never an
+    arbitrary normal with an OK status; ``info["lambda_min"]`` is kept).
 
     Raises
     ------
@@ -165,13 +168,14 @@ def closed_form(data: PlaneData) -> PlaneSolution:
             f"{lam[0]:.6g}, {lam[1]:.6g}, {lam[2]:.6g}: the two smallest coincide to "
             "round-off -- collinear points?)"
         )
-    return _finish(
+    sol = _finish(
         data, normal, offset, status=Status.OPTIMAL, method="closed_form",
         stationarity=step, solve_time=t.elapsed, iterations=None,
         info={"lambda_min": float(eig.check.rho[0]), "eigenvalues": lam.copy(),
               "line_statistic": float(lam[0] + lam[1]), "line_dof": 2 * data.n_points - 4,
               "refined": bool(eig.refined[0])},
     )
+    return _resolve(sol, data, level)
 
 
 def change_of_basis(base_cov: ArrayLike, q: ArrayLike, *, printed: bool = False) -> FloatArray:

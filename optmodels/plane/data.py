@@ -170,11 +170,22 @@ class PlaneSolution(Solution):
         ``a`` in :math:`\\langle n, x\\rangle = a` (1.1).
     projected : ndarray (N, 3)
         The estimated positions :math:`x_i` on the plane (1.8).
+    resolved : bool or None
+        Whether the data determine the plane: the hypothesis "the points are on a line"
+        is rejected at the fit's ``level`` (:func:`optmodels.plane.general.line_test`;
+        ``info["line_test"]`` holds its numbers). ``False``: the fit is not OK (status
+        ERROR, message "unresolved: ..."), ``normal``/``offset`` are NaN (every plane
+        through the line fits about as well) and ``line_direction`` is what the data
+        determine. ``None``: not tested (the fit failed first, or ``level=None``).
+    line_direction : ndarray (3,)
+        Unit direction of the maximum-likelihood line (NaN where not tested).
     """
 
     normal: FloatArray = field(default_factory=lambda: np.full(3, np.nan))
     offset: float = float("nan")
     projected: FloatArray = field(default_factory=lambda: np.empty((0, 3)))
+    resolved: bool | None = None
+    line_direction: FloatArray = field(default_factory=lambda: np.full(3, np.nan))
 
 
 def _canonical_sign(normal: FloatArray, offset: float) -> tuple[FloatArray, float]:

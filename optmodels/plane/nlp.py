@@ -43,7 +43,7 @@ from optmodels.core import (
     timed,
 )
 from optmodels.plane.data import PlaneData, PlaneSolution, _oblique_projection, _weighted_offset
-from optmodels.plane.verify import _finish, _profile_check
+from optmodels.plane.verify import _finish, _profile_check, _resolve
 
 Formulation = Literal["full", "reduced"]
 
@@ -264,6 +264,7 @@ def solve(
     plugin: str = "ipopt",
     plugin_options: dict[str, Any] | None = None,
     via_reduced: bool | None = None,
+    level: float | None = 0.997,
 ) -> PlaneSolution:
     """Solve the ML plane problem generically with CasADi + IPOPT (or another NLP plugin).
 
@@ -304,6 +305,10 @@ def solve(
         axis itself, an independent solve (about 20 IPOPT iterations from each of the
         axes that are a saddle or a maximum of the profile: 2.2 s at N = 10⁴ with 3
         starts, against 0.37 s). A phase 1 that fails hands the axis itself to phase 2.
+    level : float or None
+        Level of the line test behind ``resolved`` (default 0.997): a plane whose points
+        are on a line at this level is returned unresolved (status ERROR, NaN normal,
+        ``line_direction``; :func:`optmodels.plane.verify._resolve`). ``None``: no test.
 
     Returns
     -------
@@ -477,4 +482,4 @@ def solve(
         "verification": verification,
         **({"rejected": out.info["rejected"]} if "rejected" in out.info else {}),
     }
-    return out
+    return _resolve(out, data, level)

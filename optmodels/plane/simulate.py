@@ -148,15 +148,16 @@ def plane_change_track(
 
 
 # =========================================================================== Monte Carlo
-def false_alarm_runs(hours: float, seed: int = 0, *, window: float | int | None = 40.0,
-                     false_alarm_rate: float = 1.0 / 3600.0, sigma: float = 50.0,
+def false_alarm_runs(hours: float, seed: int = 0, *, window: str | None = "40s",
+                     false_alarm_rate_per_h: float = 1.0, sigma: float = 50.0,
                      errors: str = "isotropic", run_hours: float = 1.0,
                      **kw: float) -> dict[str, float]:
     """False alarms of :func:`optmodels.plane.tracking.track` on planar tracks (a turn of
     ``radius1`` in one plane, ``tilt_deg=0``), ``hours`` of track in runs of ``run_hours``.
 
     Returns ``alarms``, ``hours``, ``rate`` (per hour), ``se`` (Poisson: √alarms / hours),
-    ``stated`` (``false_alarm_rate`` per hour) and ``seconds`` (wall time).
+    ``stated`` (``false_alarm_rate_per_h``) and ``seconds`` (wall time). ``window``: as
+    :func:`optmodels.plane.tracking.window_spec` reads it (``"40s"``, ``"100pts"``).
     """
     import time
 
@@ -171,17 +172,17 @@ def false_alarm_runs(hours: float, seed: int = 0, *, window: float | int | None 
         sc = plane_change_track(rng, tilt_deg=0.0, before=3600.0 * run_hours, after=0.0,
                                 sigma=sigma, errors=errors, **kw)
         tr = track(sc.times, sc.points, sc.cov, window=window,
-                   false_alarm_rate=false_alarm_rate)
+                   false_alarm_rate_per_h=false_alarm_rate_per_h)
         alarms += int(np.sum(tr.change))
         total += float(tr.times[-1] - tr.times[0]) / 3600.0
     return {"alarms": float(alarms), "hours": total, "rate": alarms / total,
-            "se": float(np.sqrt(max(alarms, 1))) / total, "stated": 3600.0 * false_alarm_rate,
+            "se": float(np.sqrt(max(alarms, 1))) / total, "stated": float(false_alarm_rate_per_h),
             "seconds": time.perf_counter() - t0}
 
 
 def detection_runs(runs: int, seed: int = 0, *, tilt_deg: float = 30.0,
-                   window: float | int | None = 40.0, sigma: float = 50.0,
-                   errors: str = "isotropic", false_alarm_rate: float = 1.0 / 3600.0,
+                   window: str | None = "40s", sigma: float = 50.0,
+                   errors: str = "isotropic", false_alarm_rate_per_h: float = 1.0,
                    **kw: float) -> dict[str, Any]:
     """Detection delay of :func:`optmodels.plane.tracking.track` on
     :func:`plane_change_track` (``runs`` seeded runs). ``delay`` (runs,) s from the change
@@ -200,7 +201,7 @@ def detection_runs(runs: int, seed: int = 0, *, tilt_deg: float = 30.0,
     for r in range(runs):
         sc = plane_change_track(rng, tilt_deg=tilt_deg, sigma=sigma, errors=errors, **kw)
         tr = track(sc.times, sc.points, sc.cov, window=window,
-                   false_alarm_rate=false_alarm_rate)
+                   false_alarm_rate_per_h=false_alarm_rate_per_h)
         at = tr.change_times
         early[r] = int(np.sum(at < sc.change_time))
         late = at[at >= sc.change_time]

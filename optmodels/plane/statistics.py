@@ -23,7 +23,7 @@ from optmodels.core import (
     as_number,
     as_probability,
 )
-from optmodels.plane.closedform import _scaled_sums, closed_form
+from optmodels.plane.closedform import closed_form
 from optmodels.plane.data import (
     PlaneData,
     PlaneSolution,
@@ -31,6 +31,7 @@ from optmodels.plane.data import (
     _quad_forms,
     reduced_objective,
 )
+from optmodels.plane.general import line_test
 from optmodels.plane.nlp import solve
 
 
@@ -67,11 +68,13 @@ class PlanarityTest:
         statistic far below it, and every plane through the line fits about equally).
         When not resolved, ``planar`` and ``paper_planar`` are False.
     line_statistic : float
-        Under (1.4): Λ₁ + Λ₂, the two smallest eigenvalues of (Q, D) = the minimum of
-        (1.2) over lines, χ²(2N − 4) for points on a line (scale invariant: whitened).
-        For general :math:`D_i`: a lower bound of that minimum, the two smallest
-        eigenvalues of the scatter weighted by :math:`1/\\lambda_{max}(D_i)` (so
-        ``resolved`` errs towards "not resolved" when the :math:`D_i` are anisotropic).
+        The minimum of (1.2) over lines, χ²(2N − 4) for points on a line
+        (:func:`optmodels.plane.general.line_test`). Under (1.4): Λ₁ + Λ₂, the two
+        smallest eigenvalues of (Q, D). For general :math:`D_i`: the exact minimum
+        (Newton over line directions) wherever it could be below ``line_threshold``, as
+        :func:`fit_general` computes it (issue 26: the lower bound used before called a
+        real climbing turn "unresolved"); a lower bound only where that bound already
+        exceeds the threshold (the verdict is then certain).
     line_dof, line_threshold : int, float
         ``2N − 4`` and ``chi2.ppf(level, 2N − 4)``.
     """
@@ -126,23 +129,6 @@ def _planarity_arrays(
     }
 
 
-def _line_statistic(data: PlaneData) -> float:
-    """Minimum of (1.2) over lines (under (1.4)) or its lower bound (general D_i); see
-    :class:`PlanarityTest` ``line_statistic``."""
-    if data.alpha2 is not None and data.base_cov is not None:
-        s0, s1, s2, _, _, spread = _scaled_sums(data.points, data.alpha2, cumulative=False)
-        q = (s2 - s1[..., :, None] * s1[..., None, :] / s0[..., None, None])[0]
-        m, h = np.linalg.eigh(data.base_cov / spread**2)
-        t = h / np.sqrt(m)
-        lam = np.linalg.eigvalsh(0.5 * (t.T @ q @ t + (t.T @ q @ t).T))
-    else:
-        w = 1.0 / np.linalg.eigvalsh(data.covs)[:, -1]
-        c = w @ data.points / np.sum(w)
-        y = data.points - c
-        lam = np.linalg.eigvalsh((y * w[:, None]).T @ y)
-    return float(lam[0] + lam[1])
-
-
 def planarity_test(
     data: PlaneData, solution: PlaneSolution | None = None, level: float = 0.997
 ) -> PlanarityTest:
@@ -171,15 +157,24 @@ def planarity_test(
     if data.n_points < 4:
         raise ProblemError("points: the planarity test needs N >= 4 (dof = N - 3)")
     if solution is None:
-        solution = closed_form(data) if data.proportional else solve(data).require_ok()
+        solution = (closed_form(data, level=None) if data.proportional
+                    else solve(data, level=None).require_ok())
     if not isinstance(solution, PlaneSolution):
         raise ProblemError("plane.planarity_test solution: expected a PlaneSolution, got "
                            f"{type(solution).__name__}")
-    solution.require_ok()
-    stat = reduced_objective(data, solution.normal, solution.offset)
-    line = _line_statistic(data)
+    if solution.resolved is False and "rejected" in solution.info:
+        # an unresolved fit: Λ_min at the plane it fitted (the statistic is defined, the
+        # plane is not determined; the test then reports resolved=False)
+        normal, offset = solution.info["rejected"]["normal"], solution.info["rejected"]["offset"]
+    else:
+        solution.require_ok()
+        normal, offset = solution.normal, solution.offset
+    stat = reduced_objective(data, normal, offset)
+    lt = line_test(data, lv)
+    line = lt.statistic
     arr = _planarity_arrays(np.asarray(stat), np.asarray(float(data.n_points)), lv,
-                            np.asarray(line))
+                            np.asarray(line),
+                            determined=bool(lt.resolved or not line > lt.threshold))
     return PlanarityTest(
         statistic=stat, dof=int(arr["dof"]), level=lv, threshold=float(arr["threshold"]),
         p_value=float(arr["p_value"]), planar=bool(arr["planar"]),

@@ -2,8 +2,9 @@ r"""The plane of maneuver along a track (paper 000): sliding windows, plane-chan
 detection, resolved/unresolved steps and the detector's power, one record per step.
 
 :func:`track` re-estimates the ML plane (1.2)-(1.3) after every measurement from the
-points of a window -- growing (``window=None``, as :func:`identify_sequence`), the last
-``window`` seconds (a float) or the last ``window`` points (an int) -- and runs the
+points of a window -- growing (no window, as :func:`identify_sequence`), the last
+``window_seconds`` seconds or the last ``window_points`` points (:func:`window_spec`;
+a bare ``window=40`` is refused as ambiguous) -- and runs the
 plane-change detector of :mod:`optmodels.plane.detector` on the stream. After an alarm
 the detector restarts: the windows forget every point before the estimated change
 (the split of the alarming test), so that the next plane is estimated from the new
@@ -105,9 +106,10 @@ class PlaneTrack:
         detector cannot reliably see a bank change below this."
     detectable_tilt_any : (K,) rad
         The same for the least informed direction of rotation (≥ ``detectable_tilt``).
-    level, false_alarm_rate, power : the settings (``false_alarm_rate`` per second).
-    window : None, float (s) or int (points); scales : the test-segment lengths (s, or
-        points with an int window).
+    level, false_alarm_rate_per_h, power : the settings (false alarms per hour).
+    window : None, float (s) or int (points), as :func:`window_spec` returns it
+        (:func:`window_label` gives its text, ``"40s"``); scales : the test-segment
+        lengths (s, or points with a points window).
     method : "closed_form" (1.4) or "general" (:func:`fit_general`).
     test_level : the level p of each test (``false_alarm_rate · dt / len(scales)``).
     solve_time : float, s for the whole track.
@@ -135,7 +137,7 @@ class PlaneTrack:
     detectable_tilt: FloatArray
     detectable_tilt_any: FloatArray
     level: float = 0.997
-    false_alarm_rate: float = 1.0 / 3600.0
+    false_alarm_rate_per_h: float = 1.0
     power: float = 0.9
     window: float | int | None = None
     scales: tuple[float, ...] = ()
@@ -143,6 +145,11 @@ class PlaneTrack:
     test_level: float = float("nan")
     solve_time: float = 0.0
     info: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def false_alarm_rate(self) -> float:
+        """The bound in false alarms per SECOND (``false_alarm_rate_per_h / 3600``)."""
+        return self.false_alarm_rate_per_h / 3600.0
 
     @property
     def n_steps(self) -> int:
@@ -192,8 +199,9 @@ class PlaneTrack:
             obj[~np.isfinite(a)] = None
             return obj.tolist()
         out: dict[str, Any] = {k: clean(np.asarray(getattr(self, k))) for k in _ARRAYS}
-        out.update(level=self.level, false_alarm_rate=self.false_alarm_rate,
-                   power=self.power, window=self.window, scales=list(self.scales),
+        out.update(level=self.level, false_alarm_rate_per_h=self.false_alarm_rate_per_h,
+                   power=self.power, window=window_label(self.window),
+                   scales=list(self.scales),
                    method=self.method, test_level=self.test_level,
                    solve_time=self.solve_time, n_steps=self.n_steps,
                    change_times=self.change_times.tolist())
@@ -201,15 +209,81 @@ class PlaneTrack:
 
 
 # =========================================================================== helpers
-def _window_arg(window: Any) -> float | int | None:
+_WINDOW_HELP = ('write window_seconds=40.0 (or window="40s") for the last 40 s, '
+                'window_points=100 (or window="100pts") for the last 100 measurements, or '
+                'nothing (window=None, "growing") for a growing window')
+
+
+def window_spec(window: str | None = None, *, window_points: int | None = None,
+                window_seconds: float | None = None, where: str = _W) -> float | int | None:
+    """The sliding window of :func:`track`, with its unit stated: ``window_seconds`` (s),
+    ``window_points`` (measurements), or ``window`` as text with a unit (``"40s"``,
+    ``"100pts"``, ``"growing"``); at most one. A bare number is refused: ``40`` (points?)
+    and ``40.0`` (seconds?) read alike (issue 26).
+
+    Returns the internal form: a float (seconds), an int (points) or ``None`` (growing).
+
+    Raises
+    ------
+    ProblemError
+        A bare number, two of the three given, or a value out of range; the message says
+        what to write.
+    """
+    given = [k for k, v in (("window", window), ("window_points", window_points),
+                            ("window_seconds", window_seconds)) if v is not None]
+    if len(given) > 1:
+        raise ProblemError(f"{where} {'/'.join(given)}: give one window, got {len(given)}")
+    if window_points is not None:
+        if isinstance(window_points, bool | np.bool_) or not isinstance(
+                window_points, int | np.integer):
+            raise ProblemError(f"{where} window_points: expected a whole number of "
+                               f"measurements (>= 4), got {window_points!r}")
+        return as_count(f"{where} window_points", window_points, minimum=4)
+    if window_seconds is not None:
+        if isinstance(window_seconds, bool | np.bool_):
+            raise ProblemError(f"{where} window_seconds: expected seconds, got "
+                               f"{window_seconds!r}")
+        return as_positive(f"{where} window_seconds", window_seconds)
     if window is None:
         return None
-    if isinstance(window, bool | np.bool_):
-        raise ProblemError(f"{_W} window: expected None, seconds (a float) or a number of "
-                           f"points (an int), got {window!r}")
-    if isinstance(window, int | np.integer):
-        return as_count(f"{_W} window", window, minimum=4)
-    return as_positive(f"{_W} window", window)
+    if not isinstance(window, str):
+        raise ProblemError(f"{where} window: {window!r} does not say its unit (points or "
+                           f"seconds?); {_WINDOW_HELP}")
+    return _parse_window_text(window, where)
+
+
+def _parse_window_text(text: str, where: str) -> float | int | None:
+    """``"40s"`` / ``"40 s"`` → 40.0 s; ``"100pts"`` / ``"100 points"`` → 100 points;
+    ``"growing"`` → ``None``; anything else (a bare ``"40"``) refused."""
+    raw = text.strip().lower().replace(" ", "")
+    if raw in ("growing", "none", "all"):
+        return None
+    for suffix in ("seconds", "second", "sec", "s"):
+        if raw.endswith(suffix):
+            try:
+                value = float(raw[: -len(suffix)])
+            except ValueError:
+                break
+            return as_positive(f"{where} window (s)", value)
+    for suffix in ("points", "point", "pts", "pt"):
+        if raw.endswith(suffix):
+            try:
+                count = int(raw[: -len(suffix)])
+            except ValueError:
+                break
+            return as_count(f"{where} window (points)", count, minimum=4)
+    raise ProblemError(f"{where} window: {text!r} does not say its unit (points or "
+                       f"seconds?); {_WINDOW_HELP}")
+
+
+def window_label(window: float | int | None) -> str:
+    """The text form of a window (``"40s"``, ``"100pts"``, ``"growing"``): what
+    :func:`window_spec` reads back."""
+    if window is None:
+        return "growing"
+    if isinstance(window, int):
+        return f"{window}pts"
+    return f"{window:g}s"
 
 
 def _scales_arg(scales: Any, window: float | int | None) -> tuple[float, ...]:
@@ -360,15 +434,18 @@ def track(
     points: ArrayLike,
     cov: ArrayLike,
     *,
-    window: float | int | None = None,
+    window: str | None = None,
+    window_points: int | None = None,
+    window_seconds: float | None = None,
     level: float = 0.997,
-    false_alarm_rate: float = 1.0 / 3600.0,
+    false_alarm_rate_per_h: float = 1.0,
     alpha2: ArrayLike | None = None,
     start: float | None = None,
     scales: Any = None,
     power: float = 0.9,
     min_reference: int = 8,
     max_reference_sd: float = 0.1,
+    false_alarm_rate: Any = None,
 ) -> PlaneTrack:
     r"""The plane of maneuver along a track, with plane-change detection.
 
@@ -380,18 +457,23 @@ def track(
         Error covariances D_i (m², same frame): a (3, 3) ``D`` with ``alpha2`` for (1.4),
         or one per point (proportional stacks are detected; others use
         :func:`optmodels.plane.general.fit_general`).
-    window : None, float or int
-        ``None``: growing window (all points since the start or the last change); a float:
-        the last ``window`` seconds (points with t > t_k − window); an int: the last
-        ``window`` points (≥ 4).
+    window_seconds : float, optional
+        The last ``window_seconds`` seconds (points with t > t_k − window_seconds).
+    window_points : int, optional
+        The last ``window_points`` measurements (≥ 4).
+    window : str, optional
+        The same as text with its unit: ``"40s"``, ``"100pts"`` or ``"growing"``. At most
+        one of the three; none: a growing window (all points since the start or the last
+        change). A bare number (``window=40``) is refused: points or seconds? (issue 26;
+        :func:`window_spec`).
     level : float
         Level of the χ²(n − 3) planarity test and of the line test behind ``resolved``,
         in (0, 1) (default 0.997 as in the paper).
-    false_alarm_rate : float
-        Bound on the detector's false alarms per second of planar track (default 1/3600:
-        at most one per hour). Each of the ``len(scales)`` tests of a step has level
-        ``false_alarm_rate · dt / len(scales)`` (``dt`` the median sampling interval);
-        their union bounds the rate (see :mod:`optmodels.plane.detector`).
+    false_alarm_rate_per_h : float
+        Bound on the detector's false alarms per HOUR of planar track (default 1). Each of
+        the ``len(scales)`` tests of a step has level ``rate · dt / len(scales)`` (the
+        rate per second, ``dt`` the median sampling interval); their union bounds the rate
+        (see :mod:`optmodels.plane.detector`).
     alpha2 : (N,), optional
         The factors α_i² of (1.4) with a (3, 3) ``cov``.
     start : float, optional
@@ -409,6 +491,8 @@ def track(
         deviation of its tilts (Cramér–Rao, rad) is at most this (default 0.1 rad ≈ 6°).
         A barely resolved reference (nearly straight, or just after a restart) fits
         its rotation about the line to the noise, and U is then not χ²(3).
+    false_alarm_rate : removed
+        Was per SECOND; refused with a message: write ``false_alarm_rate_per_h``.
 
     Returns
     -------
@@ -429,9 +513,16 @@ def track(
     t = as_finite_array(f"{_W} times", times, shape=(n,), max_abs=1e100)
     if np.any(np.diff(t) <= 0):
         raise ProblemError(f"{_W} times: must be strictly increasing")
-    win = _window_arg(window)
+    win = window_spec(window, window_points=window_points, window_seconds=window_seconds)
     lv = as_probability(f"{_W} level", level, low_open=True, high_open=True)
-    far = as_positive(f"{_W} false_alarm_rate", false_alarm_rate)
+    if false_alarm_rate is not None:
+        raise ProblemError(f"{_W} false_alarm_rate: renamed false_alarm_rate_per_h, false "
+                           "alarms per HOUR (it was per second); write false_alarm_rate_per_h"
+                           f"={3600.0 * float(false_alarm_rate):g} for the same bound"
+                           if isinstance(false_alarm_rate, int | float) else
+                           f"{_W} false_alarm_rate: renamed false_alarm_rate_per_h (per hour)")
+    far_h = as_positive(f"{_W} false_alarm_rate_per_h", false_alarm_rate_per_h)
+    far = far_h / 3600.0
     pw = as_probability(f"{_W} power", power, low_open=True, high_open=True)
     min_ref = as_count(f"{_W} min_reference", min_reference, minimum=4)
     max_sd = as_positive(f"{_W} max_reference_sd", max_reference_sd, allow_inf=True)
@@ -439,7 +530,7 @@ def track(
     if isinstance(win, float) and n > 1:
         dt = float(np.median(np.diff(t)))
         if win < 3.0 * dt:  # a plane needs 4 points: found by review (n_points = 1 per step)
-            raise ProblemError(f"{_W} window: {win:g} s holds fewer than 4 measurements at "
+            raise ProblemError(f"{_W} window_seconds: {win:g} s holds fewer than 4 measurements at "
                                f"the median sampling interval {dt:g} s; give at least "
                                f"{3.0 * dt:g} s")
     if start is None:
@@ -453,7 +544,7 @@ def track(
     dt = float(np.median(np.diff(t)))
     thr, p_test = detector_threshold(far, dt, len(sc))
     if not p_test < 0.5:
-        raise ProblemError(f"{_W} false_alarm_rate: {far:g} per second with a sampling "
+        raise ProblemError(f"{_W} false_alarm_rate_per_h: {far_h:g} per hour with a sampling "
                            f"interval of {dt:g} s and {len(sc)} scales gives a per-test "
                            f"level {p_test:.3g}; must be < 0.5")
     lam_star = noncentrality_for_power(thr, pw)
@@ -540,7 +631,7 @@ def track(
         detector=rec["det"], detector_threshold=np.full(k, thr),
         change_time=rec["ctime"], detectable_tilt=rec["tilt"],
         detectable_tilt_any=rec["tilt_any"], level=lv,
-        false_alarm_rate=far, power=pw, window=win, scales=sc,
+        false_alarm_rate_per_h=far_h, power=pw, window=win, scales=sc,
         method="general" if general else "closed_form", test_level=p_test,
         solve_time=tm.elapsed, info={"restarts": restarts, "noncentrality": lam_star,
                                      "dt": dt},

@@ -223,3 +223,30 @@ def _no_plane(sol: PlaneSolution) -> PlaneSolution:
     sol.offset = float("nan")
     sol.projected = np.empty((0, 3))
     return sol
+
+
+def _resolve(sol: PlaneSolution, data: PlaneData, level: float | None) -> PlaneSolution:
+    """The verdict of the line test on a single fit (issue 26): an OK plane whose points
+    are on a line at ``level`` is not a plane -- it becomes the unresolved form (status
+    ERROR, message "unresolved: ...", NaN normal and offset, the plane that was fitted in
+    ``info["rejected"]``), with ``resolved=False`` and the ML ``line_direction``. A fit
+    that is not OK, or ``level=None``, is returned untested (``resolved=None``)."""
+    if level is None or not sol.ok:
+        return sol
+    from optmodels.plane.general import line_test
+
+    lt = line_test(data, level)
+    sol.resolved = lt.resolved
+    sol.line_direction = lt.direction
+    sol.info["line_test"] = {"statistic": lt.statistic, "dof": lt.dof,
+                             "threshold": lt.threshold, "level": lt.level,
+                             "exact": lt.exact}
+    if lt.resolved:
+        return sol
+    sol = _no_plane(sol)
+    sol.status = Status.ERROR
+    sol.message = (f"unresolved: the points lie on a line at level {lt.level:g} (line "
+                   f"statistic {lt.statistic:.6g} <= {lt.threshold:.6g}, chi2({lt.dof})): "
+                   "the plane is not determined; line_direction is the maximum-likelihood "
+                   "line")
+    return sol

@@ -11,7 +11,7 @@ from pathlib import Path
 from typing import Any
 
 from optmodels.cli.args import _count, _positive
-from optmodels.cli.contract import _OK_STATUSES, Outcome, _leaf, _reading
+from optmodels.cli.contract import _OK_STATUSES, Outcome, _group, _leaf, _reading
 from optmodels.core import ProblemError
 
 #: This problem's line in the demo's report/index.md.
@@ -168,15 +168,16 @@ def register(sub: Any) -> None:
     """Add ``optmodels assignment solve`` and ``count`` to the top-level sub-commands
     ``sub``."""
     positive, count0, count1 = _positive(), _count(0), _count(1)
-    asp = sub.add_parser("assignment", help="joint assignment with merges (paper 004)")
-    asub = asp.add_subparsers(dest="verb", required=True)
+    asub = _group(sub, "assignment", "joint assignment with merges (paper 004)")
     aso = _leaf(asub, "solve", "the MAP hypothesis of a CASE.json")
     aso.add_argument("case", help="JSON with means, covs, measurements, meas_cov (one d×d or "
                                   "a list of N), volume, pd, and rho or a sensor block "
                                   "({range: m, azimuth_deg: deg, site: [x, y]} or "
                                   "{ellipse: [[m²]]}, weights) [, max_group_size, "
                                   "group_gate]")
-    aso.add_argument("--method", choices=("milp", "brute-force", "linear"), default="milp")
+    aso.add_argument("--method", choices=("milp", "brute-force", "linear"), default="milp",
+                     help="one MILP, enumeration (13)-(14), or the linear assignment "
+                          "without merges")
     aso.add_argument("--solver", default="HIGHS", help="MILP solver (HIGHS, SCIP, ...)")
     aso.add_argument("--time-limit", type=positive, help="MILP time limit, s (> 0)")
     aso.add_argument("--k", type=count0, default=0, help="also list the k best and marginals")

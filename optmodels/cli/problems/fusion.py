@@ -11,9 +11,8 @@ from typing import Any
 
 import numpy as np
 
-from optmodels import fusion
 from optmodels.cli.args import _count
-from optmodels.cli.contract import Outcome, _leaf, _reading
+from optmodels.cli.contract import Outcome, _group, _leaf, _reading
 from optmodels.core import ProblemError
 
 #: This problem's line in the demo's report/index.md.
@@ -37,6 +36,8 @@ def _matrix_arg(flag: str, text: str) -> np.ndarray:
 
 
 def _fusion_weights(args: argparse.Namespace) -> Outcome:
+    from optmodels import fusion
+
     s1, s2 = _matrix_arg("--s1", args.s1), _matrix_arg("--s2", args.s2)
     n1 = args.n1 if args.n1 is not None else args.n
     n2 = args.n2 if args.n2 is not None else args.n
@@ -107,8 +108,7 @@ def run_details(out: Path, *, sizes: list[int], runs: int, repeats: int, seed: i
 def register(sub: Any) -> None:
     """Add ``optmodels fusion weights`` to the top-level sub-commands ``sub``."""
     count1 = _count(1)
-    fus = sub.add_parser("fusion", help="fusion of two estimates (paper 003)")
-    fsub = fus.add_subparsers(dest="verb", required=True)
+    fsub = _group(sub, "fusion", "fusion of two estimates (paper 003)")
     fw = _leaf(fsub, "weights", "W, the Jacobians P1, P2 (13)-(14) and Cov(vec W) (10)")
     fw.add_argument("--s1", required=True,
                     help="error covariance of estimate 1: JSON '[[..],[..]]' or .npy/.json path")
@@ -117,7 +117,7 @@ def register(sub: Any) -> None:
     fw.add_argument("--n1", type=count1, help="snapshots behind S1 (overrides --n)")
     fw.add_argument("--n2", type=count1, help="snapshots behind S2 (overrides --n)")
     fw.add_argument("--mean", choices=("sample", "known"), default="sample",
-                    help="sample covariances about the sample mean (default) or the known "
+                    help="sample covariances about the sample mean, or about the known "
                          "mean (the paper's literal (3))")
     fw.add_argument("--s12", help="Cov(a1, a2) when both sample covariances come from the "
                                    "same snapshots of correlated estimators (adds the cross "

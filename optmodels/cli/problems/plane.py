@@ -15,10 +15,12 @@ from typing import Any
 
 import numpy as np
 
-from optmodels import plane
 from optmodels.cli.args import _finite, _level, _positive
-from optmodels.cli.contract import _OK_STATUSES, Outcome, _leaf, _out_file, _reading
+from optmodels.cli.contract import _OK_STATUSES, Outcome, _group, _leaf, _out_file, _reading
 from optmodels.core import VERIFY_TOL, ProblemError
+
+# the problem package is imported inside the handlers only: `optmodels --help` imports no
+# problem (issue 23 item 4)
 
 #: This problem's line in the demo's report/index.md.
 DEMO_TITLE = ("- [Plane of maneuver (paper 000)](plane/report.md): figures 1-4, Monte "
@@ -39,9 +41,40 @@ def _parse_cov(text: str) -> np.ndarray:
     raise ProblemError(f"--cov: expected 6 or 9 numbers, got {len(v)}")
 
 
+def _orientation(normal: Any) -> dict[str, float]:
+    """The plane's orientation in degrees, for a person (the file's frame read as local
+    ENU: x east, y north, z up): ``tilt_deg``, the angle between the plane and the
+    horizontal (0: a level turn, 90: a vertical plane), and ``tilt_azimuth_deg``, the
+    direction in which the plane rises most steeply, clockwise from north (NaN for a
+    level plane)."""
+    n = np.asarray(normal, dtype=float)
+    if not np.all(np.isfinite(n)):
+        return {"tilt_deg": float("nan"), "tilt_azimuth_deg": float("nan")}
+    tilt = float(np.degrees(np.arccos(min(1.0, abs(float(n[2]))))))
+    # the plane rises along the horizontal part of -n·sign(nz) (up-slope direction)
+    up = -np.sign(n[2]) * n[:2] if n[2] != 0 else n[:2]
+    az = float(np.degrees(np.arctan2(up[0], up[1])) % 360.0) if tilt > 1e-9 else float("nan")
+    return {"tilt_deg": tilt, "tilt_azimuth_deg": az}
+
+
+def _method(args: argparse.Namespace) -> str:
+    """``--method`` (closed-form or ipopt); the former ``--formulation closed-form`` is
+    read as ``--method closed-form``, with a note on stderr."""
+    import sys
+
+    if args.formulation == "closed-form":
+        print("optmodels: note: --formulation closed-form is now --method closed-form",
+              file=sys.stderr)
+        return "closed-form"
+    return str(args.method)
+
+
 def _plane_fit(args: argparse.Namespace) -> Outcome:
+    from optmodels import plane
     from optmodels.io import read_plane_csv
 
+    method = _method(args)
+    formulation = "full" if args.formulation == "closed-form" else args.formulation
     with _reading(str(args.file)):
         cols = read_plane_csv(args.file)
         cols = _time_range(cols, args.file, args.start, args.end)
@@ -59,43 +92,41 @@ def _plane_fit(args: argparse.Namespace) -> Outcome:
                 "covariance: give --sigma2 S, --cov ..., or cxx..czz columns in the file"
             )
         data = plane.PlaneData(cols["points"], cov, cols.get("alpha2"))
-    if args.formulation == "closed-form":
-        sol = plane.closed_form(data)
+    if method == "closed-form":
+        sol = plane.closed_form(data, level=args.level)
     else:
-        sol = plane.solve(data, args.formulation)
+        sol = plane.solve(data, formulation, level=args.level)
     out: dict[str, Any] = {
         "file": str(args.file),
         "n_points": data.n_points,
         "time_span": ([float(cols["t"][0]), float(cols["t"][-1])] if "t" in cols
                       else None),
-        "formulation": args.formulation,
-        "status": sol.status.value,
+        "method_flag": method,
+        "formulation": None if method == "closed-form" else formulation,
+        "status": "unresolved" if sol.resolved is False else sol.status.value,
         "method": sol.method,
+        "resolved": sol.resolved,
         "normal": np.asarray(sol.normal, dtype=float).tolist(),
         "offset": sol.offset,
+        **_orientation(sol.normal),
+        "line_direction": (np.asarray(sol.line_direction, dtype=float).tolist()
+                           if sol.resolved is False else None),
+        "line_test": sol.info.get("line_test"),
         "objective": sol.objective,
         "residuals": sol.residuals,
         "build_time": sol.build_time,
         "solve_time": sol.solve_time,
         "iterations": sol.iterations,
         "message": sol.message,
+        "units": {"offset": "m", "normal": "unit vector in the file's frame",
+                  "tilt_deg": "deg from the horizontal (z up)",
+                  "tilt_azimuth_deg": "deg clockwise from north (y) of the steepest rise",
+                  "time_span": "s"},
     }
-    if sol.ok and data.n_points >= 4:
+    if (sol.ok or sol.resolved is False) and data.n_points >= 4:
+        # the same line test as the fit (exact under general covariances)
         test = plane.planarity_test(data, sol, level=args.level)
         out["planarity_test"] = test.to_dict()
-        if not test.resolved:
-            # the points lie on a line at `level`: every plane through it fits as well, so no
-            # plane is reported (never an arbitrary normal with an OK status)
-            # the ML line of the package's general fit (what `plane track` reports)
-            direction = plane.fit_general(data.points, data.covs,
-                                          level=args.level).line_direction
-            out.update(status="unresolved", normal=[float("nan")] * 3, offset=float("nan"),
-                       line_direction=np.asarray(direction, dtype=float).tolist(),
-                       message=(f"the points lie on a line at level {args.level} (line test "
-                                f"{test.line_statistic:.6g} ≤ {test.line_threshold:.6g}): "
-                                "the plane is not determined; line_direction is the "
-                                "maximum-likelihood line"))
-            return out, False
     return out, sol.ok
 
 
@@ -112,6 +143,10 @@ def _print_plane_fit(res: dict[str, Any]) -> None:
         return
     print(f"  normal  = ({n[0]:.9f}, {n[1]:.9f}, {n[2]:.9f})")
     print(f"  offset  = {res['offset']:.6f} m")
+    az = res["tilt_azimuth_deg"]
+    print(f"  tilt    = {res['tilt_deg']:.3f}° from the horizontal"
+          + (f", rising towards azimuth {az:.1f}° (clockwise from north)"
+             if az == az else " (a level plane)"))
     print(f"  objective (1.2) = {res['objective']:.6g}; max residual (1.3) = "
           f"{max(res['residuals'].values(), default=0.0):.1e}")
     t = res.get("planarity_test")
@@ -119,6 +154,8 @@ def _print_plane_fit(res: dict[str, Any]) -> None:
         verdict = "planar" if t["planar"] else "NOT planar"
         print(f"  χ² test: Λ = {t['statistic']:.6g}, dof = {t['dof']}, threshold "
               f"{t['threshold']:.6g} at level {t['level']} -> {verdict} (p = {t['p_value']:.3g})")
+        print(f"  line test: {t['line_statistic']:.6g} > {t['line_threshold']:.6g} "
+              f"(χ²({t['line_dof']})) -> the plane is resolved")
         pv = "planar" if t["paper_planar"] else "NOT planar"
         print(f"  paper (1.17): √(2Λ) = {t['paper_statistic']:.4f} vs √(2N)+2 = "
               f"{t['paper_threshold']:.4f} -> {pv}")
@@ -147,21 +184,16 @@ def _time_range(cols: dict[str, Any], file: Path, start: float | None,
 
 
 def _parse_window(text: str) -> float | int | None:
-    """``--window``: ``40s`` (seconds), ``100`` (points) or ``growing``."""
-    raw = text.strip().lower()
-    if raw in ("growing", "none", "all"):
-        return None
+    """``--window``: ``40s`` (seconds), ``100pts`` (points) or ``growing``; a bare number
+    is refused (points or seconds?), as in :func:`optmodels.plane.tracking.window_spec`."""
+    from optmodels.plane.tracking import _parse_window_text
+
     try:
-        if raw.endswith("s"):
-            v = float(raw[:-1])
-            if not (np.isfinite(v) and v > 0):
-                raise ValueError
-            return v
-        return int(raw)
-    except ValueError:
+        return _parse_window_text(text, "--window")
+    except ProblemError:
         raise argparse.ArgumentTypeError(
-            f"expected seconds like 40s, a number of points like 100, or growing; got "
-            f"{text!r}") from None
+            f"{text!r} does not say its unit: write seconds like 40s, a number of "
+            "points like 100pts, or growing") from None
 
 
 def _parse_site(text: str) -> np.ndarray:
@@ -245,40 +277,63 @@ def _csv_text(rows: list[dict[str, Any]]) -> str:
     return buf.getvalue()
 
 
+#: The step columns that are angles: written in degrees, the unit in the name.
+_DEG_COLUMNS = {"detectable_tilt": "detectable_tilt_deg",
+                "detectable_tilt_any": "detectable_tilt_any_deg"}
+
+
+def _cli_row(row: dict[str, Any]) -> dict[str, Any]:
+    """One step row for a person: the angles in degrees (``detectable_tilt_deg``), the
+    numerical error estimate named with its unit (``numerical_error_rad``)."""
+    out: dict[str, Any] = {}
+    for k, v in row.items():
+        if k in _DEG_COLUMNS:
+            out[_DEG_COLUMNS[k]] = float(np.degrees(v))
+        elif k == "numerical_error":
+            out["numerical_error_rad"] = v
+        else:
+            out[k] = v
+    return out
+
+
 def _plane_track(args: argparse.Namespace) -> Outcome:
     from optmodels.io import read_plane_csv
     from optmodels.io.paths import _write_text
-    from optmodels.plane.tracking import track
+    from optmodels.plane.tracking import track, window_label
 
     out_path = _out_file("--out", args.out) if args.out is not None else None
     with _reading(str(args.file)):
         cols = read_plane_csv(args.file, require_time=True)
         cov, alpha2, source = _track_cov(args, cols)
-    trk = track(cols["t"], cols["points"], cov, window=args.window, level=args.level,
-                false_alarm_rate=args.false_alarm_rate / 3600.0, alpha2=alpha2,
+    win = args.window
+    trk = track(cols["t"], cols["points"], cov,
+                window_points=win if isinstance(win, int) else None,
+                window_seconds=win if isinstance(win, float) else None, level=args.level,
+                false_alarm_rate_per_h=args.false_alarm_rate_per_h, alpha2=alpha2,
                 power=args.power, start=args.start)
     status = _step_status(trk)
-    rows = [{**r, "status": s} for r, s in zip(trk.to_rows(), status, strict=True)]
+    rows = [{**_cli_row(r), "status": s} for r, s in zip(trk.to_rows(), status, strict=True)]
     if out_path is not None:
         _write_text(out_path, _csv_text(rows), newline="")
     counts = {s: status.count(s) for s in ("optimal", "optimal_inaccurate", "unresolved",
                                            "error")}
     ok = counts["error"] == 0
     settings = {k: v for k, v in trk.to_dict().items()
-                if k in ("level", "false_alarm_rate", "power", "window", "scales",
+                if k in ("level", "false_alarm_rate_per_h", "power", "scales",
                          "method", "test_level", "solve_time", "n_steps", "change_times")}
     doc: dict[str, Any] = {
         "file": str(args.file),
         "n_points": len(cols["t"]),
         "covariance": source,
-        "window": args.window,
+        "window": window_label(win),
         "units": {"time": "s", "offset": "m", "normal": "unit vector in the file's frame",
-                  "detectable_tilt": "rad", "false_alarm_rate": "per second",
-                  "statistic": "dimensionless, chi2(n_points - 3) if planar"},
+                  "detectable_tilt_deg": "deg", "false_alarm_rate_per_h": "per hour",
+                  "numerical_error_rad": "rad", "scales": "s, or points with a points "
+                  "window", "statistic": "dimensionless, chi2(n_points - 3) if planar"},
         **settings,
         "status_counts": counts,
         "status": "optimal" if ok else "error",
-        "out": str(out_path) if out_path is not None else None,
+        "out": str(out_path.resolve()) if out_path is not None else None,
         "steps": rows,
     }
     return doc, ok
@@ -291,11 +346,11 @@ def _print_plane_track(res: dict[str, Any]) -> None:
     c = res["status_counts"]
     ch = ", ".join(f"{t:g}" for t in res["change_times"]) or "none"
     print(f"{res['file']}: N = {res['n_points']}, {res['n_steps']} steps ({res['method']}, "
-          f"window {res['window'] if res['window'] is not None else 'growing'}) -> "
-          f"{res['out']}")
+          f"window {res['window']}); wrote {res['out']}")
     print(f"  steps: {c['optimal']} optimal, {c['optimal_inaccurate']} inaccurate, "
           f"{c['unresolved']} unresolved (on a line), {c['error']} error")
-    print(f"  plane changes detected at t = {ch} s")
+    print(f"  plane changes detected at t = {ch} s (bound: "
+          f"{res['false_alarm_rate_per_h']:g} false alarms per hour)")
 
 
 def run_demo(out: Path, args: argparse.Namespace, progress: bool) -> dict[str, Any]:
@@ -325,17 +380,25 @@ def register(sub: Any) -> None:
     """Add ``optmodels plane fit`` and ``optmodels plane track`` to the top-level
     sub-commands ``sub``."""
     positive = _positive()
-    pl = sub.add_parser("plane", help="plane of maneuver (paper 000)")
-    plsub = pl.add_subparsers(dest="verb", required=True)
-    fit = _leaf(plsub, "fit", "fit the ML plane to a CSV of positions")
+    plsub = _group(sub, "plane", "plane of maneuver (paper 000)")
+    fit = _leaf(plsub, "fit", "fit the ML plane to a CSV of positions; prints its tilt")
+    fit.epilog = ("Exit 0: a resolved plane; 1: not OK, or unresolved (the points lie on a "
+                  "line at --level: the line's direction is reported, no plane); 2: bad "
+                  "input.")
     fit.add_argument("file", type=Path, help="CSV with x,y,z [,t] [,alpha2] [,cxx..czz]")
     g = fit.add_mutually_exclusive_group()
     g.add_argument("--sigma2", type=positive, help="error variance per axis, m² (D = σ² I)")
     g.add_argument("--cov", help="common D, m²: cxx,cxy,cxz,cyy,cyz,czz (or 9 numbers)")
+    fit.add_argument("--method", choices=("ipopt", "closed-form"), default="ipopt",
+                     help="closed-form (1.5)-(1.8), valid under D_i = α_i² D, or the "
+                          "generic NLP (CasADi + IPOPT) on --formulation")
     fit.add_argument("--formulation", choices=("full", "reduced", "closed-form"),
-                     default="full")
+                     default="full",
+                     help="the generic NLP's form: full (1.2)-(1.3) or reduced "
+                          "(1.12)-(1.13) (closed-form: the former spelling of --method "
+                          "closed-form)")
     fit.add_argument("--level", type=_level(), default=0.997,
-                     help="χ² test level, in (0, 1)")
+                     help="level of the χ² planarity and line tests, in (0, 1)")
     fit.add_argument("--start", type=_finite(), help="fit only rows with t >= START (s)")
     fit.add_argument("--end", type=_finite(), help="fit only rows with t <= END (s)")
     fit.set_defaults(func=_plane_fit, printer=_print_plane_fit)
@@ -345,19 +408,24 @@ def register(sub: Any) -> None:
     tr.epilog = ("One row per step: time (s), nx, ny, nz (unit normal, the file's frame; "
                  "empty/nan where not resolved), offset (m), statistic and threshold (χ², "
                  "dimensionless), resolved, planar, change, detector, detector_threshold, "
-                 "change_time (s), detectable_tilt (rad), n_points, window_start (s), "
-                 "line_x..line_z, numerical_error (rad), p_value, status. Exit 0: no step "
-                 "in error; 1: some step's plane failed its re-check; 2: bad input.")
+                 "change_time (s), detectable_tilt_deg, detectable_tilt_any_deg (deg), "
+                 "n_points, window_start (s), line_x..line_z, numerical_error_rad, "
+                 "p_value, status. Exit 0: no step in error; 1: some step's plane failed "
+                 "its re-check; 2: bad input.")
     tr.add_argument("file", type=Path,
                     help="CSV with t (s, increasing), x,y,z (m) [,alpha2] [,cxx..czz (m²)]")
     tr.add_argument("--window", type=_parse_window, required=True,
-                    help="window: seconds like 40s, a number of points like 100, or growing")
+                    metavar="40s|100pts|growing",
+                    help="window with its unit: seconds like 40s, a number of points like "
+                         "100pts, or growing (a bare 40 is refused: points or seconds?)")
     tr.add_argument("--level", type=_level(), default=0.997,
                     help="level of the χ² planarity and line tests, in (0, 1)")
-    tr.add_argument("--false-alarm-rate", type=positive, default=1.0,
-                    help="detector false alarms per HOUR of planar track (default 1)")
+    tr.add_argument("--false-alarm-rate-per-h", type=positive, default=1.0,
+                    metavar="PER_HOUR", help="detector false alarms per HOUR of planar track")
+    tr.add_argument("--false-alarm-rate", type=positive, dest="false_alarm_rate_per_h",
+                    default=argparse.SUPPRESS, help=argparse.SUPPRESS)  # the former name
     tr.add_argument("--power", type=_level(), default=0.9,
-                    help="detection probability behind detectable_tilt, in (0, 1)")
+                    help="detection probability behind detectable_tilt_deg, in (0, 1)")
     tr.add_argument("--start", type=_finite(), help="first reported time, s")
     tr.add_argument("--site", type=_parse_site,
                     help="radar position x,y,z (m, the file's local flat ENU frame): "
@@ -370,5 +438,6 @@ def register(sub: Any) -> None:
                     help="radar elevation error std, DEGREES")
     tr.add_argument("--cov", help="common D, m²: cxx,cxy,cxz,cyy,cyz,czz (or 9 numbers)")
     tr.add_argument("--sigma2", type=positive, help="error variance per axis, m² (D = σ² I)")
-    tr.add_argument("--out", help="write the steps to this CSV file (else CSV on stdout)")
+    tr.add_argument("--out", metavar="FILE",
+                    help="write the steps to this CSV FILE (else the CSV on stdout)")
     tr.set_defaults(func=_plane_track, printer=_print_plane_track)

@@ -10,11 +10,9 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from scipy import stats
 
-from optmodels import trajectories
 from optmodels.cli.args import _finite, _level, _positive
-from optmodels.cli.contract import _OK_STATUSES, Outcome, _leaf, _reading
+from optmodels.cli.contract import _OK_STATUSES, Outcome, _group, _leaf, _reading
 from optmodels.core import ProblemError
 
 #: This problem's line in the demo's report/index.md.
@@ -24,6 +22,9 @@ DEMO_TITLE = ("- [Dependent linear trajectories (paper 002)]"
 
 
 def _trajectories_fit(args: argparse.Namespace) -> Outcome:
+    from scipy import stats
+
+    from optmodels import trajectories
     from optmodels.io import read_trajectory_csv
 
     with _reading(str(args.file)):
@@ -133,25 +134,28 @@ def run_details(out: Path, *, sizes: list[int], runs: int, repeats: int, seed: i
 def register(sub: Any) -> None:
     """Add ``optmodels trajectories fit`` to the top-level sub-commands ``sub``."""
     positive = _positive()
-    trj = sub.add_parser("trajectories", help="dependent linear trajectories (paper 002)")
-    tsub = trj.add_subparsers(dest="verb", required=True)
+    tsub = _group(sub, "trajectories", "dependent linear trajectories (paper 002)")
     tfit = _leaf(tsub, "fit", "fit a family of lines to a CSV of measurements")
     tfit.add_argument("file", type=Path,
                       help="CSV with object,t,y or object,t,x,y[,z] [,sigma2]")
     tfit.add_argument("--family", default="diverging",
-                      choices=("diverging", "parallel", "independent", "custom"))
+                      choices=("diverging", "parallel", "independent", "custom"),
+                      help="the family of lines: shared start (diverging), shared velocity "
+                           "(parallel), none, or --shared-start/--shared-velocity groups")
     tfit.add_argument("--shared-start", action="append", metavar="A,B,..",
                       help="custom family: objects sharing a start (repeatable)")
     tfit.add_argument("--shared-velocity", action="append", metavar="A,B,..",
                       help="custom family: objects sharing a velocity (repeatable)")
     tfit.add_argument("--sigma2", type=positive,
-                      help="error variance, (unit of y)² (default 1)")
+                      help="error variance, (unit of y)² (when absent: 1, or the file's "
+                           "sigma2 column)")
     tfit.add_argument("--sigma2-unknown", action="store_true",
                       help="family test with σ² estimated (F test) instead of known (χ²)")
     tfit.add_argument("--epoch", type=_finite(), default=0.0,
-                      help="time at which the start is defined, s (default 0)")
+                      help="time at which the start is defined, s")
     tfit.add_argument("--method", default="closed-form",
-                      help="closed-form (default) or a CVXPY solver: CLARABEL, OSQP, SCS, ...")
+                      help="closed-form (8)-(9)/(12)-(13), or a CVXPY solver: CLARABEL, "
+                           "OSQP, SCS, ...")
     tfit.add_argument("--formulation", choices=("constrained", "reduced"),
                       default="constrained", help="generic formulation (with --method SOLVER)")
     tfit.add_argument("--level", type=_level(), default=0.95,

@@ -23,7 +23,8 @@ from optmodels.montecarlo import LineLog
 COLUMNS = ("problem", "instance", "size", "seed", "formulation", "solver", "settings",
            "status", "success", "reason", "objective", "objective_gap", "solution_error",
            "max_violation", "build_time", "solve_time", "iterations", "message",
-           "solver_version", "cpu", "time_limit", "options", "repeats")
+           "solver_version", "cpu", "time_limit", "options", "repeats", "build_again",
+           "repeats_done")
 #: What identifies a run for resume: the case, the formulation and solver, the settings
 #: profile, the time limit (s), the options that reach the solver (JSON: the profile's and
 #: the back-end's class defaults, :func:`solvers_cmp.harness.profiles.options_key`), the
@@ -98,6 +99,8 @@ def read_results(path: Path) -> list[dict[str, Any]]:
 def _parse(key: str, v: str) -> Any:
     if key in ("size", "seed", "repeats"):
         return int(v)
+    if key == "repeats_done":
+        return int(float(v)) if v not in ("", "None") else None
     if key == "iterations":
         return int(float(v)) if v not in ("", "None") else None
     if key == "success":
@@ -105,7 +108,7 @@ def _parse(key: str, v: str) -> Any:
             raise ValueError(f"success: {v!r}")
         return v == "True"
     if key in ("objective", "objective_gap", "solution_error", "max_violation",
-               "build_time", "solve_time", "time_limit"):
+               "build_time", "solve_time", "time_limit", "build_again"):
         return float(v) if v not in ("", "None") else float("nan")
     return v
 

@@ -80,6 +80,12 @@ DEFAULTS: dict[str, dict[str, dict[str, Any]]] = {
         "CASADI_OSQP": _casadi_osqp(_OSQP_LSQ),
         "CLARABEL": {"tol_gap_abs": 1e-12, "tol_gap_rel": 1e-12, "tol_feas": 1e-12},
         "SCS": {"eps_abs": 1e-9, "eps_rel": 1e-9, "max_iters": 200_000},
+        # at its defaults (eps_abs 1e-5 through CasADi) PROXQP stopped at stationarity
+        # 2e-5 to 5e-4 on the trajectories QPs (issue 27's sweep): tightened to the target
+        "CASADI_PROXQP": {"proxqp": {"eps_abs": 1e-9}},
+        # (HiGHS' QP solver is left at its defaults: feasibility tolerances of 1e-10 did
+        # not change its 1e-5..1e-4 errors here, measured in issue 27; it fails the target
+        # on these QPs, its failures are results of the comparison)
     },
     # The QPs of the comparison and the package's own checks.
     "qp": {
@@ -93,6 +99,8 @@ DEFAULTS: dict[str, dict[str, dict[str, Any]]] = {
         # reduced problem; 1e-10 brings them to ~3e-8 for one more iteration
         "CLARABEL": {"tol_gap_abs": 1e-10, "tol_gap_rel": 1e-10, "tol_feas": 1e-10,
                      "tol_ktratio": 1e-8},
+        # PROXQP at its defaults: errors 1e-4 to 8e-3 on the bias-field QPs (issue 27)
+        "CASADI_PROXQP": {"proxqp": {"eps_abs": 1e-9}},
     },
     # The solvers' own default accuracy (Clarabel's 1e-10 gap of the QP defaults ends
     # "inaccurate" on the Lipschitz SOCP); only SCS, a first-order solver, is tightened.

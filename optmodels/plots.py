@@ -291,8 +291,9 @@ def association_rates(path: Path, rows: list[dict]) -> Path:
 def scaling(path: Path, rows: list[dict], *, title: str, size_label: str,
             time_limit: float) -> Path:
     """Log-log total time (build + solve) vs size, one panel per instance, one line per
-    (formulation, solver); failed runs drawn as × at the time limit; the closed form (the
-    floor) as a thick black line."""
+    (formulation, solver) with its fitted log-log slope where it has three sizes or more
+    (markers only otherwise: two points make no slope); failed runs drawn as × at the
+    time limit; the closed form (the floor) as a thick black line."""
     instances = sorted({r["instance"] for r in rows})
     fig, axes = plt.subplots(1, len(instances), figsize=(5.2 * len(instances), 4.2),
                              squeeze=False, sharey=True)
@@ -313,9 +314,15 @@ def scaling(path: Path, rows: list[dict], *, title: str, size_label: str,
                 "color": colors[fs], "lw": 1.2, "marker": "o", "ms": 3}
             label = "closed form" if floor else f"{fs[1]} ({fs[0]})"
             if ok:
-                ax.plot([r["size"] for r in ok],
-                        [max(r["build_time"] + r["solve_time"], 1e-6) for r in ok],
-                        label=label, **style)
+                xs = np.array([r["size"] for r in ok], float)
+                ys = np.array([max(r["build_time"] + r["solve_time"], 1e-6) for r in ok])
+                sizes = np.unique(xs)
+                if len(sizes) >= 3:  # enough sizes for a slope: line and fitted exponent
+                    slope = float(np.polyfit(np.log(xs), np.log(ys), 1)[0])
+                    label += f", slope {slope:.2f}"
+                else:  # two sizes make no slope: markers only, no line
+                    style = {**style, "ls": "none"}
+                ax.plot(xs, ys, label=label, **style)
             if bad:
                 ax.plot([r["size"] for r in bad], [time_limit] * len(bad), "x",
                         color=style["color"], ms=7, label=None if ok else label + " (failed)")

@@ -55,6 +55,14 @@ def _check_selection(problems: Sequence[str], solvers: Sequence[str] | None,
                 "the closed form is always kept")
 
 
+def quick_sizes(sizes: Sequence[int]) -> list[int]:
+    """The quick sweep's sizes: a problem's two smallest default sizes and their
+    geometric midpoint -- three sizes, so that every scaling line has a slope."""
+    a, b = sorted(sizes)[:2]
+    mid = round((a * b) ** 0.5)
+    return sorted({a, mid, b})
+
+
 def _run_harness(out: Path, problems: Sequence[str], *, sizes: list[int] | None,
                  solvers: list[str] | None, profile: str, seed: int,
                  time_limit: float | None, quick: bool = False, progress: bool,
@@ -62,7 +70,8 @@ def _run_harness(out: Path, problems: Sequence[str], *, sizes: list[int] | None,
                  repeats: int = 3) -> dict[str, Any]:
     """The comparison harness (:mod:`solvers_cmp.harness`) and its report.
 
-    ``quick``: the main job's sweep -- each problem's two smallest default sizes, the
+    ``quick``: the main job's sweep -- each problem's two smallest default sizes and
+    their geometric midpoint (:func:`quick_sizes`), the
     runs :data:`solvers_cmp.harness.profiles.TOO_SLOW` marks too slow for their size
     left out (listed in the report, ``skipped`` here). ``repeats``: calls per run
     (the median solve time is reported).
@@ -79,7 +88,7 @@ def _run_harness(out: Path, problems: Sequence[str], *, sizes: list[int] | None,
     env = report.environment()
     plan_sizes: harness.Sizes = sizes
     if sizes is None and quick:
-        plan_sizes = {p: list(cs.adapter(p).sizes[:2]) for p in problems}
+        plan_sizes = {p: quick_sizes(cs.adapter(p).sizes) for p in problems}
     from solvers_cmp.harness.profiles import too_slow
 
     skipped = []

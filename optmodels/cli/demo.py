@@ -83,7 +83,7 @@ def register(sub: Any) -> None:
     demo.add_argument("--no-compare", action="store_true", help="skip the comparison")
     demo.add_argument("--sizes", type=_int_list, default=None,
                       help="comparison sizes for every problem (default: each problem's "
-                           "two smallest default sizes)")
+                           "two smallest default sizes and their geometric midpoint)")
     demo.add_argument("--time-limit", type=positive, default=5.0,
                       help="comparison time limit per run, s (default 5)")
     demo.set_defaults(func=_demo, printer=lambda r: _print_written(r, "index.md"))

@@ -224,42 +224,53 @@ def bias_maps(path: Path, centers: FloatArray, panels: dict[str, FloatArray],
               sites: FloatArray, *, component: int, truth_grid: tuple | None = None,
               names: tuple[str, ...] = ()) -> Path:
     """Paper 001, fig. 4: one bias component per radar (columns) for each estimate (rows):
-    cells as dots coloured by value, radar sites as crosses; ``truth_grid`` = (gx, gy,
-    values (ny, nx, m)) adds a first row with the true field as a filled map.
-    ``component`` 0: range bias (m); 1: azimuth bias (shown in degrees)."""
+    cells as dots coloured by value, radar sites as crosses with their names; ``truth_grid``
+    = (gx, gy, values (ny, nx, m)) adds a first row with the true field as a filled map.
+    ``component`` 0: range bias (m); 1: azimuth bias (shown in degrees). Each column is
+    titled by its radar's name once (``names``, default "radar 1", ...), each row by its
+    estimate at the left (wrapped), so that no title runs into its neighbour."""
+    import textwrap
+
     m = sites.shape[0]
+    names = tuple(names) if names else tuple(f"radar {i + 1}" for i in range(m))
     scale, unit = (1.0, "m") if component == 0 else (180 / np.pi, "deg")
     rows = (1 if truth_grid is not None else 0) + len(panels)
     vals = [v[..., component] * scale for v in panels.values()]
     if truth_grid is not None:
         vals.append(truth_grid[2][..., :m] * scale)
     lim = max(float(np.nanmax(np.abs(v))) for v in vals)
-    fig, axes = plt.subplots(rows, m, figsize=(3.6 * m, 3.3 * rows), squeeze=False,
-                             sharex=True, sharey=True)
+    fig, axes = plt.subplots(rows, m, figsize=(3.4 * m + 1.2, 3.1 * rows), squeeze=False,
+                             sharex=True, sharey=True, layout="constrained")
     r0 = 0
     km = 1e-3
+    row_titles = []
     if truth_grid is not None:
         gx, gy, gv = truth_grid
         for i in range(m):
-            ax = axes[0, i]
-            im = ax.pcolormesh(gx * km, gy * km, gv[..., i] * scale, cmap="RdBu_r", vmin=-lim,
-                               vmax=lim, shading="auto")
-            ax.set_title(f"{names[i] if names else i + 1}: true", fontsize=9)
+            im = axes[0, i].pcolormesh(gx * km, gy * km, gv[..., i] * scale, cmap="RdBu_r",
+                                       vmin=-lim, vmax=lim, shading="auto")
+        row_titles.append("true field")
         r0 = 1
     for r, (title, val) in enumerate(panels.items(), start=r0):
         for i in range(m):
-            ax = axes[r, i]
-            im = ax.scatter(centers[:, 0] * km, centers[:, 1] * km,
-                            c=val[:, i, component] * scale, cmap="RdBu_r", vmin=-lim,
-                            vmax=lim, s=14, edgecolors="k", linewidths=0.2)
-            ax.set_title(f"{names[i] if names else i + 1}: {title}", fontsize=9)
+            im = axes[r, i].scatter(centers[:, 0] * km, centers[:, 1] * km,
+                                    c=val[:, i, component] * scale, cmap="RdBu_r",
+                                    vmin=-lim, vmax=lim, s=14, edgecolors="k",
+                                    linewidths=0.2)
+        row_titles.append(title)
+    for i in range(m):
+        axes[0, i].set_title(names[i], fontsize=10, fontweight="bold")
     for ax in axes.ravel():
         ax.plot(sites[:, 0] * km, sites[:, 1] * km, "kx", ms=7, mew=2)
+        for j in range(m):
+            ax.annotate(names[j], (sites[j, 0] * km, sites[j, 1] * km), fontsize=6,
+                        xytext=(3, 3), textcoords="offset points")
         ax.set_aspect("equal")
     for ax in axes[-1]:
         ax.set_xlabel("East, km")
-    for ax in axes[:, 0]:
-        ax.set_ylabel("North, km")
+    for r, ax in enumerate(axes[:, 0]):
+        ax.set_ylabel("\n".join(textwrap.wrap(row_titles[r], 24)) + "\n\nNorth, km",
+                      fontsize=8)
     what = "range bias" if component == 0 else "azimuth bias"
     fig.colorbar(im, ax=axes.ravel().tolist(), shrink=0.8, label=f"{what}, {unit}")
     fig.savefig(path, dpi=100)
@@ -291,8 +302,9 @@ def association_rates(path: Path, rows: list[dict]) -> Path:
 def scaling(path: Path, rows: list[dict], *, title: str, size_label: str,
             time_limit: float) -> Path:
     """Log-log total time (build + solve) vs size, one panel per instance, one line per
-    (formulation, solver); failed runs drawn as × at the time limit; the closed form (the
-    floor) as a thick black line."""
+    (formulation, solver) with its fitted log-log slope where it has three sizes or more
+    (markers only otherwise: two points make no slope); failed runs drawn as × at the
+    time limit; the closed form (the floor) as a thick black line."""
     instances = sorted({r["instance"] for r in rows})
     fig, axes = plt.subplots(1, len(instances), figsize=(5.2 * len(instances), 4.2),
                              squeeze=False, sharey=True)
@@ -313,9 +325,15 @@ def scaling(path: Path, rows: list[dict], *, title: str, size_label: str,
                 "color": colors[fs], "lw": 1.2, "marker": "o", "ms": 3}
             label = "closed form" if floor else f"{fs[1]} ({fs[0]})"
             if ok:
-                ax.plot([r["size"] for r in ok],
-                        [max(r["build_time"] + r["solve_time"], 1e-6) for r in ok],
-                        label=label, **style)
+                xs = np.array([r["size"] for r in ok], float)
+                ys = np.array([max(r["build_time"] + r["solve_time"], 1e-6) for r in ok])
+                sizes = np.unique(xs)
+                if len(sizes) >= 3:  # enough sizes for a slope: line and fitted exponent
+                    slope = float(np.polyfit(np.log(xs), np.log(ys), 1)[0])
+                    label += f", slope {slope:.2f}"
+                else:  # two sizes make no slope: markers only, no line
+                    style = {**style, "ls": "none"}
+                ax.plot(xs, ys, label=label, **style)
             if bad:
                 ax.plot([r["size"] for r in bad], [time_limit] * len(bad), "x",
                         color=style["color"], ms=7, label=None if ok else label + " (failed)")

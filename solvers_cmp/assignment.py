@@ -36,22 +36,59 @@ BRUTE_LIMIT = 200_000
 
 
 def instance(q: int, n: int, seed: int, gate: float | None, *,
-             rho: float = 0.05, merges: bool = True, side_factor: float = 3.0,
-             max_group_size: int | None = None) -> asg.AssignmentData:
+             rho: float | None = None, merges: bool = True, side_factor: float = 3.0,
+             max_group_size: int | None = None,
+             merged_pairs: int | None = None) -> asg.AssignmentData:
     """Q objects in a square of side ``side_factor``·√Q (constant density, so some are
-    closer than the measurement noise), the first min(N, Q) measurements on objects (a
-    merged mean for one close pair), the rest uniform clutter. Groups up to
-    ``max_group_size`` objects (no limit by default; 1 without ``merges``)."""
+    closer than the measurement noise), the first measurements on objects, the rest
+    uniform clutter. Groups up to ``max_group_size`` objects (no limit by default; 1
+    without ``merges``).
+
+    ``merges=True`` (the harness's ``merges`` instance): ``merged_pairs`` (default
+    max(1, Q // 8)) pairs of objects 1 m apart (objects 2k, 2k + 1), each seen as ONE
+    measurement at the pair's centroid (noise σ = 0.2 m), no clutter within 3 m of a
+    pair, P_D = 0.99 and ρ = 0.2 (default): the MAP merges every such pair (a missed
+    detection costs ln 0.01, a merge ln 0.2) -- tested, and the MAP's merge gain (its
+    log score minus the best hypothesis without merges) is in the harness rows.
+    Until issue 27 every measurement was on a single object and the MAP never merged
+    (merge gain 0.0 on every size and seed). ``merges=False`` (``resolved``): the scene
+    as before (σ = 0.5 m, P_D = 0.9, ρ = 0.05), groups of one.
+    """
     rng = np.random.default_rng([seed, q, n])
     side = side_factor * np.sqrt(q)
     means = rng.uniform(0, side, (q, 2))
     covs = np.stack([np.eye(2) * rng.uniform(0.1, 0.5) for _ in range(q)])
     meas = rng.uniform(0, side, (n, 2))
-    k = min(n, q)
-    meas[:k] = means[:k] + rng.normal(0, 0.5, (k, 2))
-    return asg.AssignmentData(means, covs, meas, 0.25 * np.eye(2), side**2, 0.9, rho,
-                              max_group_size=max_group_size if merges else 1,
+    if not merges:
+        k = min(n, q)
+        meas[:k] = means[:k] + rng.normal(0, 0.5, (k, 2))
+        return asg.AssignmentData(means, covs, meas, 0.25 * np.eye(2), side**2, 0.9,
+                                  0.05 if rho is None else rho, max_group_size=1,
+                                  group_gate=gate)
+    m = min(q // 2, max(1, q // 8) if merged_pairs is None else int(merged_pairs))
+    ang = rng.uniform(0, 2 * np.pi, m)
+    means[1:2 * m:2] = means[0:2 * m:2] + np.column_stack([np.cos(ang), np.sin(ang)])
+    cen = (means[0:2 * m:2] + means[1:2 * m:2]) / 2
+    seen = [j for j in range(q) if not (j < 2 * m and j % 2 == 1)]  # one per pair
+    k = min(n, len(seen))
+    for i in range(k, n):  # clutter away from the pairs
+        while m and np.min(np.linalg.norm(cen - meas[i], axis=1)) < 3.0:
+            meas[i] = rng.uniform(0, side, 2)
+    for i, j in enumerate(seen[:k]):
+        c = (means[j] + means[j + 1]) / 2 if j < 2 * m else means[j]
+        meas[i] = c + rng.normal(0, 0.2, 2)
+    return asg.AssignmentData(means, covs, meas, 0.04 * np.eye(2), side**2, 0.99,
+                              0.2 if rho is None else rho, max_group_size=max_group_size,
                               group_gate=gate)
+
+
+def merge_gain(data: asg.AssignmentData, sol: Any) -> float:
+    """The MAP's merge gain: its log score minus that of the best hypothesis without
+    merges (the linear assignment on the same data); 0 when the MAP merges nothing."""
+    import dataclasses
+
+    lin = asg.linear_assignment(dataclasses.replace(data, max_group_size=1))
+    return float(sol.log_score - lin.log_score)
 
 
 def rows(cases: tuple[tuple[int, int, float | None], ...] = CASES, *, seed: int = 0,
@@ -135,6 +172,17 @@ class Adapter(cases.Adapter):
     size_meaning = "objects Q"
     problem_class = "MILP"
     brute_limit = 200_000
+    reference_formulations = ("enumeration (14)",)
+    reductions = ("linear assignment",)
+
+    def notes(self, instance: str, data: Any, ref: Outcome) -> dict[str, Any]:
+        """The reference MAP's merged groups and its merge gain (log score over the best
+        hypothesis without merges, :func:`merge_gain`)."""
+        from optmodels import assignment as asg
+
+        sol = asg.solve(data)
+        return {"MAP merged groups": sum(len(g) > 1 for g in sol.partition),
+                "merge gain (ln)": merge_gain(data, sol)}
 
     def make(self, instance: str, size: int, seed: int) -> Any:
         from solvers_cmp.assignment import instance as gen

@@ -162,6 +162,7 @@ class Adapter(cases.Adapter):
     sizes = (100, 500, 2000)
     size_meaning = "cells K (4 radars)"
     problem_class = "QP (equality-constrained; box = bound constraints)"
+    reductions = ("reduced",)
 
     def make(self, instance: str, size: int, seed: int) -> Any:
         from optmodels import biasfield as bf

@@ -114,6 +114,16 @@ class Adapter:
     sizes: tuple[int, ...] = ()
     size_meaning: str = ""
     problem_class: str = ""
+    #: Formulations that are the floor (exact answers, not generic solves): the closed
+    #: form, the exact enumeration. Ranked in their own rows, never in the headline.
+    reference_formulations: tuple[str, ...] = ("closed_form",)
+    #: Formulations that are reductions of the original problem (a reduced form, a
+    #: special case such as the linear assignment without merges): their own rows.
+    reductions: tuple[str, ...] = ()
+
+    def notes(self, instance: str, data: Any, ref: Outcome) -> dict[str, Any]:
+        """What the report says about an instance (e.g. the MAP's merges); none here."""
+        return {}
 
     def make(self, instance: str, size: int, seed: int) -> Any:
         raise NotImplementedError

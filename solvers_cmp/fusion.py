@@ -198,7 +198,14 @@ class Adapter(cases.Adapter):
         if run.formulation == "closed_form":
             sol = self._fuse(data)
         else:
-            sol = self._fuse(data, method="cvxpy", solver=run.solver, **options)
+            # the package's fusion takes the solvers' own defaults; the comparison runs
+            # every solver at the one target (issue 27): the back-end's least-squares
+            # options (the same for OSQP through CVXPY and through CasADi), then the
+            # profile's
+            from optmodels.backends.profiles import defaults
+
+            opts = {**defaults("lsq", run.solver), **options}
+            sol = self._fuse(data, method="cvxpy", solver=run.solver, **opts)
         return cases._from_solution(sol, sol.estimate)
 
     def error(self, x: Any, ref: Any) -> float:

@@ -284,6 +284,7 @@ class Adapter(cases.Adapter):
     sizes = (20, 100, 1000)
     size_meaning = "points N"
     problem_class = "NLP (equality-constrained, nonconvex)"
+    reductions = ("reduced",)
 
     def make(self, instance: str, size: int, seed: int) -> Any:
         from optmodels import plane, scenarios

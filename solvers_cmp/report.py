@@ -66,12 +66,64 @@ def _benchmark(out: Path, problem: str, bench: list[dict[str, Any]] | None, intr
 
 
 # ============================================================== the harness report
-_SUMMARY_COLS = ["formulation", "solver", "runs", "success_rate", "sgm_solve_time",
-                 "rel_solve_time", "sgm_build_time", "rel_build_time", "max_error",
-                 "max_violation"]
-_SUMMARY_FMT = {"success_rate": ".0%", "sgm_solve_time": ".2e", "rel_solve_time": ".1f",
-                "sgm_build_time": ".2e", "rel_build_time": ".1f", "max_error": ".1e",
+_SUMMARY_COLS = ["kind", "rank", "formulation", "solver", "runs", "success_rate",
+                 "sgm_total_time", "total 95% interval (s)", "sgm_solve_time",
+                 "sgm_build_time", "rel_total_time", "max_error", "max_violation"]
+_SUMMARY_FMT = {"success_rate": ".0%", "sgm_solve_time": ".2e", "rel_total_time": ".1f",
+                "sgm_build_time": ".2e", "sgm_total_time": ".2e", "max_error": ".1e",
                 "max_violation": ".1e"}
+
+
+def _interval(s: dict[str, Any]) -> str:
+    return f"{s['sgm_total_lo']:.2e} – {s['sgm_total_hi']:.2e}"
+
+
+def _display(summary: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """Summary rows for the Markdown tables: the interval as text, ties marked (``1=``),
+    no rank for reductions and references."""
+    out = []
+    for s in summary:
+        d = dict(s)
+        d["total 95% interval (s)"] = _interval(s)
+        d["rank"] = (f"{s['rank']}{'=' if s.get('tied') else ''}" if "rank" in s else "—")
+        out.append(d)
+    return out
+
+
+#: Failure kinds of the harness rows and why they are expected (the demo's summary).
+FAILURE_KINDS = {
+    "time_limit": "the run passed the time limit (a solver too slow at this size, "
+                  "charged the limit in the means)",
+    "error": "the solver failed or its answer failed the package's NumPy re-check "
+             "(never counted as a solution)",
+    "crashed": "the solver killed its worker process (isolated; the sweep went on)",
+    "inaccurate": "the solver returned an answer outside the success bar (error or "
+                  "violation above the profile's tolerance)",
+}
+
+
+def harness_info(rows: list[dict[str, Any]], time_limit: float) -> dict[str, Any]:
+    """The numbers a summary prints: per problem the headline (rank-1 generic solves of
+    the original problem, ties included, with their interval) and the failures by kind
+    (:data:`FAILURE_KINDS`)."""
+    from solvers_cmp.harness import summarise
+
+    summary = summarise(rows, time_limit)
+    head = {}
+    for s in summary:
+        if s["kind"] == "original" and s.get("rank") == 1:
+            head.setdefault(f"{s['problem']}: {s['formulation']}", []).append(
+                {"solver": s["solver"], "formulation": s["formulation"],
+                 "sgm_total_s": s["sgm_total_time"], "interval_s": [s["sgm_total_lo"],
+                                                                    s["sgm_total_hi"]],
+                 "success_rate": s["success_rate"], "tied": bool(s.get("tied"))})
+    kinds: dict[str, int] = {}
+    for r in rows:
+        if not r["success"]:
+            k = r["status"] if r["status"] in ("time_limit", "error", "crashed") \
+                else "inaccurate"
+            kinds[k] = kinds.get(k, 0) + 1
+    return {"headline": head, "failure_kinds": kinds}
 
 
 def _failure_lines(rows: list[dict[str, Any]]) -> list[str]:
@@ -95,16 +147,20 @@ def _failure_lines(rows: list[dict[str, Any]]) -> list[str]:
 def write_harness_report(out: Path, rows: list[dict[str, Any]], *, profile: str,
                          time_limit: float, error_tol: float, violation_tol: float,
                          notes: dict[str, str] | None = None,
-                         env: dict[str, Any] | None = None) -> str:
+                         env: dict[str, Any] | None = None,
+                         skipped: list[dict[str, Any]] | None = None) -> str:
     """Write ``report.md``, one scaling plot per problem (``<problem>_scaling.png``) and
-    ``summary.csv`` for a harness sweep; return the Markdown."""
+    ``summary.csv`` for a harness sweep; return the Markdown. ``skipped``: runs the quick
+    sweep left out (problem, instance, size, formulation, solver, why)."""
     from optmodels import plots
     from solvers_cmp import cases as cs
     from solvers_cmp.harness import summarise
+    from solvers_cmp.harness.metrics import N_BOOT
 
     out.mkdir(parents=True, exist_ok=True)
     summary = summarise(rows, time_limit)
     write_csv(out / "summary.csv", summary)
+    instance_notes = _instance_notes(rows)
     env = env or environment()
     problems = [p for p in cs.REGISTRY if any(r["problem"] == p for r in rows)]
     problems += sorted({r["problem"] for r in rows} - set(problems))
@@ -116,7 +172,10 @@ def write_harness_report(out: Path, rows: list[dict[str, Any]], *, profile: str,
         "failure is charged the time limit. Times are shifted geometric means (shift "
         "10 ms) over the problem's cases; `rel_*` divides by the best of the problem "
         "(1.0 = fastest). Build = CVXPY canonicalisation or CasADi construction; solve = "
-        "the solver's own time. Full rows: `results.csv`; this table: `summary.csv`.\n",
+        "the solver's own time (median of the run's repetitions; build = the first "
+        "call's, measured for every row, the closed forms' included). Full rows: "
+        "`results.csv` (each with its time limit, options and solver version: a rerun "
+        "recomputes any row whose key differs); this table: `summary.csv`.\n",
         f"Machine: {env['cpu']}, {env['cores']} cores; Python {env['python']}; "
         + ", ".join(f"{k} {v}" for k, v in env["packages"].items() if v) + ".\n",
     ]
@@ -125,26 +184,47 @@ def write_harness_report(out: Path, rows: list[dict[str, Any]], *, profile: str,
               "explained under its problem.\n")
     headline = []
     for p in problems:
-        generic = [s for s in summary if s["problem"] == p and s["formulation"] != "closed_form"]
-        best = min(generic, key=lambda s: (-s["success_rate"], s["sgm_solve_time"]
-                                           + s["sgm_build_time"]), default=None)
-        cf = next((s for s in summary if s["problem"] == p
-                   and s["formulation"] == "closed_form"), None)
-        if best is not None:
-            headline.append({"problem": p, "best generic": f"{best['solver']} "
-                             f"({best['formulation']})",
-                             "success": best["success_rate"],
-                             "solve (sgm, s)": best["sgm_solve_time"],
-                             "build (sgm, s)": best["sgm_build_time"],
-                             "closed form (sgm, s)": cf["sgm_solve_time"] if cf else "—",
-                             "max error": best["max_error"]})
+        mine_s = [s for s in summary if s["problem"] == p]
+        floor = [s for s in mine_s if s["kind"] == "reference"]
+        red = sorted((s for s in mine_s if s["kind"] == "reduction"),
+                     key=lambda s: (-s["success_rate"], s["sgm_total_time"]))
+        forms = sorted({s["formulation"] for s in mine_s if s["kind"] == "original"})
+        for form in forms:
+            best = [s for s in mine_s if s["kind"] == "original" and s.get("rank") == 1
+                    and s["formulation"] == form]
+            headline.append({
+                "problem": p, "original problem": form,
+                "best generic": " = ".join(s["solver"] for s in best)
+                + (" (tied)" if len(best) > 1 else ""),
+                "success": best[0]["success_rate"],
+                "total (sgm, s)": best[0]["sgm_total_time"],
+                "95% interval (s)": _interval(best[0]),
+                "best reduction": (f"{red[0]['solver']} ({red[0]['formulation']}): "
+                                   f"{red[0]['sgm_total_time']:.2e} s") if red else "—",
+                "floor (s)": " / ".join(f"{s['formulation']} {s['sgm_total_time']:.2e}"
+                                        for s in floor) or "—"})
     md.append("## Headline\n")
-    md.append(markdown_table(headline, ["problem", "best generic", "success",
-                                        "solve (sgm, s)", "build (sgm, s)",
-                                        "closed form (sgm, s)", "max error"],
-                             {"success": ".0%", "solve (sgm, s)": ".2e",
-                              "build (sgm, s)": ".2e", "closed form (sgm, s)": ".2e",
-                              "max error": ".1e"}))
+    md.append("Generic solves of the **original** problem ranked per problem by success "
+              "rate, then the shifted geometric mean of build + solve time over the "
+              "problem's cases; the 95 % interval is a percentile bootstrap over the cases "
+              f"({N_BOOT} resamples, seeded); solvers whose intervals overlap the leader's "
+              "are **tied** (`1=`) and named together — a rerun may swap them, not the "
+              "headline. Reductions (reduced formulations, the linear assignment without "
+              "merges) and the floor (closed form, enumeration) have their own rows.\n")
+    md.append(markdown_table(headline, ["problem", "original problem", "best generic",
+                                        "success", "total (sgm, s)", "95% interval (s)",
+                                        "best reduction", "floor (s)"],
+                             {"success": ".0%", "total (sgm, s)": ".2e"}))
+    if skipped:
+        md.append("\n## Left out of this quick sweep\n\nRuns the profile marks as too "
+                  "slow for their size (`solvers_cmp.harness.profiles.TOO_SLOW`, measured); "
+                  "a full `optmodels compare` runs them:\n")
+        groups: dict[tuple[str, str, str], list[str]] = {}
+        for k in skipped:
+            groups.setdefault((k["problem"], k["solver"], k["why"]), []).append(
+                f"{k['instance']}/{k['formulation']}/{k['size']}")
+        md.append("\n".join(f"- {p}: **{sv}** at {', '.join(w)} — {why}"
+                             for (p, sv, why), w in groups.items()) + "\n")
     for p in problems:
         mine = [r for r in rows if r["problem"] == p]
         try:
@@ -156,8 +236,12 @@ def write_harness_report(out: Path, rows: list[dict[str, Any]], *, profile: str,
         fig = plots.scaling(out / f"{p}_scaling.png", mine, title=p, size_label=size_label,
                             time_limit=time_limit)
         md.append(f"\n## {p}\n\n{doc}\n")
-        md.append(markdown_table([s for s in summary if s["problem"] == p], _SUMMARY_COLS,
-                                 _SUMMARY_FMT))
+        md.append(markdown_table(_display([s for s in summary if s["problem"] == p]),
+                                 _SUMMARY_COLS, _SUMMARY_FMT))
+        notes_p = instance_notes.get(p)
+        if notes_p:
+            md.append("\nInstances:\n\n" + markdown_table(
+                notes_p, list(notes_p[0]), {"merge gain (ln)": ".2f"}))
         md.append(f"\n![{p} scaling]({fig.name})\n")
         fails = _failure_lines(mine)
         if fails:
@@ -168,3 +252,30 @@ def write_harness_report(out: Path, rows: list[dict[str, Any]], *, profile: str,
     text = "\n".join(md)
     (out / "report.md").write_text(text)
     return text
+
+
+def _instance_notes(rows: list[dict[str, Any]]) -> dict[str, list[dict[str, Any]]]:
+    """Per problem, what its adapter says about each case of the sweep
+    (:meth:`solvers_cmp.cases.Adapter.notes`, e.g. the assignment MAP's merges and
+    merge gain); computed here, once per case."""
+    from solvers_cmp import cases as cs
+
+    out: dict[str, list[dict[str, Any]]] = {}
+    seen = set()
+    for r in rows:
+        key = (r["problem"], r["instance"], r["size"], r["seed"])
+        if key in seen:
+            continue
+        seen.add(key)
+        try:
+            ad = cs.adapter(r["problem"])
+            if type(ad).notes is cs.Adapter.notes:
+                continue
+            data = ad.make(r["instance"], r["size"], r["seed"])
+            note = ad.notes(r["instance"], data, None)  # type: ignore[arg-type]
+        except Exception:  # a note is optional: never fail a report for it
+            continue
+        if note:
+            out.setdefault(r["problem"], []).append(
+                {"instance": r["instance"], "size": r["size"], "seed": r["seed"], **note})
+    return out

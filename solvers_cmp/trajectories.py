@@ -120,6 +120,7 @@ class Adapter(cases.Adapter):
     sizes = (10, 100, 1000)
     size_meaning = "points per object (Q = 10)"
     problem_class = "QP (equality-constrained least squares)"
+    reductions = ("reduced",)
     objects = 10
 
     def make(self, instance: str, size: int, seed: int) -> Any:

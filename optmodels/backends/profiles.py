@@ -27,8 +27,46 @@ from typing import Any
 
 from optmodels.core import ProblemError
 
-__all__ = ["DEFAULTS", "HIGH_OPTIONS", "MILP_LIMIT_SOLVERS", "PROBLEM_CLASSES", "PROFILES",
-           "defaults", "milp_options", "profile_options", "solver_options"]
+__all__ = [
+    "DEFAULTS",
+    "HIGH_OPTIONS",
+    "HIGH_TARGET",
+    "MILP_LIMIT_SOLVERS",
+    "PROBLEM_CLASSES",
+    "PROFILES",
+    "TARGET",
+    "defaults",
+    "milp_options",
+    "profile_options",
+    "solver_options",
+]
+
+#: The accuracy target of the ``default`` profile, the same for every solver (issue 27):
+#: the comparison's success bar -- solution error ≤ 1e-5 (relative; rad for the plane
+#: normal) against the reference and re-computed violation of the original problem
+#: ≤ 1e-6. Each option below is there to reach it (reason beside it); the ``high``
+#: profile's target is 1e-8 / 1e-8 (:data:`HIGH_TARGET`).
+TARGET: dict[str, float] = {"error": 1e-5, "violation": 1e-6}
+#: The ``high`` profile's target.
+HIGH_TARGET: dict[str, float] = {"error": 1e-8, "violation": 1e-8}
+
+
+def _casadi_osqp(opts: dict[str, Any]) -> dict[str, Any]:
+    """The same OSQP options through CasADi's ``osqp`` conic plugin (its name for
+    CVXPY's ``polishing`` is ``polish``): a solver gets one set of options whichever
+    modelling layer drives it. CasADi's plugin otherwise runs at OSQP's own defaults
+    (eps 1e-3), which fail the target (measured: stationarity 2e-3, box residual 4e-3,
+    issue 27's sweep)."""
+    inner = {("polish" if k == "polishing" else k): v for k, v in opts.items()}
+    return {"osqp": {**inner, "verbose": False}}
+
+
+_OSQP_LSQ = {"eps_abs": 1e-6, "eps_rel": 1e-6, "polishing": True, "max_iter": 200_000}
+# eps 1e-6 (was 1e-9): on the bias-field box case OSQP at 1e-9 hit the 5 s limit where
+# 1e-6 reaches the same 5e-10 error in 4.9 s (issue 27); the polish (a KKT solve on the
+# active set, refined 50 times) is what lands on the target, not ADMM's own eps
+_OSQP_QP = {"eps_abs": 1e-6, "eps_rel": 1e-6, "polishing": True, "polish_refine_iter": 50,
+            "max_iter": 200_000}
 
 #: Default options by problem class, then solver.
 DEFAULTS: dict[str, dict[str, dict[str, Any]]] = {
@@ -38,22 +76,31 @@ DEFAULTS: dict[str, dict[str, dict[str, Any]]] = {
     # iterations (22 s) on the parallel family with Q = 100 × 1000 points, for nothing.
     # Every generic solution is verified afterwards, so a failed polish shows.
     "lsq": {
-        "OSQP": {"eps_abs": 1e-6, "eps_rel": 1e-6, "polishing": True, "max_iter": 200_000},
+        "OSQP": _OSQP_LSQ,
+        "CASADI_OSQP": _casadi_osqp(_OSQP_LSQ),
         "CLARABEL": {"tol_gap_abs": 1e-12, "tol_gap_rel": 1e-12, "tol_feas": 1e-12},
         "SCS": {"eps_abs": 1e-9, "eps_rel": 1e-9, "max_iters": 200_000},
+        # at its defaults (eps_abs 1e-5 through CasADi) PROXQP stopped at stationarity
+        # 2e-5 to 5e-4 on the trajectories QPs (issue 27's sweep): tightened to the target
+        "CASADI_PROXQP": {"proxqp": {"eps_abs": 1e-9}},
+        # (HiGHS' QP solver is left at its defaults: feasibility tolerances of 1e-10 did
+        # not change its 1e-5..1e-4 errors here, measured in issue 27; it fails the target
+        # on these QPs, its failures are results of the comparison)
     },
-    # Tight enough for the 1e-8 agreement with the closed form.
+    # The QPs of the comparison and the package's own checks.
     "qp": {
         # OSQP's polish refines its KKT solve 3 times by default: on the bias-field
         # problems that left 1e-3 relative errors in φ while reporting "solved, polishing
         # successful"; 50 reach 1e-15
-        "OSQP": {"eps_abs": 1e-9, "eps_rel": 1e-9, "polishing": True,
-                 "polish_refine_iter": 50, "max_iter": 200_000},
+        "OSQP": _OSQP_QP,
+        "CASADI_OSQP": _casadi_osqp(_OSQP_QP),
         "SCS": {"eps_abs": 1e-9, "eps_rel": 1e-9, "max_iters": 200_000},
         # Clarabel's default gap 1e-8 leaves ~2e-6 relative errors in a box-bound φ of the
         # reduced problem; 1e-10 brings them to ~3e-8 for one more iteration
         "CLARABEL": {"tol_gap_abs": 1e-10, "tol_gap_rel": 1e-10, "tol_feas": 1e-10,
                      "tol_ktratio": 1e-8},
+        # PROXQP at its defaults: errors 1e-4 to 8e-3 on the bias-field QPs (issue 27)
+        "CASADI_PROXQP": {"proxqp": {"eps_abs": 1e-9}},
     },
     # The solvers' own default accuracy (Clarabel's 1e-10 gap of the QP defaults ends
     # "inaccurate" on the Lipschitz SOCP); only SCS, a first-order solver, is tightened.

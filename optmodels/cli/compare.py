@@ -55,14 +55,26 @@ def _check_selection(problems: Sequence[str], solvers: Sequence[str] | None,
                 "the closed form is always kept")
 
 
+def quick_sizes(sizes: Sequence[int]) -> list[int]:
+    """The quick sweep's sizes: a problem's two smallest default sizes and their
+    geometric midpoint -- three sizes, so that every scaling line has a slope."""
+    a, b = sorted(sizes)[:2]
+    mid = round((a * b) ** 0.5)
+    return sorted({a, mid, b})
+
+
 def _run_harness(out: Path, problems: Sequence[str], *, sizes: list[int] | None,
                  solvers: list[str] | None, profile: str, seed: int,
                  time_limit: float | None, quick: bool = False, progress: bool,
-                 instances: list[str] | None = None, scheduler: str | None = None
-                 ) -> dict[str, Any]:
+                 instances: list[str] | None = None, scheduler: str | None = None,
+                 repeats: int = 3) -> dict[str, Any]:
     """The comparison harness (:mod:`solvers_cmp.harness`) and its report.
 
-    ``quick``: the main job's sweep -- each problem's two smallest default sizes.
+    ``quick``: the main job's sweep -- each problem's two smallest default sizes and
+    their geometric midpoint (:func:`quick_sizes`), the
+    runs :data:`solvers_cmp.harness.profiles.TOO_SLOW` marks too slow for their size
+    left out (listed in the report, ``skipped`` here). ``repeats``: calls per run
+    (the median solve time is reported).
     ``scheduler``: ``None``/``"local"``, or a Dask address (each run a Dask task).
     ``references_ok``: every closed-form (reference) row succeeded."""
     from optmodels.backends.casadi_backend import probe_nlp_plugins
@@ -76,11 +88,22 @@ def _run_harness(out: Path, problems: Sequence[str], *, sizes: list[int] | None,
     env = report.environment()
     plan_sizes: harness.Sizes = sizes
     if sizes is None and quick:
-        plan_sizes = {p: list(cs.adapter(p).sizes[:2]) for p in problems}
+        plan_sizes = {p: quick_sizes(cs.adapter(p).sizes) for p in problems}
+    from solvers_cmp.harness.profiles import too_slow
+
+    skipped = []
+    if quick:
+        for _, case, runs in harness.plan(problems, plan_sizes, solvers, (seed,), instances):
+            for run in runs:
+                why = too_slow(case, run)
+                if why is not None:
+                    skipped.append({"problem": case.problem, "instance": case.instance,
+                                    "size": case.size, "formulation": run.formulation,
+                                    "solver": run.solver, "why": why})
     rows = harness.run_sweep(problems, out, sizes=plan_sizes, solvers=solvers,
                              profile=profile, seeds=(seed,), time_limit=time_limit,
                              instances=instances, progress=progress,
-                             scheduler=scheduler)
+                             scheduler=scheduler, repeats=repeats, skip_slow=quick)
     # after the sweep: a second sweep refused by the folder's lock must not overwrite it
     write_json(out / "environment.json", env)
     prof = harness.PROFILES[profile]
@@ -89,10 +112,16 @@ def _run_harness(out: Path, problems: Sequence[str], *, sizes: list[int] | None,
     notes |= {f"CasADi nlpsol {k}": v for k, v in probe_nlp_plugins().items() if v != "ok"}
     report.write_harness_report(out, rows, profile=profile, time_limit=limit,
                                 error_tol=prof.error_tol, violation_tol=prof.violation_tol,
-                                notes=notes, env=env)
+                                notes=notes, env=env, skipped=skipped)
+    summary = report.harness_info(rows, limit)
     refs = [r for r in rows if r["formulation"] == "closed_form"]
+    at_limit = [r for r in rows if r["status"] == "time_limit"]
     return {"out": str(out), "runs": len(rows),
             "successes": sum(bool(r["success"]) for r in rows),
+            "time_limit_s": limit, "runs_at_time_limit": len(at_limit),
+            "seconds_at_time_limit": float(sum(r["solve_time"] for r in at_limit)),
+            "skipped": skipped, "headline": summary["headline"],
+            "failure_kinds": summary["failure_kinds"],
             "references_ok": all(bool(r["success"]) for r in refs)
             and not any("reference failed" in str(r.get("reason", "")) for r in rows),
             "failures": [{k: r[k] for k in ("problem", "instance", "size", "formulation",
@@ -137,12 +166,12 @@ def _compare(args: argparse.Namespace) -> Outcome:
         if args.scheduler not in (None, "local"):
             raise ProblemError("--scheduler: only for the sweep, not with --details")
         res = _run_compare(Path(args.out), problems, args.sizes or [100, 1000, 10000],
-                           args.runs, args.repeats, args.seed, progress=not args.json)
+                           args.runs, args.repeats or 5, args.seed, progress=not args.json)
         return res, True
     res = _run_harness(Path(args.out), problems, sizes=args.sizes, solvers=solvers,
                        profile=args.profile, seed=args.seed, time_limit=args.time_limit,
                        instances=instances, progress=not args.json,
-                       scheduler=args.scheduler)
+                       scheduler=args.scheduler, repeats=args.repeats or 3)
     return res, res["references_ok"]
 
 
@@ -179,7 +208,9 @@ def register(sub: Any) -> None:
     cmp_.add_argument("--time-limit", type=positive,
                       help="per run, s (> 0; default: the profile's)")
     cmp_.add_argument("--seed", type=count0, default=0)
-    cmp_.add_argument("--out", default="report/compare", help="output FOLDER (report.md, results)")
+    cmp_.add_argument("--out", default="report/compare-full",
+                      help="output FOLDER (report.md, results.csv; default report/compare-full; the demo's quick "
+                           "sweep writes report/compare, so the two never share rows)")
     cmp_.add_argument("--scheduler", default="local",
                       help="'local' (default: one isolated worker process here) or a Dask "
                            "scheduler address, e.g. tcp://host:8786: each run is a task on "
@@ -189,5 +220,8 @@ def register(sub: Any) -> None:
                       help="run the per-problem studies instead (plane Monte Carlo accuracy, "
                            "benchmarks at the issues' target sizes)")
     cmp_.add_argument("--runs", type=runs, default=200, help="--details: Monte Carlo runs")
-    cmp_.add_argument("--repeats", type=count1, default=5, help="--details: timing repeats")
+    cmp_.add_argument("--repeats", type=count1, default=None,
+                      help="timing repeats: calls per run of the sweep (default 3, the "
+                           "median solve time reported, stopped after 1 s of calls), "
+                           "--details: per benchmark (default 5)")
     cmp_.set_defaults(func=_compare, printer=lambda r: _print_written(r, "report.md"))

@@ -213,25 +213,44 @@ def track_level(out: Path, *, seed: int = 0, ratios: tuple[float, ...] | None = 
     runs = TRACKING_RUNS if runs is None else runs
     scans = TRACKING_SCANS if scans is None else scans
     rows = at.summarise(at.study(ratios=ratios, runs=runs, seed=seed, scans=scans))
-    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(11, 4.2))
+    # left: mean GOSPA per method, the methods side by side at each ratio (dodged on the
+    # log axis) so that equal values do not hide each other; right: swaps and breaks per
+    # run as a table of numbers (mostly 0: as lines they were 8 series stacked on 0)
+    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(12, 4.4),
+                                   gridspec_kw={"width_ratios": [1.3, 1]})
     styles = {"MAP+merges": "o-", "resolved": "s--", "GNN": "^:", "JPDA": "v:"}
-    for m in at.METHODS:
+    methods = [m for m in at.METHODS if any(r["method"] == m for r in rows)]
+    xs = sorted({r["ratio"] for r in rows})
+    for k, m in enumerate(methods):
         sel = [r for r in rows if r["method"] == m]
-        x = [r["ratio"] for r in sel]
+        dodge = 1.0 + 0.04 * (k - (len(methods) - 1) / 2)
+        x = [r["ratio"] * dodge for r in sel]
         se = [0.0 if not np.isfinite(r["gospa_se"]) else 2 * r["gospa_se"] for r in sel]
-        ax1.errorbar(x, [r["gospa"] for r in sel], yerr=se, fmt=styles[m], capsize=3,
-                     label=m)
-        ax2.plot(x, [r["swaps"] / r["runs"] for r in sel], styles[m], label=f"{m} swaps")
-        ax2.plot(x, [r["breaks"] / r["runs"] for r in sel], styles[m], mfc="none",
-                 alpha=0.6, label=f"{m} breaks")
-    ax2.legend(fontsize=7, ncol=2)
-    for ax, lab in ((ax1, "mean GOSPA, m (p = 2, c = 500 m; ± 2 se)"),
-                    (ax2, "track swaps (filled) and breaks (open) per run")):
-        ax.axvline(1.0, color="grey", lw=0.8)
-        ax.set_xlabel("separation / range resolution")
-        ax.set_ylabel(lab)
-        ax.grid(alpha=0.3)
-    ax1.legend()
+        ax1.errorbar(x, [r["gospa"] for r in sel], yerr=se, fmt=styles.get(m, "o-"),
+                     capsize=3, label=m)
+    ax1.set_xscale("log")
+    ax1.set_xticks(xs, [f"{x:g}" for x in xs])
+    ax1.minorticks_off()
+    ax1.axvline(1.0, color="grey", lw=0.8)
+    ax1.set_xlabel("separation / range resolution")
+    ax1.set_ylabel("mean GOSPA, m (p = 2, c = 500 m; ± 2 se)")
+    ax1.grid(alpha=0.3)
+    ax1.legend(fontsize=8)
+    by = {(r["method"], r["ratio"]): r for r in rows}
+    bad = np.array([[(by[(m, x)]["swaps"] + by[(m, x)]["breaks"]) / by[(m, x)]["runs"]
+                     if (m, x) in by else np.nan for x in xs] for m in methods])
+    ax2.imshow(bad, cmap="Reds", vmin=0, vmax=max(1.0, float(np.nanmax(bad))),
+               aspect="auto")
+    for i, m in enumerate(methods):
+        for j, x in enumerate(xs):
+            r = by.get((m, x))
+            if r is not None:
+                ax2.text(j, i, f"{r['swaps'] / r['runs']:.1f} / {r['breaks'] / r['runs']:.1f}",
+                         ha="center", va="center", fontsize=9)
+    ax2.set_xticks(range(len(xs)), [f"{x:g}" for x in xs])
+    ax2.set_yticks(range(len(methods)), methods)
+    ax2.set_xlabel("separation / range resolution")
+    ax2.set_title("track swaps / breaks per run (darker = more)", fontsize=10)
     fig.suptitle(f"Crossing pairs, radar 50 km, range cell 150 m, 1°; {runs} runs × "
                  f"{scans} scans per point (demo size)", fontsize=10)
     fig.tight_layout()

@@ -22,7 +22,7 @@ _REMOTE = threading.local()
 
 
 def _remote_run(ad_path: str, case: Case, run: cs.Run, options: dict[str, Any],
-                limit: float) -> tuple[str, Any, float, str, str]:
+                limit: float, repeats: int = 1) -> tuple[str, Any, float, str, str]:
     """One comparison run as a Dask task (``run_sweep(scheduler=ADDRESS)``): on the Dask
     worker, in a child process (one per worker thread, kept across tasks, restarted after
     a crash or a time-out) with the time limit enforced there, exactly as the local
@@ -33,5 +33,6 @@ def _remote_run(ad_path: str, case: Case, run: cs.Run, options: dict[str, Any],
     if worker is None:
         worker = _REMOTE.worker = Worker("-")
         _REMOTE.prepared = [None, None]
-    return (*run_prepared(worker, _REMOTE.prepared, ad_path, case, run, options, limit),
+    return (*run_prepared(worker, _REMOTE.prepared, ad_path, case, run, options, limit,
+                          repeats),
             solver_version(run.solver), cpu_name())

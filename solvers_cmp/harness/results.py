@@ -23,8 +23,15 @@ from optmodels.montecarlo import LineLog
 COLUMNS = ("problem", "instance", "size", "seed", "formulation", "solver", "settings",
            "status", "success", "reason", "objective", "objective_gap", "solution_error",
            "max_violation", "build_time", "solve_time", "iterations", "message",
-           "solver_version", "cpu")
-KEY = ("problem", "instance", "size", "seed", "formulation", "solver", "settings")
+           "solver_version", "cpu", "time_limit", "options", "repeats", "build_again",
+           "repeats_done")
+#: What identifies a run for resume: the case, the formulation and solver, the settings
+#: profile, the time limit (s), the options that reach the solver (JSON: the profile's and
+#: the back-end's class defaults, :func:`solvers_cmp.harness.profiles.options_key`), the
+#: solver's version and the timing repetitions. A rerun recomputes every row whose key
+#: differs (issue 27: a rerun with ``--time-limit 5`` used to return the 60 s rows).
+KEY = ("problem", "instance", "size", "seed", "formulation", "solver", "settings",
+       "time_limit", "options", "solver_version", "repeats")
 
 
 def _header_line() -> str:
@@ -90,8 +97,10 @@ def read_results(path: Path) -> list[dict[str, Any]]:
 
 
 def _parse(key: str, v: str) -> Any:
-    if key in ("size", "seed"):
+    if key in ("size", "seed", "repeats"):
         return int(v)
+    if key == "repeats_done":
+        return int(float(v)) if v not in ("", "None") else None
     if key == "iterations":
         return int(float(v)) if v not in ("", "None") else None
     if key == "success":
@@ -99,10 +108,10 @@ def _parse(key: str, v: str) -> Any:
             raise ValueError(f"success: {v!r}")
         return v == "True"
     if key in ("objective", "objective_gap", "solution_error", "max_violation",
-               "build_time", "solve_time"):
+               "build_time", "solve_time", "time_limit", "build_again"):
         return float(v) if v not in ("", "None") else float("nan")
     return v
 
 
 def _key(row: dict[str, Any]) -> tuple[Any, ...]:
-    return tuple(str(row[k]) for k in KEY)
+    return tuple(f"{float(row[k]):.6g}" if k == "time_limit" else str(row[k]) for k in KEY)

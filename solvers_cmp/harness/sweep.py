@@ -15,13 +15,13 @@ from typing import Any
 
 from tqdm import tqdm
 
-from optmodels.core import ProblemError, as_choice, as_positive
+from optmodels.core import ProblemError, as_choice, as_count, as_positive
 from optmodels.montecarlo import Interrupted, LineLog
 from optmodels.montecarlo.engine import CONNECT_TIMEOUT, execute
 from solvers_cmp import cases as cs
 from solvers_cmp.common import cpu_name
 from solvers_cmp.harness.planning import Case, Sizes, _check_scheduler, plan
-from solvers_cmp.harness.profiles import PROFILES, Profile, _judge
+from solvers_cmp.harness.profiles import PROFILES, Profile, _judge, options_key, too_slow
 from solvers_cmp.harness.remote import _remote_run
 from solvers_cmp.harness.results import COLUMNS, _csv_line, _key, _load_results
 from solvers_cmp.harness.versions import solver_version
@@ -33,7 +33,8 @@ def run_sweep(problems: Sequence[str], out: Path, *, sizes: Sizes = None,
               seeds: Sequence[int] = (0,), instances: Sequence[str] | None = None,
               time_limit: float | None = None, isolate: bool = True,
               progress: bool = False, scheduler: Any = None,
-              connect_timeout: float = CONNECT_TIMEOUT) -> list[dict[str, Any]]:
+              connect_timeout: float = CONNECT_TIMEOUT, repeats: int = 3,
+              skip_slow: bool = False) -> list[dict[str, Any]]:
     """Run (or resume) a sweep; append rows to ``out/results.csv`` and return all rows of
     this sweep (the finished ones read back included), in the sweep's order.
 
@@ -45,7 +46,14 @@ def run_sweep(problems: Sequence[str], out: Path, *, sizes: Sizes = None,
     the same time limit (:func:`_remote_run`; ``isolate`` is not used). Both go through
     :func:`optmodels.montecarlo.engine.execute`; this process alone writes
     ``results.csv``, so resume, locks and repairs are the same. ``connect_timeout``: s to
-    reach the scheduler (an unreachable one is a ``ProblemError``).
+    reach the scheduler (an unreachable one is a ``ProblemError``). ``repeats``: calls
+    per run (median solve time; stopped after 1 s of calls), ``skip_slow``: leave out the
+    runs :data:`solvers_cmp.harness.profiles.TOO_SLOW` marks as too slow for their size
+    (the quick sweep; they are listed in the report, not run).
+
+    A row is reused on a rerun only when its whole key matches (:data:`KEY`: the case,
+    formulation, solver, profile, time limit, options, solver version and repeats);
+    any other row is computed again.
 
     Raises
     ------
@@ -62,7 +70,10 @@ def run_sweep(problems: Sequence[str], out: Path, *, sizes: Sizes = None,
              else as_positive("compare time_limit", time_limit))
     scheduler = _check_scheduler(scheduler)
     connect_timeout = as_positive("compare connect_timeout", connect_timeout)
+    repeats = as_count("compare repeats", repeats, minimum=1)
     sweep = plan(problems, sizes, solvers, seeds, instances)
+    if skip_slow:
+        sweep = [(a, c, [r for r in runs if too_slow(c, r) is None]) for a, c, runs in sweep]
     try:
         out = Path(out)
     except TypeError:
@@ -78,7 +89,7 @@ def run_sweep(problems: Sequence[str], out: Path, *, sizes: Sizes = None,
     try:
         done = {_key(r): r for r in _load_results(rl)}
         return _sweep(rl, done, sweep, out, profile, prof, limit, isolate, progress,
-                      scheduler, connect_timeout)
+                      scheduler, connect_timeout, repeats)
     finally:
         rl.close()
 
@@ -86,21 +97,25 @@ def run_sweep(problems: Sequence[str], out: Path, *, sizes: Sizes = None,
 def _sweep(rl: LineLog, done: dict[tuple[Any, ...], dict[str, Any]],
            sweep: list[tuple[str, Case, list[cs.Run]]], out: Path, profile: str,
            prof: Profile, limit: float, isolate: bool, progress: bool,
-           scheduler: Any = None, connect_timeout: float = CONNECT_TIMEOUT
-           ) -> list[dict[str, Any]]:
+           scheduler: Any = None, connect_timeout: float = CONNECT_TIMEOUT,
+           repeats: int = 1) -> list[dict[str, Any]]:
     total = sum(len(runs) for _, _, runs in sweep)
     cpu = cpu_name()
     slots: list[dict[str, Any] | None] = []  # the sweep's rows, in order
     tasks: list[tuple[int, dict[str, Any], str, Case, cs.Run]] = []
     for ad_path, case, runs in sweep:
         base = {"problem": case.problem, "instance": case.instance, "size": case.size,
-                "seed": case.seed, "settings": profile, "cpu": cpu}
+                "seed": case.seed, "settings": profile, "cpu": cpu,
+                "time_limit": float(limit), "repeats": repeats}
         for run in runs:
-            k = _key({**base, "formulation": run.formulation, "solver": run.solver})
+            mine = {**base, "formulation": run.formulation, "solver": run.solver,
+                    "options": options_key(prof, run.solver),
+                    "solver_version": solver_version(run.solver)}
+            k = _key(mine)
             if k in done:
                 slots.append(done[k])
             else:
-                tasks.append((len(slots), base, ad_path, case, run))
+                tasks.append((len(slots), mine, ad_path, case, run))
                 slots.append(None)
     new = 0
     bar = tqdm(total=total, initial=total - len(tasks), desc=f"compare ({profile})",
@@ -108,10 +123,9 @@ def _sweep(rl: LineLog, done: dict[tuple[Any, ...], dict[str, Any]],
 
     def record(t: int, outcome: tuple[str, Any, float, str, str]) -> None:
         nonlocal new
-        slot, base, _, _, run = tasks[t]
+        slot, base, _, _, _ = tasks[t]
         kind, res, wall, version, where = outcome
-        row: dict[str, Any] = {**base, "cpu": where, "formulation": run.formulation,
-                               "solver": run.solver, "solver_version": version}
+        row: dict[str, Any] = {**base, "cpu": where, "solver_version": version}
         if kind == "ok":
             row.update(res)
         else:
@@ -135,18 +149,19 @@ def _sweep(rl: LineLog, done: dict[tuple[Any, ...], dict[str, Any]],
     prepared: list[Any] = [None, None]  # (path, case) last prepared, its failure
 
     def local_run(ad_path: str, case: Case, run: cs.Run, options: dict[str, Any],
-                  limit: float) -> tuple[str, Any, float, str, str]:
+                  limit: float, repeats: int = 1) -> tuple[str, Any, float, str, str]:
         """One run on this machine: the instance and its reference once per case (their
         own, longer, time limit), then the run in the worker with the time limit."""
         assert worker is not None
-        return (*run_prepared(worker, prepared, ad_path, case, run, options, limit),
+        return (*run_prepared(worker, prepared, ad_path, case, run, options, limit,
+                              repeats),
                 solver_version(run.solver), cpu)
 
     def lost(t: int, msg: str) -> None:
         record(t, ("crashed", msg, float("nan"), solver_version(tasks[t][4].solver),
                    "unknown"))
 
-    args = [(ad_path, case, run, prof.options(run.solver), limit)
+    args = [(ad_path, case, run, prof.options(run.solver), limit, repeats)
             for _, _, ad_path, case, run in tasks]
     try:
         if scheduler is None:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import platform
 from importlib import metadata
 
@@ -10,6 +11,7 @@ from importlib import metadata
 _OTHER_PACKAGES = {"numpy": "numpy", "scipy": "scipy", "SCIPY": "scipy"}
 
 
+@functools.cache
 def solver_version(solver: str) -> str:
     """Package and version behind a solver name (CasADi plugins: the casadi version)."""
     if solver == "python":

@@ -1,0 +1,175 @@
+"""Issue 27: a solver comparison a user can trust -- compile-once models equal fresh ones,
+instances that exercise their problem (assignment merges, a binding box), rankings with
+intervals and ties that repeat, and a resume that recomputes rows whose key differs
+(through the installed CLI)."""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from optmodels import assignment as asg
+from optmodels import trajectories as tr
+from optmodels.trajectories import generic
+from solvers_cmp import cases as cs
+from solvers_cmp import harness
+from solvers_cmp.harness.metrics import headline, rank_rows, sgm_interval, summarise
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _env() -> dict[str, str]:
+    return {**os.environ, "PYTHONPATH": str(ROOT)}
+
+
+# ------------------------------------------------------------ compile once (DPP)
+@pytest.mark.parametrize("family", ["diverging", "parallel"])
+@pytest.mark.parametrize("formulation", ["constrained", "reduced"])
+def test_dpp_solve_equals_the_non_parametric_one(family: str, formulation: str) -> None:
+    """Two data sets on the same design (times, weights): the second solve reuses the
+    compiled model, and both equal a fresh non-parametric solve and the closed form."""
+    rng = np.random.default_rng(7)
+    times = [np.sort(rng.uniform(0, 100, 30)) for _ in range(4)]
+    generic._MODELS.clear()
+    for trial in range(2):
+        vals = [50.0 + rng.uniform(-2, 2) * t + rng.normal(0, 1, 30) for t in times]
+        data = tr.TrajectoryData(times, vals, 1.0)
+        dpp = tr.solve(data, family, formulation=formulation)
+        fresh = tr.solve(data, family, formulation=formulation, reuse_model=False)
+        cf = tr.closed_form(data, family)
+        assert dpp.status.ok and fresh.status.ok
+        assert ("compiled model reused" in dpp.method) == (trial == 1)
+        scale = np.max(np.abs(cf.theta))
+        assert np.max(np.abs(dpp.theta - fresh.theta)) / scale < 1e-8
+        assert np.max(np.abs(dpp.theta - cf.theta)) / scale < 1e-8
+    assert len(generic._MODELS) == 1
+
+
+# ------------------------------------------------------------ instances
+@pytest.mark.parametrize("q", [4, 8, 25])
+def test_assignment_merges_instance_has_merges_in_its_map(q: int) -> None:
+    from solvers_cmp.assignment import merge_gain
+
+    ad = cs.adapter("assignment")
+    for seed in (0, 1, 2):
+        data = ad.make("merges", q, seed)
+        sol = asg.solve(data)
+        merged = [g for g in sol.partition if len(g) > 1]
+        assert merged, (q, seed)
+        assert merge_gain(data, sol) > 0.5
+        if q == 4:  # the enumeration (14) agrees: the MAP merges
+            bf = asg.brute_force(data)
+            assert sorted(map(sorted, bf.partition)) == sorted(map(sorted, sol.partition))
+    res = asg.solve(ad.make("resolved", q, 0))
+    assert all(len(g) == 1 for g in res.partition)
+
+
+def test_biasfield_box_instance_binds() -> None:
+    """The box of the ``box`` instance is active: the reference field touches it, and the
+    unconstrained closed form violates it."""
+    from optmodels import biasfield as bf
+
+    ad = cs.adapter("biasfield")
+    inst = ad.make("box", 100, 0)
+    box = np.asarray(inst["box"])
+    ref = ad.reference("box", inst)
+    assert ref.ok
+    field = np.abs(np.asarray(ref.x)).max(axis=(0, 1))
+    assert np.all(field <= box * (1 + 1e-6))
+    assert np.any(field >= box * (1 - 1e-6))
+    free = np.abs(bf.closed_form(inst["data"]).field).max(axis=(0, 1))
+    assert np.any(free > box * (1 + 1e-4))
+
+
+# ------------------------------------------------------------ rankings
+def _rows(rng: np.random.Generator, truth: dict[str, float], cases: int) -> list[dict]:
+    out = []
+    for c in range(cases):
+        base = rng.lognormal(0, 0.5)  # instance difficulty, shared by the solvers
+        for solver, t in truth.items():
+            out.append({"problem": "toy", "instance": "i", "size": c, "seed": 0,
+                        "formulation": "original form", "solver": solver, "success": True,
+                        "solve_time": t * base * rng.lognormal(0, 0.15),
+                        "build_time": 0.0, "solution_error": 0.0, "max_violation": 0.0,
+                        "status": "optimal"})
+    return out
+
+
+def test_two_noisy_runs_give_the_same_headline_with_ties() -> None:
+    """Same true order (A ≈ B ≪ C), two seeded noisy timing sets: the headline (rank 1
+    with its ties) is the same, A and B tied, C ranked after them."""
+    truth = {"A": 0.010, "B": 0.0105, "C": 0.2}
+    heads = []
+    for seed in (1, 2):
+        summ = summarise(_rows(np.random.default_rng(seed), truth, 12), 5.0)
+        heads.append(headline(summ))
+        by = {s["solver"]: s for s in summ}
+        assert by["A"]["tied"] and by["B"]["tied"] and by["A"]["rank"] == by["B"]["rank"] == 1
+        assert by["C"]["rank"] == 3 and not by["C"]["tied"]
+        for s in summ:  # the interval holds the estimate
+            assert s["sgm_total_lo"] <= s["sgm_total_time"] <= s["sgm_total_hi"]
+    assert heads[0] == heads[1] == {"toy: original form": ("A", "B")}
+
+
+def test_overlapping_intervals_are_ties_and_disjoint_ones_are_not() -> None:
+    def row(name: str, t: float, lo: float, hi: float) -> dict:
+        return {"solver": name, "success_rate": 1.0, "sgm_total_time": t,
+                "sgm_total_lo": lo, "sgm_total_hi": hi}
+
+    ranked = rank_rows([row("slow", 3.0, 2.9, 3.1), row("b", 1.1, 1.0, 1.3),
+                        row("a", 1.0, 0.8, 1.05)])
+    got = {r["solver"]: (r["rank"], r["tied"]) for r in ranked}
+    assert got == {"a": (1, True), "b": (1, True), "slow": (3, False)}
+    lo, hi = sgm_interval([0.001, 0.002, 0.004, 0.003])
+    assert lo < hi and lo >= 0.001 and hi <= 0.004
+
+
+# ------------------------------------------------------------ timing columns
+def test_repetitions_build_and_closed_form_build_are_measured(tmp_path: Path) -> None:
+    rows = harness.run_sweep(["trajectories"], tmp_path, sizes=[10], solvers=["CLARABEL"],
+                             instances=["diverging"], isolate=False, repeats=3)
+    by = {r["formulation"]: r for r in rows}
+    cf, gen = by["closed_form"], by["constrained"]
+    assert cf["success"] and gen["success"]
+    assert 1e-7 < cf["build_time"] < 1.0  # measured, not 0 / 3.5e-18
+    assert gen["repeats_done"] == 3
+    # the compiled model is reused: the later builds are below the first one
+    assert gen["build_again"] < gen["build_time"]
+
+
+# ------------------------------------------------------------ resume cannot lie
+def _cli(*args: str) -> dict:
+    out = subprocess.run(["optmodels", *args], capture_output=True, text=True,
+                         env=_env(), timeout=300, check=False)
+    assert out.returncode == 0, out.stderr[-2000:]
+    return json.loads(out.stdout)
+
+
+def test_cli_rerun_with_another_time_limit_recomputes(tmp_path: Path) -> None:
+    base = ["compare", "--problems", "fusion", "--instances", "independent", "--sizes", "3",
+            "--solvers", "CLARABEL", "--out", str(tmp_path), "--json"]
+    first = _cli(*base, "--time-limit", "5")
+    path = tmp_path / "results.csv"
+    rows1 = list(csv.DictReader(path.open()))
+    assert first["runs"] == len(rows1) == 2
+    for c in ("time_limit", "options", "solver_version", "repeats"):
+        assert c in rows1[0] and rows1[0][c] not in ("", "None")
+    assert {float(r["time_limit"]) for r in rows1} == {5.0}
+    _cli(*base, "--time-limit", "5")  # the same key: reused, nothing appended
+    assert len(list(csv.DictReader(path.open()))) == 2
+    third = _cli(*base, "--time-limit", "7")  # another key: recomputed
+    rows3 = list(csv.DictReader(path.open()))
+    assert len(rows3) == 4 and third["runs"] == 2 and third["time_limit_s"] == 7.0
+    assert sorted(float(r["time_limit"]) for r in rows3) == [5.0, 5.0, 7.0, 7.0]
+
+
+def test_compare_default_out_differs_from_the_demos() -> None:
+    out = subprocess.run(["optmodels", "compare", "--help"], capture_output=True, text=True,
+                         env=_env(), timeout=120, check=True).stdout
+    assert "report/compare-full" in " ".join(out.split())

@@ -528,11 +528,7 @@ def build_field_data(plots: PlotTable, radars: RadarSet, *, cells: int | ArrayLi
             kept.append(per_radar)
             all_pos.append(smp[3])
     if not kept:
-        if union:
-            raise ProblemError("plots: no object is seen by two radars at the same time "
-                               "(after the track fits); no cell can be formed")
-        raise ProblemError("plots: no object is seen by all m radars at the same time; "
-                           "no cell can be formed")
+        raise ProblemError(_no_samples_message(fn, plots, fits, knot_spacing, union, m))
     clock = _lap(diag, "samples", clock)
     if np.ndim(cells) == 0:
         pts = np.vstack(all_pos)
@@ -619,6 +615,48 @@ def build_field_data(plots: PlotTable, radars: RadarSet, *, cells: int | ArrayLi
     jac = np.stack([radars.polar_jacobian(i, mean, heights) for i in range(m)], axis=1)
     return FieldData(radars.sites, centers, xi, adj, p, xi_cov, jac, heights,
                      radars.geodetic, radars.origin, seen), diag
+
+
+def _scan_intervals(plots: PlotTable, m: int) -> FloatArray:
+    """(m,) each radar's median time between consecutive plots of one object (s; NaN for
+    a radar without two plots of an object)."""
+    out = np.full(m, np.nan)
+    ok = plots.object >= 0
+    for i in range(m):
+        sel = ok & (plots.radar == i)
+        if sel.sum() < 2:
+            continue
+        o, t = plots.object[sel], plots.time[sel]
+        order = np.lexsort((t, o))
+        o, t = o[order], t[order]
+        d = np.diff(t)[np.diff(o) == 0]
+        d = d[d > 0]
+        if d.size:
+            out[i] = float(np.median(d))
+    return out
+
+
+def _no_samples_message(fn: str, plots: PlotTable, fits: list[TrackFit],
+                        knot_spacing: float, union: bool, m: int) -> str:
+    """Why no sampling instant was found: a knot spacing shorter than the scans (every
+    track split at each plot, no fit), no fit at all, or the geometry (no object seen by
+    all m radars / by two radars at the same time)."""
+    scans = _scan_intervals(plots, m)
+    longest = float(np.nanmax(scans)) if np.isfinite(scans).any() else float("nan")
+    if np.isfinite(longest) and knot_spacing < 1.5 * longest:
+        return (f"{fn} knot_spacing: {knot_spacing:g} s is not longer than the radars' scan "
+                f"intervals (median per radar {np.round(scans, 1).tolist()} s): the track "
+                "fits split a track at every silence longer than the knot spacing and "
+                f"keep {len(fits)} fits; give at least 2 × the longest scan interval "
+                f"(e.g. {2 * longest:.0f} s; 20 s for 4-10 s scans)")
+    if not fits:
+        return (f"{fn} plots: no track could be fitted (too few plots per track for the "
+                f"polyline of knot spacing {knot_spacing:g} s); no cell can be formed")
+    if union:
+        return ("plots: no object is seen by two radars at the same time (after the "
+                "track fits); no cell can be formed")
+    return ("plots: no object is seen by all m radars at the same time; no cell can be "
+            "formed (coverage='union' forms cells wherever two radars overlap)")
 
 
 #: Most radars of ``build_field_data(coverage="union")`` (one bit of a uint64 each).

@@ -32,7 +32,7 @@ def recording(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     rec.write_bytes(cat048 + cat021)
     (tmp / "adsb_only.ast").write_bytes(cat021)
     fd, out = tmp / "fd.npz", tmp / "solved"
-    run_cli("biasfield", "build", rec, "--radars", sites, "--cells", "30", "--out", fd)
+    run_cli("biasfield", "build", rec, "--radars", sites, "--cells", "60", "--out", fd)
     run_cli("biasfield", "solve", fd, "--solver", "closed-form", "--out", out)
     return {"tmp": tmp, "sites": sites, "recording": rec, "fd": fd,
             "field": out / "field.npz", "adsb_only": tmp / "adsb_only.ast"}

@@ -173,7 +173,8 @@ def _biasfield_build(args: argparse.Namespace) -> Outcome:
     out = _out_file("--out", _npz_name(Path(args.out)))
     coverage = getattr(args, "coverage", "union")
     # the reading here; placement, cleaning, fits, cells: the one chain (biasfield.pipeline)
-    inp = _read_input(args, locate=False, clean=False, require_all=coverage == "all")
+    # a site no plot carries is refused whatever the coverage (a wrong SAC/SIC, mostly)
+    inp = _read_input(args, locate=False, clean=False, require_all=True)
     radars, org_used = inp["radars"], inp["org_used"]
     extra = {} if args.scheduler == "serial" else {"scheduler": args.scheduler}
     build = bf.field_data_from_plots(inp["plots"], radars, cells=args.cells,

@@ -121,10 +121,13 @@ def test_build_from_csv_3d_with_adsb(tmp_path: Path) -> None:
     kept, _ = clean_plots(table, radars)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        ref, _ = bf.build_field_data(kept, radars, cells=15)
+        ref, _ = bf.build_field_data(kept, radars, cells=15, coverage="union")
     fd = bf.FieldData.load(npz)
     assert fd.k == ref.k == res["cells"]
+    assert res["coverage"] == "union"
     np.testing.assert_allclose(fd.xi, ref.xi, rtol=0, atol=1e-9)
+    np.testing.assert_array_equal(fd.subsets, ref.subsets)
+    assert sum(res["radars_per_cell"].values()) == fd.k
     assert_error(bad_origin, 2, "--origin", "LAT,LON,H")
     assert_error(three, 2, "RECORDING", "at most two")
     assert_error(flat3d, 2, "--geometry 3d", "lat, lon")
@@ -187,8 +190,9 @@ def test_build_from_asterix_one_or_two_files(tmp_path: Path) -> None:
     kept, _ = clean_plots(plots, rec.radars)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        ref, _ = bf.build_field_data(kept, rec.radars, cells=12)
+        ref, _ = bf.build_field_data(kept, rec.radars, cells=12, coverage="union")
     for name in ("one.npz", "two.npz"):
         fd = bf.FieldData.load(tmp_path / name)
         assert fd.k == ref.k
         np.testing.assert_allclose(fd.xi, ref.xi, rtol=0, atol=1e-9)
+        np.testing.assert_array_equal(fd.subsets, ref.subsets)

@@ -45,6 +45,7 @@ from optmodels.biasfield.geometry import (
 )
 from optmodels.biasfield.ingest import read_plots, read_radars, read_tracks
 from optmodels.biasfield.lipschitz import solve_lipschitz
+from optmodels.biasfield.pipeline import FieldBuild, field_data_from_plots
 from optmodels.biasfield.problem import FieldSolution
 from optmodels.biasfield.recording import (
     AdsbReports,
@@ -79,6 +80,7 @@ from optmodels.biasfield.usage import (
     field_map,
     registration_error,
     score,
+    seen_by_others,
 )
 
 __all__ = [
@@ -91,6 +93,7 @@ __all__ = [
     "CleaningLimits",
     "CleaningReport",
     "Corrected",
+    "FieldBuild",
     "FieldData",
     "FieldMap",
     "FieldScore",
@@ -113,6 +116,7 @@ __all__ = [
     "closed_form",
     "compare_fields",
     "correct_plots",
+    "field_data_from_plots",
     "field_map",
     "fit_tracks",
     "fl_to_height",
@@ -132,6 +136,7 @@ __all__ = [
     "registration_error",
     "residual_check",
     "score",
+    "seen_by_others",
     "shift_from_bias",
     "solve",
     "solve_lipschitz",

@@ -69,6 +69,14 @@ class FieldData:
     ``heights`` the sets (10) use the exact 3-D polar maps (:func:`uncertainty_sets`);
     with ``jacobians`` alone, Φ⁰ is linearised through them; without any, the 2-D maps
     of the sites ``radars``.
+
+    Per-cell radar subsets (the field over the union of coverage, docs/formulations.md
+    "The field over the union of coverage"): ``seen`` (K, m) bool, the radars S_k whose
+    averaged position enters cell k (≥ 2 per cell); ``None`` (the paper's case) means
+    every radar sees every cell. ``xi`` (and ``xi_cov``, ``jacobians``) must still be
+    finite where a radar does not see a cell; those entries are not used (the builder
+    stores the cell's mean position there). With subsets, ``P`` must be block-diagonal per
+    radar (the smoothness functional (9) is summed per radar over the cells it sees).
     """
 
     radars: FloatArray
@@ -81,6 +89,7 @@ class FieldData:
     heights: FloatArray | None = None
     geodetic: FloatArray | None = None
     origin: FloatArray | None = None
+    seen: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         self.radars = as_finite_array("radars", self.radars, ndim=2)
@@ -115,6 +124,37 @@ class FieldData:
             check_spd_stack("biasfield.FieldData xi_cov", cov)
             self.xi_cov = cov
         self._check_geometry3d(k, m)
+        self._check_seen(k, m)
+
+    def _check_seen(self, k: int, m: int) -> None:
+        if self.seen is None:
+            return
+        arr = np.asarray(self.seen)
+        if arr.shape != (k, m) or not (arr.dtype == bool or np.isin(arr, (0, 1)).all()):
+            raise ProblemError(f"biasfield.FieldData seen: expected a ({k}, {m}) boolean "
+                               f"array (radar i sees cell k), got shape {arr.shape}")
+        arr = arr.astype(bool)
+        few = np.flatnonzero(arr.sum(axis=1) < 2)
+        if few.size:
+            raise ProblemError(f"biasfield.FieldData seen: cells {few[:10].tolist()} are seen "
+                               "by fewer than 2 radars (a cell needs two radars to carry a "
+                               "set (10))")
+        p = self.P
+        if p.shape == (2 * m, 2 * m):
+            off = p.copy()
+            for i in range(m):
+                off[2 * i:2 * i + 2, 2 * i:2 * i + 2] = 0.0
+            if np.any(off != 0.0):
+                raise ProblemError("biasfield.FieldData P: with per-cell radar subsets (seen) "
+                                   "P must be block-diagonal per radar (2 × 2 blocks)")
+        self.seen = arr
+
+    @property
+    def subsets(self) -> np.ndarray:
+        """(K, m) bool: radar i sees cell k (all True without ``seen``)."""
+        if self.seen is None:
+            return np.ones((self.k, self.m), dtype=bool)
+        return self.seen
 
     def _check_geometry3d(self, k: int, m: int) -> None:
         from optmodels.biasfield.geometry3d import site_geodetic
@@ -164,7 +204,7 @@ class FieldData:
         arrays = {"radars": self.radars, "centers": self.centers, "xi": self.xi,
                   "edges": np.column_stack([upper.row, upper.col]).astype(np.int64),
                   "P": self.P}
-        for name in ("xi_cov", "jacobians", "heights", "geodetic", "origin"):
+        for name in ("xi_cov", "jacobians", "heights", "geodetic", "origin", "seen"):
             if getattr(self, name) is not None:
                 arrays[name] = getattr(self, name)
         if not isinstance(path, str | Path):
@@ -181,7 +221,7 @@ class FieldData:
         """Read an ``.npz`` written by :meth:`save` (or by hand with the same keys; the
         neighbours as ``edges`` (E, 2) or a dense ``adjacency`` (K, K)); the optional keys
         ``xi_cov``, ``jacobians``, ``heights``, ``geodetic``, ``origin`` (files of the 2-D
-        chain have none of the last four)."""
+        chain have none of these four), ``seen`` (per-cell radar subsets)."""
         if not isinstance(path, str | Path):
             raise ProblemError(f"biasfield.FieldData.load path: expected a file name, got "
                                f"{type(path).__name__}")
@@ -191,7 +231,7 @@ class FieldData:
         try:
             return cls(d["radars"], d["centers"], d["xi"], adj, d["P"], d.get("xi_cov"),
                        d.get("jacobians"), d.get("heights"), d.get("geodetic"),
-                       d.get("origin"))
+                       d.get("origin"), d.get("seen"))
         except ProblemError as exc:
             raise ProblemError(f"{path}: {exc}") from None
 
@@ -321,14 +361,24 @@ def uncertainty_sets(data: FieldData, *, space: Literal["polar", "cartesian"] = 
     [range, azimuth]; azimuth differences wrapped. η_k = ξ̂_(k) − x_(k).
 
     ``space="cartesian"``: the exact sets S_ξ̂ of section 3 in the shift space,
-    s = [ξ̂_i(k) − ξ̂_(k)]_i + [I; …; I] η_k (a common shift per cell is free)."""
+    s = [ξ̂_i(k) − ξ̂_(k)]_i + [I; …; I] η_k (a common shift per cell is free).
+
+    Per-cell subsets (``data.seen``): ξ̂_(k) is the mean over the radars S_k that see cell
+    k, and the rows of the radars outside S_k are zero in Φ⁰ and Φ¹ (their φ entries are
+    0 and enter neither (9) nor (8)); with every radar in every S_k this is the paper's
+    (10) exactly."""
     space = as_choice("biasfield.uncertainty_sets space", space,  # type: ignore[assignment]
                       ("polar", "cartesian"))
     m, k = data.m, data.k
-    mean = data.xi.mean(axis=1)  # ξ̂_(k)
+    if data.seen is None:
+        mean = data.xi.mean(axis=1)  # ξ̂_(k)
+    else:
+        w = data.seen.astype(float)
+        mean = np.einsum("ki,kia->ka", w, data.xi) / w.sum(axis=1)[:, None]
     if space == "cartesian":
         s0 = (data.xi - mean[:, None, :]).reshape(-1)
-        return s0, sparse.block_diag([np.tile(np.eye(2), (m, 1))] * k, format="csr")
+        s1 = sparse.block_diag([np.tile(np.eye(2), (m, 1))] * k, format="csr")
+        return _mask_sets(data, s0, s1)
     phi0 = np.empty((k, m, 2))
     blocks = []
     if data.geodetic is not None and data.heights is not None:
@@ -355,7 +405,18 @@ def uncertainty_sets(data: FieldData, *, space: Literal["polar", "cartesian"] = 
         jac = np.stack([polar_jacobian(mean, data.radars[i]) for i in range(m)], axis=1)
     for kk in range(k):
         blocks.append(jac[kk].reshape(2 * m, 2))
-    return phi0.reshape(-1), sparse.block_diag(blocks, format="csr")
+    return _mask_sets(data, phi0.reshape(-1), sparse.block_diag(blocks, format="csr"))
+
+
+def _mask_sets(data: FieldData, phi0: FloatArray, phi1: sparse.csr_matrix
+               ) -> tuple[FloatArray, sparse.csr_matrix]:
+    """Zero the rows of (Φ⁰, Φ¹) of the radars outside each cell's subset S_k."""
+    if data.seen is None:
+        return phi0, phi1
+    rows = np.repeat(data.seen.reshape(-1), 2).astype(float)
+    phi1 = (sparse.diags(rows) @ phi1).tocsr()
+    phi1.eliminate_zeros()
+    return phi0 * rows, phi1
 
 
 @dataclass
@@ -380,8 +441,9 @@ def build_field_data(plots: PlotTable, radars: RadarSet, *, cells: int | ArrayLi
                      sample_step: float = 5.0, neighbour_method: Literal[
                          "delaunay", "radius"] = "delaunay", neighbour_radius: float | None = None,
                      P: ArrayLike | None = None, exclude_radius: float = 20e3, seed: int = 0,
-                     scheduler: Any = None, positions: ArrayLike | None = None
-                     ) -> tuple[FieldData, Diagnostics]:
+                     scheduler: Any = None, positions: ArrayLike | None = None,
+                     coverage: Literal["all", "union"] = "all", subset_share: float = 0.5,
+                     progress: bool = False) -> tuple[FieldData, Diagnostics]:
     """Plots → :class:`FieldData`: track fits (3), cells, averaging (6)-(7), neighbours.
 
     ``cells``: a number of k-means centres, or the centres (K, 2) themselves.
@@ -404,6 +466,15 @@ def build_field_data(plots: PlotTable, radars: RadarSet, *, cells: int | ArrayLi
     (``plots.cartesian(radars)``) if the caller has them already, passed to ``fit_tracks``
     (the exact 3-D placement costs ~11 s per 10⁶ plots: compute it once per chain).
 
+    ``coverage``: ``"all"`` (paper 001's (6)-(7) as printed: samples and cells only where
+    every radar sees the object) or ``"union"`` (the field over the union of coverage:
+    sampling instants where two radars or more have a fit; the cell centres are placed on
+    that shared traffic; each cell k gets a subset S_k (``FieldData.seen``): among the
+    radar sets of its samples, the largest set contained in the sets of at least
+    ``subset_share`` of the cell's samples (ties: the most samples), and it averages
+    (6)-(7) over those samples, for the radars of S_k only). ``progress``: tqdm bars on
+    stderr for the per-object loops (off when stderr is not a terminal).
+
     Units: ``cell_radius``, ``neighbour_radius``, ``exclude_radius`` in metres;
     ``knot_spacing``, ``sample_step`` in seconds.
     """
@@ -420,7 +491,16 @@ def build_field_data(plots: PlotTable, radars: RadarSet, *, cells: int | ArrayLi
         neighbour_radius = as_positive(f"{fn} neighbour_radius (m)", neighbour_radius)
     exclude_radius = as_positive(f"{fn} exclude_radius (m)", exclude_radius, allow_zero=True)
     seed = as_count(f"{fn} seed", seed)
+    coverage = as_choice(f"{fn} coverage", coverage,  # type: ignore[assignment]
+                         ("all", "union"))
+    subset_share = as_positive(f"{fn} subset_share", subset_share)
+    if subset_share > 1:
+        raise ProblemError(f"{fn} subset_share: expected a share in (0, 1], got "
+                           f"{subset_share}")
     _check_tables(fn, plots, radars)
+    if coverage == "union" and radars.m > MAX_UNION_RADARS:
+        raise ProblemError(f"{fn} radars: coverage='union' handles up to {MAX_UNION_RADARS} "
+                           f"radars (one bit each), got {radars.m}")
     extra: dict[str, Any] = {} if scheduler is None else {"scheduler": scheduler}
     if positions is not None:
         extra["positions"] = positions
@@ -430,54 +510,52 @@ def build_field_data(plots: PlotTable, radars: RadarSet, *, cells: int | ArrayLi
     diag = Diagnostics(dropped_plots=dict(dropped.counts), fits=fits)
     clock = _lap(diag, "fits", clock)
     m = radars.m
+    union = coverage == "union"
     by_obj: dict[int, list[list[TrackFit]]] = {}
     for f in fits:
         by_obj.setdefault(f.object, [[] for _ in range(m)])[f.radar].append(f)
-    # samples: instants where all m radars have a fit, with each radar's piece
-    samples: list[tuple[FloatArray, list[list[TrackFit]], np.ndarray]] = []
-    all_pos = []
     for per_radar in by_obj.values():
-        if any(not p for p in per_radar):
-            continue
-        lo = max(min(f.span[0] for f in p) for p in per_radar)
-        hi = min(max(f.span[1] for f in p) for p in per_radar)
-        if hi <= lo:
-            continue
-        t = np.arange(lo, hi, sample_step)
-        pidx = np.full((m, t.size), -1, dtype=np.int32)  # each radar's piece per instant
-        for i, pieces in enumerate(per_radar):
+        for pieces in per_radar:
             pieces.sort(key=lambda f: f.span[0])
-            for j, f in enumerate(pieces):
-                pidx[i, (t >= f.span[0]) & (t <= f.span[1])] = j
-        ok = np.all(pidx >= 0, axis=0)
-        if not ok.any():
-            continue
-        t, pidx = t[ok], pidx[:, ok]
-        pos = np.zeros((t.size, 2))
-        for i, pieces in enumerate(per_radar):
-            for j in np.unique(pidx[i]):
-                sel = pidx[i] == j
-                pos[sel] += pieces[j].at(t[sel]) / m
-        samples.append((t, per_radar, pidx))
-        all_pos.append(pos)
-    if not samples:
-        raise ProblemError("plots: no object is seen by all m radars at the same time; "
-                           "no cell can be formed")
+    objects = [p for p in by_obj.values()
+               if sum(1 for q in p if q) >= (2 if union else m)]
+    # samples: instants where all m radars (union: two or more) have a fit
+    all_pos = []
+    kept = []
+    for per_radar in _bar(objects, progress, "field data: samples"):
+        smp = _object_samples(per_radar, sample_step, union)
+        if smp is not None:
+            kept.append(per_radar)
+            all_pos.append(smp[3])
+    if not kept:
+        raise ProblemError(_no_samples_message(fn, plots, fits, knot_spacing, union, m))
     clock = _lap(diag, "samples", clock)
     if np.ndim(cells) == 0:
-        centers = place_centers(np.vstack(all_pos), int(cells),  # type: ignore[arg-type]
-                                seed=seed)
+        pts = np.vstack(all_pos)
+        if pts.shape[0] < int(cells):  # type: ignore[arg-type]
+            raise ProblemError(f"{fn} cells: {int(cells)} cells asked for but only "  # type: ignore
+                               f"{pts.shape[0]} sampling instants are shared by "
+                               f"{'two radars or more' if union else 'all radars'}")
+        centers = place_centers(pts, int(cells), seed=seed)  # type: ignore[arg-type]
+        del pts
     else:
         centers = as_finite_array(f"{fn} cells", cells, ndim=2, max_abs=MAX_MAGNITUDE)
         if centers.shape[1] != 2 or centers.shape[0] < 2:
             raise ProblemError(f"{fn} cells: expected (K, 2) centres (m) with K ≥ 2, got "
                                f"{centers.shape}")
+    del all_pos
     clock = _lap(diag, "centres", clock)
     tree = cKDTree(centers)
     if cell_radius is None:
         nn = tree.query(centers, k=2)[0][:, 1]
         cell_radius = 1.5 * float(np.median(nn))
     k0 = centers.shape[0]
+    full = np.uint64((1 << m) - 1) if union else np.uint64(0)
+    if union:
+        subset = _choose_subsets(kept, sample_step, tree, cell_radius, radars,
+                                 exclude_radius, k0, subset_share, progress)
+    else:
+        subset = np.zeros(k0, dtype=np.uint64)
     sum_xi = np.zeros((k0, m, 2))
     sum_cov = np.zeros((k0, m, 2, 2))
     sum_h = np.zeros(k0)
@@ -485,21 +563,38 @@ def build_field_data(plots: PlotTable, radars: RadarSet, *, cells: int | ArrayLi
     n_smp = np.zeros(k0, dtype=int)
     n_plt = np.zeros(k0, dtype=int)
     plot_times = plots.time
-    for (t, per_radar, pidx), pos in zip(samples, all_pos, strict=True):
-        _accumulate(t, per_radar, pidx, pos, tree, cell_radius, radars, exclude_radius,
-                    sample_step, plot_times, height_of, sum_xi, sum_cov, sum_h, n_obj,
-                    n_smp, n_plt)
+    for per_radar in _bar(kept, progress, "field data: averaging"):
+        smp = _object_samples(per_radar, sample_step, union)
+        assert smp is not None
+        _accumulate(smp, per_radar, tree, cell_radius, radars, exclude_radius,
+                    sample_step, plot_times, height_of, subset if union else None,
+                    sum_xi, sum_cov, sum_h, n_obj, n_smp, n_plt)
     clock = _lap(diag, "averaging", clock)
     keep = n_obj > 0
     diag.dropped_cells = int(np.sum(~keep))
+    who = "two radars or more" if union else "all radars"
     if diag.dropped_cells:
         warnings.warn(f"build_field_data: {diag.dropped_cells} of {k0} cells hold no object "
-                      "seen by all radars and were dropped", stacklevel=2)
+                      f"seen by {who} and were dropped", stacklevel=2)
     if keep.sum() < 2:
-        raise ProblemError("cells: fewer than 2 cells hold objects seen by all radars")
+        raise ProblemError(f"cells: fewer than 2 cells hold objects seen by {who}")
     centers = centers[keep]
+    seen = None
+    if union:
+        bits = subset[keep]
+        seen = ((bits[:, None] >> np.arange(m, dtype=np.uint64)[None, :]) & np.uint64(1)
+                ).astype(bool)
+        if np.all(bits == full):
+            seen = None  # every cell sees every radar: the paper's case
     xi = sum_xi[keep] / n_obj[keep, None, None]
     xi_cov = sum_cov[keep] / (n_obj[keep, None, None, None] ** 2)
+    if seen is not None:
+        w = seen.astype(float)
+        mean_s = np.einsum("ki,kia->ka", w, xi) / w.sum(axis=1)[:, None]
+        xi = np.where(seen[..., None], xi, mean_s[:, None, :])
+        eye = np.broadcast_to(np.eye(2) * float(np.median(xi_cov[seen][:, [0, 1], [0, 1]])),
+                              xi_cov.shape)
+        xi_cov = np.where(seen[..., None, None], xi_cov, eye)
     diag.samples_per_cell = n_smp[keep]
     diag.plots_per_cell = n_plt[keep]
     diag.objects_per_cell = n_obj[keep]
@@ -511,12 +606,165 @@ def build_field_data(plots: PlotTable, radars: RadarSet, *, cells: int | ArrayLi
     else:
         p = as_finite_array(f"{fn} P", P, ndim=2, max_abs=MAX_MAGNITUDE)
     if not radars.is_3d:
-        return FieldData(radars.sites, centers, xi, adj, p, xi_cov), diag
+        return FieldData(radars.sites, centers, xi, adj, p, xi_cov, seen=seen), diag
     heights = sum_h[keep] / n_obj[keep]
-    mean = xi.mean(axis=1)
+    if seen is None:
+        mean = xi.mean(axis=1)
+    else:
+        mean = np.einsum("ki,kia->ka", seen.astype(float), xi) / seen.sum(axis=1)[:, None]
     jac = np.stack([radars.polar_jacobian(i, mean, heights) for i in range(m)], axis=1)
     return FieldData(radars.sites, centers, xi, adj, p, xi_cov, jac, heights,
-                     radars.geodetic, radars.origin), diag
+                     radars.geodetic, radars.origin, seen), diag
+
+
+def _scan_intervals(plots: PlotTable, m: int) -> FloatArray:
+    """(m,) each radar's median time between consecutive plots of one object (s; NaN for
+    a radar without two plots of an object)."""
+    out = np.full(m, np.nan)
+    ok = plots.object >= 0
+    for i in range(m):
+        sel = ok & (plots.radar == i)
+        if sel.sum() < 2:
+            continue
+        o, t = plots.object[sel], plots.time[sel]
+        order = np.lexsort((t, o))
+        o, t = o[order], t[order]
+        d = np.diff(t)[np.diff(o) == 0]
+        d = d[d > 0]
+        if d.size:
+            out[i] = float(np.median(d))
+    return out
+
+
+def _no_samples_message(fn: str, plots: PlotTable, fits: list[TrackFit],
+                        knot_spacing: float, union: bool, m: int) -> str:
+    """Why no sampling instant was found: a knot spacing shorter than the scans (every
+    track split at each plot, no fit), no fit at all, or the geometry (no object seen by
+    all m radars / by two radars at the same time)."""
+    scans = _scan_intervals(plots, m)
+    longest = float(np.nanmax(scans)) if np.isfinite(scans).any() else float("nan")
+    if np.isfinite(longest) and knot_spacing < 1.5 * longest:
+        return (f"{fn} knot_spacing: {knot_spacing:g} s is not longer than the radars' scan "
+                f"intervals (median per radar {np.round(scans, 1).tolist()} s): the track "
+                "fits split a track at every silence longer than the knot spacing and "
+                f"keep {len(fits)} fits; give at least 2 × the longest scan interval "
+                f"(e.g. {2 * longest:.0f} s; 20 s for 4-10 s scans)")
+    if not fits:
+        return (f"{fn} plots: no track could be fitted (too few plots per track for the "
+                f"polyline of knot spacing {knot_spacing:g} s); no cell can be formed")
+    if union:
+        return ("plots: no object is seen by two radars at the same time (after the "
+                "track fits); no cell can be formed")
+    return ("plots: no object is seen by all m radars at the same time; no cell can be "
+            "formed (coverage='union' forms cells wherever two radars overlap)")
+
+
+#: Most radars of ``build_field_data(coverage="union")`` (one bit of a uint64 each).
+MAX_UNION_RADARS = 63
+
+#: One object's samples: (instants t, the present radars, each present radar's piece per
+#: instant (−1: none), the positions (mean over the radars with a piece), the radar bits).
+Samples = tuple[FloatArray, list[int], np.ndarray, FloatArray, np.ndarray]
+
+
+def _bar(items: list[Any], progress: bool, desc: str) -> Any:
+    """``items`` wrapped in a tqdm bar on stderr when ``progress`` and stderr is a
+    terminal (and tqdm installed)."""
+    if not progress:
+        return items
+    import sys
+
+    try:
+        from tqdm import tqdm
+    except ImportError:  # pragma: no cover - tqdm is a dependency of the bench extra
+        return items
+    return tqdm(items, desc=desc, file=sys.stderr, disable=not sys.stderr.isatty(),
+                leave=False)
+
+
+def _object_samples(per_radar: list[list[TrackFit]], sample_step: float, union: bool
+                    ) -> Samples | None:
+    """The sampling instants of one object (``sample_step`` s apart): inside the common
+    span of all m radars' fits (``union`` False, the paper's case), or wherever two radars
+    or more have a fit (``union``); None if there is none."""
+    present = [i for i, p in enumerate(per_radar) if p]
+    if union:
+        lo = min(p[0].span[0] for p in (per_radar[i] for i in present))
+        hi = max(max(f.span[1] for f in per_radar[i]) for i in present)
+    else:
+        lo = max(min(f.span[0] for f in p) for p in per_radar)
+        hi = min(max(f.span[1] for f in p) for p in per_radar)
+    if hi <= lo:
+        return None
+    t = np.arange(lo, hi, sample_step)
+    pidx = np.full((len(present), t.size), -1, dtype=np.int32)
+    for ii, i in enumerate(present):
+        for j, f in enumerate(per_radar[i]):
+            pidx[ii, (t >= f.span[0]) & (t <= f.span[1])] = j
+    act = pidx >= 0
+    count = act.sum(axis=0)
+    ok = count >= 2 if union else np.all(act, axis=0)
+    if not ok.any():
+        return None
+    t, pidx, count = t[ok], pidx[:, ok], count[ok]
+    pos = np.zeros((t.size, 2))
+    bits = np.zeros(t.size, dtype=np.uint64)
+    for ii, i in enumerate(present):
+        for j in np.unique(pidx[ii]):
+            if j < 0:
+                continue
+            sel = pidx[ii] == j
+            if union:
+                pos[sel] += per_radar[i][j].at(t[sel]) / count[sel, None]
+            else:
+                pos[sel] += per_radar[i][j].at(t[sel]) / len(per_radar)
+        bits[pidx[ii] >= 0] |= np.uint64(1 << i)
+    return t, present, pidx, pos, bits
+
+
+def _sample_cells(pos: FloatArray, tree: cKDTree, cell_radius: float, radars: RadarSet,
+                  exclude_radius: float) -> tuple[np.ndarray, np.ndarray]:
+    """Each sample's nearest cell and the samples that count (within ``cell_radius`` of
+    it and farther than ``exclude_radius`` from every radar)."""
+    dist, cell = tree.query(pos)
+    near = np.min(np.linalg.norm(pos[:, None] - radars.sites[None], axis=2), axis=1)
+    return cell, np.flatnonzero((dist <= cell_radius) & (near > exclude_radius))
+
+
+def _choose_subsets(objects: list[list[list[TrackFit]]], sample_step: float,
+                    tree: cKDTree, cell_radius: float, radars: RadarSet,
+                    exclude_radius: float, k0: int, share: float, progress: bool
+                    ) -> np.ndarray:
+    """Per cell the radar set S_k (bits): among the radar sets of its samples, the largest
+    contained in the sets of ≥ ``share`` of the samples (ties: the most samples); 0 for a
+    cell without samples."""
+    counts: dict[tuple[int, int], int] = {}
+    for per_radar in _bar(objects, progress, "field data: subsets"):
+        smp = _object_samples(per_radar, sample_step, True)
+        assert smp is not None
+        cell, idx = _sample_cells(smp[3], tree, cell_radius, radars, exclude_radius)
+        if idx.size == 0:
+            continue
+        key = np.column_stack([cell[idx].astype(np.uint64), smp[4][idx]])
+        uniq, n = np.unique(key, axis=0, return_counts=True)
+        for (c, b), v in zip(uniq.tolist(), n.tolist(), strict=True):
+            counts[(c, b)] = counts.get((c, b), 0) + v
+    per_cell: dict[int, list[tuple[int, int]]] = {}
+    for (c, b), v in counts.items():
+        per_cell.setdefault(c, []).append((b, v))
+    subset = np.zeros(k0, dtype=np.uint64)
+    for c, lst in per_cell.items():
+        total = sum(v for _, v in lst)
+        best = (-1, -1, 0)
+        for b, _ in lst:
+            support = sum(v for b2, v in lst if b2 & b == b)
+            if support >= share * total:
+                cand = (int(b).bit_count(), support, b)
+                if cand[:2] > best[:2]:
+                    best = cand
+        if best[0] >= 2:
+            subset[c] = np.uint64(best[2])
+    return subset
 
 
 def _lap(diag: Diagnostics, stage: str, since: float) -> float:
@@ -526,24 +774,29 @@ def _lap(diag: Diagnostics, stage: str, since: float) -> float:
     return now
 
 
-def _accumulate(t: FloatArray, per_radar: list[list[TrackFit]], pidx: np.ndarray,
-                pos: FloatArray, tree: cKDTree, cell_radius: float, radars: RadarSet,
-                exclude_radius: float, sample_step: float, plot_times: FloatArray,
-                height_of: dict[int, tuple[FloatArray, FloatArray]], sum_xi: FloatArray,
-                sum_cov: FloatArray, sum_h: FloatArray, n_obj: np.ndarray, n_smp: np.ndarray,
+def _accumulate(smp: Samples, per_radar: list[list[TrackFit]], tree: cKDTree,
+                cell_radius: float, radars: RadarSet, exclude_radius: float,
+                sample_step: float, plot_times: FloatArray,
+                height_of: dict[int, tuple[FloatArray, FloatArray]],
+                subset: np.ndarray | None, sum_xi: FloatArray, sum_cov: FloatArray,
+                sum_h: FloatArray, n_obj: np.ndarray, n_smp: np.ndarray,
                 n_plt: np.ndarray) -> None:
     """One object's share of the averages (6)-(7), added in place to the per-cell sums.
 
-    The object's sampling instants ``t`` (positions ``pos``, each radar's piece ``pidx``)
-    are sorted by cell once (stable: time order kept inside a cell); per radar and piece
-    ONE :meth:`TrackFit.means_over` gives the means and covariances over all the cells at
+    The object's sampling instants (positions, each present radar's piece) are sorted by
+    cell once (stable: time order kept inside a cell); per radar and piece ONE
+    :meth:`TrackFit.means_over` gives the means and covariances over all the cells at
     once (the same numbers as one :meth:`TrackFit.mean_over` per cell), and the plots
     behind each (cell, piece) are counted by binary search in the piece's sorted plot
-    times: O(samples log) per object instead of O(samples × cells crossed) Python calls."""
-    m = radars.m
-    dist, cell = tree.query(pos)
-    near = np.min(np.linalg.norm(pos[:, None] - radars.sites[None], axis=2), axis=1)
-    idx = np.flatnonzero((dist <= cell_radius) & (near > exclude_radius))
+    times: O(samples log) per object instead of O(samples × cells crossed) Python calls.
+
+    ``subset`` (K,) radar bits S_k (union coverage): only the samples whose radar set
+    contains S_k count for cell k, and only the radars of S_k are averaged there."""
+    t, present, pidx, pos, bits = smp
+    cell, idx = _sample_cells(pos, tree, cell_radius, radars, exclude_radius)
+    if subset is not None and idx.size:
+        need = subset[cell[idx]]
+        idx = idx[(need != 0) & ((bits[idx] & need) == need)]
     if idx.size == 0:
         return
     idx = idx[np.argsort(cell[idx], kind="stable")]
@@ -556,11 +809,16 @@ def _accumulate(t: FloatArray, per_radar: list[list[TrackFit]], pidx: np.ndarray
     n_smp[cells_here] += n_sel
     ts_all = t[idx]
     if radars.is_3d:
-        ht, hv = height_of[per_radar[0][0].object]
+        ht, hv = height_of[per_radar[present[0]][0].object]
         sum_h[cells_here] += np.bincount(grp, np.interp(ts_all, ht, hv)) / n_sel
-    for i in range(m):
-        pieces_i = pidx[i, idx]
+    for ii, i in enumerate(present):
+        pieces_i = pidx[ii, idx]
+        if subset is not None:  # radar i only in the cells whose S_k holds it
+            mine = ((subset[cs] >> np.uint64(i)) & np.uint64(1)) == 1
+            pieces_i = np.where(mine, pieces_i, -1)
         for j in np.unique(pieces_i):
+            if j < 0:
+                continue
             fit = per_radar[i][j]
             on = pieces_i == j
             ts, g = ts_all[on], grp[on]

@@ -57,7 +57,9 @@ class FieldSolution(Solution):
 
     ``centers`` (K, 2) the cell centres x̌_k (m, common plane) the field belongs to, and
     ``frame`` the data's frame (``sites`` (m, 2); ``geodetic`` (m, 3) and ``origin`` (3,)
-    for the exact 3-D chain; None where absent): with them :meth:`at` evaluates the field
+    for the exact 3-D chain; None where absent); ``seen`` (K, m) the radars of each cell
+    (per-cell subsets; ``field`` is 0 where a radar does not see a cell, and the map serves
+    each radar over its own cells only): with them :meth:`at` evaluates the field
     anywhere in the covered area and :meth:`map` gives the
     :class:`~optmodels.biasfield.usage.FieldMap` to correct plots with or to save."""
 
@@ -69,6 +71,7 @@ class FieldSolution(Solution):
     lipschitz: float | None = None
     centers: FloatArray = dataclasses.field(default_factory=lambda: np.empty((0, 2)))
     frame: dict[str, Any] = dataclasses.field(default_factory=dict, repr=False)
+    seen: np.ndarray | None = None
 
     def map(self, *, names: Sequence[str] = (), max_distance: float | None = None
             ) -> FieldMap:
@@ -94,7 +97,7 @@ class FieldSolution(Solution):
             dmax = float("nan") if max_distance is None else max_distance
             fm = FieldMap(c, self.field, dmax, key[0], self.frame.get("sites"),
                           self.frame.get("geodetic"), self.frame.get("origin"),
-                          self.frame.get("chain", ""))
+                          self.frame.get("chain", ""), seen=self.seen)
             cache = (key, fm, self.field)
             self.__dict__["_maps"] = cache
         fm_cached: FieldMap = cache[1]
@@ -146,14 +149,39 @@ def _check_graph(data: FieldData) -> tuple[int, np.ndarray]:
     if not isinstance(data, FieldData):
         raise ProblemError(f"biasfield data: expected a FieldData (biasfield.build_field_data "
                            f"or FieldData(...)), got {type(data).__name__}")
-    n, labels = csgraph.connected_components(data.adjacency, directed=False)
+    n, labels = csgraph.connected_components(_overlap_graph(data), directed=False)
     sizes = np.bincount(labels)
     lonely = np.flatnonzero(sizes[labels] == 1)
     if lonely.size:
-        raise ProblemError(f"adjacency: cells {lonely[:10].tolist()} have no neighbour; their "
+        what = ("have no neighbour" if data.seen is None else
+                "share no radar with any neighbour")
+        raise ProblemError(f"adjacency: cells {lonely[:10].tolist()} {what}; their "
                            "field is not determined by the smoothness criterion (add edges "
                            "or drop them)")
     return int(n), labels
+
+
+def _overlap_graph(data: FieldData) -> sparse.csr_matrix:
+    """The radar-overlap graph: the neighbour pairs (k, l) whose subsets share a radar,
+    S_k ∩ S_l ≠ ∅ (the adjacency itself without subsets). J (9) couples two cells only
+    along its edges, so its connected components are the pieces the field decouples
+    into (docs/formulations.md)."""
+    if data.seen is None:
+        return data.adjacency
+    upper = sparse.triu(data.adjacency, k=1).tocoo()
+    share = np.any(data.seen[upper.row] & data.seen[upper.col], axis=1)
+    a = sparse.csr_matrix((np.ones(int(share.sum())), (upper.row[share], upper.col[share])),
+                          shape=data.adjacency.shape)
+    return (a + a.T).tocsr()
+
+
+def _edge_radars(data: FieldData) -> np.ndarray | None:
+    """(E, m) bool: radar i enters the term of neighbour pair e = (k < l) of (9), i.e. it
+    sees both cells (None without subsets: every radar on every edge)."""
+    if data.seen is None:
+        return None
+    i, j, _ = _edges(data)
+    return data.seen[i] & data.seen[j]
 
 
 def _edge_difference(data: FieldData, weights: FloatArray) -> sparse.csr_matrix:
@@ -165,7 +193,15 @@ def _edge_difference(data: FieldData, weights: FloatArray) -> sparse.csr_matrix:
                               (np.concatenate([e, e]), np.concatenate([i, j]))),
                              shape=(i.size, data.k))
     lt = np.linalg.cholesky(_p_full(data)).T
-    return sparse.kron(diff, sparse.csr_matrix(lt), format="csr")
+    g = sparse.kron(diff, sparse.csr_matrix(lt), format="csr")
+    on = _edge_radars(data)
+    if on is None:
+        return g
+    # per-cell subsets: radar i's rows of edge e only where it sees both cells (P is
+    # block-diagonal, so Lᵀ keeps each radar's two rows to its own two columns)
+    g = (sparse.diags(np.repeat(on.reshape(-1), 2).astype(float)) @ g).tocsr()
+    g.eliminate_zeros()
+    return g
 
 
 def edge_factor(data: FieldData) -> sparse.csr_matrix:
@@ -187,6 +223,11 @@ def _objective(g: sparse.csr_matrix, phi: FloatArray) -> float:
 
 
 def _r_matrix(data: FieldData) -> sparse.csr_matrix:
+    """R of (9): Q ⊗ P; with per-cell subsets GᵀG (each radar's Laplacian over the cells
+    it sees, ⊗ its block of P), which is Q ⊗ P when every radar sees every cell."""
+    if data.seen is not None:
+        g = edge_factor(data)
+        return (g.T @ g).tocsr()
     return sparse.kron(laplacian(data.centers, data.adjacency), sparse.csr_matrix(_p_full(data)),
                        format="csr")
 
@@ -216,6 +257,8 @@ def _solver_name(where: str, solver: Any) -> str:
 def _scales(data: FieldData, phi0: FloatArray) -> FloatArray:
     """Per-component scale of φ (range, azimuth) so that the solver sees O(1) numbers."""
     v = np.abs(phi0.reshape(-1, 2))
+    if data.seen is not None:
+        v = v[data.seen.reshape(-1)]
     s = np.array([max(float(np.median(v[:, 0])), 1e-9), max(float(np.median(v[:, 1])), 1e-15)])
     return np.tile(s, data.m * data.k)
 
@@ -269,7 +312,8 @@ def _finish(data: FieldData, sets: Sets, phi: FloatArray, eta: FloatArray,
                          field=phi.reshape(k, m, 2), phi=phi, eta=eta.reshape(k, 2),
                          active=active.reshape(k, m, 2), duals=dual.reshape(k, m, 2),
                          lipschitz=lipschitz, centers=data.centers.copy(),
-                         frame=_frame(data), **common)
+                         frame=_frame(data),
+                         seen=None if data.seen is None else data.seen.copy(), **common)
 
 
 def _frame(data: FieldData) -> dict[str, Any]:

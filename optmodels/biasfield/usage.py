@@ -56,8 +56,8 @@ from optmodels.core import (
     as_positive,
 )
 
-__all__ = ["FieldMap", "FieldScore", "RegistrationError", "correct_plots", "field_map",
-           "registration_error", "score"]
+__all__ = ["REASONS", "FieldMap", "FieldScore", "RegistrationError", "correct_plots",
+           "field_map", "registration_error", "score", "seen_by_others"]
 
 
 # ----------------------------------------------------------------------------- the map
@@ -128,6 +128,11 @@ class FieldMap:
     by ``geodetic``), ``"2d"`` (a field of the flat 2-D chain: refused on a 3-D radar set,
     whose slant ranges it was not estimated from) or ``""`` (unknown, e.g. a file written
     before the frame was saved: only the sites are compared).
+
+    ``seen`` (K, m) bool (per-cell radar subsets, the field over the union of coverage):
+    radar i's field is served over its own cells only -- the P1 interpolant on the
+    Delaunay triangulation of the centres radar i sees, NaN elsewhere for that radar
+    (:meth:`covered_for`); ``None``: every radar on every cell (the paper's case).
     """
 
     centers: FloatArray
@@ -138,8 +143,10 @@ class FieldMap:
     geodetic: FloatArray | None = None
     origin: FloatArray | None = None
     chain: str = ""
+    seen: np.ndarray | None = None
     _tri: Any = field(default=None, repr=False, compare=False)
     _tree: Any = field(default=None, repr=False, compare=False)
+    _own: Any = field(default=None, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         c = as_finite_array("biasfield.FieldMap centers (m)", self.centers, ndim=2,
@@ -168,6 +175,33 @@ class FieldMap:
         object.__setattr__(self, "max_distance", dmax)
         object.__setattr__(self, "_tri", tri)
         object.__setattr__(self, "_tree", tree)
+        self._set_seen(c, f)
+
+    def _set_seen(self, c: FloatArray, f: FloatArray) -> None:
+        """Per radar with a partial subset: (its cells, triangulation, k-d tree) or None
+        (fewer than 3 cells or no area: the radar is served nowhere)."""
+        if self.seen is None:
+            object.__setattr__(self, "_own", {})
+            return
+        seen = np.asarray(self.seen)
+        if seen.shape != f.shape[:2]:
+            raise ProblemError(f"biasfield.FieldMap seen: expected {f.shape[:2]} (cells, "
+                               f"radars), got {seen.shape}")
+        seen = seen.astype(bool)
+        own: dict[int, Any] = {}
+        for i in range(f.shape[1]):
+            if seen[:, i].all():
+                continue
+            idx = np.flatnonzero(seen[:, i])
+            entry = None
+            if idx.size >= 3:
+                try:
+                    entry = (idx, _Triangles(c[idx]), cKDTree(c[idx]))
+                except QhullError:
+                    entry = None
+            own[i] = entry
+        object.__setattr__(self, "seen", seen)
+        object.__setattr__(self, "_own", own)
 
     def _set_frame(self, m: int) -> None:
         fn = "biasfield.FieldMap"
@@ -250,11 +284,68 @@ class FieldMap:
         near = self._tree.query(p)[0] <= self.max_distance
         return np.asarray(inside & near)
 
+    def covered_for(self, points: ArrayLike, radar: ArrayLike) -> np.ndarray:
+        """(n,) True where radar ``radar[n]`` (an index, or one index for all points) is
+        served at ``points`` (n, 2): inside the triangulation of the cells it sees and
+        within ``max_distance`` of one of them."""
+        p = _points("biasfield.FieldMap.covered_for points (m)", points)
+        return np.all(np.isfinite(self.at_radar(p, radar)), axis=1)
+
+    def at_radar(self, points: ArrayLike, radar: ArrayLike) -> FloatArray:
+        """Radar ``radar[n]``'s field at ``points`` (n, 2): (n, 2) = [range bias (m),
+        azimuth bias (rad)]; NaN where that radar is not served (outside its own cells)."""
+        p = _points("biasfield.FieldMap.at_radar points (m)", points)
+        r = np.broadcast_to(np.asarray(radar, dtype=np.int64), (p.shape[0],))
+        if r.size and (r.min() < 0 or r.max() >= self.m):
+            raise ProblemError(f"biasfield.FieldMap.at_radar radar: indices outside "
+                               f"0..{self.m - 1}")
+        out = np.full((p.shape[0], 2), np.nan)
+        for i in np.unique(r):
+            sel = np.flatnonzero(r == i)
+            out[sel] = self._at_one(p[sel], int(i))
+        return out
+
+    def _at_one(self, p: FloatArray, i: int) -> FloatArray:
+        extend = self.seen is not None
+        if i not in self._own:
+            return self._interp(p, self._tri, self._tree, self.field[:, i:i + 1],
+                                extend)[:, 0]
+        entry = self._own[i]
+        if entry is None:
+            return np.full((p.shape[0], 2), np.nan)
+        idx, tri, tree = entry
+        return self._interp(p, tri, tree, self.field[idx, i:i + 1], extend)[:, 0]
+
+    def _interp(self, p: FloatArray, tri: _Triangles, tree: cKDTree, values: FloatArray,
+                extend: bool = False) -> FloatArray:
+        """P1 interpolant of ``values`` (K', q, 2) on ``tri``; NaN outside it or farther
+        than ``max_distance`` from every node; a node's value bit for bit. ``extend``
+        (maps with per-cell subsets): outside the triangulation but within
+        ``max_distance`` of a node, that nearest node's value (a radar's cells lie inside
+        its coverage by about half a cell; the constant extension errs by ‖∇f‖·d)."""
+        simplex = tri.find(p)
+        dist, idx = tree.query(p)
+        ok = (simplex >= 0) & (dist <= self.max_distance)
+        out = np.full((p.shape[0], *values.shape[1:]), np.nan)
+        if extend:
+            ext = (simplex < 0) & (dist <= self.max_distance)
+            out[ext] = values[idx[ext]]
+        if ok.any():
+            bary = tri.barycentric(p[ok], simplex[ok])
+            verts = tri.simplices[simplex[ok]]
+            out[ok] = np.einsum("nj,njab->nab", bary, values[verts])
+        on = dist == 0.0
+        out[on] = values[idx[on]]
+        return out
+
     def at(self, points: ArrayLike) -> FloatArray:
         """The field at ``points`` (n, 2) (m, common plane): (n, m, 2) = [range bias (m),
-        azimuth bias (rad)] per radar; NaN outside the covered area (:meth:`covered`).
+        azimuth bias (rad)] per radar; NaN outside the covered area (:meth:`covered`),
+        and, with per-cell subsets, for a radar outside its own cells.
         At a cell centre it is that cell's value, exactly."""
         p = _points("biasfield.FieldMap.at points (m)", points)
+        if self._own:
+            return np.stack([self._at_one(p, i) for i in range(self.m)], axis=1)
         simplex = self._tri.find(p)
         dist, idx = self._tree.query(p)
         ok = (simplex >= 0) & (dist <= self.max_distance)
@@ -275,7 +366,7 @@ class FieldMap:
         if self.names:
             extra["names"] = np.array(self.names, dtype=str)
         for key, val in (("radars", self.sites), ("geodetic", self.geodetic),
-                         ("origin", self.origin)):
+                         ("origin", self.origin), ("seen", self.seen)):
             if val is not None:
                 extra[key] = np.asarray(val)
         try:
@@ -298,7 +389,7 @@ class FieldMap:
         chain = str(d["chain"]) if "chain" in d else ""
         try:
             return cls(d["centers"], d["field"], dmax, names, d.get("radars"),
-                       d.get("geodetic"), d.get("origin"), chain)
+                       d.get("geodetic"), d.get("origin"), chain, d.get("seen"))
         except ProblemError as exc:
             raise ProblemError(f"{path}: {exc}") from None
 
@@ -331,7 +422,7 @@ def field_map(solution: Any, data: FieldData, *, max_distance: float | None = No
     three = data.geodetic is not None and data.origin is not None
     return FieldMap(data.centers, f, dmax, tuple(names), data.radars,
                     data.geodetic if three else None, data.origin if three else None,
-                    "3d" if three else "2d")
+                    "3d" if three else "2d", data.seen)
 
 
 # ----------------------------------------------------------------------------- correct
@@ -339,26 +430,62 @@ def field_map(solution: Any, data: FieldData, *, max_distance: float | None = No
 class Corrected:
     """:func:`correct_plots`' result: the corrected ``plots`` (same rows and order), the
     ``bias`` (n, 2) subtracted from each (range m, azimuth rad; 0 where not corrected) and
-    ``covered`` (n,) where the field was defined (elsewhere the plot is left as read)."""
+    ``covered`` (n,) where the field was defined (elsewhere the plot is left as read);
+    ``reason`` (n,) str, why (:data:`REASONS`): ``"covered"``, ``"one radar only"`` (no
+    other radar has a plot of the same object within ``window`` s: no cross-radar data
+    can place a field there) or ``"outside every cell"`` (seen by two radars or more, or
+    of an unknown object, but outside the cells of its radar)."""
 
     plots: PlotTable
     bias: FloatArray
     covered: np.ndarray
+    reason: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype="<U18"))
 
     @property
     def n_uncovered(self) -> int:
         return int(np.sum(~self.covered))
 
 
+#: The values of :attr:`Corrected.reason`.
+REASONS = ("covered", "one radar only", "outside every cell")
+
+
+def seen_by_others(plots: PlotTable, window: float = 60.0) -> np.ndarray:
+    """(n,) True where another radar has a plot of the same object (``plots.object`` ≥ 0)
+    within ``window`` seconds: the plot is seen by two radars or more."""
+    window = as_positive("biasfield.seen_by_others window (s)", window)
+    out = np.zeros(len(plots), dtype=bool)
+    known = np.flatnonzero(plots.object >= 0)
+    if known.size == 0:
+        return out
+    t = plots.time[known]
+    # one sorted key per (object, time): objects spaced farther apart than any time gap
+    span = float(t.max() - t.min()) + 4.0 * window + 1.0
+    key = plots.object[known].astype(np.float64) * span + (t - t.min())
+    r = plots.radar[known]
+    for i in np.unique(r):
+        other = np.sort(key[r != i])
+        mine = np.flatnonzero(r == i)
+        if other.size == 0:
+            continue
+        lo = np.searchsorted(other, key[mine] - window, side="left")
+        hi = np.searchsorted(other, key[mine] + window, side="right")
+        out[known[mine]] = hi > lo
+    return out
+
+
 def correct_plots(plots: PlotTable, radars: RadarSet, field: FieldMap, *,
-                  passes: int = 2) -> Corrected:
+                  passes: int = 2, window: float = 60.0) -> Corrected:
     """Plots with the estimated bias removed: range − f_r(x), azimuth − f_α(x) for each
     plot of radar i, x its position on the common plane.
 
     The bias is a function of the true position; it is evaluated at the plot's position,
     then (``passes`` ≥ 2) again at the corrected position (a fixed-point iteration that
     converges at the rate ‖∇f‖ ≈ 1e-3 per pass). Plots outside the covered area are left
-    uncorrected and flagged in ``covered``. Heights and every other column are kept.
+    uncorrected and flagged in ``covered``, with the ``reason`` per plot
+    (:attr:`Corrected.reason`; ``window`` (s) the time within which another radar's plot
+    of the same object counts as seeing it). With per-cell subsets (``field.seen``) each
+    radar is corrected over its own cells. Heights and every other column are kept.
     """
     fn = "biasfield.correct_plots"
     plots = as_instance(f"{fn} plots", plots, PlotTable)
@@ -372,13 +499,18 @@ def correct_plots(plots: PlotTable, radars: RadarSet, field: FieldMap, *,
     covered = np.ones(n, dtype=bool)
     for _ in range(passes):
         pos = out.cartesian(radars)
-        vals = field.at(pos)  # (n, m, 2)
-        b = vals[np.arange(n), plots.radar]
+        b = field.at_radar(pos, plots.radar)  # (n, 2), each plot's own radar
         covered = np.all(np.isfinite(b), axis=1)
         bias = np.where(covered[:, None], b, 0.0)
         out = replace(plots, range=np.abs(plots.range - bias[:, 0]),
                       azimuth=wrap_angle(plots.azimuth - bias[:, 1]))
-    return Corrected(out, bias, covered)
+    reason = np.full(n, REASONS[0], dtype="<U18")
+    if not covered.all():
+        miss = ~covered
+        single = miss & ~seen_by_others(plots, window) & (plots.object >= 0)
+        reason[miss] = REASONS[2]
+        reason[single] = REASONS[1]
+    return Corrected(out, bias, covered, reason)
 
 
 # ----------------------------------------------------------------------------- registration
@@ -637,6 +769,8 @@ def score(field: ArrayLike, truth: ArrayLike, data: FieldData) -> FieldScore:
     t = as_finite_array(f"{fn} truth", truth, shape=(k, m, 2), max_abs=MAX_MAGNITUDE)
     e = f - t
     e[..., 1] = wrap_angle(e[..., 1])
+    seen = data.subsets
+    e[~seen] = 0.0  # a radar's error counts only on the cells it sees
     _, phi1 = uncertainty_sets(data)
     coo = phi1.tocoo()  # block-diagonal, (2m, 2) blocks; never densified (K may be 1e4)
     jac = np.zeros((k, 2 * m, 2))
@@ -653,13 +787,15 @@ def score(field: ArrayLike, truth: ArrayLike, data: FieldData) -> FieldScore:
                            "singular)") from None
     sh = np.einsum("kia,ka->ki", jac, deta).reshape(k, m, 2)
     rest = e - sh
-    jb = jac.reshape(k, m, 2, 2)  # ∂(r, α)/∂(x, y) of radar i at cell k
+    rest[~seen] = 0.0
+    jb = jac.reshape(k, m, 2, 2).copy()  # ∂(r, α)/∂(x, y) of radar i at cell k
+    jb[~seen] = np.eye(2)  # (zero rows of the radars outside S_k; their errors are 0)
 
     def metres(err: FloatArray) -> float:
         d = np.linalg.solve(jb, err[..., None])[..., 0]
-        return float(np.sqrt(np.mean(np.sum(d * d, axis=-1))))
+        return float(np.sqrt(np.sum(d * d) / seen.sum()))
 
     def rms(err: FloatArray) -> FloatArray:
-        return np.sqrt(np.mean(err.reshape(-1, 2) ** 2, axis=0))
+        return np.sqrt(np.sum(err.reshape(-1, 2) ** 2, axis=0) / seen.sum())
 
     return FieldScore(rms(e), rms(sh), rms(rest), metres(e), metres(sh), metres(rest))

@@ -32,7 +32,7 @@ from optmodels.biasfield.geometry import shift_from_bias, to_polar, wrap_angle
 from optmodels.core import FloatArray, ProblemError, as_finite_array, as_positive
 
 __all__ = ["AircraftPaths", "RadarNetworkScenario", "fly_paths", "fly_paths3d",
-           "radar_network", "simulate_plots"]
+           "grid_sites", "line_sites", "radar_network", "ring_sites", "simulate_plots"]
 
 #: Default network: four radars on a ~200 km square, typical en-route accuracy.
 #: Default azimuth noise, 0.08° (rad).
@@ -342,6 +342,42 @@ class RadarNetworkScenario:
 
 
 FieldKind = Literal["zero", "constant", "linear", "smooth"]
+
+
+# ----------------------------------------------------------------------------- networks
+# Sites for networks where no area is seen by every radar (issue 24): pass them as
+# ``radar_network(..., sites=ring_sites(6, 180e3), max_range=150e3, region=...)``.
+# How such a scenario differs from real traffic: the aircraft enter at uniform random
+# places and times in a square and fly random legs and turns (no airways, no terminal
+# areas, no dense flows between airports), every aircraft is seen by every radar that
+# has it in range and above its horizon with probability 1 per scan (no missed plots,
+# no clutter, no multipath, no beam-shape or cone-of-silence shadows beyond the 40°
+# cone), the heights are exact, and each radar's bias field is a smooth function of
+# the position on the common plane (no height dependence, no time drift).
+def ring_sites(m: int, radius: float) -> FloatArray:
+    """(m, 2) East-North (m) of ``m`` sites evenly on a circle of ``radius`` (m) about the
+    origin: with a range below ``radius`` the centre is seen by none, and with a range
+    between half the chord 2·radius·sin(π/m) and radius each area by two or three."""
+    a = 2 * np.pi * np.arange(m) / m
+    return float(radius) * np.column_stack([np.sin(a), np.cos(a)])
+
+
+def line_sites(m: int, spacing: float) -> FloatArray:
+    """(m, 2) ``m`` sites on the East axis, ``spacing`` (m) apart, centred on the origin
+    (a range below ``spacing`` leaves pairwise overlaps only)."""
+    x = (np.arange(m) - (m - 1) / 2) * float(spacing)
+    return np.column_stack([x, np.zeros(m)])
+
+
+def grid_sites(rows: int, cols: int, spacing: float, *, jitter: float = 0.0,
+               seed: int | np.random.Generator = 0) -> FloatArray:
+    """(rows·cols, 2) sites on a square grid ``spacing`` (m) apart about the origin,
+    each moved by a uniform ±``jitter`` (m) per axis (a national network)."""
+    rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
+    gx, gy = np.meshgrid((np.arange(cols) - (cols - 1) / 2) * float(spacing),
+                         (np.arange(rows) - (rows - 1) / 2) * float(spacing))
+    s = np.column_stack([gx.ravel(), gy.ravel()])
+    return s + rng.uniform(-jitter, jitter, s.shape) if jitter > 0 else s
 
 
 def radar_network(seed: int | np.random.Generator, *, n_aircraft: int = 30,

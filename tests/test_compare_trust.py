@@ -20,6 +20,7 @@ from optmodels.trajectories import generic
 from solvers_cmp import cases as cs
 from solvers_cmp import harness
 from solvers_cmp.harness.metrics import headline, rank_rows, sgm_interval, summarise
+from tests.test_cli import OPTMODELS
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -145,7 +146,7 @@ def test_repetitions_build_and_closed_form_build_are_measured(tmp_path: Path) ->
 
 # ------------------------------------------------------------ resume cannot lie
 def _cli(*args: str) -> dict:
-    out = subprocess.run(["optmodels", *args], capture_output=True, text=True,
+    out = subprocess.run([str(OPTMODELS), *args], capture_output=True, text=True,
                          env=_env(), timeout=300, check=False)
     assert out.returncode == 0, out.stderr[-2000:]
     return json.loads(out.stdout)
@@ -170,6 +171,6 @@ def test_cli_rerun_with_another_time_limit_recomputes(tmp_path: Path) -> None:
 
 
 def test_compare_default_out_differs_from_the_demos() -> None:
-    out = subprocess.run(["optmodels", "compare", "--help"], capture_output=True, text=True,
+    out = subprocess.run([str(OPTMODELS), "compare", "--help"], capture_output=True, text=True,
                          env=_env(), timeout=120, check=True).stdout
     assert "report/compare-full" in " ".join(out.split())

@@ -187,10 +187,11 @@ def test_trajectories_closed_form_corrupted_kernel(monkeypatch: pytest.MonkeyPat
         assert sol.velocity[0] == pytest.approx(honest.velocity[0] + rel * size, rel=1e-9)
 
 
+@pytest.mark.parametrize("reuse", [False, True])
 @pytest.mark.parametrize(("rel", "expect"), [(1e-5, SMALL), (1e-2, LARGE)])
 def test_trajectories_solve_corrupted_point(monkeypatch: pytest.MonkeyPatch,
                                             verdicts: list[Verdict], rel: float,
-                                            expect: Status) -> None:
+                                            expect: Status, reuse: bool) -> None:
     """The solver's θ shifted: downgraded, then refused. The decision is the strict gate
     of :func:`optmodels.trajectories.solution._finish_solve` (the same point through it
     gives the same solution); ``generic.solve`` still decides inline until it calls that
@@ -211,8 +212,25 @@ def test_trajectories_solve_corrupted_point(monkeypatch: pytest.MonkeyPatch,
 
         return prob, bad_back
 
+    real_parametric = gen._parametric_model
+
+    def corrupted_parametric(*args: Any, **kwargs: Any) -> Any:
+        prob, set_values, first, cached = real_parametric(*args, **kwargs)
+
+        def bad_set_values() -> Any:
+            back = set_values()
+
+            def bad_back() -> Any:
+                theta, lines = back()
+                seen["theta"] = _shift_velocity(theta, fam, rel)[0]
+                return seen["theta"], lines
+            return bad_back
+        return prob, bad_set_values, first, cached
+
+    # both paths: the fresh model and the compiled (DPP) model kept between solves
     monkeypatch.setattr(gen, "_cvxpy_problem", corrupted)
-    sol = tr.solve(data, formulation="reduced")
+    monkeypatch.setattr(gen, "_parametric_model", corrupted_parametric)
+    sol = tr.solve(data, formulation="reduced", reuse_model=reuse)
     assert sol.status is expect, sol.message
     assert sol.residuals["stationarity"] == pytest.approx(rel, rel=1e-2)
     verdicts.clear()

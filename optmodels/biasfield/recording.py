@@ -219,16 +219,18 @@ def read_recording(paths: str | os.PathLike[str] | Iterable[str | os.PathLike[st
         Drop (and count) plots beyond their radar's ``max_range`` (default) instead of
         refusing the recording.
 
-    Drops (counted in ``report.dropped``): plots of a SAC/SIC not in ``radars``, plots
-    without an aircraft address (I220: no object to build a track of), plots beyond
-    ``max_range``; the decoder's own drops (no I010/I140/I040) are in ``report.decoder``.
-    ADS-B reports without an address are dropped (``report.adsb_dropped``).
-
     Raises
     ------
     ProblemError
         For an unreadable or foreign file (naming it and the byte offset), a radar set
         that is not 3-D or has no SAC/SIC ids, and bad arguments.
+
+    Notes
+    -----
+    Drops (counted in ``report.dropped``): plots of a SAC/SIC not in ``radars``, plots
+    without an aircraft address (I220: no object to build a track of), plots beyond
+    ``max_range``; the decoder's own drops (no I010/I140/I040) are in ``report.decoder``.
+    ADS-B reports without an address are dropped (``report.adsb_dropped``).
     """
     from optmodels.io.asterix import read_asterix
 

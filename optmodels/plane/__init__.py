@@ -49,8 +49,8 @@ Errata (details and the tests that show them in ``docs/errata.md``)
 * ``a`` is called "the distance to the origin"; it is a signed distance (``n`` and ``a``
   are defined up to a common sign). optmodels reports ``offset >= 0``.
 
-Modules
--------
+Package layout
+--------------
 * :mod:`~optmodels.plane.data`: :class:`PlaneData`, :class:`PlaneSolution` and the
   original form in NumPy (objective (1.2), residuals of (1.3), (1.11)-(1.12), (1.8)).
 * :mod:`~optmodels.plane.verify`: the re-check of every estimate against (1.2)-(1.3).

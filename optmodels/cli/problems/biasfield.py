@@ -7,13 +7,22 @@ part of ``optmodels demo`` and ``optmodels compare --details``."""
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from optmodels.cli.args import _count, _positive
-from optmodels.cli.contract import _OK_STATUSES, Outcome, _leaf, _out_dir, _out_file, _reading
+from optmodels.cli.contract import (
+    _OK_STATUSES,
+    Outcome,
+    _group,
+    _leaf,
+    _out_dir,
+    _out_file,
+    _reading,
+)
 from optmodels.core import ProblemError, as_positive
 
 #: This problem's line in the demo's report/index.md.
@@ -189,7 +198,7 @@ def _biasfield_build(args: argparse.Namespace) -> Outcome:
     for reason, n in build.dropped.items():
         dropped[reason] = dropped.get(reason, 0) + int(n)
     seen = fd.subsets
-    return {"out": str(out), "cells": fd.k, "radars": list(radars.names),
+    return {"out": str(Path(out).resolve()), "cells": fd.k, "radars": list(radars.names),
             "source": inp["source"], "coverage": coverage,
             "geometry": "3d" if getattr(radars, "is_3d", False) else "2d",
             "plots": inp["n_read"], "plots_used": int(sum(f.rows.size for f in diag.fits)),
@@ -250,24 +259,28 @@ def _biasfield_solve(args: argparse.Namespace) -> Outcome:
                            "DEGREES; the Python API's box=(K1 m, K2 rad) takes radians), so "
                            "that the unit is in the flag's name")
     box = _parse_box(args.box_deg) if args.box_deg else None
-    if args.lipschitz and args.solver == "closed-form":
+    closed = args.method == "closed-form" or args.solver == "closed-form"
+    if args.solver == "closed-form":
+        print("optmodels: note: --solver closed-form is now --method closed-form",
+              file=sys.stderr)
+    if args.lipschitz and closed:
         raise ProblemError("--solver closed-form: the Lipschitz problem (--lipschitz) has no "
                            "closed form; choose a CVXPY conic solver (CLARABEL, SCS, ...)")
-    if args.solver == "closed-form" and box is not None:
+    if closed and box is not None:
         raise ProblemError("--box-deg: the closed form (11) has no box; choose a --solver")
     out = _out_dir("--out", args.out)
     with _reading(str(args.file)):
         fd = bf.FieldData.load(args.file)
     if args.lipschitz:
         sol = bf.solve_lipschitz(fd, box=box, solver=args.solver)
-    elif args.solver == "closed-form":
+    elif closed:
         sol = bf.closed_form(fd)
     else:
         sol = bf.solve(fd, box=box, solver=args.solver, formulation=args.formulation)
     res: dict[str, Any] = {"status": sol.status.value, "method": sol.method,
                            "message": sol.message, "objective": sol.objective,
                            "lipschitz": sol.lipschitz, "residuals": sol.residuals,
-                           "cells": fd.k, "out": str(out)}
+                           "cells": fd.k, "out": str(Path(out).resolve())}
     if sol.status.ok:
         with _reading(f"--out {out}"):
             # the frame, so that `biasfield correct` can check the radar set it is applied to
@@ -341,7 +354,7 @@ def _biasfield_correct(args: argparse.Namespace) -> Outcome:
                      f"{int(plots.object[k])},{float(rng[k])!r},"
                      f"{float(np.rad2deg(az[k]))!r},{h},{int(covered[k])}\n")
     n_cov = int(covered.sum())
-    return {"out": str(out), "field": str(args.field), "source": inp["source"],
+    return {"out": str(Path(out).resolve()), "field": str(args.field), "source": inp["source"],
             "geometry": "3d" if getattr(radars, "is_3d", False) else "2d",
             "plots": len(plots), "corrected": n_cov, "not_covered": int(len(plots) - n_cov),
             "not_locatable": int(np.sum(~ok)), "radars": list(names),
@@ -408,7 +421,8 @@ def _recording_args(p: Any, positive: Any) -> None:
                    "geodetic and the plots have heights")
     p.add_argument("--azimuth-unit", choices=("deg", "rad"), default="deg",
                    help="azimuth unit of CSV/Parquet plots")
-    p.add_argument("--drop-out-of-range", action="store_true")
+    p.add_argument("--drop-out-of-range", action="store_true",
+                   help="drop plots beyond their radar's max_range instead of refusing")
     p.add_argument("--date", help="UTC date of an ASTERIX recording (YYYY-MM-DD; time of "
                    "day rolls over at midnight)")
     p.add_argument("--max-rows", type=_count(0), default=100,
@@ -438,8 +452,7 @@ def register(sub: Any) -> None:
     """Add ``optmodels biasfield build``, ``solve``, ``correct`` and ``registration`` to
     the top-level sub-commands ``sub``."""
     positive = _positive()
-    bfp = sub.add_parser("biasfield", help="radar bias fields (paper 001)")
-    bsub = bfp.add_subparsers(dest="verb", required=True)
+    bsub = _group(sub, "biasfield", "radar bias fields (paper 001)")
     bb = _leaf(bsub, "build", "plots -> FieldData .npz (cleaning, track fits, cells, "
                               "averaging)")
     bb.add_argument("recording", type=Path, nargs="+", metavar="RECORDING",
@@ -465,8 +478,10 @@ def register(sub: Any) -> None:
                     help="union: cells wherever two radars or more see the traffic, each "
                          "with its own radars (default); all: only where every radar does "
                          "(paper 001 as printed)")
-    bb.add_argument("--azimuth-unit", choices=("deg", "rad"), default="deg")
-    bb.add_argument("--drop-out-of-range", action="store_true")
+    bb.add_argument("--azimuth-unit", choices=("deg", "rad"), default="deg",
+                    help="azimuth unit of CSV/Parquet plots")
+    bb.add_argument("--drop-out-of-range", action="store_true",
+                    help="drop plots beyond their radar's max_range instead of refusing")
     bb.add_argument("--no-clean", dest="clean", action="store_false",
                     help="skip the cleaning (glitches, track jumps, ground traffic)")
     bb.add_argument("--max-rows", type=_count(0), default=100,
@@ -475,27 +490,33 @@ def register(sub: Any) -> None:
                                    "day rolls over at midnight)")
     bb.add_argument("--scheduler", choices=("serial", "processes"), default="serial",
                     help="where the track fits run (processes: all local cores)")
-    bb.add_argument("--out", type=Path, default=Path("fielddata.npz"))
+    bb.add_argument("--out", type=Path, default=Path("fielddata.npz"), metavar="FILE",
+                    help="the FieldData .npz FILE written")
     bb.set_defaults(func=_biasfield_build, printer=_print_biasfield_build)
     bs = _leaf(bsub, "solve", "the smoothest field on a FieldData .npz")
-    bs.add_argument("file", type=Path)
+    bs.add_argument("file", type=Path, help="FieldData .npz written by biasfield build")
     bs.add_argument("--box-deg", metavar="K1,K2",
                     help="the box (8): |range bias| ≤ K1 metres, |azimuth bias| ≤ K2 DEGREES "
                          "(the API's box=(K1, K2) takes radians)")
     bs.add_argument("--box", help=argparse.SUPPRESS)
+    bs.add_argument("--method", choices=("closed-form", "qp"), default="qp",
+                    help="closed-form (11) (no box, no --lipschitz), or the QP (9)-(10) on "
+                         "--solver")
     bs.add_argument("--solver", default="CLARABEL",
-                    help="closed-form, or a CVXPY solver (CLARABEL, OSQP, SCS, ...)")
-    bs.add_argument("--formulation", choices=("reduced", "constrained"), default="reduced")
+                    help="CVXPY solver (CLARABEL, OSQP, SCS, ...)")
+    bs.add_argument("--formulation", choices=("reduced", "constrained"), default="reduced",
+                    help="the QP's form: reduced or constrained")
     bs.add_argument("--lipschitz", action="store_true",
                     help="smallest Lipschitz constant instead of the quadratic criterion")
-    bs.add_argument("--out", default="biasfield_out", help="folder for field.csv/.npz, maps")
+    bs.add_argument("--out", default="biasfield_out", metavar="FOLDER",
+                    help="output FOLDER for field.csv, field.npz and the two maps")
     bs.set_defaults(func=_biasfield_solve, printer=_print_biasfield_solve)
     bc = _leaf(bsub, "correct", "plots corrected with a field: one CSV row per plot read")
     _recording_args(bc, positive)
     bc.add_argument("--field", type=Path, required=True,
                     help="DIR/field.npz written by `biasfield solve`")
-    bc.add_argument("--out", type=Path, default=Path("corrected.csv"),
-                    help="CSV: time (s), radar, object, range (m), azimuth (deg, clockwise "
+    bc.add_argument("--out", type=Path, default=Path("corrected.csv"), metavar="FILE",
+                    help="CSV FILE: time (s), radar, object, range (m), azimuth (deg, clockwise "
                     "from the radar's own north), height (m above the ellipsoid), covered")
     bc.set_defaults(func=_biasfield_correct, printer=_print_biasfield_correct, adsb=None)
     br = _leaf(bsub, "registration", "cross-radar registration error (and against ADS-B)")

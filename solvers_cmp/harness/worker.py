@@ -19,7 +19,7 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
-from optmodels.montecarlo import guard_worker, sigint_ignored
+from optmodels.execution import guard_worker, sigint_ignored
 from solvers_cmp import cases as cs
 from solvers_cmp.harness.planning import Case
 

@@ -23,7 +23,7 @@ from optmodels.backends.casadi_qp import CasadiConic, casadi_qp_plugins
 from optmodels.backends.common import probe_in_child
 from optmodels.cli import main
 from optmodels.core import ProblemError
-from optmodels.montecarlo import LineLog
+from optmodels.execution import LineLog
 from solvers_cmp import cases as cs
 from solvers_cmp import harness, report
 from tests.harness_adapters import children, interrupt, wait_gone
@@ -403,8 +403,10 @@ def test_bad_and_unreachable_schedulers(tmp_path: Path,
         harness.run_sweep(["trajectories"], tmp_path / "u", sizes=[10],
                           scheduler="tcp://127.0.0.1:1", connect_timeout=1.0)
     assert time.monotonic() - t0 < 8  # the connect timeout, not distributed's 30 s
-    assert main(["compare", "--problems", "trajectories", "--sizes", "10", "--out",
-                 str(tmp_path / "v"), "--scheduler", "localhost:8786", "--json"]) == 2
+    with pytest.raises(SystemExit) as info:  # the shared argparse type: usage error
+        main(["compare", "--problems", "trajectories", "--sizes", "10", "--out",
+              str(tmp_path / "v"), "--scheduler", "localhost:8786", "--json"])
+    assert info.value.code == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "tcp://host:8786" in err[0], err
     assert main(["compare", "--details", "--scheduler", "tcp://h:1", "--out",
@@ -415,7 +417,7 @@ def test_bad_and_unreachable_schedulers(tmp_path: Path,
 def test_ctrl_c_of_a_dask_sweep_keeps_rows_and_resumes(
         tmp_path: Path, trouble: None, dask_cluster: object,
         monkeypatch: pytest.MonkeyPatch) -> None:
-    from optmodels.montecarlo import Interrupted
+    from optmodels.execution import Interrupted
 
     address = dask_cluster.scheduler_address  # type: ignore[attr-defined]
     judge = harness._judge

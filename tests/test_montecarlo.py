@@ -326,7 +326,7 @@ def test_foreign_file_is_refused_untouched(tmp_path: Path) -> None:
 def test_second_writer_is_refused_and_a_stale_lock_is_not(tmp_path: Path) -> None:
     ckpt = tmp_path / "w.jsonl"
     code = ("import time\n"
-            "from optmodels.montecarlo import LineLog\n"
+            "from optmodels.execution import LineLog\n"
             f"log = LineLog({str(ckpt)!r}, 'holder')\n"
             "print('locked', flush=True)\n"
             "time.sleep(60)\n")
@@ -379,7 +379,7 @@ def test_execute_serial_pool_and_a_lost_task() -> None:
     import math
     import operator
 
-    from optmodels.montecarlo.engine import execute
+    from optmodels.execution import execute
 
     xs = np.random.default_rng(11).uniform(1.0, 100.0, size=6)
     tasks = [(math.sqrt, float(x)) for x in xs]

@@ -458,29 +458,11 @@ def _tasks(plots: PlotTable, radars: RadarSet, z_all: FloatArray, chunk: int
 
 
 def _as_scheduler(fn: str, scheduler: Any) -> Any:
-    """None/"serial" → "serial"; "processes"; "dask" → the current distributed Client; a
-    Dask address or Client as given (checked by the Monte Carlo engine)."""
-    from optmodels.montecarlo.engine import _check_scheduler
+    """The scheduler in the one vocabulary (:func:`optmodels.execution.as_scheduler`;
+    ``None`` is ``"serial"``)."""
+    from optmodels.execution import as_scheduler
 
-    if scheduler is None or (isinstance(scheduler, str) and scheduler == "serial"):
-        return "serial"
-    if isinstance(scheduler, str) and scheduler == "dask":
-        try:
-            from distributed import get_client
-        except ImportError:  # pragma: no cover - the test extra installs it
-            raise ProblemError(f"{fn} scheduler: 'dask' needs Dask distributed "
-                               "(pip install 'optmodels[distributed]')") from None
-        try:
-            return get_client()
-        except ValueError:
-            raise ProblemError(f"{fn} scheduler: 'dask' uses the current distributed "
-                               "Client, and there is none (start one, or pass the Client "
-                               "or its address tcp://host:8786)") from None
-    _check_scheduler(scheduler, fn)
-    if isinstance(scheduler, str) and scheduler != "processes" and "://" not in scheduler:
-        raise ProblemError(f"{fn} scheduler: expected None, 'serial', 'processes', 'dask', "
-                           f"a Dask address or a distributed.Client, got {scheduler!r}")
-    return scheduler
+    return as_scheduler(f"{fn} scheduler", scheduler, default="serial")
 
 
 def fit_tracks(plots: PlotTable, radars: RadarSet, *, knot_spacing: float = 20.0,
@@ -498,10 +480,10 @@ def fit_tracks(plots: PlotTable, radars: RadarSet, *, knot_spacing: float = 20.0
 
     The tracks are independent: ``scheduler`` runs them here (``None`` or ``"serial"``),
     on ``workers`` local processes (``"processes"``: a spawn pool whose workers exit with
-    the parent and leave Ctrl-C to it, :func:`optmodels.montecarlo.engine.execute`), or
-    on Dask (``"dask"``: the current ``distributed.Client``; or a Client, or its address
-    ``tcp://host:8786``), in tasks of whole tracks of about ``chunk`` plots. The fits are
-    the same whatever runs them (same tasks, same order: radar, object, time).
+    the parent and leave Ctrl-C to it, :func:`optmodels.execution.execute`), or on Dask
+    (a ``distributed.Client``, or its address ``tcp://host:8786``), in tasks of whole
+    tracks of about ``chunk`` plots. The fits are the same whatever runs them (same
+    tasks, same order: radar, object, time).
     ``positions`` (n, 2): the plots' positions on the common plane if already computed
     (``plots.cartesian(radars)``; the exact 3-D placement costs ~11 s per 10⁶ plots).
 
@@ -510,7 +492,7 @@ def fit_tracks(plots: PlotTable, radars: RadarSet, *, knot_spacing: float = 20.0
     tuple
         The fits (ordered by radar, object, time) and the dropped-plot counts.
     """
-    from optmodels.montecarlo.engine import MAX_WORKERS, execute
+    from optmodels.execution import MAX_WORKERS, execute
 
     fn = "biasfield.fit_tracks"
     knot_spacing = as_positive(f"{fn} knot_spacing (s)", knot_spacing)

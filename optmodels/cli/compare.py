@@ -15,6 +15,7 @@ from optmodels.cli import problems as cli_problems
 from optmodels.cli.args import _count, _int_list, _names, _positive
 from optmodels.cli.contract import Outcome, _leaf, _out_dir
 from optmodels.core import ProblemError
+from optmodels.execution import scheduler_argument
 
 
 def _check_selection(problems: Sequence[str], solvers: Sequence[str] | None,
@@ -75,7 +76,8 @@ def _run_harness(out: Path, problems: Sequence[str], *, sizes: list[int] | None,
     runs :data:`solvers_cmp.harness.profiles.TOO_SLOW` marks too slow for their size
     left out (listed in the report, ``skipped`` here). ``repeats``: calls per run
     (the median solve time is reported).
-    ``scheduler``: ``None``/``"local"``, or a Dask address (each run a Dask task).
+    ``scheduler``: ``None``/``"processes"``, ``"serial"``, or a Dask address (each run a
+    Dask task; :func:`optmodels.execution.as_scheduler`).
     ``references_ok``: every closed-form (reference) row succeeded."""
     from optmodels.backends.casadi_backend import probe_nlp_plugins
     from optmodels.backends.casadi_qp import probe_plugins
@@ -163,7 +165,7 @@ def _compare(args: argparse.Namespace) -> Outcome:
     solvers = _names(args.solvers)
     instances = _names(args.instances)
     if args.details:
-        if args.scheduler not in (None, "local"):
+        if args.scheduler != "processes":
             raise ProblemError("--scheduler: only for the sweep, not with --details")
         res = _run_compare(Path(args.out), problems, args.sizes or [100, 1000, 10000],
                            args.runs, args.repeats or 5, args.seed, progress=not args.json)
@@ -209,13 +211,13 @@ def register(sub: Any) -> None:
                       help="per run, s (> 0; default: the profile's)")
     cmp_.add_argument("--seed", type=count0, default=0)
     cmp_.add_argument("--out", default="report/compare-full",
-                      help="output FOLDER (report.md, results.csv; default report/compare-full; the demo's quick "
-                           "sweep writes report/compare, so the two never share rows)")
-    cmp_.add_argument("--scheduler", default="local",
-                      help="'local' (default: one isolated worker process here) or a Dask "
-                           "scheduler address, e.g. tcp://host:8786: each run is a task on "
-                           "the cluster, with its time limit; results.csv and resume as "
-                           "locally")
+                      help="output FOLDER (report.md, results.csv); the demo's quick sweep "
+                           "writes report/compare, so the two never share rows")
+    cmp_.add_argument("--scheduler", type=scheduler_argument, default="processes",
+                      help="processes (default: one isolated worker process here), serial "
+                           "(in this process) or a Dask scheduler address, e.g. "
+                           "tcp://host:8786: each run is a task on the cluster, with its "
+                           "time limit; results.csv and resume as locally")
     cmp_.add_argument("--details", action="store_true",
                       help="run the per-problem studies instead (plane Monte Carlo accuracy, "
                            "benchmarks at the issues' target sizes)")

@@ -12,6 +12,7 @@ import numpy as np
 from optmodels.cli.args import _count
 from optmodels.cli.contract import Outcome, _leaf, _out_file, _reading
 from optmodels.core import ProblemError
+from optmodels.execution import scheduler_argument
 
 
 def _montecarlo(args: argparse.Namespace) -> Outcome:
@@ -86,7 +87,7 @@ def register(sub: Any) -> None:
                      help="seed of the study's numpy.random.Generator streams")
     mcp.add_argument("--param", action="append", metavar="NAME=VALUE",
                      help="study parameter (repeatable), e.g. --param n=100")
-    mcp.add_argument("--scheduler", default=None,
+    mcp.add_argument("--scheduler", type=scheduler_argument, default="processes",
                      help="processes (default), serial, or a Dask address tcp://host:8786")
     mcp.add_argument("--workers", type=count1, help="local processes (default: all cores)")
     mcp.add_argument("--checkpoint", metavar="FILE",

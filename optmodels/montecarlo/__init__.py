@@ -7,7 +7,8 @@ everything from the :class:`numpy.random.Generator` it is given. :func:`run` giv
 study was interrupted and resumed. That is what makes the engines interchangeable and the
 checkpoints safe.
 
-Engines (``scheduler``):
+Engines (``scheduler``, :func:`optmodels.execution.as_scheduler`; the engine itself is
+:func:`optmodels.execution.execute`):
 
 * ``None`` or ``"processes"`` (default): a local process pool (``concurrent.futures``,
   spawn start method, ``workers`` processes, all cores by default). Workers exit with
@@ -18,7 +19,8 @@ Engines (``scheduler``):
 * ``"tcp://host:8786"`` (any Dask address, ``inproc://`` included), or a
   ``distributed.Client``: Dask distributed (``pip install 'optmodels[distributed]'``).
   The study and optmodels must be importable on the workers. An address that does not
-  answer within ``connect_timeout`` (10 s) is a :class:`~optmodels.core.ProblemError`.
+  answer, or does not complete the Dask handshake, within ``connect_timeout`` (10 s), or
+  a peer that is not a Dask scheduler, is a :class:`~optmodels.core.ProblemError`.
 
 Faults:
 
@@ -48,26 +50,18 @@ Built-in studies (:data:`STUDIES`): plane angle error vs the CRB, trajectories Î
 Carlo, Cov(vec Å´) vs (10), bias-field recovery error, association rate vs separation.
 Their parameters are checked when the study is built (``ProblemError``).
 
-Modules: :mod:`~optmodels.montecarlo.engine` (:func:`run`, the schedulers, the process
-pool), :mod:`~optmodels.montecarlo.studies` (the built-in studies, :func:`study`),
-:mod:`~optmodels.montecarlo.results` (:class:`MonteCarloResult`, :class:`Interrupted`),
-:mod:`~optmodels.montecarlo.checkpoint` (the checkpoint lines),
-:mod:`~optmodels.montecarlo.files` (:class:`LineLog`: locked, line-oriented files) and
-:mod:`~optmodels.montecarlo.workers` (:func:`guard_worker`, :func:`sigint_ignored`); the
-last three are shared with the comparison harness (``solvers_cmp.harness``). Every name
-is importable from here.
+Modules: :mod:`~optmodels.montecarlo.engine` (:func:`run`),
+:mod:`~optmodels.montecarlo.studies` (the built-in studies, :func:`study`),
+:mod:`~optmodels.montecarlo.results` (:class:`MonteCarloResult`) and
+:mod:`~optmodels.montecarlo.checkpoint` (the checkpoint lines). The engine, the worker
+guards, the locked line files and :class:`Interrupted` are in :mod:`optmodels.execution`
+(``Interrupted`` is importable from here too).
 """
 
-from optmodels.montecarlo.engine import CONNECT_TIMEOUT as CONNECT_TIMEOUT
+from optmodels.execution import Interrupted
 from optmodels.montecarlo.engine import MAX_TRIALS as MAX_TRIALS
-from optmodels.montecarlo.engine import MAX_WORKERS as MAX_WORKERS
-from optmodels.montecarlo.engine import Chunk as Chunk
-from optmodels.montecarlo.engine import execute as execute
 from optmodels.montecarlo.engine import run
-from optmodels.montecarlo.files import LineLog
-from optmodels.montecarlo.files import log as log
-from optmodels.montecarlo.files import report_skipped as report_skipped
-from optmodels.montecarlo.results import Interrupted, MonteCarloResult
+from optmodels.montecarlo.results import MonteCarloResult
 from optmodels.montecarlo.studies import (
     STUDIES,
     AssignmentSeparation,
@@ -78,9 +72,7 @@ from optmodels.montecarlo.studies import (
     study,
 )
 from optmodels.montecarlo.studies import Study as Study
-from optmodels.montecarlo.workers import guard_worker
-from optmodels.montecarlo.workers import sigint_ignored as sigint_ignored
 
 __all__ = ["STUDIES", "AssignmentSeparation", "BiasfieldRecovery", "FusionWeight",
-           "Interrupted", "LineLog", "MonteCarloResult", "PlaneAngle", "TrajectoriesEta",
-           "guard_worker", "run", "study"]
+           "Interrupted", "MonteCarloResult", "PlaneAngle", "TrajectoriesEta", "run",
+           "study"]

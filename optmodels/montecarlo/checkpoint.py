@@ -2,7 +2,7 @@
 (names only, no module paths), then one line per finished chunk (``[[i, {name: value}],
 ...]``) and one per chunk with failures (``{"failed": [[i, message], ...]}``).
 ``_load_checkpoint`` reads them back (and repairs a damaged file through
-:class:`~optmodels.montecarlo.files.LineLog`).
+:class:`~optmodels.execution.LineLog`).
 """
 
 from __future__ import annotations
@@ -11,7 +11,7 @@ import json
 from typing import Any
 
 from optmodels.core import ProblemError
-from optmodels.montecarlo.files import LineLog
+from optmodels.execution import LineLog
 
 
 def _pair_ok(p: Any) -> bool:

@@ -1,18 +1,14 @@
-"""The execution engine: :func:`execute` (tasks on serial / a local process pool / Dask
-distributed, results handed back in the parent as they finish), shared by the Monte Carlo
-trials (:func:`run`) and the comparison harness (``solvers_cmp.harness``, ``optmodels
-compare --scheduler``). Trial ``i`` draws from ``default_rng([seed, i])`` whatever the
+"""The study runner: :func:`run` splits the trials into chunks, runs them through the
+execution engine (:func:`optmodels.execution.execute`), records them in the checkpoint
+and summarises them. Trial ``i`` draws from ``default_rng([seed, i])`` whatever the
 engine, the chunking or a resume (see :mod:`optmodels.montecarlo`).
 """
 
 from __future__ import annotations
 
-import contextlib
 import json
 import os
-from collections.abc import Callable, Mapping, Sequence
-from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
-from concurrent.futures.process import BrokenProcessPool
+from collections.abc import Mapping
 from dataclasses import asdict, is_dataclass
 from pathlib import Path
 from typing import Any
@@ -20,29 +16,26 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
-from optmodels.core import (
-    ProblemError,
-    SolverNotAvailable,
-    as_count,
-    as_positive,
+from optmodels.core import ProblemError, as_count, as_positive
+from optmodels.execution import (
+    CONNECT_TIMEOUT,
+    MAX_WORKERS,
+    Interrupted,
+    LineLog,
+    as_scheduler,
+    describe,
+    execute,
 )
 from optmodels.montecarlo.checkpoint import _load_checkpoint
-from optmodels.montecarlo.files import LineLog
-from optmodels.montecarlo.results import Interrupted, MonteCarloResult, _result
+from optmodels.montecarlo.results import MonteCarloResult, _result
 from optmodels.montecarlo.studies import Study, _builtin
-from optmodels.montecarlo.workers import _kill_pool, guard_worker, sigint_ignored
 
-__all__ = ["CONNECT_TIMEOUT", "MAX_TRIALS", "MAX_WORKERS", "execute", "run"]
+__all__ = ["MAX_TRIALS", "run"]
 
 
-#: Size guards: trials per run (the trial indices are held in memory; split a larger
-#: study over seeds) and local worker processes.
+#: Size guard: trials per run (the trial indices are held in memory; split a larger
+#: study over seeds).
 MAX_TRIALS = 10_000_000
-MAX_WORKERS = 256
-
-
-#: Seconds to wait for a Dask scheduler to answer (``run(connect_timeout=...)``).
-CONNECT_TIMEOUT = 10.0
 
 
 def _describe(study: Any) -> str:
@@ -74,92 +67,6 @@ def _chunk_task(study: Study, seed: int, indices: list[int]) -> Chunk:
 
 def _chunks(todo: list[int], size: int) -> list[list[int]]:
     return [todo[k:k + size] for k in range(0, len(todo), size)]
-
-
-def _dask_client(scheduler: Any, timeout: float, what: str = "montecarlo.run") -> Any:
-    try:
-        from distributed import Client
-    except ImportError as exc:  # pragma: no cover - the test extra installs it
-        raise SolverNotAvailable("scheduler: Dask distributed is not installed; "
-                                 "pip install 'optmodels[distributed]'") from exc
-    if isinstance(scheduler, Client):
-        return scheduler, False
-    try:
-        return Client(scheduler, timeout=timeout), True
-    except (OSError, TimeoutError, ValueError) as exc:
-        raise ProblemError(f"{what} scheduler: cannot reach the Dask scheduler at "
-                           f"{scheduler} within {timeout:g} s "
-                           f"({type(exc).__name__}: {str(exc)[:200]})") from None
-
-
-def _check_scheduler(scheduler: Any, what: str = "montecarlo.run") -> None:
-    if scheduler is None or scheduler in ("processes", "serial"):
-        return
-    if isinstance(scheduler, str):
-        if "://" not in scheduler or scheduler.endswith("://"):
-            raise ProblemError(f"{what} scheduler: expected None, 'processes', "
-                               f"'serial' or a Dask address like tcp://host:8786, got "
-                               f"{scheduler!r}")
-        return
-    if not hasattr(scheduler, "submit") or not hasattr(scheduler, "map"):
-        raise ProblemError(f"{what} scheduler: expected None, 'processes', "
-                           f"'serial', a Dask address or a distributed.Client, got "
-                           f"{type(scheduler).__name__}")
-
-
-def execute(fn: Callable[..., Any], tasks: Sequence[tuple[Any, ...]], *,
-            on_result: Callable[[int, Any], None], scheduler: Any = None,
-            workers: int | None = None, on_lost: Callable[[int, str], None] | None = None,
-            connect_timeout: float = CONNECT_TIMEOUT, what: str = "montecarlo.run") -> str:
-    """Run ``fn(*tasks[k])`` for every ``k`` and call ``on_result(k, result)`` in this
-    process as each one finishes (in completion order); return the engine's description.
-
-    ``scheduler``: ``"serial"`` (here, in order), ``None``/``"processes"`` (a local spawn
-    pool of ``workers`` processes, each exiting with its parent and ignoring SIGINT; at
-    most 2 tasks per worker in flight), a Dask address (``tcp://host:8786``) or a
-    ``distributed.Client``. ``fn`` and the tasks must pickle for the last two. A task
-    whose worker died (a crashed pool process, Dask's ``KilledWorker``) goes to
-    ``on_lost(k, message)``; without ``on_lost`` the error is raised. An exception of
-    ``fn`` itself is raised: tasks that may fail record their failures in their result.
-    Ctrl-C kills the local workers (cancels the Dask futures) and raises
-    ``KeyboardInterrupt``: what was handed to ``on_result`` is all that finished.
-    ``what`` prefixes the ``ProblemError`` of an unreachable scheduler.
-    """
-    _check_scheduler(scheduler, what)
-    if scheduler == "serial" or not tasks:
-        for k, args in enumerate(tasks):
-            on_result(k, fn(*args))
-        return "serial"
-    if scheduler is None or scheduler == "processes":
-        nworkers = workers or os.cpu_count() or 1
-        _run_pool(fn, list(tasks), nworkers, on_result, on_lost)
-        return f"processes ({nworkers})"
-    from distributed import KilledWorker, as_completed
-
-    client, own = _dask_client(scheduler, connect_timeout, what)
-    engine = f"dask ({client.scheduler.address})"
-    futs: list[Any] = []
-    try:
-        futs = [client.submit(fn, *args, pure=False) for args in tasks]
-        index = {f.key: k for k, f in enumerate(futs)}
-        for f in as_completed(futs):
-            try:
-                res = f.result()
-            except KilledWorker as exc:
-                if on_lost is None:
-                    raise
-                on_lost(index[f.key], f"Dask worker died while running this task ({exc})"
-                        [:300])
-            else:
-                on_result(index[f.key], res)
-    except KeyboardInterrupt:
-        with contextlib.suppress(Exception):
-            client.cancel(futs)
-        raise
-    finally:
-        if own:
-            client.close()
-    return engine
 
 
 def run(study: Study | str, trials: int, seed: int = 0, *, scheduler: Any = None,
@@ -224,7 +131,7 @@ def run(study: Study | str, trials: int, seed: int = 0, *, scheduler: Any = None
     if chunk is not None:
         chunk = as_count("montecarlo.run chunk", chunk, minimum=1)
     connect_timeout = as_positive("montecarlo.run connect_timeout", connect_timeout)
-    _check_scheduler(scheduler)
+    scheduler = as_scheduler("montecarlo.run scheduler", scheduler, default="processes")
     name = _describe(study)
     header = {"study": name, "seed": seed}
     ck = (LineLog(checkpoint, "montecarlo.run checkpoint") if checkpoint is not None
@@ -268,14 +175,12 @@ def _run(study: Study, trials: int, seed: int, name: str, header: dict[str, Any]
         collect(([], [(i, "worker process died while running this chunk "
                           "(a trial crashed the interpreter?)") for i in parts[k]]))
 
-    engine = "serial" if scheduler == "serial" or not parts else (
-        f"processes ({nworkers})" if scheduler in (None, "processes") else
-        f"dask ({getattr(getattr(scheduler, 'scheduler', None), 'address', scheduler)})")
+    engine = "serial" if not parts else describe(scheduler, nworkers)
     try:
         engine = execute(_chunk_task, [(study, seed, p) for p in parts],
                          on_result=lambda _k, res: collect(res), scheduler=scheduler,
                          workers=nworkers, on_lost=lambda k, _msg: lost(k),
-                         connect_timeout=connect_timeout)
+                         connect_timeout=connect_timeout, what="montecarlo.run")
     except KeyboardInterrupt:
         partial = _result(study, name, seed, trials, done, failed, resumed, engine,
                           skipped, interrupted=True)
@@ -286,48 +191,3 @@ def _run(study: Study, trials: int, seed: int, name: str, header: dict[str, Any]
     finally:
         bar.close()
     return _result(study, name, seed, trials, done, failed, resumed, engine, skipped)
-
-
-def _run_pool(fn: Callable[..., Any], tasks: list[tuple[Any, ...]], nworkers: int,
-              on_result: Callable[[int, Any], None],
-              on_lost: Callable[[int, str], None] | None) -> None:
-    """The local process pool; at most 2 tasks per worker in flight, so that Ctrl-C and
-    a dead worker lose little. A dead worker breaks the pool: every task in flight goes
-    to ``on_lost`` and a new pool runs the rest."""
-    import multiprocessing as mp
-
-    queue = list(reversed(range(len(tasks))))
-    msg = "worker process died while running this task"
-    while queue:
-        ex = ProcessPoolExecutor(nworkers, mp_context=mp.get_context("spawn"),
-                                 initializer=guard_worker, initargs=(os.getpid(),))
-        pending: dict[Future[Any], int] = {}
-        try:
-            while queue or pending:
-                with sigint_ignored():  # workers start inside submit
-                    while queue and len(pending) < 2 * nworkers:
-                        k = queue.pop()
-                        pending[ex.submit(fn, *tasks[k])] = k
-                finished, _ = wait(pending, return_when=FIRST_COMPLETED)
-                broken = False
-                for f in finished:
-                    k = pending.pop(f)
-                    try:
-                        res = f.result()
-                    except BrokenProcessPool:
-                        if on_lost is None:
-                            raise
-                        broken = True
-                        on_lost(k, msg)
-                    else:
-                        on_result(k, res)
-                if broken:  # every other task in flight died with the pool
-                    assert on_lost is not None
-                    for k in pending.values():
-                        on_lost(k, msg)
-                    pending.clear()
-                    break
-        except BaseException:
-            _kill_pool(ex)
-            raise
-        ex.shutdown(wait=True)

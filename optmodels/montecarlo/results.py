@@ -1,7 +1,6 @@
 """What a study run gives back: :class:`MonteCarloResult` (values and summary of the
-successful trials, the failures) and :class:`Interrupted` (Ctrl-C after what had finished
-was saved; also raised by the comparison harness), and ``_result`` which builds the first
-from the engine's finished and failed trials.
+successful trials, the failures) and ``_result`` which builds it from the engine's
+finished and failed trials.
 """
 
 from __future__ import annotations
@@ -13,22 +12,7 @@ import numpy as np
 
 from optmodels.montecarlo.studies import Study
 
-__all__ = ["Interrupted", "MonteCarloResult"]
-
-
-class Interrupted(KeyboardInterrupt):
-    """Ctrl-C during a study or a comparison sweep, after what had finished was saved.
-
-    A ``KeyboardInterrupt`` (so ``except Exception`` does not swallow it) whose message
-    is one line saying what was kept; ``partial`` is the partial result
-    (:class:`MonteCarloResult` with ``interrupted=True``, or the sweep's rows)."""
-
-    def __init__(self, message: str, partial: Any = None) -> None:
-        super().__init__(message)
-        self.partial = partial
-
-    def __str__(self) -> str:
-        return str(self.args[0]) if self.args else "interrupted"
+__all__ = ["MonteCarloResult"]
 
 
 @dataclass

@@ -11,14 +11,14 @@ it stopped.
 
 Faults are handled as in :mod:`optmodels.montecarlo` (same helpers): the worker exits with
 its parent, even after a SIGKILL, and ignores SIGINT; Ctrl-C kills the worker, keeps the
-finished rows and raises :class:`optmodels.montecarlo.Interrupted`; a second sweep on the
+finished rows and raises :class:`optmodels.execution.Interrupted`; a second sweep on the
 same folder gets a ``ProblemError`` (``results.csv.lock``); unreadable rows of
 ``results.csv`` (a last row cut short by a kill, garbage) are moved to
 ``results.csv.skipped``, logged, and run again.
 
-The runs go through the engine of the Monte Carlo studies,
-:func:`optmodels.montecarlo.engine.execute`: here, in order, through the one local worker
-(``scheduler=None``/``"local"``), or on a Dask cluster (``scheduler="tcp://host:8786"``,
+The runs go through the execution engine,
+:func:`optmodels.execution.execute`: here, in order, through the one local worker
+(``scheduler=None``/``"processes"``; ``"serial"``: in this process), or on a Dask cluster (``scheduler="tcp://host:8786"``,
 ``optmodels compare --scheduler``): each run is then one Dask task, run in a child process
 of its Dask worker with the same time limit (:func:`_remote_run`), and a Dask worker that
 dies records the run as ``crashed``. Only this process writes ``results.csv`` (rows in
@@ -43,9 +43,9 @@ Modules (every name of the former ``solvers_cmp/harness.py`` is importable from 
 :mod:`~solvers_cmp.harness.metrics` (:func:`shifted_geometric_mean`, :func:`summarise`).
 """
 
-from optmodels.montecarlo import Interrupted as Interrupted
-from optmodels.montecarlo import LineLog as LineLog
-from optmodels.montecarlo.engine import CONNECT_TIMEOUT as CONNECT_TIMEOUT
+from optmodels.execution import CONNECT_TIMEOUT as CONNECT_TIMEOUT
+from optmodels.execution import Interrupted as Interrupted
+from optmodels.execution import LineLog as LineLog
 from solvers_cmp.harness.metrics import shifted_geometric_mean, summarise
 from solvers_cmp.harness.planning import Case, Sizes, plan
 from solvers_cmp.harness.planning import _check_scheduler as _check_scheduler

@@ -16,8 +16,8 @@ from pathlib import Path
 from typing import Any
 
 from optmodels.core import ProblemError
+from optmodels.execution import LineLog
 from optmodels.io import csv_cell
-from optmodels.montecarlo import LineLog
 
 #: Fixed columns of ``results.csv`` (DESIGN.md, "Solver comparison"), in order.
 COLUMNS = ("problem", "instance", "size", "seed", "formulation", "solver", "settings",

@@ -1,7 +1,7 @@
 """The sweep of the comparison harness: :func:`run_sweep` and its loop :func:`_sweep`.
 
 Checks the arguments, locks and repairs ``results.csv``, skips the rows already there and
-sends the other runs through :func:`optmodels.montecarlo.engine.execute`: in order to the
+sends the other runs through :func:`optmodels.execution.execute`: in order to the
 one local :class:`~solvers_cmp.harness.worker.Worker` (or :class:`_InProcess`), or as Dask
 tasks (:func:`~solvers_cmp.harness.remote._remote_run`); each outcome becomes a judged row
 appended to ``results.csv`` by this process alone.
@@ -16,11 +16,10 @@ from typing import Any
 from tqdm import tqdm
 
 from optmodels.core import ProblemError, as_choice, as_count, as_positive
-from optmodels.montecarlo import Interrupted, LineLog
-from optmodels.montecarlo.engine import CONNECT_TIMEOUT, execute
+from optmodels.execution import CONNECT_TIMEOUT, Interrupted, LineLog, as_scheduler, execute
 from solvers_cmp import cases as cs
 from solvers_cmp.common import cpu_name
-from solvers_cmp.harness.planning import Case, Sizes, _check_scheduler, plan
+from solvers_cmp.harness.planning import Case, Sizes, plan
 from solvers_cmp.harness.profiles import PROFILES, Profile, _judge, options_key, too_slow
 from solvers_cmp.harness.remote import _remote_run
 from solvers_cmp.harness.results import COLUMNS, _csv_line, _key, _load_results
@@ -40,11 +39,12 @@ def run_sweep(problems: Sequence[str], out: Path, *, sizes: Sizes = None,
 
     ``time_limit`` (s, > 0 and finite; default the profile's) bounds each run. The folder
     is locked for the sweep: a second sweep on it gets a ``ProblemError``.
-    ``scheduler``: ``None``/``"local"`` (one worker process here, or in this process with
-    ``isolate=False``), or a Dask address (``tcp://host:8786``) / ``distributed.Client``:
+    ``scheduler`` (:func:`optmodels.execution.as_scheduler`): ``None``/``"processes"``
+    (one worker process here, or in this process with ``isolate=False``), ``"serial"``
+    (in this process), or a Dask address (``tcp://host:8786``) / ``distributed.Client``:
     each run is then one Dask task, isolated in a child process of its Dask worker with
     the same time limit (:func:`_remote_run`; ``isolate`` is not used). Both go through
-    :func:`optmodels.montecarlo.engine.execute`; this process alone writes
+    :func:`optmodels.execution.execute`; this process alone writes
     ``results.csv``, so resume, locks and repairs are the same. ``connect_timeout``: s to
     reach the scheduler (an unreachable one is a ``ProblemError``). ``repeats``: calls
     per run (median solve time; stopped after 1 s of calls), ``skip_slow``: leave out the
@@ -60,7 +60,7 @@ def run_sweep(problems: Sequence[str], out: Path, *, sizes: Sizes = None,
     ProblemError
         Bad arguments (see :func:`plan`), ``out`` not a folder, ``results.csv`` of
         another format, or in use by another sweep.
-    optmodels.montecarlo.Interrupted
+    optmodels.execution.Interrupted
         Ctrl-C: the finished rows are in ``results.csv`` (rerun to resume) and in
         ``exc.partial``.
     """
@@ -68,7 +68,7 @@ def run_sweep(problems: Sequence[str], out: Path, *, sizes: Sizes = None,
     prof = PROFILES[profile]
     limit = (prof.time_limit if time_limit is None
              else as_positive("compare time_limit", time_limit))
-    scheduler = _check_scheduler(scheduler)
+    scheduler = as_scheduler("compare scheduler", scheduler, default="processes")
     connect_timeout = as_positive("compare connect_timeout", connect_timeout)
     repeats = as_count("compare repeats", repeats, minimum=1)
     sweep = plan(problems, sizes, solvers, seeds, instances)
@@ -164,8 +164,9 @@ def _sweep(rl: LineLog, done: dict[tuple[Any, ...], dict[str, Any]],
     args = [(ad_path, case, run, prof.options(run.solver), limit, repeats)
             for _, _, ad_path, case, run in tasks]
     try:
-        if scheduler is None:
-            worker = Worker(out / "worker.log") if isolate else _InProcess()
+        if scheduler in ("serial", "processes"):
+            worker = (Worker(out / "worker.log") if isolate and scheduler == "processes"
+                      else _InProcess())
             execute(local_run, args, on_result=record, scheduler="serial")
         else:
             execute(_remote_run, args, on_result=record, on_lost=lost,

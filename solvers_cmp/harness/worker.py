@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from optmodels.montecarlo import guard_worker, sigint_ignored
+from optmodels.execution import guard_worker, sigint_ignored
 from solvers_cmp import cases as cs
 from solvers_cmp.harness.planning import Case
 

@@ -24,6 +24,7 @@ from optmodels.cli.contract import (
     _reading,
 )
 from optmodels.core import ProblemError, as_positive
+from optmodels.execution import scheduler_argument
 
 #: This problem's line in the demo's report/index.md.
 DEMO_TITLE = ("- [Radar bias fields (paper 001)](biasfield/report.md): plots to "
@@ -488,8 +489,9 @@ def register(sub: Any) -> None:
                     help="dropped rows listed per reason in the report (default 100)")
     bb.add_argument("--date", help="UTC date of an ASTERIX recording (YYYY-MM-DD; time of "
                                    "day rolls over at midnight)")
-    bb.add_argument("--scheduler", choices=("serial", "processes"), default="serial",
-                    help="where the track fits run (processes: all local cores)")
+    bb.add_argument("--scheduler", type=scheduler_argument, default="serial",
+                    help="where the track fits run: serial (default), processes (all "
+                         "local cores) or a Dask address tcp://host:8786")
     bb.add_argument("--out", type=Path, default=Path("fielddata.npz"), metavar="FILE",
                     help="the FieldData .npz FILE written")
     bb.set_defaults(func=_biasfield_build, printer=_print_biasfield_build)

@@ -15,9 +15,10 @@ from typing import Any
 
 from optmodels.core import ProblemError
 
-__all__ = ["LineLog", "report_skipped"]
+__all__ = ["LineLog", "log", "report_skipped"]
 
 
+#: The package's logger (name ``optmodels``).
 log = logging.getLogger("optmodels")
 
 

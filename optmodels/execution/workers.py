@@ -1,9 +1,10 @@
 """Worker processes that exit with their parent and leave Ctrl-C to it.
 
-Shared fault handling of the two process engines: the Monte Carlo pool
-(:mod:`optmodels.montecarlo.engine`) and the comparison harness (``solvers_cmp.harness``):
-:func:`guard_worker` (the workers' initializer), :func:`sigint_ignored` (around starting
-children) and ``_kill_pool`` (no orphans after Ctrl-C or an error).
+Shared fault handling of the process engines: the pool of :func:`optmodels.execution.execute`
+(Monte Carlo studies, track fits) and the comparison harness's worker
+(``solvers_cmp.harness``): :func:`guard_worker` (the workers' initializer),
+:func:`sigint_ignored` (around starting children) and :func:`kill_pool` (no orphans after
+Ctrl-C or an error).
 """
 
 from __future__ import annotations
@@ -16,7 +17,7 @@ import time
 from collections.abc import Iterator
 from concurrent.futures import ProcessPoolExecutor
 
-__all__ = ["guard_worker", "sigint_ignored"]
+__all__ = ["guard_worker", "kill_pool", "sigint_ignored"]
 
 
 def guard_worker(parent_pid: int) -> None:
@@ -61,7 +62,7 @@ def sigint_ignored() -> Iterator[None]:
         signal.signal(signal.SIGINT, old)
 
 
-def _kill_pool(ex: ProcessPoolExecutor) -> None:
+def kill_pool(ex: ProcessPoolExecutor) -> None:
     """Kill a pool's workers now (Ctrl-C, or leaving with an error): no orphans, no wait
     for running trials."""
     procs = list(getattr(ex, "_processes", {}).values())  # no public API for this

@@ -1,0 +1,128 @@
+"""The execution layer: one scheduler vocabulary, and Dask addresses with a deadline that
+covers the handshake (a silent peer, an HTTP server, garbage: one ProblemError, exit 2)."""
+
+from __future__ import annotations
+
+import argparse
+import http.server
+import os
+import socket
+import subprocess
+import threading
+import time
+from collections.abc import Iterator
+
+import pytest
+
+from optmodels import montecarlo as mc
+from optmodels.core import ProblemError
+from optmodels.execution import as_scheduler, scheduler_argument
+
+
+def test_one_vocabulary() -> None:
+    assert as_scheduler("w", None) == "serial"
+    assert as_scheduler("w", None, default="processes") == "processes"
+    assert as_scheduler("w", " processes ") == "processes"
+    assert as_scheduler("w", "tcp://127.0.0.1:8786") == "tcp://127.0.0.1:8786"
+    for bad in ("local", "dask", "threads", "localhost:8786", "tcp://", 3):
+        with pytest.raises(ProblemError, match=r"^my where: expected 'serial'"):
+            as_scheduler("my where", bad)
+    assert scheduler_argument("serial") == "serial"
+    with pytest.raises(argparse.ArgumentTypeError):
+        scheduler_argument("local")
+
+
+@pytest.fixture
+def silent_peer() -> Iterator[str]:
+    """Accepts TCP connections and never says a word."""
+    srv = socket.socket()
+    srv.bind(("127.0.0.1", 0))
+    srv.listen(8)
+    held: list[socket.socket] = []
+    stop = threading.Event()
+
+    def loop() -> None:
+        srv.settimeout(0.2)
+        while not stop.is_set():
+            try:
+                held.append(srv.accept()[0])
+            except OSError:
+                continue
+
+    t = threading.Thread(target=loop, daemon=True)
+    t.start()
+    yield f"tcp://127.0.0.1:{srv.getsockname()[1]}"
+    stop.set()
+    t.join(2)
+    for c in held:
+        c.close()
+    srv.close()
+
+
+@pytest.fixture
+def garbage_peer() -> Iterator[str]:
+    """Answers every connection with bytes that misread as a huge Dask frame length."""
+    srv = socket.socket()
+    srv.bind(("127.0.0.1", 0))
+    srv.listen(8)
+    stop = threading.Event()
+
+    def loop() -> None:
+        srv.settimeout(0.2)
+        while not stop.is_set():
+            try:
+                c = srv.accept()[0]
+            except OSError:
+                continue
+            c.sendall(b"\xff" * 64)
+            c.close()
+
+    t = threading.Thread(target=loop, daemon=True)
+    t.start()
+    yield f"tcp://127.0.0.1:{srv.getsockname()[1]}"
+    stop.set()
+    t.join(2)
+    srv.close()
+
+
+@pytest.fixture
+def http_peer() -> Iterator[str]:
+    srv = http.server.ThreadingHTTPServer(("127.0.0.1", 0), http.server.SimpleHTTPRequestHandler)
+    t = threading.Thread(target=srv.serve_forever, daemon=True)
+    t.start()
+    yield f"tcp://127.0.0.1:{srv.server_address[1]}"
+    srv.shutdown()
+    srv.server_close()
+
+
+@pytest.mark.parametrize("peer", ["silent_peer", "garbage_peer", "http_peer"])
+def test_run_on_a_peer_that_is_not_dask(peer: str, request: pytest.FixtureRequest) -> None:
+    address = request.getfixturevalue(peer)
+    t0 = time.monotonic()
+    with pytest.raises(ProblemError, match=r"montecarlo.run scheduler: .*[Dd]ask"):
+        mc.run(mc.TrajectoriesEta(q=2, n=3), 4, 0, scheduler=address, connect_timeout=1.0)
+    assert time.monotonic() - t0 < 5.0
+
+
+def test_fit_tracks_on_a_silent_peer(silent_peer: str) -> None:
+    from optmodels.biasfield import fit_tracks
+    from optmodels.scenarios import radar_network
+
+    sc = radar_network(3, n_aircraft=2, duration=120.0)
+    t0 = time.monotonic()
+    with pytest.raises(ProblemError, match=r"fit_tracks scheduler: .*no Dask handshake"):
+        fit_tracks(sc.plots, sc.radars, scheduler=silent_peer)
+    assert time.monotonic() - t0 < 15.0  # the default 10 s deadline
+
+
+@pytest.mark.parametrize("peer", ["silent_peer", "http_peer"])
+def test_cli_montecarlo_on_a_peer_that_is_not_dask(peer: str,
+                                                   request: pytest.FixtureRequest) -> None:
+    address = request.getfixturevalue(peer)
+    t0 = time.monotonic()
+    proc = subprocess.run(["optmodels", "montecarlo", "trajectories-eta", "--trials", "2",
+                           "--scheduler", address], capture_output=True, text=True,
+                          timeout=60, env={**os.environ})
+    assert proc.returncode == 2, proc.stderr
+    assert "Dask" in proc.stderr and "Traceback" not in proc.stderr
+    assert time.monotonic() - t0 < 30.0  # 10 s deadline plus start-up

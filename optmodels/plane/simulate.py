@@ -157,7 +157,7 @@ def false_alarm_runs(hours: float, seed: int = 0, *, window: str | None = "40s",
 
     Returns ``alarms``, ``hours``, ``rate`` (per hour), ``se`` (Poisson: √alarms / hours),
     ``stated`` (``false_alarm_rate_per_h``) and ``seconds`` (wall time). ``window``: as
-    :func:`optmodels.plane.tracking.window_spec` reads it (``"40s"``, ``"100pts"``).
+    :func:`optmodels.plane.windows.window_spec` reads it (``"40s"``, ``"100pts"``).
     """
     import time
 

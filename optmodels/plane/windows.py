@@ -39,7 +39,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from optmodels.core import FloatArray
+from optmodels.core import FloatArray, ProblemError, as_count, as_positive
 
 #: A window inside one epoch is recomputed from scratch when the absolute second moments
 #: of the prefix it subtracts exceed this multiple of its own (relative cancellation
@@ -207,3 +207,82 @@ def range_moments(points: FloatArray, w: FloatArray, lo: np.ndarray, hi: np.ndar
     q = 0.5 * (q + np.swapaxes(q, -1, -2))
     return Moments(s0=s0, mean=mean, q=q, qabs=qabs, count=(hi - lo + 1).astype(float),
                    spread=sp, recomputed=recomputed)
+
+
+# =========================================================================== the window's unit
+_WINDOW_HELP = ('write window_seconds=40.0 (or window="40s") for the last 40 s, '
+                'window_points=100 (or window="100pts") for the last 100 measurements, or '
+                'nothing (window=None, "growing") for a growing window')
+
+
+def window_spec(window: str | None = None, *, window_points: int | None = None,
+                window_seconds: float | None = None, where: str = "plane.track"
+                ) -> float | int | None:
+    """The sliding window of :func:`optmodels.plane.tracking.track`, with its unit
+    stated: ``window_seconds`` (s), ``window_points`` (measurements), or ``window`` as
+    text with a unit (``"40s"``, ``"100pts"``, ``"growing"``); at most one. A bare
+    number is refused: ``40`` (points?) and ``40.0`` (seconds?) read alike (issue 26).
+
+    Returns the internal form: a float (seconds), an int (points) or ``None`` (growing).
+
+    Raises
+    ------
+    ProblemError
+        A bare number, two of the three given, or a value out of range; the message says
+        what to write.
+    """
+    given = [k for k, v in (("window", window), ("window_points", window_points),
+                            ("window_seconds", window_seconds)) if v is not None]
+    if len(given) > 1:
+        raise ProblemError(f"{where} {'/'.join(given)}: give one window, got {len(given)}")
+    if window_points is not None:
+        if isinstance(window_points, bool | np.bool_) or not isinstance(
+                window_points, int | np.integer):
+            raise ProblemError(f"{where} window_points: expected a whole number of "
+                               f"measurements (>= 4), got {window_points!r}")
+        return as_count(f"{where} window_points", window_points, minimum=4)
+    if window_seconds is not None:
+        if isinstance(window_seconds, bool | np.bool_):
+            raise ProblemError(f"{where} window_seconds: expected seconds, got "
+                               f"{window_seconds!r}")
+        return as_positive(f"{where} window_seconds", window_seconds)
+    if window is None:
+        return None
+    if not isinstance(window, str):
+        raise ProblemError(f"{where} window: {window!r} does not say its unit (points or "
+                           f"seconds?); {_WINDOW_HELP}")
+    return _parse_window_text(window, where)
+
+
+def _parse_window_text(text: str, where: str) -> float | int | None:
+    """``"40s"`` / ``"40 s"`` → 40.0 s; ``"100pts"`` / ``"100 points"`` → 100 points;
+    ``"growing"`` → ``None``; anything else (a bare ``"40"``) refused."""
+    raw = text.strip().lower().replace(" ", "")
+    if raw in ("growing", "none", "all"):
+        return None
+    for suffix in ("seconds", "second", "sec", "s"):
+        if raw.endswith(suffix):
+            try:
+                value = float(raw[: -len(suffix)])
+            except ValueError:
+                break
+            return as_positive(f"{where} window (s)", value)
+    for suffix in ("points", "point", "pts", "pt"):
+        if raw.endswith(suffix):
+            try:
+                count = int(raw[: -len(suffix)])
+            except ValueError:
+                break
+            return as_count(f"{where} window (points)", count, minimum=4)
+    raise ProblemError(f"{where} window: {text!r} does not say its unit (points or "
+                       f"seconds?); {_WINDOW_HELP}")
+
+
+def window_label(window: float | int | None) -> str:
+    """The text form of a window (``"40s"``, ``"100pts"``, ``"growing"``): what
+    :func:`window_spec` reads back."""
+    if window is None:
+        return "growing"
+    if isinstance(window, int):
+        return f"{window}pts"
+    return f"{window:g}s"

@@ -185,8 +185,8 @@ def _time_range(cols: dict[str, Any], file: Path, start: float | None,
 
 def _parse_window(text: str) -> float | int | None:
     """``--window``: ``40s`` (seconds), ``100pts`` (points) or ``growing``; a bare number
-    is refused (points or seconds?), as in :func:`optmodels.plane.tracking.window_spec`."""
-    from optmodels.plane.tracking import _parse_window_text
+    is refused (points or seconds?), as in :func:`optmodels.plane.windows.window_spec`."""
+    from optmodels.plane.windows import _parse_window_text
 
     try:
         return _parse_window_text(text, "--window")
@@ -299,7 +299,8 @@ def _cli_row(row: dict[str, Any]) -> dict[str, Any]:
 def _plane_track(args: argparse.Namespace) -> Outcome:
     from optmodels.io import read_plane_csv
     from optmodels.io.paths import _write_text
-    from optmodels.plane.tracking import track, window_label
+    from optmodels.plane.tracking import track
+    from optmodels.plane.windows import window_label
 
     out_path = _out_file("--out", args.out) if args.out is not None else None
     with _reading(str(args.file)):

@@ -24,19 +24,19 @@ def false_alarms(hours: float = 30.0, seed: int = 11) -> list[dict[str, Any]]:
     at the default bound of one per hour, for a 40 s, a 100-point and a growing window;
     and at 60 per hour (one per minute)."""
     rows = []
-    for window in (40.0, 100, None):
+    for window in ("40s", "100pts", None):
         r = false_alarm_runs(hours, seed, window=window)
         rows.append({"window": window, **r})
-    for window in (40.0, None):
+    for window in ("40s", None):
         r = false_alarm_runs(hours / 10, seed + 1, window=window,
-                             false_alarm_rate=1.0 / 60.0, run_hours=0.5)
+                             false_alarm_rate_per_h=60.0, run_hours=0.5)
         rows.append({"window": window, **r})
     return rows
 
 
 def delays(runs: int = 50, seed: int = 1, tilts: tuple[float, ...] = (5, 10, 20, 30, 45, 90),
            sigmas: tuple[float, ...] = (30.0, 50.0),
-           windows: tuple[Any, ...] = (40.0, None)) -> list[dict[str, Any]]:
+           windows: tuple[Any, ...] = ("40s", None)) -> list[dict[str, Any]]:
     """Detection delay (s) after a level turn → climbing turn transition (plane tilted by
     ``tilt`` about the velocity; 200 m/s, 7 km radii, 1 Hz) by tilt, σ and window."""
     rows = []
@@ -56,8 +56,8 @@ def radar_delays(runs: int = 20, seed: int = 2, tilts: tuple[float, ...] = (10, 
     """The same with one radar's covariances (general D_i: fit_general per window)."""
     rows = []
     for tilt in tilts:
-        r = detection_runs(runs, seed, tilt_deg=tilt, errors="radar", window=40.0)
-        rows.append({"window": 40.0, "errors": "radar", "tilt": tilt,
+        r = detection_runs(runs, seed, tilt_deg=tilt, errors="radar", window="40s")
+        rows.append({"window": "40s", "errors": "radar", "tilt": tilt,
                      "detected": r["detected"], "median": r["median"], "p90": r["p90"],
                      "early": int(r["early"].sum()),
                      "detectable_tilt_deg": r["detectable_tilt_deg"],
@@ -86,7 +86,7 @@ def before(runs: int = 20, tilts: tuple[float, ...] = (10, 30, 90)) -> list[dict
                     flag = tk - sc.change_time
                     break
             d_win.append(flag)
-            tr = track(sc.times, sc.points, sc.cov, window=40.0)
+            tr = track(sc.times, sc.points, sc.cov, window_seconds=40.0)
             at = tr.change_times[tr.change_times >= sc.change_time]
             d_tr.append(at[0] - sc.change_time if at.size else np.inf)
         def summary(d: list[float]) -> str:
@@ -103,7 +103,7 @@ def per_step_cost(n: int = 100_000, repeats: int = 3) -> list[dict[str, Any]]:
     median of ``repeats``; ``identify_sequence`` beside it."""
     sc = plane_change_track(3, tilt_deg=0.0, before=float(n), after=0.0)
     rows = []
-    for window in (100, 40.0, None):
+    for window in ("100pts", "40s", "growing"):
         ts = []
         for _ in range(repeats):
             t0 = time.perf_counter()

@@ -90,7 +90,7 @@ def test_shared_flags_mean_the_same() -> None:
         assert len(by_flag[opt]) == len(LEAVES)
         assert len({a.help for _, a in by_flag[opt]}) == 1, opt
     for opt in ("--seed", "--level", "--sigma2", "--time-limit", "--start", "--end",
-                "--runs", "--sizes", "--power"):
+                "--runs", "--sizes", "--power", "--scheduler"):
         kinds = {getattr(a.type, "__name__", repr(a.type)) for _, a in by_flag.get(opt, [])}
         assert len(kinds) <= 1, (opt, kinds)
     for path, action in by_flag["--out"]:

@@ -316,6 +316,24 @@ class MergedMeasurementAssociator(DataAssociator):
         model = getattr(detection, "measurement_model", None)
         return model if model is not None else self.hypothesiser.updater.measurement_model
 
+    def predict_measurements(self, tracks: list[Any], dets: list[Any], timestamp: Any,
+                             **kwargs: Any) -> tuple[list[Any], FloatArray, FloatArray]:
+        """Each track predicted to ``timestamp`` and its predicted measurement without noise
+        (the first detection's measurement model, else the updater's): the predictions,
+        their means (Q, d) and symmetrised covariances (Q, d, d)."""
+        pred = self.hypothesiser.predictor
+        upd = self.hypothesiser.updater
+        model0 = self._model(dets[0]) if dets else upd.measurement_model
+        preds, mpreds = [], []
+        for tr in tracks:
+            p = pred.predict(tr, timestamp=timestamp, **kwargs)
+            preds.append(p)
+            mpreds.append(upd.predict_measurement(p, measurement_model=model0,
+                                                  measurement_noise=False))
+        means = np.array([np.asarray(m.state_vector, dtype=float).ravel() for m in mpreds])
+        covs = np.array([np.asarray(m.covar, dtype=float) for m in mpreds])
+        return preds, means, 0.5 * (covs + np.swapaxes(covs, 1, 2))
+
     def _data(self, means: FloatArray, covs: FloatArray, z: FloatArray,
               noises: FloatArray) -> AssignmentData:
         """The AssignmentData of one scan (per-measurement noises R_i (N, d, d))."""
@@ -349,18 +367,7 @@ class MergedMeasurementAssociator(DataAssociator):
         self.last_solution, self.last_groups, self.last_tracks = None, [], tracks
         if not tracks:
             return {}
-        pred = self.hypothesiser.predictor
-        upd = self.hypothesiser.updater
-        model0 = self._model(dets[0]) if dets else upd.measurement_model
-        preds, mpreds = [], []
-        for tr in tracks:
-            p = pred.predict(tr, timestamp=timestamp, **kwargs)
-            preds.append(p)
-            mpreds.append(upd.predict_measurement(p, measurement_model=model0,
-                                                  measurement_noise=False))
-        means = np.array([np.asarray(m.state_vector, dtype=float).ravel() for m in mpreds])
-        covs = np.array([np.asarray(m.covar, dtype=float) for m in mpreds])
-        covs = 0.5 * (covs + np.swapaxes(covs, 1, 2))
+        preds, means, covs = self.predict_measurements(tracks, dets, timestamp, **kwargs)
         d = means.shape[1]
         z = np.array([np.asarray(dt.state_vector, dtype=float).ravel() for dt in dets]
                      ).reshape(len(dets), d) if dets else np.zeros((0, d))

@@ -164,18 +164,7 @@ class SoftMergedAssociator(MergedMeasurementAssociator):
         self.last_solution, self.last_groups = None, []
         if not tracks:
             return {}
-        pred = self.hypothesiser.predictor
-        upd = self.hypothesiser.updater
-        model0 = self._meas_model(dets[0]) if dets else upd.measurement_model
-        preds, mpreds = [], []
-        for tr in tracks:
-            p = pred.predict(tr, timestamp=timestamp, **kwargs)
-            preds.append(p)
-            mpreds.append(upd.predict_measurement(p, measurement_model=model0,
-                                                  measurement_noise=False))
-        means = np.array([np.asarray(m.state_vector, dtype=float).ravel() for m in mpreds])
-        covs = np.array([np.asarray(m.covar, dtype=float) for m in mpreds])
-        covs = 0.5 * (covs + np.swapaxes(covs, 1, 2))
+        preds, means, covs = self.predict_measurements(tracks, dets, timestamp, **kwargs)
         d = means.shape[1]
         if not dets:
             return {tr: MultipleHypothesis([SingleProbabilityHypothesis(

@@ -17,6 +17,7 @@ import pytest
 from optmodels import montecarlo as mc
 from optmodels.core import ProblemError
 from optmodels.execution import as_scheduler, scheduler_argument
+from tests.test_cli import OPTMODELS
 
 
 def test_one_vocabulary() -> None:
@@ -120,7 +121,7 @@ def test_cli_montecarlo_on_a_peer_that_is_not_dask(peer: str,
                                                    request: pytest.FixtureRequest) -> None:
     address = request.getfixturevalue(peer)
     t0 = time.monotonic()
-    proc = subprocess.run(["optmodels", "montecarlo", "trajectories-eta", "--trials", "2",
+    proc = subprocess.run([str(OPTMODELS), "montecarlo", "trajectories-eta", "--trials", "2",
                            "--scheduler", address], capture_output=True, text=True,
                           timeout=60, env={**os.environ})
     assert proc.returncode == 2, proc.stderr

@@ -261,14 +261,15 @@ def _biasfield_solve(args: argparse.Namespace) -> Outcome:
                            "that the unit is in the flag's name")
     box = _parse_box(args.box_deg) if args.box_deg else None
     closed = args.method == "closed-form" or args.solver == "closed-form"
+    given = "--method closed-form" if args.method == "closed-form" else "--solver closed-form"
+    if args.lipschitz and closed:
+        raise ProblemError(f"{given}: the Lipschitz problem (--lipschitz) has no "
+                           "closed form; choose a CVXPY conic solver (CLARABEL, SCS, ...)")
+    if closed and box is not None:
+        raise ProblemError("--box-deg: the closed form (11) has no box; use --method qp")
     if args.solver == "closed-form":
         print("optmodels: note: --solver closed-form is now --method closed-form",
               file=sys.stderr)
-    if args.lipschitz and closed:
-        raise ProblemError("--solver closed-form: the Lipschitz problem (--lipschitz) has no "
-                           "closed form; choose a CVXPY conic solver (CLARABEL, SCS, ...)")
-    if closed and box is not None:
-        raise ProblemError("--box-deg: the closed form (11) has no box; choose a --solver")
     out = _out_dir("--out", args.out)
     with _reading(str(args.file)):
         fd = bf.FieldData.load(args.file)

@@ -40,7 +40,15 @@ from optmodels.io.paths import _MAGIC as _MAGIC
 from optmodels.io.paths import _make_dir as _make_dir
 from optmodels.io.paths import _read_bytes as _read_bytes
 from optmodels.io.paths import _write_text as _write_text
-from optmodels.io.paths import as_path, input_file, output_dir, output_file, read_text
+from optmodels.io.paths import (
+    as_path,
+    atomic_write,
+    input_file,
+    output_dir,
+    output_file,
+    read_text,
+    save_npz,
+)
 from optmodels.io.tables import _COV_COLUMNS as _COV_COLUMNS
 from optmodels.io.tables import (
     CsvRows,
@@ -67,6 +75,7 @@ __all__ = [
     "CsvRows",
     "PlaneCsv",
     "as_path",
+    "atomic_write",
     "csv_cell",
     "csv_numbers",
     "encode_cat021",
@@ -85,6 +94,7 @@ __all__ = [
     "read_plane_csv",
     "read_text",
     "read_trajectory_csv",
+    "save_npz",
     "write_csv",
     "write_json",
     "write_plane_csv",

@@ -4,16 +4,23 @@
 checks an existing readable regular file; :func:`read_text` reads UTF-8 text (BOM dropped),
 refusing UTF-16, binary data and non-UTF-8 bytes with the byte offset and line;
 :func:`output_file` / :func:`output_dir` prepare a path to write to (missing parent folders
-created). The private ``_read_bytes`` / ``_write_text`` / ``_make_dir`` turn ``OSError`` into
-one :class:`~optmodels.core.ProblemError` naming the path. No equations (file handling only).
+created); :func:`atomic_write` writes a file so that a kill or an error part-way leaves the
+previous file untouched (temporary file in the target's folder, flush + fsync,
+``os.replace``, the folder fsynced), and :func:`save_npz` writes an ``.npz`` archive through it.
+Every writer of the package goes through :func:`atomic_write`. The private ``_read_bytes`` /
+``_write_text`` / ``_make_dir`` turn ``OSError`` into one
+:class:`~optmodels.core.ProblemError` naming the path. No equations (file handling only).
 """
 
 from __future__ import annotations
 
 import codecs
+import contextlib
 import os
+import tempfile
+from collections.abc import Iterator
 from pathlib import Path
-from typing import Any
+from typing import IO, Any
 
 from optmodels.core import ProblemError
 
@@ -157,9 +164,92 @@ def _make_dir(d: Path, *, what: str) -> None:
         raise ProblemError(f"{d}: cannot create {what} ({exc.strerror or exc})") from None
 
 
-def _write_text(p: Path, text: str, *, newline: str | None = None) -> None:
+@contextlib.contextmanager
+def atomic_write(path: str | os.PathLike[str], *, name: str = "path", binary: bool = False,
+                 newline: str | None = None) -> Iterator[IO[Any]]:
+    """Write a file all or nothing: ``with atomic_write(p) as fh: fh.write(...)``.
+
+    The data go to a temporary file in the target's folder (``.NAME.XXXX.tmp``); when the
+    block ends without an exception it is flushed, fsynced and moved onto the target with
+    ``os.replace`` (atomic on POSIX), then the folder is fsynced. An exception, a kill or
+    Ctrl-C part-way leaves the previous target as it was (and, but for a kill -9, no
+    temporary file). The path is checked before anything is written (see
+    :func:`output_file`): an existing directory or a parent that is a file is refused.
+
+    Parameters
+    ----------
+    path
+        The file to write.
+    name
+        The argument's name in messages (e.g. ``"--out"``).
+    binary
+        Open in binary mode (default text, UTF-8).
+    newline
+        Passed to :func:`open` in text mode (``""`` for the :mod:`csv` module).
+
+    Raises
+    ------
+    ProblemError
+        Naming the path if it cannot be prepared or written (permission, disk full).
+    """
+    p = output_file(path, name=name)
     try:
-        with p.open("w", encoding="utf-8", newline=newline) as fh:
-            fh.write(text)
+        fd, tmp_name = tempfile.mkstemp(prefix=f".{p.name}.", suffix=".tmp", dir=p.parent)
     except OSError as exc:
         raise ProblemError(f"{p}: cannot write ({exc.strerror or exc})") from None
+    tmp = Path(tmp_name)
+    done = False
+    try:
+        mode = "wb" if binary else "w"
+        kwargs: dict[str, Any] = {} if binary else {"encoding": "utf-8", "newline": newline}
+        with os.fdopen(fd, mode, **kwargs) as fh:
+            yield fh
+            fh.flush()
+            os.fsync(fh.fileno())
+        with contextlib.suppress(OSError):
+            os.chmod(tmp, 0o666 & ~_umask())
+        os.replace(tmp, p)
+        done = True
+        _fsync_dir(p.parent)
+    except OSError as exc:
+        raise ProblemError(f"{p}: cannot write ({exc.strerror or exc}); the previous "
+                           "file, if any, is unchanged") from None
+    finally:
+        if not done:
+            with contextlib.suppress(OSError):
+                tmp.unlink()
+
+
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+def _fsync_dir(d: Path) -> None:
+    with contextlib.suppress(OSError):
+        fd = os.open(d, os.O_RDONLY)
+        try:
+            os.fsync(fd)
+        finally:
+            os.close(fd)
+
+
+def save_npz(path: str | os.PathLike[str], *, name: str = "path", compressed: bool = True,
+             **arrays: Any) -> Path:
+    """``np.savez_compressed`` (or ``np.savez``) onto exactly ``path``, atomically.
+
+    Unlike NumPy's own function, no ``.npz`` is appended to the name, and a kill part-way
+    leaves the previous archive readable (:func:`atomic_write`). Returns the path written.
+    """
+    import numpy as np
+
+    p = output_file(path, name=name)
+    with atomic_write(p, name=name, binary=True) as fh:
+        (np.savez_compressed if compressed else np.savez)(fh, **arrays)
+    return p
+
+
+def _write_text(p: Path, text: str, *, newline: str | None = None) -> None:
+    with atomic_write(p, newline=newline) as fh:
+        fh.write(text)

@@ -46,6 +46,7 @@ from optmodels.biasfield.geometry import (
 from optmodels.biasfield.ingest import read_plots, read_radars, read_tracks
 from optmodels.biasfield.lipschitz import solve_lipschitz
 from optmodels.biasfield.pipeline import FieldBuild, field_data_from_plots
+from optmodels.biasfield.polyline import hat_basis
 from optmodels.biasfield.problem import FieldSolution
 from optmodels.biasfield.recording import (
     AdsbReports,
@@ -64,13 +65,7 @@ from optmodels.biasfield.referee import (
     compare_fields,
 )
 from optmodels.biasfield.selection import closed_form, solve
-from optmodels.biasfield.tracks import (
-    ResidualCheck,
-    TrackFit,
-    fit_tracks,
-    hat_basis,
-    residual_check,
-)
+from optmodels.biasfield.tracks import ResidualCheck, TrackFit, fit_tracks, residual_check
 from optmodels.biasfield.usage import (
     Corrected,
     FieldMap,

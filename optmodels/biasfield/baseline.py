@@ -32,9 +32,9 @@ import numpy as np
 from scipy import linalg, stats
 
 from optmodels.biasfield import geometry3d as g3
-from optmodels.biasfield.data import PlotTable, RadarSet
+from optmodels.biasfield.data import PlotTable, RadarSet, check_tables
 from optmodels.biasfield.geometry import to_polar
-from optmodels.biasfield.tracks import _check_tables, _knots, _pieces, polyline_normal, whiten
+from optmodels.biasfield.polyline import polyline_knots, polyline_normal, split_at_gaps, whiten
 from optmodels.core import FloatArray, ProblemError, as_positive
 
 __all__ = ["BaselineResult", "azimuth_bias_baseline"]
@@ -75,7 +75,7 @@ def azimuth_bias_baseline(plots: PlotTable, radars: RadarSet, *,
         if obj.ndim != 1 or (obj.size and not np.issubdtype(obj.dtype, np.integer)):
             raise ProblemError(f"{fn} objects: expected a list of integer object ids, got "
                                f"{obj.dtype} {obj.shape}")
-    _check_tables(fn, plots, radars)
+    check_tables(fn, plots, radars)
     plots.check(radars)
     m = radars.m
     z_all = plots.cartesian(radars)
@@ -100,10 +100,10 @@ def azimuth_bias_baseline(plots: PlotTable, radars: RadarSet, *,
     for a in ids:
         rows_a = np.flatnonzero(plots.object == a)
         rows_a = rows_a[np.argsort(plots.time[rows_a], kind="stable")]
-        for piece in _pieces(plots.time[rows_a], gap):
+        for piece in split_at_gaps(plots.time[rows_a], gap):
             rows = rows_a[piece]
             t = plots.time[rows]
-            knots = _knots(t, knot_spacing)
+            knots = polyline_knots(t, knot_spacing)
             if len(np.unique(plots.radar[rows])) < 2 or 2 * rows.size < 2 * knots.size + 2:
                 dropped += rows.size
                 continue

@@ -32,9 +32,9 @@ from numpy.typing import ArrayLike
 from scipy import sparse
 from scipy.spatial import Delaunay, QhullError, cKDTree
 
-from optmodels.biasfield.data import PlotTable, RadarSet
+from optmodels.biasfield.data import PlotTable, RadarSet, check_tables
 from optmodels.biasfield.geometry import polar_jacobian, to_polar, wrap_angle
-from optmodels.biasfield.tracks import TrackFit, _check_tables, fit_tracks
+from optmodels.biasfield.tracks import TrackFit, fit_tracks
 from optmodels.core import (
     MAX_MAGNITUDE,
     FloatArray,
@@ -497,7 +497,7 @@ def build_field_data(plots: PlotTable, radars: RadarSet, *, cells: int | ArrayLi
     if subset_share > 1:
         raise ProblemError(f"{fn} subset_share: expected a share in (0, 1], got "
                            f"{subset_share}")
-    _check_tables(fn, plots, radars)
+    check_tables(fn, plots, radars)
     if coverage == "union" and radars.m > MAX_UNION_RADARS:
         raise ProblemError(f"{fn} radars: coverage='union' handles up to {MAX_UNION_RADARS} "
                            f"radars (one bit each), got {radars.m}")

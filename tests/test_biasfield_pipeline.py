@@ -384,7 +384,10 @@ def test_read_tracks_to_enu_and_simulate(tmp_path) -> None:
 
 @pytest.mark.parametrize("module", [
     "optmodels.scenarios.radar_network", "optmodels.biasfield.ingest",
-    "optmodels.biasfield.cells", "optmodels.biasfield.baseline", "optmodels.scenarios"])
+    "optmodels.biasfield.cells", "optmodels.biasfield.baseline", "optmodels.scenarios",
+    "optmodels.biasfield.fielddata", "optmodels.biasfield.averaging",
+    "optmodels.biasfield.polyline", "optmodels.biasfield.paths",
+    "optmodels.biasfield.closedform", "optmodels.biasfield.selection"])
 def test_modules_import_first(module: str) -> None:
     """Each module imports in a fresh interpreter as the first optmodels import (guards
     against import cycles between biasfield and scenarios)."""
@@ -403,9 +406,9 @@ def _old_averaging(plots, radars, fits, centers, *, cell_radius, sample_step=5.0
     independent reference for the vectorised loop. Returns the per-cell sums."""
     from scipy.spatial import cKDTree
 
-    from optmodels.biasfield.cells import _height_interpolants
+    from optmodels.biasfield.averaging import height_interpolants
 
-    height_of = _height_interpolants(plots) if radars.is_3d else {}
+    height_of = height_interpolants(plots) if radars.is_3d else {}
     m = radars.m
     by_obj = {}
     for f in fits:

@@ -32,13 +32,13 @@ def data() -> bf.FieldData:
 
 def test_edge_factor_reproduces_r(data: bf.FieldData) -> None:
     g = sel.edge_factor(data)
-    r = sel._r_matrix(data)
+    r = sel.r_matrix(data)
     assert abs(g.T @ g - r).max() < 1e-12 * abs(r).max()
     # J(φ) = φᵀRφ and the paper's sum over ordered pairs is twice that
     rng = np.random.default_rng(0)
     phi = rng.normal(size=r.shape[0])
     total = 0.0
-    p = sel._p_full(data)
+    p = sel.p_full(data)
     m2 = 2 * data.m
     for i in range(data.k):
         for j in range(data.k):
@@ -72,7 +72,7 @@ def test_printed_11_sign(data: bf.FieldData) -> None:
     """(11) as printed, η = +(Φ1ᵀRΦ1)⁻¹Φ1ᵀRΦ0, is the maximiser's mirror: its J is
     larger than at η = 0, while the corrected sign gives the minimum."""
     phi0, phi1 = bf.uncertainty_sets(data)
-    r = sel._r_matrix(data).toarray()
+    r = sel.r_matrix(data).toarray()
     a = phi1.T @ r @ phi1
     b = phi1.T @ r @ phi0
     printed = phi0 + phi1 @ np.linalg.solve(a, b)
@@ -130,7 +130,7 @@ def test_lipschitz_is_minimal(data: bf.FieldData) -> None:
     assert sel.solve_lipschitz(data, cap=lip.lipschitz * (1 - 1e-3)).status is Status.INFEASIBLE
     assert sel.solve_lipschitz(data, cap=lip.lipschitz * (1 + 1e-3)).status.ok
     cf = sel.closed_form(data)
-    lt = np.linalg.cholesky(sel._p_full(data)).T
+    lt = np.linalg.cholesky(sel.p_full(data)).T
     i, j = np.nonzero(np.triu(data.adjacency.toarray()))
     m2 = 2 * data.m
     jumps = [np.linalg.norm(lt @ (cf.phi[m2 * a:m2 * (a + 1)] - cf.phi[m2 * b:m2 * (b + 1)]))
@@ -189,7 +189,7 @@ def test_identifiability_report() -> None:
     fd, _ = bf.synthetic_field_data(2, cells=200)
     idf = sel.identifiability(fd, batch=64)
     _, phi1 = bf.uncertainty_sets(fd)
-    h = (phi1.T @ sel._r_matrix(fd) @ phi1).toarray()
+    h = (phi1.T @ sel.r_matrix(fd) @ phi1).toarray()
     assert idf.condition == pytest.approx(np.linalg.cond(h), rel=1e-6)
     hi = np.linalg.inv(h)
     spread = np.sqrt([np.trace(hi[2 * k:2 * k + 2, 2 * k:2 * k + 2]) for k in range(fd.k)])
@@ -221,7 +221,7 @@ def test_disconnected_graph_is_solved_per_component() -> None:
 def _lipschitz_of(data: bf.FieldData, phi: np.ndarray) -> float:
     """max over neighbour pairs of ‖Lᵀ(f_i − f_j)‖ / ‖x̌_i − x̌_j‖, P = LLᵀ, by loops over
     the dense adjacency (independent of the module's sparse edge matrices)."""
-    lt = np.linalg.cholesky(sel._p_full(data)).T
+    lt = np.linalg.cholesky(sel.p_full(data)).T
     i, j = np.nonzero(np.triu(data.adjacency.toarray()))
     m2 = 2 * data.m
     return max(float(np.linalg.norm(lt @ (phi[m2 * a:m2 * (a + 1)] - phi[m2 * b:m2 * (b + 1)]))
@@ -373,17 +373,17 @@ def test_closed_form_conditioning_check(weight: float, expect: Status) -> None:
     d = bf.FieldData(fd.radars, fd.centers, fd.xi, fd.adjacency,
                      np.diag([1 / 50.0**2, weight / 1e-3**2]))
     phi0, phi1 = bf.uncertainty_sets(d)
-    h = (phi1.T @ sel._r_matrix(d) @ phi1).toarray()
+    h = (phi1.T @ sel.r_matrix(d) @ phi1).toarray()
     kappa = np.linalg.cond(h, 1)
     cf = sel.closed_form(d)
     assert kappa / 3 <= cf.info["condition"] <= kappa * (1 + 1e-8)
     assert cf.status is expect, cf.message
     if expect is Status.ERROR:
         assert np.all(np.isnan(cf.phi)) and "conditioning" in cf.message
-        eta_dense = -np.linalg.solve(h, phi1.T @ (sel._r_matrix(d) @ phi0))
+        eta_dense = -np.linalg.solve(h, phi1.T @ (sel.r_matrix(d) @ phi0))
         assert cf.residuals["stationarity"] < 1e-12
         eta_sparse = -splinalg.splu(sparse.csc_matrix(h)).solve(
-            phi1.T @ (sel._r_matrix(d) @ phi0))
+            phi1.T @ (sel.r_matrix(d) @ phi0))
         assert np.max(np.abs(eta_dense - eta_sparse)) > 1e-9 * np.max(np.abs(eta_dense))
     else:
         assert cf.residuals["conditioning"] == pytest.approx(kappa * np.finfo(float).eps,

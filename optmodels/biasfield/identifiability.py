@@ -10,8 +10,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.sparse import linalg as splinalg
 
-from optmodels.biasfield.cells import FieldData, uncertainty_sets
-from optmodels.biasfield.problem import _check_graph, _r_matrix
+from optmodels.biasfield.fielddata import FieldData, uncertainty_sets
+from optmodels.biasfield.problem import check_graph, r_matrix
 from optmodels.core import FloatArray, ProblemError, as_count
 
 __all__ = ["Identifiability", "identifiability"]
@@ -37,9 +37,9 @@ def identifiability(data: FieldData, *, batch: int = 512) -> Identifiability:
     """Condition of Φ¹ᵀRΦ¹ (sparse eigenvalues) and the per-cell spread from the diagonal
     blocks of its inverse (one sparse factorisation, solved in batches of columns)."""
     batch = as_count("biasfield.identifiability batch", batch, minimum=1)
-    _check_graph(data)
+    check_graph(data)
     _, phi1 = uncertainty_sets(data)
-    h = (phi1.T @ _r_matrix(data) @ phi1).tocsc()
+    h = (phi1.T @ r_matrix(data) @ phi1).tocsc()
     try:
         lu = splinalg.splu(h)
     except RuntimeError as exc:

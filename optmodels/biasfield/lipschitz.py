@@ -3,7 +3,7 @@ the uncertainty sets (10) [+ box (8)], an SOCP with one second-order cone per ne
 
 The claimed optimum is re-checked through the solver's dual certificate
 (:func:`optmodels.biasfield.verify.lipschitz_residuals`) in the scaled variables of
-``optmodels.biasfield.problem._lipschitz_data``.
+``optmodels.biasfield.problem.lipschitz_data``.
 """
 
 from __future__ import annotations
@@ -14,16 +14,18 @@ import cvxpy as cp
 import numpy as np
 
 from optmodels.backends.profiles import DEFAULTS, solver_options
-from optmodels.biasfield.cells import FieldData
+from optmodels.biasfield.fielddata import FieldData
 from optmodels.biasfield.problem import (
     FieldSolution,
-    _arguments,
-    _failed_method,
-    _finish,
-    _lipschitz_data,
-    _run,
+    check_arguments,
+    failed_solution,
+    lipschitz_data,
+    pack_solution,
 )
-from optmodels.biasfield.verify import _verify, box_feasibility, lipschitz_residuals
+
+# the solver call under the name tests/test_gate.py patches (``bf.lipschitz._run``)
+from optmodels.biasfield.problem import run_solver as _run
+from optmodels.biasfield.verify import box_feasibility, lipschitz_residuals, verify_solution
 from optmodels.core import ProblemError, as_positive, timed
 
 __all__ = ["SOCP_DEFAULTS", "solve_lipschitz"]
@@ -63,7 +65,7 @@ def solve_lipschitz(data: FieldData, *, box: tuple[float, float] | None = None,
     certificate (see :mod:`optmodels.backends.cvxpy_backend`).
     """
     fn = "biasfield.solve_lipschitz"
-    n_comp, formulation, solver, bound, sets = _arguments(fn, data, formulation, solver, box)
+    n_comp, formulation, solver, bound, sets = check_arguments(fn, data, formulation, solver, box)
     cap_v = None if cap is None else as_positive(f"{fn} cap", cap)
     method = f"cvxpy:{solver}:lipschitz:{formulation}"
     phi0, phi1 = sets
@@ -72,7 +74,7 @@ def solve_lipschitz(data: FieldData, *, box: tuple[float, float] | None = None,
         if bad.size:
             raise ProblemError(f"{fn} box: the box misses the uncertainty sets of cells "
                                f"{bad[:20].tolist()}")
-    prob_data = _lipschitz_data(data, sets)
+    prob_data = lipschitz_data(data, sets)
     sc, u0, bmat, dmat, dist, ref, lip0 = (prob_data[k] for k in (
         "sc", "u0", "bmat", "dmat", "dist", "ref", "lip0"))
     m2 = 2 * data.m
@@ -99,11 +101,11 @@ def solve_lipschitz(data: FieldData, *, box: tuple[float, float] | None = None,
     common["build_time"] += tb.elapsed
     common["method"] = method
     if not res.status.ok or eta.value is None:
-        return _failed_method(data, sets, common, bound)
+        return failed_solution(data, sets, common, bound)
     et = np.asarray(eta.value, dtype=float) * sc[0]
     phi = phi0 + phi1 @ et if formulation == "reduced" else np.asarray(u.value) * sc
     jumps = np.linalg.norm((prob_data["jump"] @ phi).reshape(-1, m2), axis=1) / dist
-    sol = _finish(data, sets, phi, et, common, bound, None, lipschitz=float(np.max(jumps)))
+    sol = pack_solution(data, sets, phi, et, common, bound, None, lipschitz=float(np.max(jumps)))
     sol.info["components"] = n_comp
     duals = {"soc": soc.dual_value,
              "upper": box_cons[0].dual_value if box_cons else None,
@@ -114,4 +116,4 @@ def solve_lipschitz(data: FieldData, *, box: tuple[float, float] | None = None,
     sol.info["duals"] = duals  # the solver's multipliers: the certificate checked below
     sol.residuals.update(lipschitz_residuals(data, sol, duals, box=box, cap=cap_v,
                                              sets=sets, prob_data=prob_data))
-    return _verify(sol)
+    return verify_solution(sol)

@@ -2,15 +2,20 @@ r"""The original problem of section 4 (paper 001, (8)-(10)) and what every metho
 
 The solution type :class:`FieldSolution`; the objective (9) J(φ) = φᵀ(Q ⊗ P)φ written as
 ‖Gφ‖² with the sparse edge-difference factor G (:func:`edge_factor`, :func:`objective`)
-and R = Q ⊗ P itself (``_r_matrix``); the box (8) as bounds on φ (``_box``); the checks of
-the arguments common to the solves (``_check_graph``, ``_arguments``); the per-component
-scaling the solvers see (``_scales``, and the scaled Lipschitz SOCP's matrices
-``_lipschitz_data``, shared by its solve and its certificate check); the solver call
-(``_run``) and the result packer (``_finish``: φ on the sets (10), the box's active set).
+and R = Q ⊗ P itself (:func:`r_matrix`); the box (8) as bounds on φ (:func:`box_bounds`);
+the checks of the arguments common to the solves (:func:`check_graph`,
+:func:`check_arguments`); the per-component scaling the solvers see
+(:func:`variable_scales`, and the scaled Lipschitz SOCP's matrices :func:`lipschitz_data`,
+shared by its solve and its certificate check); the solver call (:func:`run_solver`), the
+result packer (:func:`pack_solution`: φ on the sets (10), the box's active set; the gate
+is :func:`optmodels.biasfield.verify.verify_solution`) and the result of a method without a
+field (:func:`failed_solution`).
 
-Used by :mod:`~optmodels.biasfield.selection` (closed form (11), QP),
-:mod:`~optmodels.biasfield.lipschitz`, :mod:`~optmodels.biasfield.verify` and
-:mod:`~optmodels.biasfield.identifiability`.
+Those helpers are the selection stage's shared pieces: public inside the package (used by
+:mod:`~optmodels.biasfield.closedform`, :mod:`~optmodels.biasfield.selection`,
+:mod:`~optmodels.biasfield.lipschitz`, :mod:`~optmodels.biasfield.verify`,
+:mod:`~optmodels.biasfield.identifiability` and :mod:`~optmodels.biasfield.referee`), not
+re-exported by ``optmodels.biasfield``.
 """
 
 from __future__ import annotations
@@ -27,7 +32,7 @@ from scipy import sparse
 from scipy.sparse import csgraph
 
 from optmodels.backends.cvxpy_backend import solve_problem
-from optmodels.biasfield.cells import FieldData, laplacian, uncertainty_sets
+from optmodels.biasfield.fielddata import FieldData, laplacian, uncertainty_sets
 from optmodels.core import (
     FloatArray,
     ProblemError,
@@ -132,7 +137,8 @@ class FieldSolution(Solution):
 
 
 # ----------------------------------------------------------------------------- pieces
-def _p_full(data: FieldData) -> FloatArray:
+def p_full(data: FieldData) -> FloatArray:
+    """P of ‖·‖_F as the (2m, 2m) matrix (a (2, 2) P repeated for every radar)."""
     m = data.m
     return np.kron(np.eye(m), data.P) if data.P.shape == (2, 2) else data.P
 
@@ -144,7 +150,7 @@ def _edges(data: FieldData) -> tuple[np.ndarray, np.ndarray, FloatArray]:
     return i, j, d2
 
 
-def _check_graph(data: FieldData) -> tuple[int, np.ndarray]:
+def check_graph(data: FieldData) -> tuple[int, np.ndarray]:
     """Connected components of the neighbour graph; isolated cells are refused."""
     if not isinstance(data, FieldData):
         raise ProblemError(f"biasfield data: expected a FieldData (biasfield.build_field_data "
@@ -192,7 +198,7 @@ def _edge_difference(data: FieldData, weights: FloatArray) -> sparse.csr_matrix:
     diff = sparse.csr_matrix((np.concatenate([weights, -weights]),
                               (np.concatenate([e, e]), np.concatenate([i, j]))),
                              shape=(i.size, data.k))
-    lt = np.linalg.cholesky(_p_full(data)).T
+    lt = np.linalg.cholesky(p_full(data)).T
     g = sparse.kron(diff, sparse.csr_matrix(lt), format="csr")
     on = _edge_radars(data)
     if on is None:
@@ -222,18 +228,18 @@ def _objective(g: sparse.csr_matrix, phi: FloatArray) -> float:
     return float(v @ v)
 
 
-def _r_matrix(data: FieldData) -> sparse.csr_matrix:
+def r_matrix(data: FieldData) -> sparse.csr_matrix:
     """R of (9): Q ⊗ P; with per-cell subsets GᵀG (each radar's Laplacian over the cells
     it sees, ⊗ its block of P), which is Q ⊗ P when every radar sees every cell."""
     if data.seen is not None:
         g = edge_factor(data)
         return (g.T @ g).tocsr()
-    return sparse.kron(laplacian(data.centers, data.adjacency), sparse.csr_matrix(_p_full(data)),
+    return sparse.kron(laplacian(data.centers, data.adjacency), sparse.csr_matrix(p_full(data)),
                        format="csr")
 
 
-def _box(data: FieldData, box: Sequence[float] | None, where: str = "biasfield.solve"
-         ) -> FloatArray | None:
+def box_bounds(data: FieldData, box: Sequence[float] | None, where: str = "biasfield.solve"
+               ) -> FloatArray | None:
     """The box (8) as bounds on φ (2mK,): ``box`` = (K1 range bound, m; K2 azimuth bound,
     rad), two positive finite numbers, or None."""
     as_instance(f"{where} data", data, FieldData)
@@ -254,7 +260,7 @@ def _solver_name(where: str, solver: Any) -> str:
 
 
 # ----------------------------------------------------------------------------- solves
-def _scales(data: FieldData, phi0: FloatArray) -> FloatArray:
+def variable_scales(data: FieldData, phi0: FloatArray) -> FloatArray:
     """Per-component scale of φ (range, azimuth) so that the solver sees O(1) numbers."""
     v = np.abs(phi0.reshape(-1, 2))
     if data.seen is not None:
@@ -263,19 +269,19 @@ def _scales(data: FieldData, phi0: FloatArray) -> FloatArray:
     return np.tile(s, data.m * data.k)
 
 
-def _arguments(fn: str, data: FieldData, formulation: Any, solver: Any, box: Any
-               ) -> tuple[int, Any, str, Any, Any]:
+def check_arguments(fn: str, data: FieldData, formulation: Any, solver: Any, box: Any
+                    ) -> tuple[int, Any, str, Any, Any]:
     """The checked arguments common to :func:`~optmodels.biasfield.selection.solve` and
     :func:`~optmodels.biasfield.lipschitz.solve_lipschitz`: the number of graph components,
     the formulation, the solver's name, the box bound and the uncertainty sets (10)."""
-    n_comp, _ = _check_graph(data)
+    n_comp, _ = check_graph(data)
     formulation = as_choice(f"{fn} formulation", formulation, ("constrained", "reduced"))
     solver = _solver_name(fn, solver)
-    bound = _box(data, box, fn)
+    bound = box_bounds(data, box, fn)
     return n_comp, formulation, solver, bound, uncertainty_sets(data)
 
 
-def _run(where: str, prob: cp.Problem, solver: str, opts: dict[str, Any]) -> Any:
+def run_solver(where: str, prob: cp.Problem, solver: str, opts: dict[str, Any]) -> Any:
     """:func:`solve_problem`, with a rejected option named as this function's argument."""
     try:
         return solve_problem(prob, solver, **opts)
@@ -283,19 +289,22 @@ def _run(where: str, prob: cp.Problem, solver: str, opts: dict[str, Any]) -> Any
         raise ProblemError(f"{where} options: {exc}") from None
 
 
-def _failed_method(data: FieldData, sets: Sets, common: dict[str, Any],
-                   bound: FloatArray | None) -> FieldSolution:
+def failed_solution(data: FieldData, sets: Sets, common: dict[str, Any],
+                    bound: FloatArray | None) -> FieldSolution:
     """The result of a method that produced no field (a failed solve, an overflow, a
-    proven-infeasible box): φ and η NaN, packed and re-checked by :func:`_finish`."""
+    proven-infeasible box): φ and η NaN, packed and re-checked by :func:`pack_solution`."""
     phi0, phi1 = sets
-    return _finish(data, sets, np.full(phi0.size, np.nan), np.full(phi1.shape[1], np.nan),
+    return pack_solution(data, sets, np.full(phi0.size, np.nan), np.full(phi1.shape[1], np.nan),
                    common, bound, None)
 
 
-def _finish(data: FieldData, sets: Sets, phi: FloatArray, eta: FloatArray,
-            common: dict[str, Any],
-            bound: FloatArray | None, duals: FloatArray | None,
-            lipschitz: float | None = None) -> FieldSolution:
+def pack_solution(data: FieldData, sets: Sets, phi: FloatArray, eta: FloatArray,
+                  common: dict[str, Any], bound: FloatArray | None, duals: FloatArray | None,
+                  lipschitz: float | None = None) -> FieldSolution:
+    """A method's φ, η (and box multipliers ``duals``) packed as a :class:`FieldSolution`
+    with the residuals of the sets (10) and of the box (8) and the box's active set; the
+    status in ``common`` is not judged here (the gate is
+    :func:`~optmodels.biasfield.verify.verify_solution`)."""
     k, m = data.k, data.m
     phi0, phi1 = sets
     res: dict[str, float] = {}
@@ -324,12 +333,12 @@ def _frame(data: FieldData) -> dict[str, Any]:
             "origin": None if not three else np.array(data.origin, dtype=float)}
 
 
-def _lipschitz_data(data: FieldData, sets: Sets) -> dict[str, Any]:
+def lipschitz_data(data: FieldData, sets: Sets) -> dict[str, Any]:
     """The scaled SOCP's matrices: φ = sc·u, u = u0 + B η̃ (η = sc_range·η̃); the jump of
     edge e is D_e u (= Lᵀ(f_i − f_j)); cone e: (ℓ d_e/ref, (D_e u)/lip0) with L = ℓ·lip0/ref,
     lip0 the largest jump ratio at η = 0 times ref = median edge length."""
     phi0, phi1 = sets
-    sc = _scales(data, phi0)
+    sc = variable_scales(data, phi0)
     m2 = 2 * data.m
     dist = np.sqrt(_edges(data)[2])
     jump = _edge_difference(data, np.ones(dist.size))  # Lᵀ(f_i − f_j) per edge

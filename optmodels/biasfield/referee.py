@@ -31,7 +31,7 @@ The reference positions of the plots come from a recording's ADS-B reports throu
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -41,10 +41,10 @@ from scipy.sparse import linalg as splinalg
 from scipy.spatial import cKDTree
 
 from optmodels.biasfield import geometry3d as g3
-from optmodels.biasfield.cells import FieldData
 from optmodels.biasfield.data import PlotTable, RadarSet
+from optmodels.biasfield.fielddata import FieldData
 from optmodels.biasfield.geometry import wrap_angle
-from optmodels.biasfield.problem import _check_graph, _r_matrix
+from optmodels.biasfield.problem import check_graph, r_matrix
 from optmodels.biasfield.usage import (
     FieldMap,
     RegistrationError,
@@ -219,7 +219,7 @@ def adsb_field(data: FieldData, plots: PlotTable, radars: RadarSet, reference: A
     level = as_choice(f"{fn} level", level, ("discrepancy", "means"))
     if radars.m != data.m:
         raise ProblemError(f"{fn} radars: {radars.m} radars for data of {data.m}")
-    _check_graph(data)
+    check_graph(data)
     ref = _reference(fn, plots, reference)
     plots.check(radars)
     tree = cKDTree(data.centers)
@@ -227,127 +227,171 @@ def adsb_field(data: FieldData, plots: PlotTable, radars: RadarSet, reference: A
         cell_radius = 1.5 * float(np.median(tree.query(data.centers, k=2)[0][:, 1]))
     radius = as_positive(f"{fn} cell_radius (m)", cell_radius)
     k, m = data.k, data.m
-    tri = _Triangles(data.centers)
     with timed() as tm:
-        sums = np.zeros((k, m, 2))
-        counts = np.zeros((k, m), dtype=np.int64)
-        has = np.all(np.isfinite(ref), axis=1)
-        a_rows, a_cols, a_vals, w_list, d_list = [], [], [], [], []
-        n_used = 0
-        for i in range(m):
-            rows = np.flatnonzero(has & (plots.radar == i))
-            if rows.size == 0:
-                continue
-            y = ref[rows]
-            simplex = tri.find(y)
-            dist, cell = tree.query(y)
-            ok = (simplex >= 0) & (dist <= radius)
-            if getattr(plots, "height", None) is not None:
-                ok &= np.isfinite(np.asarray(plots.height)[rows])
-            rows, y, cell, simplex = rows[ok], y[ok], cell[ok], simplex[ok]
-            if rows.size == 0:
-                continue
-            h = _heights(plots, rows)
-            # what radar i would measure of the ADS-B position (3-D: slant range and azimuth
-            # in its own frame at the plot's height)
-            d = np.column_stack([plots.range[rows], plots.azimuth[rows]]) - radars.to_polar(
-                i, y, h)
-            d[:, 1] = wrap_angle(d[:, 1])
-            np.add.at(sums[:, i], cell, d)
-            np.add.at(counts[:, i], cell, 1)
-            if model == "interpolant":  # barycentric weights of the FieldMap's P1 at y
-                bary = tri.barycentric(y, simplex)
-                verts = tri.simplices[simplex]
-            else:  # the plot's cell
-                bary = np.ones((rows.size, 1))
-                verts = cell[:, None]
-            base = 2 * (n_used + np.arange(rows.size))
-            for comp in (0, 1):
-                a_rows.append(np.repeat(base + comp, verts.shape[1]))
-                a_cols.append((2 * (verts * m + i) + comp).ravel())
-                a_vals.append(bary.ravel())
-            # per-plot covariance V_i + σ_ref² J Jᵀ (the ADS-B error seen in polar)
-            jac = radars.polar_jacobian(i, y, h)
-            cov = (np.diag([radars.sigma_range[i] ** 2, radars.sigma_azimuth[i] ** 2])
-                   + sig_ref**2 * jac @ jac.transpose(0, 2, 1))
-            w_list.append(np.linalg.inv(cov))
-            d_list.append(d.reshape(-1))
-            n_used += rows.size
-        if n_used == 0:
-            raise ProblemError(f"{fn} reference: no plot with an ADS-B position lies in the "
-                               "covered area of the cells")
-        seen = counts > 0
-        mean = np.full((k, m, 2), np.nan)
-        mean[seen] = sums[seen] / counts[seen, None]
-        amat = sparse.csr_matrix((np.concatenate(a_vals), (np.concatenate(a_rows),
-                                                           np.concatenate(a_cols))),
-                                 shape=(2 * n_used, 2 * m * k))
-        wmat = sparse.block_diag(list(np.concatenate(w_list)), format="csr")
-        dvec = np.concatenate(d_list)
-        awa = (amat.T @ wmat @ amat).tocsc()
-        rhs = amat.T @ (wmat @ dvec)
-        r = _r_matrix(data).tocsc()
-        dof = 2 * n_used
-
-        def fit(mu: float) -> tuple[FloatArray, float]:
-            phi = splinalg.spsolve((mu * r + awa).tocsc(), rhs)
-            res = amat @ phi - dvec
-            return phi, float(res @ (wmat @ res))
-
-        # χ²(μ) increases with μ from its least-squares minimum towards that of the
-        # smoothest fields (μ → ∞: J = 0, constant per radar on each connected part of the
-        # graph, fitted exactly in that null space); the level is the expected χ² = 2n
-        n_comp, labels = csgraph.connected_components(data.adjacency, directed=False)
-        null = sparse.kron(sparse.csr_matrix((np.ones(k), (np.arange(k), labels)),
-                                             shape=(k, n_comp)),
-                           sparse.identity(2 * m), format="csr")
-        c_inf = np.linalg.solve((null.T @ awa @ null).toarray(), null.T @ rhs)
-        phi_inf = null @ c_inf
-        res_inf = amat @ phi_inf - dvec
-        chi_inf = float(res_inf @ (wmat @ res_inf))
-        status = Status.OPTIMAL
-        scale = float(np.log10(max(abs(awa).max(), 1e-300) / max(abs(r).max(), 1e-300)))
-        if level == "means":  # the least-squares field: the means, smoothness fills the rest
-            mu = 10.0 ** (scale - 12.0)
-            phi, chi2 = fit(mu)
-        elif chi_inf <= dof:  # even the smoothest fields fit the data: take the best of them
-            phi, chi2, mu = phi_inf, chi_inf, float("inf")
-        else:
-            lo, hi = scale - 20.0, scale + 14.0
-            phi, chi2 = fit(10.0**lo)
-            if chi2 >= dof:  # no field reaches the level: the least-squares one
-                mu = 10.0**lo
-                status = Status.OPTIMAL_INACCURATE
-            else:
-                for _ in range(200):
-                    mid = 0.5 * (lo + hi)
-                    phi, chi2 = fit(10.0**mid)
-                    if chi2 > dof:
-                        hi = mid
-                    else:
-                        lo = mid
-                    # the level itself is uncertain by √(2 dof): 1e-4 relative is ample
-                    if abs(chi2 - dof) <= 1e-4 * dof or hi - lo < 1e-12:
-                        break
-                mu = 10.0**mid
-                if abs(chi2 - dof) > 1e-2 * dof:
-                    status = Status.OPTIMAL_INACCURATE
+        sys_ = _adsb_system(fn, data, plots, radars, ref, tree, radius, sig_ref, model)
+        awa = (sys_.amat.T @ sys_.wmat @ sys_.amat).tocsc()
+        rhs = sys_.amat.T @ (sys_.wmat @ sys_.dvec)
+        r = r_matrix(data).tocsc()
+        dof = 2 * sys_.n_used
+        null = _null_space(data)
+        phi, chi2, mu, status = _smoothing_level(sys_, awa, rhs, r, null, dof, level)
         if not np.all(np.isfinite(phi)):
             raise ProblemError(f"{fn}: the solve overflowed (the data and the smoothness "
                                "do not determine the field)")
         obj = float(phi @ (r @ phi))
-        # re-check: the stationarity of the Lagrangian, (μR + AᵀWA)φ − AᵀWd (μ = ∞: Rφ = 0
-        # and the data term stationary in the null space of R), relative
-        ref_scale = max(float(np.max(np.abs(rhs))), 1e-300)
-        if np.isinf(mu):
-            resid = max(float(np.max(np.abs(null.T @ (awa @ phi - rhs)))) / ref_scale,
-                        float(np.max(np.abs(r @ phi))) / max(
-                            float(abs(r).max() * np.max(np.abs(phi))), 1e-300))
-        else:
-            resid = float(np.max(np.abs(mu * (r @ phi) + awa @ phi - rhs))) / ref_scale
+        resid = _stationarity(phi, mu, awa, rhs, r, null)
         status = verified_status(status, resid)
-    return AdsbField(phi.reshape(k, m, 2), mean, counts, mu, chi2, dof, obj, status,
+    return AdsbField(phi.reshape(k, m, 2), sys_.mean, sys_.counts, mu, chi2, dof, obj, status,
                      tm.elapsed, resid)
+
+
+class _AdsbSystem(NamedTuple):
+    """The weighted least-squares data term of :func:`adsb_field`: A φ ≈ d with weight W
+    (one 2 × 2 block per used plot), the per-cell mean discrepancies and their counts."""
+
+    amat: sparse.csr_matrix
+    wmat: sparse.csr_matrix
+    dvec: FloatArray
+    mean: FloatArray
+    counts: np.ndarray
+    n_used: int
+
+
+def _adsb_system(fn: str, data: FieldData, plots: PlotTable, radars: RadarSet,
+                 ref: FloatArray, tree: cKDTree, radius: float, sig_ref: float, model: str
+                 ) -> _AdsbSystem:
+    """Each used plot's discrepancy d = measured − what its radar would measure of the
+    ADS-B position, its row of A (the plot's cell, or the P1 weights at the ADS-B
+    position) and its weight (V_i + σ_ref² J Jᵀ)⁻¹."""
+    k, m = data.k, data.m
+    tri = _Triangles(data.centers)
+    sums = np.zeros((k, m, 2))
+    counts = np.zeros((k, m), dtype=np.int64)
+    has = np.all(np.isfinite(ref), axis=1)
+    a_rows, a_cols, a_vals, w_list, d_list = [], [], [], [], []
+    n_used = 0
+    for i in range(m):
+        rows = np.flatnonzero(has & (plots.radar == i))
+        if rows.size == 0:
+            continue
+        y = ref[rows]
+        simplex = tri.find(y)
+        dist, cell = tree.query(y)
+        ok = (simplex >= 0) & (dist <= radius)
+        if getattr(plots, "height", None) is not None:
+            ok &= np.isfinite(np.asarray(plots.height)[rows])
+        rows, y, cell, simplex = rows[ok], y[ok], cell[ok], simplex[ok]
+        if rows.size == 0:
+            continue
+        h = _heights(plots, rows)
+        # what radar i would measure of the ADS-B position (3-D: slant range and azimuth
+        # in its own frame at the plot's height)
+        d = np.column_stack([plots.range[rows], plots.azimuth[rows]]) - radars.to_polar(
+            i, y, h)
+        d[:, 1] = wrap_angle(d[:, 1])
+        np.add.at(sums[:, i], cell, d)
+        np.add.at(counts[:, i], cell, 1)
+        if model == "interpolant":  # barycentric weights of the FieldMap's P1 at y
+            bary = tri.barycentric(y, simplex)
+            verts = tri.simplices[simplex]
+        else:  # the plot's cell
+            bary = np.ones((rows.size, 1))
+            verts = cell[:, None]
+        base = 2 * (n_used + np.arange(rows.size))
+        for comp in (0, 1):
+            a_rows.append(np.repeat(base + comp, verts.shape[1]))
+            a_cols.append((2 * (verts * m + i) + comp).ravel())
+            a_vals.append(bary.ravel())
+        # per-plot covariance V_i + σ_ref² J Jᵀ (the ADS-B error seen in polar)
+        jac = radars.polar_jacobian(i, y, h)
+        cov = (np.diag([radars.sigma_range[i] ** 2, radars.sigma_azimuth[i] ** 2])
+               + sig_ref**2 * jac @ jac.transpose(0, 2, 1))
+        w_list.append(np.linalg.inv(cov))
+        d_list.append(d.reshape(-1))
+        n_used += rows.size
+    if n_used == 0:
+        raise ProblemError(f"{fn} reference: no plot with an ADS-B position lies in the "
+                           "covered area of the cells")
+    seen = counts > 0
+    mean = np.full((k, m, 2), np.nan)
+    mean[seen] = sums[seen] / counts[seen, None]
+    amat = sparse.csr_matrix((np.concatenate(a_vals), (np.concatenate(a_rows),
+                                                       np.concatenate(a_cols))),
+                             shape=(2 * n_used, 2 * m * k))
+    wmat = sparse.block_diag(list(np.concatenate(w_list)), format="csr")
+    return _AdsbSystem(amat, wmat, np.concatenate(d_list), mean, counts, n_used)
+
+
+def _null_space(data: FieldData) -> sparse.csr_matrix:
+    """The null space of R: fields constant per radar on each connected part of the
+    neighbour graph (2m·K × 2m·components)."""
+    k, m = data.k, data.m
+    n_comp, labels = csgraph.connected_components(data.adjacency, directed=False)
+    return sparse.kron(sparse.csr_matrix((np.ones(k), (np.arange(k), labels)),
+                                         shape=(k, n_comp)),
+                       sparse.identity(2 * m), format="csr")
+
+
+def _smoothing_level(sys_: _AdsbSystem, awa: sparse.csc_matrix, rhs: FloatArray,
+                     r: sparse.csc_matrix, null: sparse.csr_matrix, dof: int, level: str
+                     ) -> tuple[FloatArray, float, float, Status]:
+    """The field of the smoothing weight μ: (μR + AᵀWA)φ = AᵀWd with χ²(μ) at the expected
+    level ``dof`` (``"discrepancy"``, bisection in log μ) or μ → 0 (``"means"``). Returns
+    φ, χ², μ and the status (OPTIMAL_INACCURATE when the level is not reached)."""
+    amat, wmat, dvec = sys_.amat, sys_.wmat, sys_.dvec
+
+    def fit(mu: float) -> tuple[FloatArray, float]:
+        phi = splinalg.spsolve((mu * r + awa).tocsc(), rhs)
+        res = amat @ phi - dvec
+        return phi, float(res @ (wmat @ res))
+
+    # χ²(μ) increases with μ from its least-squares minimum towards that of the
+    # smoothest fields (μ → ∞: J = 0, constant per radar on each connected part of the
+    # graph, fitted exactly in that null space); the level is the expected χ² = 2n
+    c_inf = np.linalg.solve((null.T @ awa @ null).toarray(), null.T @ rhs)
+    phi_inf = null @ c_inf
+    res_inf = amat @ phi_inf - dvec
+    chi_inf = float(res_inf @ (wmat @ res_inf))
+    status = Status.OPTIMAL
+    scale = float(np.log10(max(abs(awa).max(), 1e-300) / max(abs(r).max(), 1e-300)))
+    if level == "means":  # the least-squares field: the means, smoothness fills the rest
+        mu = 10.0 ** (scale - 12.0)
+        phi, chi2 = fit(mu)
+    elif chi_inf <= dof:  # even the smoothest fields fit the data: take the best of them
+        phi, chi2, mu = phi_inf, chi_inf, float("inf")
+    else:
+        lo, hi = scale - 20.0, scale + 14.0
+        phi, chi2 = fit(10.0**lo)
+        if chi2 >= dof:  # no field reaches the level: the least-squares one
+            mu = 10.0**lo
+            status = Status.OPTIMAL_INACCURATE
+        else:
+            for _ in range(200):
+                mid = 0.5 * (lo + hi)
+                phi, chi2 = fit(10.0**mid)
+                if chi2 > dof:
+                    hi = mid
+                else:
+                    lo = mid
+                # the level itself is uncertain by √(2 dof): 1e-4 relative is ample
+                if abs(chi2 - dof) <= 1e-4 * dof or hi - lo < 1e-12:
+                    break
+            mu = 10.0**mid
+            if abs(chi2 - dof) > 1e-2 * dof:
+                status = Status.OPTIMAL_INACCURATE
+    return phi, chi2, mu, status
+
+
+def _stationarity(phi: FloatArray, mu: float, awa: sparse.csc_matrix, rhs: FloatArray,
+                  r: sparse.csc_matrix, null: sparse.csr_matrix) -> float:
+    """The re-check: the stationarity of the Lagrangian, (μR + AᵀWA)φ − AᵀWd (μ = ∞: Rφ = 0
+    and the data term stationary in the null space of R), relative."""
+    ref_scale = max(float(np.max(np.abs(rhs))), 1e-300)
+    if np.isinf(mu):
+        return max(float(np.max(np.abs(null.T @ (awa @ phi - rhs)))) / ref_scale,
+                   float(np.max(np.abs(r @ phi))) / max(
+                       float(abs(r).max() * np.max(np.abs(phi))), 1e-300))
+    return float(np.max(np.abs(mu * (r @ phi) + awa @ phi - rhs))) / ref_scale
 
 
 # ----------------------------------------------------------------------------- absolute error

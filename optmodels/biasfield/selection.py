@@ -8,13 +8,13 @@ Original problem (9)-(10), optionally with the box (8):
     |f^1_{j}| \le K^1,\ |f^2_{j}| \le K^2 .
 
 φ stacks f(x̌_k) = [f_1; …; f_m] (range, azimuth per radar) cell by cell; η_k ∈ R² per
-cell; Φ¹ is block-diagonal (see :mod:`optmodels.biasfield.cells`). The objective is written
+cell; Φ¹ is block-diagonal (see :mod:`optmodels.biasfield.fielddata`). The objective is written
 as ‖Gφ‖² with the sparse edge-difference factor G (one 2m-row block √a_ij (f_i − f_j)ᵀL
 per neighbour pair, P = LLᵀ), so GᵀG = Q ⊗ P and no dense 2mK × 2mK matrix exists.
 
 Closed form (11), with the sign fixed: η* = −(Φ¹ᵀRΦ¹)⁻¹Φ¹ᵀRΦ⁰ (the printed (11) has no
-minus sign; with (10)'s "+Φ¹η" the minimiser needs it). Solved by a sparse Cholesky-like
-factorisation (scipy ``splu``) of the 2K × 2K matrix.
+minus sign; with (10)'s "+Φ¹η" the minimiser needs it): :mod:`~optmodels.biasfield.closedform`
+(:func:`closed_form`, importable from here).
 
 The Lipschitz class: the smallest L with ‖f(x_i) − f(x_j)‖_P ≤ L‖x_i − x_j‖ on neighbour
 pairs, an SOCP over the same sets (:func:`solve_lipschitz`), solved with φ eliminated and
@@ -25,7 +25,8 @@ Every result, the closed form included, is re-checked in NumPy and its status se
 
 Modules (all names stay importable from here, the section's entry point):
 :mod:`~optmodels.biasfield.problem` (the original problem's pieces, :class:`FieldSolution`,
-:func:`objective`, :func:`edge_factor`), this module (closed form (11), the QP (9)-(10) [+ (8)]),
+:func:`objective`, :func:`edge_factor`), :mod:`~optmodels.biasfield.closedform` (closed
+form (11)), this module (the QP (9)-(10) [+ (8)]),
 :mod:`~optmodels.biasfield.lipschitz` (:func:`solve_lipschitz`),
 :mod:`~optmodels.biasfield.verify` (the NumPy re-checks: :func:`kkt_residuals`,
 :func:`box_feasibility`, :func:`lipschitz_residuals`) and
@@ -39,36 +40,45 @@ from typing import Any, Literal
 import cvxpy as cp
 import numpy as np
 from scipy import sparse
-from scipy.sparse import linalg as splinalg
+
+# tests/test_gate.py corrupts the closed form's factorisation through this name
+# (``bf.selection.splinalg.splu``; the closed form is in closedform.py)
+from scipy.sparse import linalg as splinalg  # noqa: F401
 
 from optmodels.backends.profiles import DEFAULTS, solver_options
-from optmodels.biasfield.cells import FieldData, uncertainty_sets
+from optmodels.biasfield.closedform import closed_form
+from optmodels.biasfield.fielddata import FieldData
 from optmodels.biasfield.identifiability import Identifiability, identifiability
 from optmodels.biasfield.lipschitz import SOCP_DEFAULTS as SOCP_DEFAULTS
 from optmodels.biasfield.lipschitz import solve_lipschitz
 from optmodels.biasfield.problem import (
     FieldSolution,
-    _arguments,
-    _check_graph,
-    _failed_method,
-    _finish,
-    _r_matrix,
-    _run,
-    _scales,
+    check_arguments,
     edge_factor,
+    failed_solution,
     objective,
+    pack_solution,
+    r_matrix,
+    variable_scales,
 )
 
 # importable from here as from the one-module selection of before (tests, solvers_cmp)
 from optmodels.biasfield.problem import Sets as Sets
-from optmodels.biasfield.problem import _p_full as _p_full
+from optmodels.biasfield.problem import p_full as p_full
+
+# the former private spellings: solvers_cmp/biasfield.py and tests/test_gate.py call
+# ``sel._r_matrix`` (to go when they call ``r_matrix``)
+from optmodels.biasfield.problem import r_matrix as _r_matrix  # noqa: F401
+
+# the solver call under the name tests/test_gate.py patches (``bf.selection._run``)
+from optmodels.biasfield.problem import run_solver as _run
 from optmodels.biasfield.verify import (
-    _condition,
-    _conditioning_residual,
-    _verify,
     box_feasibility,
+    condition_number,
+    conditioning_residual,
     kkt_residuals,
     lipschitz_residuals,
+    verify_solution,
 )
 from optmodels.core import (  # noqa: F401 -- the tolerances are documented here too
     REJECT_TOL,
@@ -86,52 +96,6 @@ __all__ = ["FieldSolution", "Identifiability", "box_feasibility", "closed_form",
 #: Default solver options: the back-end's table for QPs that must agree with a closed form
 #: to ~1e-8 (the same object; the reasons for each value are given there).
 SOLVER_DEFAULTS: dict[str, dict[str, Any]] = DEFAULTS["qp"]
-
-
-# ----------------------------------------------------------------------------- closed form
-def closed_form(data: FieldData) -> FieldSolution:
-    """(11) with sparse linear algebra: η* = −(Φ¹ᵀRΦ¹)⁻¹Φ¹ᵀRΦ⁰, φ* = Φ⁰ + Φ¹η*.
-
-    A neighbour graph in several components is solved as one (J and the sets decouple, so
-    this is the per-component solution); ``info["components"]`` gives their number.
-
-    The result is re-checked in NumPy against the original problem (9)-(10) like a generic
-    solve: ``residuals["set"]`` (φ on the sets), ``["stationarity"]`` (Φ¹ᵀRφ relative to
-    Φ¹ᵀRΦ⁰, the gradient at η = 0) and ``["conditioning"]`` = κ₁(Φ¹ᵀRΦ¹)·ε (the
-    double-precision error floor of η; ``info["condition"]`` gives κ₁). The status follows
-    :func:`optmodels.core.verified_status`: above :data:`VERIFY_TOL` OPTIMAL_INACCURATE,
-    above :data:`REJECT_TOL` ERROR without a field (an ill-determined field is refused,
-    not returned).
-    """
-    n_comp, _ = _check_graph(data)
-    with timed() as tm:
-        phi0, phi1 = uncertainty_sets(data)
-        r = _r_matrix(data)
-        a = (phi1.T @ r @ phi1).tocsc()
-        b = phi1.T @ (r @ phi0)
-        try:
-            lu = splinalg.splu(a)
-        except RuntimeError as exc:  # exactly singular
-            raise ProblemError(f"biasfield.closed_form data: Φ1ᵀRΦ1 is singular ({exc}); the "
-                               "field is not identifiable on these cells") from None
-        with np.errstate(all="ignore"):
-            eta = -lu.solve(b)
-        phi = phi0 + phi1 @ eta
-    common = {"status": Status.OPTIMAL, "method": "closed_form", "solve_time": tm.elapsed,
-              "message": "(11), sign corrected"}
-    if not (np.all(np.isfinite(phi)) and np.all(np.isfinite(eta))):
-        common.update(status=Status.ERROR, message="(11): the solve overflowed (non-finite "
-                      "field); Φ1ᵀRΦ1 is numerically singular")
-        return _failed_method(data, (phi0, phi1), common, None)
-    sol = _finish(data, (phi0, phi1), phi, eta, common, None, None)
-    sol.info["components"] = n_comp
-    grad = phi1.T @ (r @ phi)
-    sol.residuals["stationarity"] = float(np.max(np.abs(grad))) / max(
-        float(np.max(np.abs(b))), 1e-300)
-    kappa = _condition(a, lu)
-    sol.info["condition"] = kappa
-    sol.residuals["conditioning"] = _conditioning_residual(kappa)
-    return _verify(sol)
 
 
 # ----------------------------------------------------------------------------- QP
@@ -159,19 +123,19 @@ def solve(data: FieldData, *, box: tuple[float, float] | None = None,
     :class:`ProblemError` naming it.
     """
     fn = "biasfield.solve"
-    n_comp, formulation, solver, bound, sets = _arguments(fn, data, formulation, solver, box)
+    n_comp, formulation, solver, bound, sets = check_arguments(fn, data, formulation, solver, box)
     method = f"cvxpy:{solver}:{formulation}"
     phi0, phi1 = sets
     if bound is not None:
         bad = box_feasibility(data, box, sets=sets)  # type: ignore[arg-type]
         if bad.size:
-            return _failed_method(data, sets, {
+            return failed_solution(data, sets, {
                 "status": Status.INFEASIBLE, "method": method,
                 "message": f"box (8) misses the uncertainty sets of cells {bad[:20].tolist()}"
                            f"{' …' if bad.size > 20 else ''} ({bad.size} cells): no field "
                            "in these sets satisfies |f_range| ≤ K1, |f_azimuth| ≤ K2"},
                 bound)
-    sc = _scales(data, phi0)
+    sc = variable_scales(data, phi0)
     with timed() as tb:
         gs = (edge_factor(data) @ sparse.diags(sc)).tocsr()
         rs = (gs.T @ gs).tocsc()
@@ -197,7 +161,7 @@ def solve(data: FieldData, *, box: tuple[float, float] | None = None,
     common["build_time"] += tb.elapsed
     common["method"] = method
     if not res.status.ok or eta.value is None:
-        return _failed_method(data, sets, common, bound)
+        return failed_solution(data, sets, common, bound)
     et = np.asarray(eta.value) * sc[0]
     phi = phi0 + phi1 @ et if formulation == "reduced" else np.asarray(u.value) * sc
     duals = None
@@ -206,10 +170,10 @@ def solve(data: FieldData, *, box: tuple[float, float] | None = None,
         up = np.asarray(box_cons[0].dual_value) / sc * norm2
         lo = np.asarray(box_cons[1].dual_value) / sc * norm2
         duals = up - lo
-    sol = _finish(data, sets, phi, et, common, bound, duals)
+    sol = pack_solution(data, sets, phi, et, common, bound, duals)
     sol.info["components"] = n_comp
     sol.residuals.update(kkt_residuals(data, sol, box, sets=sets))
-    kappa = _condition(phi1.T @ _r_matrix(data) @ phi1)
+    kappa = condition_number(phi1.T @ r_matrix(data) @ phi1)
     sol.info["condition"] = kappa
-    sol.residuals["conditioning"] = _conditioning_residual(kappa)
-    return _verify(sol)
+    sol.residuals["conditioning"] = conditioning_residual(kappa)
+    return verify_solution(sol)

@@ -3,14 +3,15 @@ r"""NumPy re-checks of the section-4 answers (paper 001, (8)-(11)), and the stat
 Every result -- the closed form (11), the QP (9)-(10) [+ box (8)], the Lipschitz SOCP -- is
 re-checked here against the original problem, not against the solver's report:
 
-* ``_condition`` / ``_conditioning_residual``: κ₁(Φ¹ᵀRΦ¹) and the error floor κ₁·ε of η;
+* :func:`condition_number` / :func:`conditioning_residual`: κ₁(Φ¹ᵀRΦ¹) and the error floor
+  κ₁·ε of η;
 * :func:`kkt_residuals`: stationarity, dual signs and complementarity of the QP;
 * :func:`box_feasibility`: the cells whose uncertainty set misses the box (8), exactly;
 * :func:`lipschitz_residuals`: the SOCP's field against the solver's L and its dual
   certificate (weak duality);
-* ``_verify``: the largest residual → :func:`optmodels.core.verified_status`
-  (:data:`~optmodels.core.VERIFY_TOL` OPTIMAL_INACCURATE, :data:`~optmodels.core.REJECT_TOL`
-  ERROR without a field).
+* :func:`verify_solution` (the gate; the failure form ``_no_field``): the largest residual
+  → :func:`optmodels.core.verified_status` (:data:`~optmodels.core.VERIFY_TOL`
+  OPTIMAL_INACCURATE, :data:`~optmodels.core.REJECT_TOL` ERROR without a field).
 """
 
 from __future__ import annotations
@@ -21,13 +22,13 @@ import numpy as np
 from scipy import sparse
 from scipy.sparse import linalg as splinalg
 
-from optmodels.biasfield.cells import FieldData, uncertainty_sets
+from optmodels.biasfield.fielddata import FieldData, uncertainty_sets
 from optmodels.biasfield.problem import (
     FieldSolution,
     Sets,
-    _box,
-    _lipschitz_data,
-    _r_matrix,
+    box_bounds,
+    lipschitz_data,
+    r_matrix,
 )
 from optmodels.core import FloatArray, ProblemError, finish
 
@@ -35,7 +36,7 @@ __all__ = ["box_feasibility", "kkt_residuals", "lipschitz_residuals"]
 
 
 # ----------------------------------------------------------------------------- conditioning
-def _condition(h: sparse.spmatrix, lu: Any = None) -> float:
+def condition_number(h: sparse.spmatrix, lu: Any = None) -> float:
     """1-norm condition number of the SPD 2K × 2K matrix H = Φ¹ᵀRΦ¹ (Hager/Higham
     estimate of ‖H⁻¹‖₁, t = 1: a few solves with its sparse factorisation ``lu``, computed
     here if not given; inf if H is singular)."""
@@ -53,7 +54,7 @@ def _condition(h: sparse.spmatrix, lu: Any = None) -> float:
     return kappa if np.isfinite(kappa) else float("inf")
 
 
-def _conditioning_residual(kappa: float) -> float:
+def conditioning_residual(kappa: float) -> float:
     """κ·ε: the relative error of η that no method avoids in double precision (a backward
     stable solve of H η = −b has forward error about κ(H)·ε); it enters the re-check like a
     residual, so H with κ > 4.5e9 gives OPTIMAL_INACCURATE and κ > 4.5e12 ERROR."""
@@ -69,7 +70,7 @@ def _no_field(sol: FieldSolution) -> None:
     sol.lipschitz = None if sol.lipschitz is None else float("nan")
 
 
-def _verify(sol: FieldSolution) -> FieldSolution:
+def verify_solution(sol: FieldSolution) -> FieldSolution:
     """A claimed optimum whose NumPy-recomputed residual (KKT: stationarity, box violation,
     complementarity; or the Lipschitz SOCP's certificate; conditioning) exceeds VERIFY_TOL
     is reported OPTIMAL_INACCURATE, above REJECT_TOL
@@ -90,14 +91,14 @@ def kkt_residuals(data: FieldData, sol: FieldSolution,
     larger); complementarity
     |μ_j|·slack_j relative to the objective."""
     phi0, phi1 = uncertainty_sets(data) if sets is None else sets
-    r = _r_matrix(data)
+    r = r_matrix(data)
     mu = sol.duals.reshape(-1)
     g1 = phi1.T @ (2 * (r @ sol.phi))
     g2 = phi1.T @ mu
     g0 = phi1.T @ (2 * (r @ phi0))  # the gradient at η = 0: the problem's own scale
     scale = max(float(np.max(np.abs(g0))), float(np.max(np.abs(g2))), 1e-300)
     out = {"stationarity": float(np.max(np.abs(g1 + g2))) / scale}
-    bound = _box(data, box, "biasfield.kkt_residuals")
+    bound = box_bounds(data, box, "biasfield.kkt_residuals")
     if bound is not None:
         slack = bound - np.abs(sol.phi)
         # interior-point duals of inactive bounds are tiny but not exactly 0: allow 1e-7
@@ -119,7 +120,7 @@ def box_feasibility(data: FieldData, box: tuple[float, float], *,
     feasible (a bounded polygon -- two radars at different sites give two independent
     directions -- has its vertices among them); all cells are checked at once.
     Returns the indices of the infeasible cells."""
-    bound = _box(data, box, "biasfield.box_feasibility")
+    bound = box_bounds(data, box, "biasfield.box_feasibility")
     if bound is None:
         raise ProblemError("biasfield.box_feasibility box: expected a pair (K1 m, K2 rad), "
                            "got None")
@@ -179,8 +180,8 @@ def lipschitz_residuals(data: FieldData, sol: FieldSolution, duals: dict[str, An
     solver's L), where ℓ(field) comes from ``sol.lipschitz`` (the returned field's L).
     Missing duals give NaN (not verifiable: an ERROR)."""
     sets = uncertainty_sets(data) if sets is None else sets
-    pd_ = _lipschitz_data(data, sets) if prob_data is None else prob_data
-    bound = _box(data, box, "biasfield.lipschitz_residuals")
+    pd_ = lipschitz_data(data, sets) if prob_data is None else prob_data
+    bound = box_bounds(data, box, "biasfield.lipschitz_residuals")
     ref, lip0, dist = pd_["ref"], pd_["lip0"], pd_["dist"]
     m2 = 2 * data.m
     nan = float("nan")

@@ -269,7 +269,7 @@ def _chain(plots: PlotTable, radars: RadarSet, cells: int, scheduler: Any, progr
     """FieldData (the pipeline, union coverage), closed form (11), corrected plots;
     seconds per step."""
     from optmodels.biasfield.pipeline import field_data_from_plots
-    from optmodels.biasfield.selection import closed_form
+    from optmodels.biasfield.closedform import closed_form
     from optmodels.biasfield.usage import correct_plots
 
     sec: dict[str, float] = {}

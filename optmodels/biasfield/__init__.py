@@ -3,36 +3,44 @@ and the smoothest field on them (part 2).
 
 Paper: ``shared/papers/001_d6b2428a10e192f8.txt``. Errata: ``docs/errata.md``.
 
-Part 1: ``data`` (plot tables, radar sites), ``geometry`` (polar maps), ``ingest`` (files),
-``tracks`` (track fits), ``baseline``, ``cells`` (cells and the uncertainty sets (10)),
-``fields`` (bias field models). Part 2 (section 4; entry point ``selection``): ``problem``
-(the original problem (8)-(10), :class:`FieldSolution`), ``selection`` (closed form (11),
-the QP (9)-(10)), ``lipschitz`` (the Lipschitz class), ``verify`` (the NumPy re-checks),
-``identifiability``. Real recordings (issue 16): ``geometry3d`` (the exact 3-D geometry:
-slant range, each radar's own north, the common plane), ``recording`` (ASTERIX CAT048 /
-CAT021 in), ``frames`` (pandas in and out), ``cleaning`` (gaps, glitches, ground traffic).
-Using the field (issue 17): ``usage`` (:class:`FieldMap`, :func:`correct_plots`,
-:func:`registration_error`, :func:`score`), ``referee`` (ADS-B as the referee).
+The modules in the order the data travels (tests/test_biasfield_rooms.py holds the order):
+
+* inputs: ``data`` (:class:`RadarSet`, :class:`PlotTable`), ``paths``
+  (:class:`AircraftPaths`), ``geometry`` (polar maps), ``geometry3d`` (the exact 3-D
+  geometry: slant range, each radar's own north, the common plane), ``fields`` (bias field
+  models), ``ingest`` (files), ``recording`` (ASTERIX CAT048 / CAT021 in), ``frames``
+  (pandas in and out), ``cleaning`` (gaps, glitches, ground traffic);
+* tracks: ``polyline`` (the polyline's basis, knots and band solves), ``tracks`` (the track
+  fits (3)), ``baseline`` (the parametric baseline (2)-(4));
+* field data: ``cells`` (:func:`build_field_data`: cells, averaging (6)-(7)), ``averaging``
+  (its helpers), ``fielddata`` (:class:`FieldData`, neighbours, the uncertainty sets (10)),
+  ``pipeline`` (plots → FieldData in one call);
+* selection (section 4; entry point ``selection``): ``problem`` (the original problem
+  (8)-(10), :class:`FieldSolution`), ``closedform`` (closed form (11)), ``selection`` (the
+  QP (9)-(10)), ``lipschitz`` (the Lipschitz class), ``verify`` (the NumPy re-checks),
+  ``identifiability``;
+* use (issue 17): ``usage`` (:class:`FieldMap`, :func:`correct_plots`,
+  :func:`registration_error`, :func:`score`), ``referee`` (ADS-B as the referee).
 """
 
 from optmodels.biasfield import geometry3d
 from optmodels.biasfield.baseline import BaselineResult, azimuth_bias_baseline
-from optmodels.biasfield.cells import (
-    FieldData,
-    build_field_data,
-    laplacian,
-    neighbours,
-    place_centers,
-    synthetic_field_data,
-    uncertainty_sets,
-)
+from optmodels.biasfield.cells import build_field_data, place_centers
 from optmodels.biasfield.cleaning import (
     CleaningLimits,
     CleaningReport,
     clean_plots,
     clean_reports,
 )
-from optmodels.biasfield.data import AircraftPaths, PlotTable, RadarSet
+from optmodels.biasfield.closedform import closed_form
+from optmodels.biasfield.data import PlotTable, RadarSet
+from optmodels.biasfield.fielddata import (
+    FieldData,
+    laplacian,
+    neighbours,
+    synthetic_field_data,
+    uncertainty_sets,
+)
 from optmodels.biasfield.fields import BiasField
 from optmodels.biasfield.frames import from_frame, to_frame
 from optmodels.biasfield.geometry import (
@@ -45,6 +53,7 @@ from optmodels.biasfield.geometry import (
 )
 from optmodels.biasfield.ingest import read_plots, read_radars, read_tracks
 from optmodels.biasfield.lipschitz import solve_lipschitz
+from optmodels.biasfield.paths import AircraftPaths
 from optmodels.biasfield.pipeline import FieldBuild, field_data_from_plots
 from optmodels.biasfield.polyline import hat_basis
 from optmodels.biasfield.problem import FieldSolution
@@ -64,7 +73,7 @@ from optmodels.biasfield.referee import (
     adsb_reference,
     compare_fields,
 )
-from optmodels.biasfield.selection import closed_form, solve
+from optmodels.biasfield.selection import solve
 from optmodels.biasfield.tracks import ResidualCheck, TrackFit, fit_tracks, residual_check
 from optmodels.biasfield.usage import (
     Corrected,

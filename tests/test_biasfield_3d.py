@@ -14,9 +14,11 @@ import pytest
 from pymap3d import vincenty
 
 from optmodels.biasfield import geometry3d as g3
-from optmodels.biasfield.cells import FieldData, build_field_data, uncertainty_sets
-from optmodels.biasfield.data import AircraftPaths, PlotTable, RadarSet
-from optmodels.biasfield.selection import closed_form
+from optmodels.biasfield.cells import build_field_data
+from optmodels.biasfield.closedform import closed_form
+from optmodels.biasfield.data import PlotTable, RadarSet
+from optmodels.biasfield.fielddata import FieldData, uncertainty_sets
+from optmodels.biasfield.paths import AircraftPaths
 from optmodels.core import ProblemError, Status
 from optmodels.scenarios.radar_network import radar_network
 

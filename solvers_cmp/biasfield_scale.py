@@ -268,8 +268,8 @@ def _chain(plots: PlotTable, radars: RadarSet, cells: int, scheduler: Any, progr
            seed: int) -> tuple[Any, Any, Any, dict[str, float]]:
     """FieldData (the pipeline, union coverage), closed form (11), corrected plots;
     seconds per step."""
-    from optmodels.biasfield.pipeline import field_data_from_plots
     from optmodels.biasfield.closedform import closed_form
+    from optmodels.biasfield.pipeline import field_data_from_plots
     from optmodels.biasfield.usage import correct_plots
 
     sec: dict[str, float] = {}

@@ -73,8 +73,8 @@ def _raw(fn: str, arg: str, x: np.ndarray, f: _Field, *, unit: str, per: float,
     lo, hi = (-(1 << (f.size - 1)), (1 << (f.size - 1)) - 1) if f.signed else \
         (0, (1 << f.size) - 1)
     r = np.rint(x / f.lsb) if quantity else x
-    if wrap:
-        r = np.mod(r, hi + 1)
+    if wrap:  # an angle: modulo the field's span (360° for THETA and I130 LON)
+        r = np.mod(r - lo, hi - lo + 1) + lo
     bad = (r < lo) | (r > hi)
     if bad.any():
         lsb = f.lsb * per
@@ -179,7 +179,8 @@ def _ints(fn: str, c: dict[str, np.ndarray], names: tuple[str, ...]) -> None:
             v = c[name]
             bad = v != np.round(v)
             if bad.any():
-                raise ProblemError(f"asterix.{fn} {name}: need integers, got {v[bad][0]!r}")
+                raise ProblemError(f"asterix.{fn} {name}: need integers, got "
+                                   f"{float(v[bad][0]):.10g}")
 
 
 def _optional(c: dict[str, np.ndarray], name: str, nan: bool) -> np.ndarray | None:
@@ -230,6 +231,9 @@ def encode_cat048(time_of_day: Any, sac: Any, sic: Any, range: Any, azimuth: Any
     c = _cols(fn, time_of_day=time_of_day, sac=sac, sic=sic, range=range,
               azimuth=azimuth, flight_level=flight_level, address=address, mode3a=mode3a)
     _ints(fn, c, ("sac", "sic", "address", "mode3a"))
+    if np.any(c["range"] < 0):
+        raise ProblemError(f"asterix.{fn} range: need slant ranges ≥ 0 m, got "
+                           f"{float(c['range'][c['range'] < 0][0]):.8g}")
     spec = _spec(48, {48: edition})
     n = c["time_of_day"].size
     f140, frho = _where(spec, ("140",)), _where(spec, ("040", "RHO"))
@@ -274,8 +278,8 @@ def encode_cat021(time_of_day: Any, sac: Any, sic: Any, latitude: Any, longitude
 
     ``time_of_day`` s (I073 time of message reception for position, wrapped into
     [0, 86400)), ``latitude`` / ``longitude`` deg WGS-84 (I131 if ``high_resolution`` else
-    I130; |lat| ≤ 90, |lon| ≤ 180, and the field's own signed range: I130 holds up to
-    180° − 180°/2²³), ``height`` m above the ellipsoid (I140 geometric height, LSB
+    I130; |lat| ≤ 90, |lon| ≤ 180; in I130, 180° is written as −180°, the same
+    meridian), ``height`` m above the ellipsoid (I140 geometric height, LSB
     6.25 ft, ±62 km; NaN: absent), ``flight_level`` FL (I145, ±8192; NaN: absent),
     ``address`` (I080; < 0: absent). Every record carries I040 (target report
     descriptor, extended).
@@ -305,7 +309,8 @@ def encode_cat021(time_of_day: Any, sac: Any, sic: Any, latitude: Any, longitude
                                                       unit="s", per=1.0))]),
              _item(_frn(spec, pos), (flat.size + flon.size) // 8, [
                  (flat, _raw(fn, "latitude", c["latitude"], flat, unit="°", per=1.0)),
-                 (flon, _raw(fn, "longitude", c["longitude"], flon, unit="°", per=1.0))])]
+                 (flon, _raw(fn, "longitude", c["longitude"], flon, unit="°", per=1.0,
+                             wrap=abs((1 << flon.size) * flon.lsb - 360.0) < 1e-9))])]
     p = _optional(c, "height", nan=True)
     if p is not None:
         f = _where(spec, ("140",))

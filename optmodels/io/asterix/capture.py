@@ -81,7 +81,7 @@ def _udp_payload(dpkt: Any, linktype: int, buf: bytes) -> tuple[bytes | None, st
     except (dpkt.UnpackError, ValueError, IndexError):
         return None, "frame not decoded"
     if isinstance(pkt, dpkt.ip.IP):
-        if pkt.off & (dpkt.ip.IP_MF | dpkt.ip.IP_OFFMASK):
+        if pkt.mf or pkt.offset:
             return None, "IP fragment (not reassembled)"
     elif not isinstance(pkt, dpkt.ip6.IP6):
         return None, "not IP"

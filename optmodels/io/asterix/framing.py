@@ -96,6 +96,23 @@ def is_asterix_bytes(head: bytes, size: int, blocks: int,
     return True
 
 
+#: the binary formats the package reads, for the refusals of the text readers
+BINARY_ACCEPTED = ("accepted binary inputs: ASTERIX recordings (raw CAT048/CAT021 "
+                   "datablocks, pcap/pcapng captures of ASTERIX over UDP) where plots are "
+                   "read, Parquet (.parquet), NumPy .npz/.npy")
+
+
+def describe_binary(data: bytes) -> str | None:
+    """For the text readers: what binary bytes are, if they look like a recording (a
+    capture, or ASTERIX damaged from its first datablock on), else None."""
+    kind = capture_kind(data)
+    if kind:
+        return (f"a {kind} capture without readable ASTERIX over UDP (a capture is read "
+                "as a recording when its UDP payloads are ASTERIX datablocks), not text")
+    why = diagnose(data)
+    return None if why is None else f"damaged ASTERIX recording: {why}"
+
+
 def diagnose(data: bytes) -> str | None:
     """What is wrong with bytes that start like an ASTERIX recording (a CAT byte
     libasterix knows, a datablock LEN ≥ 3, binary), or None if they do not: the framing's

@@ -39,6 +39,9 @@ def _ids(fn: str, record_id: Any, range_m: Any, azimuth_rad: Any
         if not np.all(np.isfinite(a)):
             raise ProblemError(f"asterix.{fn} {name}: {int((~np.isfinite(a)).sum())} "
                                "non-finite values")
+    if np.any(rng < 0):
+        raise ProblemError(f"asterix.{fn} range_m: need slant ranges ≥ 0 m, got "
+                           f"{float(rng[rng < 0][0]):.8g}")
     ids = ids.astype(np.int64)
     if ids.size and (ids.min() < 0 or np.unique(ids).size != ids.size):
         raise ProblemError(f"asterix.{fn} record_id: negative or repeated identifiers")

@@ -106,7 +106,7 @@ def _chains(payload: bytes, cats: Any) -> bool:
 
 def read_capture(path: Path, *, limit: int | None = None) -> Capture:
     """The ASTERIX stream of a pcap/pcapng file (``limit``: stop after that many kept
-    payloads, for content detection).
+    payloads or 16 × that many packets, for content detection).
 
     Raises
     ------
@@ -134,6 +134,8 @@ def read_capture(path: Path, *, limit: int | None = None) -> Capture:
         pos = 0
         try:
             for ts, buf in reader:
+                if limit is not None and sum(counts.values()) >= 16 * limit:
+                    break
                 payload, why = _udp_payload(dpkt, linktype, buf)
                 if payload is not None and not _chains(payload, cats):
                     payload, why = None, "UDP datagram not ASTERIX"

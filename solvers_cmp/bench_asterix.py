@@ -20,10 +20,19 @@ on a shared machine.
   interpreter, ``--astd-python``): ``asterix.parse(data)`` and ``verbose=False``, then the
   same fields into NumPy arrays.
 
+Encoding (issue 26 item 6, ``--encode``): records/s of the vectorised
+:func:`~optmodels.io.asterix.encode_cat048` / ``encode_cat021`` against the former encoders
+through libasterix (:mod:`optmodels.io.asterix.libencode`), timed in the same run,
+interleaved (new, old, new, old …), median of ``--repeats`` rounds; the new output is
+checked byte for byte against the old on the records both encoded; the load average is
+printed with the figures.
+
 Usage::
 
     .venv/bin/python -m solvers_cmp.bench_asterix [--records 200000] [--repeats 5]
         [--astd-python /tmp/venv-astd/bin/python]
+    .venv/bin/python -m solvers_cmp.bench_asterix --encode [--records 200000]
+        [--old-records 6000] [--repeats 5]
 """
 
 from __future__ import annotations
@@ -175,6 +184,54 @@ def benchmark(records: int = 200_000, repeats: int = 5, distinct: int = 4000,
     return out
 
 
+def encode_benchmark(records: int = 200_000, old_records: int = 6000,
+                     repeats: int = 5) -> dict[str, Any]:
+    """Records/s of the vectorised encoders and of the libasterix ones (interleaved
+    rounds, medians), with the byte-for-byte check; the load average before and after."""
+    import os
+
+    from optmodels.io.asterix import encode_cat021, encode_cat048, libencode
+
+    rng = np.random.default_rng(26)
+    n = records
+    tod = 36000.0 + 0.01 * np.arange(n)
+    a48 = (tod, 1, 2, rng.uniform(1e3, 4.5e5, n), rng.uniform(0, 2 * np.pi, n))
+    k48 = {"flight_level": rng.uniform(0, 450, n), "address": rng.integers(0, 2**24, n),
+           "mode3a": rng.integers(0, 4096, n)}
+    a21 = (tod, 3, 4, rng.uniform(40, 50, n), rng.uniform(10, 20, n))
+    k21 = {"height": rng.uniform(0, 12000, n), "flight_level": rng.uniform(0, 450, n),
+           "address": rng.integers(0, 2**24, n)}
+    m = min(old_records, n)
+
+    def head(args: tuple, kw: dict) -> tuple[tuple, dict]:
+        return (tuple(a[:m] if isinstance(a, np.ndarray) else a for a in args),
+                {k: v[:m] for k, v in kw.items()})
+
+    out: dict[str, Any] = {"records (new)": n, "records (old)": m, "repeats": repeats,
+                           "load before": os.getloadavg()}
+    for cat, new, old, args, kw in (("CAT048", encode_cat048, libencode.encode_cat048,
+                                     a48, k48),
+                                    ("CAT021", encode_cat021, libencode.encode_cat021,
+                                     a21, k21)):
+        oa, ok = head(args, kw)
+        assert new(*oa, **ok) == old(*oa, **ok), f"{cat}: bytes differ"
+        t_new, t_old = [], []
+        for _ in range(repeats):
+            t = time.perf_counter()
+            new(*args, **kw)
+            t_new.append(time.perf_counter() - t)
+            t = time.perf_counter()
+            old(*oa, **ok)
+            t_old.append(time.perf_counter() - t)
+        out[f"{cat} new records/s"] = n / statistics.median(t_new)
+        out[f"{cat} old (libasterix) records/s"] = m / statistics.median(t_old)
+        out[f"{cat} speed-up"] = out[f"{cat} new records/s"] / \
+            out[f"{cat} old (libasterix) records/s"]
+    out["bytes identical"] = "yes (CAT048 and CAT021, the old run's records)"
+    out["load after"] = os.getloadavg()
+    return out
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--records", type=int, default=200_000)
@@ -182,8 +239,15 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--distinct", type=int, default=4000)
     ap.add_argument("--astd-python", default=None,
                     help="an interpreter with asterix-decoder installed")
+    ap.add_argument("--encode", action="store_true",
+                    help="benchmark the encoders (vectorised against libasterix)")
+    ap.add_argument("--old-records", type=int, default=6000,
+                    help="records given to the libasterix encoders (--encode)")
     a = ap.parse_args(argv)
-    res = benchmark(a.records, a.repeats, a.distinct, a.astd_python)
+    if a.encode:
+        res = encode_benchmark(a.records, a.old_records, a.repeats)
+    else:
+        res = benchmark(a.records, a.repeats, a.distinct, a.astd_python)
     for k, v in res.items():
         print(f"{k:40s} {v:,.0f}" if isinstance(v, float) else f"{k:40s} {v}")
     return 0

@@ -13,6 +13,7 @@ import pytest
 
 from optmodels.core import ProblemError
 from optmodels.io import asterix as ax
+from optmodels.io.asterix import framing
 
 NM, FT = 1852.0, 0.3048
 LSB = {
@@ -243,7 +244,7 @@ def test_disagreement_with_libasterix_is_refused(tmp_path, monkeypatch) -> None:
     """The layout check is live: a wrong field extraction is caught by libasterix."""
     p = tmp_path / "x.ast"
     p.write_bytes(ax.encode_cat048([1.0, 2.0], 1, 2, [1000.0, 2000.0], [0.5, 0.6]))
-    monkeypatch.setattr(ax, "_raw_at", lambda buf, o, f: -1)
+    monkeypatch.setattr(framing, "_raw_at", lambda buf, o, f: -1)
     with pytest.raises(ProblemError, match=r"x\.ast.*byte 3.*libasterix"):
         ax.read_asterix(p)
 
@@ -257,7 +258,7 @@ def test_bad_arguments() -> None:
         ax.encode_cat048([1.0], 256, 2, [1.0], [0.0])
     with pytest.raises(ProblemError, match=r"asterix\.encode_cat021 latitude"):
         ax.encode_cat021([1.0], 1, 2, [91.0], [0.0])
-    with pytest.raises(ProblemError, match=r"asterix\.encode per_block"):
+    with pytest.raises(ProblemError, match=r"asterix\.encode_cat048 per_block"):
         ax.encode_cat048([1.0], 1, 2, [1.0], [0.0], per_block=0)
     with pytest.raises(ProblemError, match=r"asterix\.read check"):
         ax.read_asterix("x.ast", check="none")
@@ -498,7 +499,7 @@ def test_chunked_framing_gives_the_same_tables(recording: tuple, monkeypatch) ->
     datablocks and between categories change nothing, the midnight unwrapping included."""
     path, _, _ = recording
     whole = ax.read_asterix(path)
-    monkeypatch.setattr(ax, "CHUNK", 7)
+    monkeypatch.setattr(framing, "CHUNK", 7)
     parts = ax.read_asterix(path)
     for tab in ("cat048", "cat021"):
         a, b = getattr(whole, tab), getattr(parts, tab)

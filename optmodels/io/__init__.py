@@ -17,9 +17,11 @@ Modules (the public names are re-exported here unchanged, ``from optmodels.io im
   (paper 000) and trajectory (paper 002) track files;
 - :mod:`~optmodels.io.binary` — ``.npz`` / ``.npy`` arrays and JSON documents;
 - :mod:`~optmodels.io.writers` — CSV, plane CSV, JSON and Markdown writers;
-- :mod:`~optmodels.io.asterix` — ASTERIX recordings: CAT048 (monoradar target reports) and
-  CAT021 (ADS-B reports) read into SI arrays (the format tables from libasterix, imported
-  lazily), :func:`is_asterix` (content detection), and the encoders the tests use.
+- :mod:`~optmodels.io.asterix` — ASTERIX recordings (raw datablocks or pcap/pcapng
+  captures of ASTERIX over UDP): CAT048 (monoradar target reports) and CAT021 (ADS-B
+  reports) read into SI arrays on one time axis across files and radars (the format
+  tables from libasterix, imported lazily), :func:`is_asterix` (content detection), the
+  vectorised encoders and :func:`rewrite_cat048_positions` (a corrected CAT048 recording).
 """
 
 from __future__ import annotations
@@ -32,6 +34,7 @@ from optmodels.io.asterix import (
     encode_cat048,
     is_asterix,
     read_asterix,
+    rewrite_cat048_positions,
 )
 from optmodels.io.binary import _ZIP_MAGIC as _ZIP_MAGIC
 from optmodels.io.binary import _file_head as _file_head
@@ -54,6 +57,7 @@ from optmodels.io.tables import (
     CsvRows,
     PlaneCsv,
     csv_numbers,
+    csv_times,
     read_csv_rows,
     read_plane_csv,
     read_trajectory_csv,
@@ -78,6 +82,7 @@ __all__ = [
     "atomic_write",
     "csv_cell",
     "csv_numbers",
+    "csv_times",
     "encode_cat021",
     "encode_cat048",
     "input_file",
@@ -94,6 +99,7 @@ __all__ = [
     "read_plane_csv",
     "read_text",
     "read_trajectory_csv",
+    "rewrite_cat048_positions",
     "save_npz",
     "write_csv",
     "write_json",

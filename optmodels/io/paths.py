@@ -110,9 +110,14 @@ def read_text(path: str | os.PathLike[str], *, what: str = "text file",
             raise ProblemError(f"{p}: {text}")
     nul = data.find(b"\x00")
     if nul >= 0:
+        from optmodels.io.asterix.framing import BINARY_ACCEPTED, describe_binary
+
         line = data.count(b"\n", 0, nul) + 1
+        known = describe_binary(data[:1 << 16])
+        if known:
+            raise ProblemError(f"{p}: {known}")
         raise ProblemError(f"{p}: binary data (a NUL byte at byte {nul}, line {line}); "
-                           f"expected a text {what}")
+                           f"expected a text {what} ({BINARY_ACCEPTED})")
     skip = len(codecs.BOM_UTF8) if data.startswith(codecs.BOM_UTF8) else 0
     try:
         return data[skip:].decode("utf-8")

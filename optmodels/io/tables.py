@@ -11,8 +11,10 @@ of paper 000, (1.2) (with optional ``t``, α_i² or per-point covariance, :class
 from __future__ import annotations
 
 import csv
+import datetime as _dt
 import io as _stdio
 import os
+import re
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any, NamedTuple
@@ -108,6 +110,11 @@ def csv_numbers(path: str | os.PathLike[str], column: str, cells: Sequence[Any],
     def where(i: int) -> str:
         return f"line {lines[i]}" if lines is not None else f"row {i + 1}"
 
+    if column in TIME_COLUMNS and arr.ndim == 1 and (arr.dtype.kind == "M" or (
+            arr.size and isinstance(arr.flat[0], str) and _ISO.match(arr.flat[0].strip()))):
+        return csv_times(path, column, cells, lines)[0]
+    if arr.dtype.kind == "M":
+        raise ProblemError(f"{path}: column {column!r} holds date-times, expected numbers")
     try:
         values = arr.astype(float)
     except (TypeError, ValueError, OverflowError):
@@ -128,6 +135,69 @@ def csv_numbers(path: str | os.PathLike[str], column: str, cells: Sequence[Any],
             raise ProblemError(f"{path}: {where(i)}, column {column!r}: {values[i]} (NaN/inf;"
                                f" {bad.size} such value(s) in the column, need finite numbers)")
     return values
+
+
+#: columns read as times: numbers (s) or ISO 8601 date-times (see :func:`csv_times`)
+TIME_COLUMNS = ("time", "t", "timestamp")
+_ISO = re.compile(r"^\d{4}-\d{2}-\d{2}([T ]\d{2}:\d{2}(:\d{2}(\.\d+)?)?)?"
+                  r"(Z|[+-]\d{2}:?\d{2})?$")
+
+
+def csv_times(path: str | os.PathLike[str], column: str, cells: Sequence[Any],
+              lines: Sequence[int] | None = None, *, epoch: Any = None
+              ) -> tuple[FloatArray, np.datetime64 | None]:
+    """A time column as seconds: numbers (s, returned as they are, epoch None) or ISO 8601
+    date-times (``2026-03-01T12:00:05.25``, a space for the ``T``, ``Z`` or ``±HH:MM``
+    offsets; naive times are UTC, as :func:`optmodels.biasfield.frames.from_frame` takes
+    them), or numpy ``datetime64`` cells (a Parquet timestamp column): seconds since
+    ``epoch`` (default: UTC midnight of the earliest time), returned with the epoch
+    (``datetime64[ns]``). :func:`csv_numbers` reads the columns named in
+    :data:`TIME_COLUMNS` through this (dropping the epoch).
+
+    Raises
+    ------
+    ProblemError
+        Naming the file, the column and the line of the first cell that is neither a
+        number nor an ISO date-time, or a column that mixes the two.
+    """
+    arr = np.asarray(cells)
+
+    def where(i: int) -> str:
+        return f"line {lines[i]}" if lines is not None else f"row {i + 1}"
+
+    if arr.dtype.kind == "M":
+        ns = arr.astype("datetime64[ns]")
+        if np.isnat(ns).any():
+            i = int(np.flatnonzero(np.isnat(ns))[0])
+            raise ProblemError(f"{path}: {where(i)}, column {column!r}: missing time (NaT)")
+    else:
+        first = str(arr.flat[0]).strip() if arr.size else ""
+        if not _ISO.match(first):
+            return csv_numbers(path, column, cells, lines), None
+        out = np.empty(arr.size, "datetime64[ns]")
+        for i, c in enumerate(arr.reshape(-1)):
+            text = str(c).strip()
+            if not _ISO.match(text):
+                raise ProblemError(f"{path}: {where(i)}, column {column!r}: {text!r:.40} is "
+                                   "not an ISO 8601 date-time (the column starts with one; "
+                                   "give all times as date-times or all as seconds)")
+            try:
+                d = _dt.datetime.fromisoformat(text.replace(" ", "T", 1))
+            except ValueError as exc:
+                raise ProblemError(f"{path}: {where(i)}, column {column!r}: {text!r:.40}: "
+                                   f"{exc}") from None
+            if d.tzinfo is not None:
+                d = d.astimezone(_dt.UTC).replace(tzinfo=None)
+            out[i] = np.datetime64(d, "ns")
+        ns = out
+    if epoch is None:
+        e = ns.min().astype("datetime64[D]").astype("datetime64[ns]")
+    else:
+        try:
+            e = np.datetime64(epoch, "ns")
+        except (TypeError, ValueError) as exc:
+            raise ProblemError(f"{path}: epoch {epoch!r:.40} is not a date-time") from exc
+    return (ns - e).astype("timedelta64[ns]").astype(np.int64) / 1e9, e
 
 
 def _columns(p: Path, table: CsvRows, names: Sequence[str]) -> dict[str, FloatArray]:

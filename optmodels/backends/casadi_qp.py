@@ -190,8 +190,6 @@ CONIC_STATUS: dict[str, str] = {
     # reported with success unset (e.g. non-finite x): not a solution either
     "SOLVER_RET_SUCCESS": s.SOLVER_ERROR,
 }
-#: The former name of :data:`CONIC_STATUS` (the same table).
-FAILURE_STATUS = CONIC_STATUS
 
 #: Plugins left out on purpose, with the reason (shown in the comparison report).
 EXCLUDED: dict[str, str] = {

@@ -80,7 +80,7 @@ def _note(v: Verdict) -> str:
     return f"{v.key} {v.worst:.1e} {verdict}"
 
 
-def _no_estimate(sol: S) -> None:
+def _failure(sol: S) -> None:
     """Fusion's failure form: no estimate (NaN), and no W/covariance if W itself failed."""
     sol.estimate = np.full_like(sol.estimate, np.nan)  # type: ignore[attr-defined]
     if not sol.residuals["weight_error"] <= REJECT_TOL:
@@ -93,4 +93,4 @@ def _verify(sol: S) -> S:
     (:func:`optmodels.core.finish`, i.e. :func:`~optmodels.core.verified_status` of the
     largest NumPy-recomputed residual). A result that is not OK keeps no estimate (NaN),
     and no W/covariance if W failed."""
-    return finish(sol, note=_note, reject=_no_estimate)
+    return finish(sol, note=_note, reject=_failure)

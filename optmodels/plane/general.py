@@ -75,7 +75,7 @@ from optmodels.core import (
     check_spd_stack,
     verified_status,
 )
-from optmodels.plane.data import PlaneData, PlaneSolution, _canonical_sign
+from optmodels.plane.data import PlaneData, _canonical_sign
 from optmodels.plane.lines import (
     LineTest,
     _chi2_ppf,
@@ -85,7 +85,8 @@ from optmodels.plane.lines import (
     _tangent,
     line_test,
 )
-from optmodels.plane.verify import _finish, _no_plane, _profile_check
+from optmodels.plane.solution import PlaneSolution, _failure
+from optmodels.plane.verify import _finish, _profile_check
 
 __all__ = ["GeneralFit", "LineTest", "fit_general", "line_test"]
 
@@ -186,7 +187,7 @@ class GeneralFit:
             sol.resolved = bool(self.resolved)
             sol.line_direction = np.asarray(self.line_direction, dtype=float)
             if not self.resolved:
-                sol = _no_plane(sol)
+                sol = _failure(sol)
                 sol.status = Status.ERROR
                 sol.message = (f"unresolved: the points lie on a line at level "
                                f"{self.level:g} (line statistic {self.line_statistic:.6g} <= "

@@ -27,7 +27,7 @@ from optmodels.core import (
 )
 from optmodels.plane.closedform import _closed_form_from_sums, _scaled_sums
 from optmodels.plane.data import PlaneData
-from optmodels.plane.nlp import Formulation, solve
+from optmodels.plane.generic import Formulation, solve
 from optmodels.plane.statistics import _planarity_arrays
 
 

@@ -42,7 +42,8 @@ from optmodels.core import (
     as_instance,
     timed,
 )
-from optmodels.plane.data import PlaneData, PlaneSolution, _oblique_projection, _weighted_offset
+from optmodels.plane.data import PlaneData, _oblique_projection, _weighted_offset
+from optmodels.plane.solution import PlaneSolution
 from optmodels.plane.verify import _finish, _profile_check, _resolve
 
 Formulation = Literal["full", "reduced"]

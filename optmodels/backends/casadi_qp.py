@@ -108,7 +108,7 @@ def _option_error(plugin: str, options: dict[str, Any], sparsity: dict[str, Any]
                         f"{options!r} ({last_line(str(exc))})")
 
 
-class CasadiConic(QpSolver):
+class CasadiConic(QpSolver):  # type: ignore[misc]  # (CVXPY is not analysed)
     """A CVXPY QP solver that calls the CasADi ``conic`` plugin ``plugin``.
 
     Parameters

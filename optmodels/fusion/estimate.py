@@ -91,12 +91,14 @@ def fuse(a1: ArrayLike, s1: ArrayLike, a2: ArrayLike, s2: ArrayLike, *,
     m = s1a.shape[0]
     x1 = as_finite_array(_where(fn, "a1"), a1, shape=(m,), max_abs=MAX_MAGNITUDE)
     x2 = as_finite_array(_where(fn, "a2"), a2, shape=(m,), max_abs=MAX_MAGNITUDE)
-    method = as_choice(_where(fn, "method"), method, ("closed_form", "cvxpy"))
+    method = as_choice(  # type: ignore[assignment]
+        _where(fn, "method"), method, ("closed_form", "cvxpy"))
     if not isinstance(solver, str):
         raise ProblemError(f"{_where(fn, 'solver')}: expected a solver name, got {solver!r}")
     if s12 is not None:
         return _fuse_correlated(x1, s1a, x2, s2a, s12, method, solver, solver_options)
-    c1, c2 = np.linalg.inv(s1a), np.linalg.inv(s2a)
+    c1 = np.asarray(np.linalg.inv(s1a), dtype=float)
+    c2 = np.asarray(np.linalg.inv(s2a), dtype=float)
     w = _weight(s1a, s2a)
     cov = (np.eye(m) - w) @ s1a
     cov = 0.5 * (cov + cov.T)
@@ -181,7 +183,8 @@ def _fuse_correlated(x1: FloatArray, a: FloatArray, x2: FloatArray, b: FloatArra
     cov = fused_covariance(w, a, b, c)
     grad = w @ d - (a - c)
     res_grad = float(np.max(np.abs(grad)) / (np.max(np.abs(d)) * max(1.0, np.max(np.abs(w)))))
-    dw = _weight_bound(w, d, a - c, np.linalg.pinv(d, rcond=PINV_RTOL, hermitian=True))
+    dw = _weight_bound(w, d, a - c, np.asarray(np.linalg.pinv(d, rcond=PINV_RTOL,
+                                                              hermitian=True), dtype=float))
     w_err = _relative_weight_error(dw, w)
     # |δα| ≤ |δW||a2 − a1| + round-off of a1 + W(a2 − a1)
     size = max(float(np.max(np.abs(np.concatenate([est, x1, x2])))), np.finfo(float).tiny)

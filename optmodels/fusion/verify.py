@@ -35,7 +35,7 @@ def _weight_bound(w: FloatArray, mat: FloatArray, rhs: FloatArray,
     if not np.all(np.isfinite(w)):
         return np.full_like(w, np.inf)
     if inv is None:
-        inv = np.linalg.inv(mat)
+        inv = np.asarray(np.linalg.inv(mat), dtype=float)
     return _bounded_error(mat, w.T, rhs.T, inv).T
 
 

@@ -86,8 +86,9 @@ class PlaneData:
                         f"plane.PlaneData alpha2: the factors of (1.4) must be ≥ 1e-100; "
                         f"{int(np.sum(alpha2 < 1 / MAX_MAGNITUDE))} are not"
                     )
-            base = 0.5 * (cov + cov.T)
-            covs = alpha2[:, None, None] * base
+            common = 0.5 * (cov + cov.T)
+            covs = alpha2[:, None, None] * common
+            base: FloatArray | None = common
         else:
             if cov.shape != (n, 3, 3):
                 raise ProblemError(f"plane.PlaneData cov: expected shape (3, 3) or ({n}, 3, 3), "

@@ -451,7 +451,7 @@ def fit_general(
         line_stat, line_dir, above = lower, lower_dir, True
     else:
         line_stat, line_dir, line_conv = _line_fit(y, c, lower_dir)
-        above = (line_stat > line_thr) if line_conv else None
+        above = bool(line_stat > line_thr) if line_conv else False
     line_dir = line_dir / np.linalg.norm(line_dir)
     line_dir = line_dir if line_dir[np.argmax(np.abs(line_dir))] > 0 else -line_dir
     # undecided (iterations ran out near the threshold): not resolved, the safe side

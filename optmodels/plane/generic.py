@@ -93,7 +93,7 @@ def _full_problem(n: int) -> dict[str, Any]:
     p_pts = ca.MX.sym("xs", 3, n)
     p_w = ca.MX.sym("Dinv", 6, n)
     e = x - p_pts
-    f = 0
+    f: Any = 0
     for r, (j, k) in enumerate(_IU):
         f = f + (1.0 if j == k else 2.0) * ca.dot(p_w[r, :], e[j, :] * e[k, :])
     g = ca.vertcat((ca.mtimes(nv.T, x) - a).T, ca.dot(nv, nv) - 1.0)
@@ -181,7 +181,7 @@ def _reduced_problem(n: int) -> dict[str, Any]:
     p_pts = ca.MX.sym("xs", 3, n)
     p_d = ca.MX.sym("D", 6, n)
     resid = a - ca.mtimes(nv.T, p_pts)
-    den = 0
+    den: Any = 0
     for r, (j, k) in enumerate(_IU):
         den = den + (1.0 if j == k else 2.0) * nv[j] * nv[k] * p_d[r, :]
     return {
@@ -382,7 +382,8 @@ def _check_args(data: PlaneData, formulation: Any, starts: Any, plugin: Any,
     automatic, how many axes to start from, and whether the full NLP starts from the
     reduced one."""
     as_instance("plane.solve data", data, PlaneData)
-    form: Formulation = as_choice("plane.solve formulation", formulation, ("full", "reduced"))
+    form: Formulation = as_choice(  # type: ignore[assignment]
+        "plane.solve formulation", formulation, ("full", "reduced"))
     auto = isinstance(starts, str) and starts == "auto"
     n_starts = 3
     if not auto:
@@ -433,7 +434,8 @@ def _build(formulation: Formulation, sc: _Scaled, plugin: str,
         pts_param = sc.points.T.ravel(order="F")
         if formulation == "full":
             params = np.concatenate(
-                [pts_param, _upper(np.linalg.inv(sc.covs)).ravel(order="F")])
+                [pts_param,
+                 _upper(np.asarray(np.linalg.inv(sc.covs), dtype=float)).ravel(order="F")])
         else:
             params = np.concatenate([pts_param, _upper(sc.covs).ravel(order="F")])
         if via_reduced:

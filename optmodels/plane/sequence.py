@@ -127,7 +127,7 @@ def identify_sequence(
     formulation : {"reduced", "full"}
         Formulation of those generic re-solves.
     """
-    data = PlaneData(points, cov, alpha2)
+    data = PlaneData(points, cov, alpha2)  # type: ignore[arg-type]  # (checked there)
     t = as_finite_array("plane.identify_sequence times", times, shape=(data.n_points,))
     if np.any(np.diff(t) <= 0):
         raise ProblemError("plane.identify_sequence times: must be strictly increasing")

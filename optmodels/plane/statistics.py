@@ -100,7 +100,7 @@ class PlanarityTest:
 
 def _planarity_arrays(
     stat: FloatArray, n: FloatArray, level: float, line_stat: FloatArray,
-    determined: FloatArray | bool = True,
+    determined: np.ndarray | bool = True,
 ) -> dict[str, FloatArray]:
     """The χ²(N − 3) test, the rule (1.17) and the line test, vectorised.
 

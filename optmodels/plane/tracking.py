@@ -363,7 +363,7 @@ def _validate(times: ArrayLike, points: ArrayLike, cov: ArrayLike, *, window: st
     """Every argument of :func:`track` checked (one ``ProblemError`` naming it), and the
     detector's threshold, the scales and the splits."""
     try:
-        data = PlaneData(points, cov, alpha2)
+        data = PlaneData(points, cov, alpha2)  # type: ignore[arg-type]  # (checked there)
     except ProblemError as exc:
         raise ProblemError(f"{_W}: {exc}") from None
     n = data.n_points

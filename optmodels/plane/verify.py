@@ -186,7 +186,8 @@ def _finish(
         projected = project(data, normal, offset)
     else:
         unit = normal / np.linalg.norm(normal)
-        opt = _oblique_projection(data.points, data.covs, unit, offset / np.linalg.norm(normal))
+        opt = _oblique_projection(data.points, data.covs, unit,
+                                  float(offset / np.linalg.norm(normal)))
         e = projected - opt
         dist2 = np.sum(e * np.linalg.solve(data.covs, e[..., None])[..., 0], axis=1)
         checks["projection"] = float(np.sqrt(np.max(np.abs(dist2))))

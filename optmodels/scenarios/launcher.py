@@ -84,14 +84,14 @@ def launcher_release(seed: int | np.random.Generator | None = None, *,
     family = as_choice(f"{where} family", family, ("diverging", "parallel"))  # type: ignore
     sigma = as_positive(f"{where} sigma", sigma)
     rng = _rng(seed, where)
-    times = []
+    times: list[FloatArray] = []
     for _ in range(q):
         first = rng.uniform(60.0, 200.0)
         n = int(rng.integers(60, 181))
         t = first + 10.0 * np.arange(n)
         keep = rng.random(n) > 0.3  # missed detections
         keep[:2] = True
-        times.append(t[keep])
+        times.append(np.asarray(t[keep], dtype=float))
     if family == "diverging":
         start = np.zeros(q)
         velocity = np.sort(rng.uniform(-4.0, 4.0, q))

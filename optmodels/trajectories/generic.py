@@ -164,7 +164,7 @@ def _parametric_model(data: TrajectoryData, fam: Family, formulation: str
     else:
         struct = _digest(data.obj, tau0 / ts, sw, dt0 / ts, u0 / ts, si, vi)
     key = (formulation, fam.start_groups, fam.velocity_groups, n, q, d, struct)
-    model = _MODELS.get(key)
+    model: Any = _MODELS.get(key)
     cached = model is not None
     if model is None:
         target = cp.Parameter((n, d), name="target")
@@ -321,6 +321,7 @@ def solve(data: TrajectoryData, family: FamilyName | Family = "diverging", *,
     common["method"] = f"{res.method} ({form}{', compiled model reused' if cached else ''})"
     if not ok:
         return _failure(data, fam, fit, {}, common, None)
+    assert theta is not None
     if not np.all(np.isfinite(theta)):
         common["message"] += "; the solver returned non-finite values"
         return _failure(data, fam, fit, {}, common, None)

@@ -148,7 +148,8 @@ def _solve_note(v: Verdict) -> str:
 
 
 def _finish_solve(data: TrajectoryData, fam: Family, fit: _Fit, theta: FloatArray,
-                  lines: tuple[FloatArray, ...] | None, common: dict[str, Any]
+                  lines: tuple[FloatArray, FloatArray, FloatArray, FloatArray] | None,
+                  common: dict[str, Any]
                   ) -> TrajectorySolution:
     """End of :func:`~.generic.solve` for a finite solver point θ (and the solver's own
     lines, constrained formulation): the re-check against the original problem

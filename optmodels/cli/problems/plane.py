@@ -11,7 +11,7 @@ import argparse
 import csv
 import io as _stdio
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 
@@ -74,10 +74,10 @@ def _plane_fit(args: argparse.Namespace) -> Outcome:
     from optmodels.io import read_plane_csv
 
     method = _method(args)
-    formulation = "full" if args.formulation == "closed-form" else args.formulation
+    formulation: Literal["full", "reduced"] = (
+        "full" if args.formulation == "closed-form" else args.formulation)
     with _reading(str(args.file)):
-        cols = read_plane_csv(args.file)
-        cols = _time_range(cols, args.file, args.start, args.end)
+        cols = _time_range(read_plane_csv(args.file), args.file, args.start, args.end)
         if "cov" in cols:
             if args.sigma2 is not None or args.cov is not None:
                 raise ProblemError("--sigma2/--cov: the file has per-point covariances "

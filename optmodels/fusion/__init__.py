@@ -34,6 +34,7 @@ Layout (one idea per module; each imports only :mod:`optmodels.core`,
 :mod:`optmodels.backends` and this package):
 
 * :mod:`~optmodels.fusion.inputs`: argument checks (S_μ, n, ``mean``, the size guard);
+* :mod:`~optmodels.fusion.solution`: :class:`FusionSolution` and its failure form;
 * :mod:`~optmodels.fusion.verify`: the NumPy re-check (forward error bounds, the WLS
   objective (1), the status gate);
 * :mod:`~optmodels.fusion.weights`: W (2), (6), the correlated W, the fused covariance;
@@ -56,8 +57,9 @@ from optmodels.fusion.accuracy import (
     weight_covariance,
     weight_jacobians,
 )
-from optmodels.fusion.estimate import FusionSolution, fuse
+from optmodels.fusion.estimate import fuse
 from optmodels.fusion.sampling import monte_carlo_weight, weight_from_samples
+from optmodels.fusion.solution import FusionSolution
 from optmodels.fusion.two_site import TwoSiteSystem
 from optmodels.fusion.two_site_ml import JointMLSolution, clear_joint_cache
 from optmodels.fusion.weights import (

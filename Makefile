@@ -21,9 +21,14 @@ $(STAMP): pyproject.toml $(LOCK)
 demo: $(STAMP)
 	$(BIN)/optmodels demo --out report
 
-## default test suite (no `slow` tests) plus the linter
+## default test suite (no `slow` tests) plus the tools that hold the rules: the linter, the
+## type checker ([tool.mypy] in pyproject.toml) and the import contracts of
+## docs/architecture.md ([tool.importlinter])
 test: $(STAMP)
 	$(BIN)/ruff check optmodels solvers_cmp tests
+	$(BIN)/ruff format --check optmodels solvers_cmp tests
+	$(BIN)/mypy
+	$(BIN)/lint-imports
 	$(BIN)/mkdocs build --strict --quiet
 	$(BIN)/python -m pytest
 
@@ -34,6 +39,9 @@ docs: $(STAMP)
 ## everything, including the long Monte Carlo / scaling runs
 test-all: $(STAMP)
 	$(BIN)/ruff check optmodels solvers_cmp tests
+	$(BIN)/ruff format --check optmodels solvers_cmp tests
+	$(BIN)/mypy
+	$(BIN)/lint-imports
 	$(BIN)/python -m pytest -m ""
 
 ## the same tests against the newest releases of every dependency (no lock)
@@ -53,6 +61,8 @@ lock: $(STAMP)
 lint: $(STAMP)
 	$(BIN)/ruff check optmodels solvers_cmp tests
 	$(BIN)/ruff format --check optmodels solvers_cmp tests
+	$(BIN)/mypy
+	$(BIN)/lint-imports
 
 compare: $(STAMP)
 	$(BIN)/optmodels compare --out report/compare

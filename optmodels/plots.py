@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import matplotlib
 
@@ -12,8 +13,12 @@ import numpy as np
 
 from optmodels.core import FloatArray
 
+if TYPE_CHECKING:
+    from matplotlib.axes import Axes
+    from matplotlib.figure import Figure
 
-def _save(fig: plt.Figure, path: Path, *, bbox: str | None = None) -> Path:
+
+def _save(fig: Figure, path: Path, *, bbox: str | None = None) -> Path:
     fig.tight_layout()
     fig.savefig(path, dpi=110, bbox_inches=bbox)
     plt.close(fig)
@@ -93,7 +98,8 @@ def _line_std(cov: FloatArray, i0: int, i1: int, t: FloatArray) -> FloatArray:
 
 
 def trajectory_fits(path: Path, times: list[FloatArray], values: list[FloatArray],
-                    dep: dict, ind: dict, truth: tuple[FloatArray, FloatArray],
+                    dep: dict[str, Any], ind: dict[str, Any],
+                    truth: tuple[FloatArray, FloatArray],
                     title: str) -> Path:
     """Paper 002: data and fitted lines (top); error of the fitted lines against the truth
     with ±3σ bands from Ψ, dependent family (solid) vs independent lines (dashed).
@@ -131,7 +137,7 @@ def trajectory_fits(path: Path, times: list[FloatArray], values: list[FloatArray
     return _save(fig, path)
 
 
-def eta_curves(path: Path, rows: list[dict]) -> Path:
+def eta_curves(path: Path, rows: list[dict[str, Any]]) -> Path:
     """η(N) for Q objects: formula, Ψ ratio and Monte Carlo, with the paper's two-object
     curve and its asymptote 0.625."""
     fig, ax = plt.subplots(figsize=(7, 4))
@@ -153,11 +159,11 @@ def eta_curves(path: Path, rows: list[dict]) -> Path:
     return _save(fig, path)
 
 
-def _sites(ax: plt.Axes, sites: FloatArray) -> None:
+def _sites(ax: Axes, sites: FloatArray) -> None:
     ax.plot(sites[:, 0] / 1e3, sites[:, 1] / 1e3, "k^", ms=8, label="sites A, B")
 
 
-def fusion_maps(path: Path, maps: dict, sites: FloatArray, *, n: int) -> Path:
+def fusion_maps(path: Path, maps: dict[str, Any], sites: FloatArray, *, n: int) -> Path:
     """Paper 003: first-order maps of the two-site system (CRB RMS, fusion (1) / CRB,
     relative standard deviation of Ŵ from (10))."""
     fig, axes = plt.subplots(1, 3, figsize=(15, 4.4), sharey=True)
@@ -221,7 +227,7 @@ def fusion_vs_n(path: Path, ns: tuple[int, ...] | list[int], snapshot: list[Floa
 
 
 def bias_maps(path: Path, centers: FloatArray, panels: dict[str, FloatArray],
-              sites: FloatArray, *, component: int, truth_grid: tuple | None = None,
+              sites: FloatArray, *, component: int, truth_grid: tuple[Any, ...] | None = None,
               names: tuple[str, ...] = ()) -> Path:
     """Paper 001, fig. 4: one bias component per radar (columns) for each estimate (rows):
     cells as dots coloured by value, radar sites as crosses with their names; ``truth_grid``
@@ -278,7 +284,7 @@ def bias_maps(path: Path, centers: FloatArray, panels: dict[str, FloatArray],
     return path
 
 
-def association_rates(path: Path, rows: list[dict]) -> Path:
+def association_rates(path: Path, rows: list[dict[str, Any]]) -> Path:
     """Paper 004: correct-association rate vs separation, MAP (merges) vs GNN."""
     sep = [r["separation, m"] for r in rows]
     fig, ax = plt.subplots(figsize=(7, 4.2))
@@ -299,7 +305,7 @@ def association_rates(path: Path, rows: list[dict]) -> Path:
     return _save(fig, path)
 
 
-def scaling(path: Path, rows: list[dict], *, title: str, size_label: str,
+def scaling(path: Path, rows: list[dict[str, Any]], *, title: str, size_label: str,
             time_limit: float) -> Path:
     """Log-log total time (build + solve) vs size, one panel per instance, one line per
     (formulation, solver) with its fitted log-log slope where it has three sizes or more

@@ -8,8 +8,10 @@ import csv
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from optmodels import plane
+from optmodels.core import ProblemError
 from optmodels.io import read_plane_csv, write_plane_csv
 from optmodels.plane.radar import radar_covariances
 from optmodels.plane.tracking import track
@@ -211,3 +213,34 @@ def test_plane_fit_on_a_line_is_unresolved(tmp_path: Path) -> None:
     true_dir = (seg[-1] - seg[0]) / np.linalg.norm(seg[-1] - seg[0])
     assert abs(float(np.dot(res["line_direction"], true_dir))) > 1 - 1e-4
     assert "not OK: status unresolved" in run.err
+
+
+def test_track_on_three_rows_names_the_times_not_none(tmp_path: Path) -> None:
+    """Issue 28: three rows (a step needs four measurements) is one error naming the times
+    and the count, not "t = None"; the library says the same."""
+    path = tmp_path / "three.csv"
+    pts = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+    write_plane_csv(path, pts, t=np.array([0.0, 1.0, 2.0]))
+    line = assert_error(run_cli("plane", "track", path, "--window", "growing", "--sigma2", "1",
+                                expect=None), 2, "times", "3 measurements", "at least 4")
+    assert "None" not in line
+    with pytest.raises(ProblemError, match="times: 3 measurements; a step needs at least 4"):
+        track([0.0, 1.0, 2.0], pts, np.eye(3))
+
+
+def test_track_out_is_written_whole_and_a_refused_run_keeps_the_old_file(
+        tmp_path: Path) -> None:
+    """``--out`` goes through ``io.atomic_write``: no temporary file is left beside it, and
+    a run refused before the write (bad input) leaves the previous file as it was."""
+    path = _track_file(tmp_path)
+    out = tmp_path / "steps.csv"
+    run_cli("plane", "track", path, "--window", "40s", "--sigma2", "25", "--out", out)
+    before = out.read_bytes()
+    rows = _read_steps(out)
+    assert len(rows) == len(read_plane_csv(path, require_time=True)["t"]) - 3
+    assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == []
+    bad = tmp_path / "bad.csv"
+    bad.write_text("t,x,y,z\n0,0,0,0\n")
+    run_cli("plane", "track", bad, "--window", "40s", "--sigma2", "25", "--out", out,
+            expect=2)
+    assert out.read_bytes() == before

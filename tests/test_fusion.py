@@ -9,9 +9,10 @@ from typing import Any
 import numpy as np
 import pytest
 
-from optmodels import ProblemError
+from optmodels import ProblemError, Status
 from optmodels import fusion as fu
 from optmodels.fusion import sampling as fu_sampling
+from optmodels.fusion.inputs import MAX_DIM
 
 
 def spd(rng: np.random.Generator, m: int, floor: float = 0.5) -> np.ndarray:
@@ -287,7 +288,7 @@ def test_joint_ml_ipopt_equals_gauss_newton() -> None:
         z = SYSTEM.sample(x, 300, rng)
         ip = SYSTEM.joint_ml(z).require_ok()
         gn = SYSTEM.joint_ml(z, method="gauss_newton").require_ok()
-        assert ip.status is fu.Status.OPTIMAL and ip.residuals["stationarity"] < 1e-6
+        assert ip.status is Status.OPTIMAL and ip.residuals["stationarity"] < 1e-6
         np.testing.assert_allclose(ip.estimate, gn.estimate, atol=1e-4)
         assert ip.objective == pytest.approx(gn.objective, rel=1e-9)
 
@@ -413,7 +414,7 @@ def test_joint_ml_at_a_degenerate_point_is_not_optimal() -> None:
     z = SYSTEM.measure(np.array([[30e3, 0.0]]))
     for method in ("ipopt", "gauss_newton"):
         sol = SYSTEM.joint_ml(z, method=method)  # type: ignore[arg-type]
-        assert sol.status is fu.Status.ERROR and np.all(np.isnan(sol.estimate))
+        assert sol.status is Status.ERROR and np.all(np.isnan(sol.estimate))
     with pytest.raises(ProblemError, match="x0"):
         SYSTEM.joint_ml(SYSTEM.measure(POSITIONS), x0=SYSTEM.site_a)
     with pytest.raises(ProblemError, match="x0"):
@@ -449,7 +450,7 @@ def test_nlp_status_tables() -> None:
         run_nlpsol,
     )
 
-    st = fu.Status
+    st = Status
     assert nlp_status("ipopt", {"return_status": "Solve_Succeeded", "success": True}) is st.OPTIMAL
     assert nlp_status("ipopt", {"return_status": "Brand_New_Code"}) is st.ERROR
     # a table entry never overrides CasADi's failure flag
@@ -483,7 +484,7 @@ def test_casadi_conic_bad_option_names_the_option() -> None:
     except ProblemError as exc:
         assert "'bogus'" in str(exc)
     else:
-        assert sol.status is fu.Status.ERROR and "'bogus'" in sol.message
+        assert sol.status is Status.ERROR and "'bogus'" in sol.message
         assert np.all(np.isnan(sol.estimate))
 
 
@@ -534,7 +535,7 @@ def test_monte_carlo_weight_is_chunked_and_guarded(monkeypatch: pytest.MonkeyPat
     with pytest.raises(ProblemError, match=r"trials.*above the limit"):
         fu.monte_carlo_weight(s1, s2, 10, 10, trials=10**9)
     with pytest.raises(ProblemError, match="dimension"):
-        fu.monte_carlo_weight(np.eye(fu.MAX_DIM + 1), np.eye(fu.MAX_DIM + 1), 40, 40,
+        fu.monte_carlo_weight(np.eye(MAX_DIM + 1), np.eye(MAX_DIM + 1), 40, 40,
                               trials=10)
     monkeypatch.setattr(fu_sampling, "MC_CHUNK", 64 * 4)
     n, trials = 400, 20_000
@@ -570,8 +571,8 @@ def test_fuse_closed_form_is_rechecked_against_its_conditioning() -> None:
     th = 0.3
     rot = np.array([[np.cos(th), -np.sin(th)], [np.sin(th), np.cos(th)]])
     a1, a2 = np.array([1.0, 2.0]), np.array([2.0, 3.0])
-    expect = {1e-9: fu.Status.OPTIMAL, 1e-11: fu.Status.OPTIMAL_INACCURATE,
-              1e-13: fu.Status.ERROR}
+    expect = {1e-9: Status.OPTIMAL, 1e-11: Status.OPTIMAL_INACCURATE,
+              1e-13: Status.ERROR}
     for c, status in expect.items():
         s1 = rot @ np.diag([1.0, c]) @ rot.T
         s2 = rot @ np.diag([2.0, 3 * c]) @ rot.T
@@ -591,14 +592,14 @@ def test_fuse_closed_form_is_rechecked_against_its_conditioning() -> None:
                 fu.weight_matrix(s1, s2)
     # S1 = S2 nearly singular: W = I/2 exactly, computed W off by 1.8e-3 (before: OPTIMAL)
     s = np.array([[1.0, 1.0], [1.0, 1.0 + 1e-13]])
-    assert fu.fuse([0.0, 0.0], s, [1.0, 1.0], s).status is fu.Status.ERROR
+    assert fu.fuse([0.0, 0.0], s, [1.0, 1.0], s).status is Status.ERROR
     for c in (1e-6, 1e-13):
         s1 = rot @ np.diag([1.0, c]) @ rot.T
         s2 = rot.T @ np.diag([1.0, c]) @ rot
         s1, s2 = 0.5 * (s1 + s1.T), 0.5 * (s2 + s2.T)
         for method in ("closed_form", "cvxpy"):
             sol = fu.fuse(a1, s1, a2, s2, method=method)  # type: ignore[arg-type]
-            assert sol.status is fu.Status.OPTIMAL
+            assert sol.status is Status.OPTIMAL
             # exact W; 1e-8 covers Clarabel's relative tolerance on the O(1) problem
             np.testing.assert_allclose(sol.estimate, a1 + _exact_weight(s1, s2) @ (a2 - a1),
                                        rtol=1e-8)

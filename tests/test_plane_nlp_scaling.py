@@ -1,7 +1,7 @@
 """The full NLP (1.2)-(1.3) of paper 000 in linear time (issue 19, item 4).
 
 The full NLP's starts come from the reduced NLP (1.12)-(1.13) by default
-(``plane.solve(..., via_reduced=True)``, see ``optmodels.plane.nlp.solve``); these tests
+(``plane.solve(..., via_reduced=True)``, see ``optmodels.plane.generic.solve``); these tests
 check that the answers are those of the independent solves: the full NLP started from the
 principal axes themselves (``via_reduced=False``), the reduced NLP, and the closed form
 (1.5)-(1.8) under (1.4); that phase 2 really solves (1.2)-(1.3) (it converges from a start
@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from optmodels import ProblemError, SolveError, Status, plane, scenarios
-from optmodels.plane import nlp
+from optmodels.plane import generic as nlp
 
 # The same KKT point reached by different paths, each re-checked (Newton step of the
 # profile) by plane.verify: measured at N = 1500-2000 (P3 notes) (1.2) equal to <= 1.2e-14

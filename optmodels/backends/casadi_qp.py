@@ -108,7 +108,7 @@ def _option_error(plugin: str, options: dict[str, Any], sparsity: dict[str, Any]
                         f"{options!r} ({last_line(str(exc))})")
 
 
-class CasadiConic(QpSolver):
+class CasadiConic(QpSolver):  # type: ignore[misc]  # (CVXPY is not analysed)
     """A CVXPY QP solver that calls the CasADi ``conic`` plugin ``plugin``.
 
     Parameters
@@ -190,8 +190,6 @@ CONIC_STATUS: dict[str, str] = {
     # reported with success unset (e.g. non-finite x): not a solution either
     "SOLVER_RET_SUCCESS": s.SOLVER_ERROR,
 }
-#: The former name of :data:`CONIC_STATUS` (the same table).
-FAILURE_STATUS = CONIC_STATUS
 
 #: Plugins left out on purpose, with the reason (shown in the comparison report).
 EXCLUDED: dict[str, str] = {

@@ -135,7 +135,7 @@ def silence_highs_banner() -> None:
     with quiet_fds((1,)) as quiet:
         if not quiet:  # no usable fd 1: nothing to protect
             return
-        highspy.Highs()
+        highspy.Highs()  # type: ignore[no-untyped-call]
         with contextlib.suppress(OSError, AttributeError):  # flush C stdio before restoring
             ctypes.CDLL(None).fflush(None)
 

@@ -12,7 +12,7 @@ from tqdm import tqdm
 
 from optmodels import fusion as fu
 from optmodels import plots
-from optmodels.io import markdown_table, write_json
+from optmodels.io import atomic_write, markdown_table, write_json
 
 __all__ = ["SNAPSHOTS", "accuracy_rows", "position_rows", "run_fusion_demo"]
 
@@ -212,6 +212,24 @@ def run_fusion_demo(out: Path, *, trials: int = 100_000, positions: int = 40,
     prow = position_rows(system, pos, position_trials, seed, progress)
     shared = shared_snapshot_rows(system, max(2000, min(trials, 20_000)), seed)
     summ_rows = _summary_rows(prow)
+    figs = _figures(out, system, pos, prow)
+    summary = {"trials": trials, "positions": positions, "position_trials": position_trials,
+               "seed": seed, "weight_accuracy": acc, "shared_snapshots": shared,
+               "positions_rows": prow,
+               "positions_summary": summ_rows, "system": {
+                   "baseline_m": system.baseline, "sigma_azimuth_rad": system.sigma_azimuth,
+                   "sigma_range_difference_m": system.sigma_range_difference}}
+    write_json(out / "summary.json", summary)
+    text = (_report_accuracy(acc, shared, system, x_ref, figs[0], trials)
+            + _report_positions(prow, summ_rows, figs, positions, position_trials))
+    with atomic_write(out / "report.md", name="report.md") as fh:
+        fh.write(text)
+    return summary
+
+
+def _figures(out: Path, system: fu.TwoSiteSystem, pos: np.ndarray,
+             prow: list[dict[str, Any]]) -> tuple[Path, Path, Path]:
+    """``maps.png``, ``positions.png`` and ``vs_n.png``."""
     maps = _maps(system, 30)
     sites = np.stack([system.site_a, system.site_b])
     fig_maps = plots.fusion_maps(out / "maps.png", maps, sites, n=30)
@@ -225,35 +243,17 @@ def run_fusion_demo(out: Path, *, trials: int = 100_000, positions: int = 40,
             "estimator 1 (2 azimuths)", "fusion (1), W at true x",
             "correlated fusion, W at true x")})
 
+    return fig_maps, fig_pos, fig_n
+
+
+def _report_accuracy(acc: list[dict[str, Any]], shared: list[dict[str, Any]],
+                     system: fu.TwoSiteSystem, x_ref: np.ndarray, fig_maps: Path,
+                     trials: int) -> str:
+    """The report's first part: the linearisation (10) and the two-site system."""
     fmt_acc = {"max |lin/MC − 1| (diag)": ".3f", "median lin/MC − 1": "+.3f",
                "rel. std of Ŵ (MC)": ".3f", "max |E Ŵ − W| / max|W|": ".4f",
                "bias se": ".4f", "MC se of a variance": ".4f"}
-    fmt_sum = {"median": ".3f", "90th percentile": ".3f", "max": ".3f"}
-    pcols = ["east, km", "north, km", "CRB RMS, m", "joint ML / CRB",
-             "estimator 1 (2 azimuths)", "estimator 2 (azimuth + Δr)",
-             "fusion (1), W at true x", "fusion (1), W at estimated x",
-             "fusion (1), Ŵ from n=5", "fusion (1), Ŵ from n=30",
-             "correlated fusion, W at true x", "fusion (1), first order / CRB"]
-    fmt_pos: dict[str, str] = {c: ".3f" for c in pcols}
-    fmt_pos.update({"east, km": ".1f", "north, km": ".1f", "CRB RMS, m": ".0f"})
-    ml_ok = sum(r["ML status"] == "optimal" for r in prow)
-    failed = sum(r["failed estimates"] for r in prow)
-    by_ratio = sorted(prow, key=lambda r: r["fusion (1), first order / CRB"])
-    shown = by_ratio[:4] + by_ratio[-4:]
-    worse = sum(r["fusion (1), W at true x"] > min(r["estimator 1 (2 azimuths)"],
-                                                   r["estimator 2 (azimuth + Δr)"])
-                for r in prow)
-    fus_med = float(np.median([r["fusion (1), W at true x"] for r in prow]))
-    snap_text = ", ".join(f"{np.median([r[f'fusion (1), Ŵ from n={n}'] for r in prow]):.3f}"
-                          for n in SNAPSHOTS)
-    summary = {"trials": trials, "positions": positions, "position_trials": position_trials,
-               "seed": seed, "weight_accuracy": acc, "shared_snapshots": shared,
-               "positions_rows": prow,
-               "positions_summary": summ_rows, "system": {
-                   "baseline_m": system.baseline, "sigma_azimuth_rad": system.sigma_azimuth,
-                   "sigma_range_difference_m": system.sigma_range_difference}}
-    write_json(out / "summary.json", summary)
-    report = f"""# Fusion of two estimates and the accuracy of its weight matrix (paper 003)
+    return f"""# Fusion of two estimates and the accuracy of its weight matrix (paper 003)
 
 Fusion (1)-(2): â_p = â1 + W(â2 − â1), W = (C1 + C2)⁻¹C2 = S1(S1 + S2)⁻¹, the solution of
 min Σ_μ (α − â_μ)ᵀC_μ(α − â_μ) for **independent** measurers. When S_μ are replaced by
@@ -309,7 +309,33 @@ Carlo ({max(2000, min(trials, 20_000))} draws of Ŵ from n snapshot pairs; se �
 The printed (10) does not converge to the truth as n grows here (it is off by the
 neglected cross term, which is of the same order 1/n); with the cross block it does.
 
-### Monte Carlo over positions
+"""
+
+
+def _report_positions(prow: list[dict[str, Any]], summ_rows: list[dict[str, Any]],
+                      figs: tuple[Path, Path, Path], positions: int,
+                      position_trials: int) -> str:
+    """The report's second part: the Monte Carlo over positions and what it says."""
+    _, fig_pos, fig_n = figs
+    fmt_sum = {"median": ".3f", "90th percentile": ".3f", "max": ".3f"}
+    pcols = ["east, km", "north, km", "CRB RMS, m", "joint ML / CRB",
+             "estimator 1 (2 azimuths)", "estimator 2 (azimuth + Δr)",
+             "fusion (1), W at true x", "fusion (1), W at estimated x",
+             "fusion (1), Ŵ from n=5", "fusion (1), Ŵ from n=30",
+             "correlated fusion, W at true x", "fusion (1), first order / CRB"]
+    fmt_pos: dict[str, str] = {c: ".3f" for c in pcols}
+    fmt_pos.update({"east, km": ".1f", "north, km": ".1f", "CRB RMS, m": ".0f"})
+    ml_ok = sum(r["ML status"] == "optimal" for r in prow)
+    failed = sum(r["failed estimates"] for r in prow)
+    by_ratio = sorted(prow, key=lambda r: r["fusion (1), first order / CRB"])
+    shown = by_ratio[:4] + by_ratio[-4:]
+    worse = sum(r["fusion (1), W at true x"] > min(r["estimator 1 (2 azimuths)"],
+                                                   r["estimator 2 (azimuth + Δr)"])
+                for r in prow)
+    fus_med = float(np.median([r["fusion (1), W at true x"] for r in prow]))
+    snap_text = ", ".join(f"{np.median([r[f'fusion (1), Ŵ from n={n}'] for r in prow]):.3f}"
+                          for n in SNAPSHOTS)
+    return f"""### Monte Carlo over positions
 
 {positions} emitter positions drawn uniformly in East [−{REGION[0] / 1e3:.0f},
 {REGION[0] / 1e3:.0f}] km × North [{REGION[1] / 1e3:.0f}, {REGION[2] / 1e3:.0f}] km,
@@ -350,5 +376,3 @@ Both estimates lie on the bearing from A, so â2 − â1 is (to first order) alo
 D = Cov(â2 − â1) has rank 1 and only the column W·u_A of the weight matrix affects the
 fused estimate. The correlated weight is computed with the pseudo-inverse D⁺.
 """
-    (out / "report.md").write_text(report)
-    return summary

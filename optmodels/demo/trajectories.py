@@ -31,7 +31,7 @@ def _fit_dict(sol: tr.TrajectorySolution) -> dict[str, Any]:
 def _scenario_section(out: Path, family: str, seed: int) -> tuple[str, dict[str, Any]]:
     sc = scenarios.launcher_release(seed, family=family)  # type: ignore[arg-type]
     data = sc.data()
-    dep = tr.closed_form(data, family)
+    dep = tr.closed_form(data, family)  # type: ignore[arg-type]
     ind = tr.closed_form(data, "independent")
     fig = plots.trajectory_fits(
         out / f"{family}_fits.png", sc.times, sc.values, _fit_dict(dep), _fit_dict(ind),
@@ -52,7 +52,7 @@ def _scenario_section(out: Path, family: str, seed: int) -> tuple[str, dict[str,
     tests = []
     for hyp in ("diverging", "parallel"):
         for mode in ("known", "estimated"):
-            t = tr.family_test(data, hyp, sigma2=mode)  # type: ignore[arg-type]
+            t = tr.family_test(data, hyp, sigma2=mode)
             tests.append({"hypothesis": hyp, "σ²": mode, "statistic": t.statistic,
                           "dof": t.dof if t.dof2 is None else f"{t.dof}, {t.dof2}",
                           "threshold (0.95)": t.threshold, "p-value": t.p_value,

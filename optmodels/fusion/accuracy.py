@@ -39,7 +39,8 @@ def weight_jacobians(s1: ArrayLike, s2: ArrayLike, *,
     a, b = _pair(s1, s2, fn)
     m = a.shape[0]
     _dim_guard(fn, m)
-    method = as_choice(_where(fn, "method"), method, ("closed_form", "ad"))
+    method = as_choice(  # type: ignore[assignment]
+        _where(fn, "method"), method, ("closed_form", "ad"))
     if method == "closed_form":
         return _jacobians(a, b)
     if method == "ad":
@@ -57,7 +58,8 @@ def _jacobians(a: FloatArray, b: FloatArray) -> tuple[FloatArray, FloatArray]:
     w = _weight(a, b)
     i = np.eye(a.shape[0])
     c1, c2 = np.linalg.inv(a), np.linalg.inv(b)
-    return np.kron((c1 @ w).T, i - w), -np.kron((c2 @ (i - w)).T, w)
+    return (np.asarray(np.kron((c1 @ w).T, i - w), dtype=float),
+            np.asarray(-np.kron((c2 @ (i - w)).T, w), dtype=float))
 
 
 def commutation_matrix(m: int) -> FloatArray:

@@ -5,7 +5,6 @@ correlated ones, each in closed form or by CVXPY, re-checked in NumPy
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
 from typing import Any, Literal
 
 import cvxpy as cp
@@ -17,18 +16,18 @@ from optmodels.core import (
     MAX_MAGNITUDE,
     FloatArray,
     ProblemError,
-    Solution,
     Status,
     as_choice,
     as_finite_array,
     timed,
 )
 from optmodels.fusion.inputs import _pair, _where
+from optmodels.fusion.solution import FusionSolution
 from optmodels.fusion.verify import (
     _EPS,
     _combination_bound,
+    _finish,
     _relative_weight_error,
-    _verify,
     _weight_bound,
     _wls_objective,
 )
@@ -39,15 +38,6 @@ from optmodels.fusion.weights import (
     _weight,
     fused_covariance,
 )
-
-
-@dataclass
-class FusionSolution(Solution):
-    """Fused estimate (1): ``estimate`` (m,), ``covariance`` (C1 + C2)⁻¹, ``W``."""
-
-    estimate: FloatArray = field(default_factory=lambda: np.empty(0))
-    covariance: FloatArray = field(default_factory=lambda: np.empty(0))
-    W: FloatArray = field(default_factory=lambda: np.empty(0))
 
 
 def fuse(a1: ArrayLike, s1: ArrayLike, a2: ArrayLike, s2: ArrayLike, *,
@@ -91,12 +81,14 @@ def fuse(a1: ArrayLike, s1: ArrayLike, a2: ArrayLike, s2: ArrayLike, *,
     m = s1a.shape[0]
     x1 = as_finite_array(_where(fn, "a1"), a1, shape=(m,), max_abs=MAX_MAGNITUDE)
     x2 = as_finite_array(_where(fn, "a2"), a2, shape=(m,), max_abs=MAX_MAGNITUDE)
-    method = as_choice(_where(fn, "method"), method, ("closed_form", "cvxpy"))
+    method = as_choice(  # type: ignore[assignment]
+        _where(fn, "method"), method, ("closed_form", "cvxpy"))
     if not isinstance(solver, str):
         raise ProblemError(f"{_where(fn, 'solver')}: expected a solver name, got {solver!r}")
     if s12 is not None:
         return _fuse_correlated(x1, s1a, x2, s2a, s12, method, solver, solver_options)
-    c1, c2 = np.linalg.inv(s1a), np.linalg.inv(s2a)
+    c1 = np.asarray(np.linalg.inv(s1a), dtype=float)
+    c2 = np.asarray(np.linalg.inv(s2a), dtype=float)
     w = _weight(s1a, s2a)
     cov = (np.eye(m) - w) @ s1a
     cov = 0.5 * (cov + cov.T)
@@ -145,7 +137,7 @@ def fuse(a1: ArrayLike, s1: ArrayLike, a2: ArrayLike, s2: ArrayLike, *,
     w_err = _relative_weight_error(dw, w)
     residuals = {"gradient": res_grad, "estimate_error": float(np.max(bound) / size),
                  "weight_error": w_err}
-    sol = _verify(FusionSolution(objective=float("nan"), residuals=residuals, estimate=est,
+    sol = _finish(FusionSolution(objective=float("nan"), residuals=residuals, estimate=est,
                                  covariance=cov, W=w, **common))
     sol.objective = _wls_objective(sol.estimate, x1, c1, x2, c2)
     return sol
@@ -181,13 +173,14 @@ def _fuse_correlated(x1: FloatArray, a: FloatArray, x2: FloatArray, b: FloatArra
     cov = fused_covariance(w, a, b, c)
     grad = w @ d - (a - c)
     res_grad = float(np.max(np.abs(grad)) / (np.max(np.abs(d)) * max(1.0, np.max(np.abs(w)))))
-    dw = _weight_bound(w, d, a - c, np.linalg.pinv(d, rcond=PINV_RTOL, hermitian=True))
+    dw = _weight_bound(w, d, a - c, np.asarray(np.linalg.pinv(d, rcond=PINV_RTOL,
+                                                              hermitian=True), dtype=float))
     w_err = _relative_weight_error(dw, w)
     # |δα| ≤ |δW||a2 − a1| + round-off of a1 + W(a2 − a1)
     size = max(float(np.max(np.abs(np.concatenate([est, x1, x2])))), np.finfo(float).tiny)
     bound = float(np.max(_combination_bound(w, dw, x1, x2))) / size
     residuals = {"gradient": res_grad, "estimate_error": bound, "weight_error": w_err}
-    sol = _verify(FusionSolution(objective=float("nan"), residuals=residuals, estimate=est,
+    sol = _finish(FusionSolution(objective=float("nan"), residuals=residuals, estimate=est,
                                  covariance=cov, W=w, **common))
     sol.objective = float(np.trace(sol.covariance))
     return sol

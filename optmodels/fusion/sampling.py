@@ -32,6 +32,7 @@ from optmodels.fusion.inputs import (
 )
 from optmodels.fusion.verify import _refuse_inaccurate, _weight_error
 from optmodels.fusion.weights import _weight, weight_matrix_correlated
+from optmodels.seeds import as_generator
 
 #: Largest trials · m² accepted by :func:`monte_carlo_weight` (measured 1e-7..8e-7 s per
 #: trial·m² on a shared 2-core VM: at most ~15 s). The draws are made in chunks of at most
@@ -103,12 +104,9 @@ def monte_carlo_weight(s1: ArrayLike, s2: ArrayLike, n1: int, n2: int, *,
 
 
 def _rng(name: str, seed: Any) -> np.random.Generator:
-    """None, a non-negative integer or a Generator → a Generator; ProblemError otherwise."""
-    if isinstance(seed, np.random.Generator):
-        return seed
-    if seed is None:
-        return np.random.default_rng()
-    return np.random.default_rng(as_count(name, seed))
+    """None (fresh entropy), a whole number ≥ 0 (or a sequence of them) or a Generator → a
+    Generator (:func:`optmodels.seeds.as_generator`); ProblemError otherwise."""
+    return as_generator(name, seed, allow_none=True)
 
 
 def weight_from_samples(a1: ArrayLike, a2: ArrayLike, *, correlated: bool = False

@@ -198,7 +198,7 @@ class TwoSiteSystem(JointMLMixin):
             out.append(np.where(good & np.isfinite(cond), cond, np.inf))
         return out[0], out[1], out[2]
 
-    def _refuse_degenerate(self, p: FloatArray, bad: FloatArray, cond: FloatArray,
+    def _refuse_degenerate(self, p: FloatArray, bad: np.ndarray, cond: FloatArray,
                            name: str, what: str) -> None:
         if np.any(bad):
             idx = _first_index(bad)
@@ -250,7 +250,7 @@ class TwoSiteSystem(JointMLMixin):
         s1 = np.where(bad1[..., None, None], nan, s1)
         s2 = np.where(bad2[..., None, None], nan, s2)
         s12 = np.where((bad1 | bad2)[..., None, None], nan, s12)
-        return s1, s2, s12
+        return s1, s2, np.asarray(s12, dtype=float)
 
     def crb(self, x: ArrayLike, *,
             on_degenerate: Literal["raise", "nan"] = "raise") -> FloatArray:
@@ -355,7 +355,8 @@ class TwoSiteSystem(JointMLMixin):
         """
         fn = "fusion.TwoSiteSystem.fused"
         zz = np.atleast_2d(self._z(z, f"{fn} z"))
-        weights_at = as_choice(f"{fn} weights_at", weights_at, ("true", "estimated"))
+        weights_at = as_choice(  # type: ignore[assignment]
+            f"{fn} weights_at", weights_at, ("true", "estimated"))
         as_flag(f"{fn} correlated", correlated)
         a1, a2 = self.triangulate(zz), self.azimuth_range_difference(zz)
         if w is not None:

@@ -51,7 +51,8 @@ class JointMLMixin:
     :meth:`joint_ml`, ``_whitened``, ``_gauss_newton``), kept here with its NLP and cache;
     TwoSiteSystem inherits them."""
 
-    def joint_ml(self: TwoSiteSystem, z: ArrayLike, *, x0: ArrayLike | None = None,
+    def joint_ml(self: TwoSiteSystem,  # type: ignore[misc]
+                 z: ArrayLike, *, x0: ArrayLike | None = None,
                  method: Literal["ipopt", "gauss_newton"] = "ipopt",
                  options: dict[str, Any] | None = None) -> JointMLSolution:
         """ML position from all three measurements (the original problem):
@@ -85,7 +86,8 @@ class JointMLMixin:
         t = zz.shape[0]
         if t == 0:
             raise ProblemError(f"{fn} z: no measurements (0 rows)")
-        method = as_choice(f"{fn} method", method, ("ipopt", "gauss_newton"))
+        method = as_choice(  # type: ignore[assignment]
+            f"{fn} method", method, ("ipopt", "gauss_newton"))
         opts = check_options(options)
         if x0 is None:
             start = self.triangulate(zz)
@@ -139,7 +141,7 @@ class JointMLMixin:
                               estimate=est, stationarity=stat, **common)
         return finish(sol, note=note, reject=no_estimate)  # the one gate
 
-    def _whitened(self: TwoSiteSystem, z: FloatArray, x: FloatArray
+    def _whitened(self: TwoSiteSystem, z: FloatArray, x: FloatArray  # type: ignore[misc]
                   ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
         """Whitened Jacobian (T, 3, 2), residuals (T, 3), gradient J_tᵀR⁻¹r_t (T, 2) and the
         relative stationarity ‖g_t‖ / (‖J_t‖‖r_t‖ + 1) per row, at positions x (NaN rows
@@ -152,7 +154,8 @@ class JointMLMixin:
                 np.linalg.norm(jw, axis=(1, 2)) * np.linalg.norm(r, axis=1) + 1.0)
         return jw, r, g, np.where(np.isfinite(stat), stat, np.inf)
 
-    def _gauss_newton(self: TwoSiteSystem, z: FloatArray, start: FloatArray, max_iter: int = 50
+    def _gauss_newton(self: TwoSiteSystem,  # type: ignore[misc]
+                      z: FloatArray, start: FloatArray, max_iter: int = 50
                       ) -> tuple[FloatArray, dict[str, Any]]:
         """Vectorised Gauss-Newton with step halving; stops when every row's full step is
         below 1e-10 of the baseline or its relative stationarity (as in :meth:`joint_ml`)

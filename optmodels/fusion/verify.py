@@ -1,7 +1,7 @@
 """NumPy re-check of the fusion answers (paper 003): forward error bounds of the weight W
 (2), (6) (and of the correlated W) from the residual of W(S1 + S2) = S1 and the
 conditioning (LAPACK xGERFS style, componentwise), of the fused estimate (1), the WLS
-objective (1) itself, and the status gate :func:`_verify` (via
+objective (1) itself, and the status gate :func:`_finish` (via
 :func:`optmodels.core.verified_status`); :func:`_refuse_inaccurate` for functions that
 return a bare matrix."""
 
@@ -12,6 +12,7 @@ from typing import TypeVar
 import numpy as np
 
 from optmodels.core import REJECT_TOL, FloatArray, ProblemError, Solution, Status, Verdict, finish
+from optmodels.fusion.solution import _failure
 
 _EPS = float(np.finfo(float).eps)
 
@@ -35,7 +36,7 @@ def _weight_bound(w: FloatArray, mat: FloatArray, rhs: FloatArray,
     if not np.all(np.isfinite(w)):
         return np.full_like(w, np.inf)
     if inv is None:
-        inv = np.linalg.inv(mat)
+        inv = np.asarray(np.linalg.inv(mat), dtype=float)
     return _bounded_error(mat, w.T, rhs.T, inv).T
 
 
@@ -80,17 +81,9 @@ def _note(v: Verdict) -> str:
     return f"{v.key} {v.worst:.1e} {verdict}"
 
 
-def _no_estimate(sol: S) -> None:
-    """Fusion's failure form: no estimate (NaN), and no W/covariance if W itself failed."""
-    sol.estimate = np.full_like(sol.estimate, np.nan)  # type: ignore[attr-defined]
-    if not sol.residuals["weight_error"] <= REJECT_TOL:
-        sol.W = np.full_like(sol.W, np.nan)  # type: ignore[attr-defined]
-        sol.covariance = np.full_like(sol.covariance, np.nan)  # type: ignore[attr-defined]
-
-
-def _verify(sol: S) -> S:
+def _finish(sol: S) -> S:
     """A solver's (or a closed form's) 'optimal' is not taken on trust: the one gate
     (:func:`optmodels.core.finish`, i.e. :func:`~optmodels.core.verified_status` of the
     largest NumPy-recomputed residual). A result that is not OK keeps no estimate (NaN),
     and no W/covariance if W failed."""
-    return finish(sol, note=_note, reject=_no_estimate)
+    return finish(sol, note=_note, reject=_failure)

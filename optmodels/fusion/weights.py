@@ -83,7 +83,8 @@ def weight_matrix_correlated(s1: ArrayLike, s2: ArrayLike, s12: ArrayLike) -> Fl
     a, b = _pair(s1, s2, "weight_matrix_correlated")
     c, d = _cross(s12, a, b, "weight_matrix_correlated")
     w = _correlated_weight(a, c, d)
-    err = _weight_error(w, d, a - c, np.linalg.pinv(d, rcond=PINV_RTOL, hermitian=True))
+    err = _weight_error(w, d, a - c, np.asarray(np.linalg.pinv(d, rcond=PINV_RTOL,
+                                                               hermitian=True), dtype=float))
     _refuse_inaccurate("weight_matrix_correlated", err, "D = S1 + S2 − S12 − S12ᵀ")
     return w
 

@@ -30,7 +30,8 @@ from optmodels.core import (
     check_spd,
     timed,
 )
-from optmodels.plane.data import PlaneData, PlaneSolution, _check_data
+from optmodels.plane.data import PlaneData, _check_data
+from optmodels.plane.solution import PlaneSolution
 from optmodels.plane.verify import _Check, _finish, _rayleigh_check, _resolve
 
 

@@ -1,7 +1,7 @@
 r"""Data and the original problem (1.2)-(1.3) of the plane of maneuver, in NumPy.
 
 :class:`PlaneData` (measurements :math:`x_i^*` and covariances :math:`D_i`, with the
-proportional case (1.4) detected), :class:`PlaneSolution`, and the functions of the
+proportional case (1.4) detected) and the functions of the
 original form at a candidate: :func:`objective` (1.2), :func:`constraint_residuals` (1.3),
 :func:`reduced_objective` (1.11)-(1.12), :func:`optimal_offset` (the ``a`` of (1.12), (1.7)
 under (1.4)) and :func:`project`, the oblique projection (1.8). Imports only
@@ -20,7 +20,6 @@ from optmodels.core import (
     MAX_MAGNITUDE,
     FloatArray,
     ProblemError,
-    Solution,
     as_finite_array,
     as_instance,
     as_number,
@@ -87,8 +86,9 @@ class PlaneData:
                         f"plane.PlaneData alpha2: the factors of (1.4) must be ≥ 1e-100; "
                         f"{int(np.sum(alpha2 < 1 / MAX_MAGNITUDE))} are not"
                     )
-            base = 0.5 * (cov + cov.T)
-            covs = alpha2[:, None, None] * base
+            common = 0.5 * (cov + cov.T)
+            covs = alpha2[:, None, None] * common
+            base: FloatArray | None = common
         else:
             if cov.shape != (n, 3, 3):
                 raise ProblemError(f"plane.PlaneData cov: expected shape (3, 3) or ({n}, 3, 3), "
@@ -154,38 +154,6 @@ def _detect_proportional(covs: FloatArray) -> tuple[FloatArray | None, FloatArra
     if np.all(dev <= _PROPORTIONAL_RTOL * np.max(np.abs(covs), axis=(1, 2))):
         return ref, alpha2
     return None, None
-
-
-# =========================================================================== solution
-@dataclass
-class PlaneSolution(Solution):
-    """A plane estimate with the projected points.
-
-    Attributes
-    ----------
-    normal : ndarray (3,)
-        Unit normal ``n``; sign convention: ``offset >= 0``, and if ``offset == 0`` the
-        first non-zero component of ``normal`` is positive.
-    offset : float
-        ``a`` in :math:`\\langle n, x\\rangle = a` (1.1).
-    projected : ndarray (N, 3)
-        The estimated positions :math:`x_i` on the plane (1.8).
-    resolved : bool or None
-        Whether the data determine the plane: the hypothesis "the points are on a line"
-        is rejected at the fit's ``level`` (:func:`optmodels.plane.general.line_test`;
-        ``info["line_test"]`` holds its numbers). ``False``: the fit is not OK (status
-        ERROR, message "unresolved: ..."), ``normal``/``offset`` are NaN (every plane
-        through the line fits about as well) and ``line_direction`` is what the data
-        determine. ``None``: not tested (the fit failed first, or ``level=None``).
-    line_direction : ndarray (3,)
-        Unit direction of the maximum-likelihood line (NaN where not tested).
-    """
-
-    normal: FloatArray = field(default_factory=lambda: np.full(3, np.nan))
-    offset: float = float("nan")
-    projected: FloatArray = field(default_factory=lambda: np.empty((0, 3)))
-    resolved: bool | None = None
-    line_direction: FloatArray = field(default_factory=lambda: np.full(3, np.nan))
 
 
 def _canonical_sign(normal: FloatArray, offset: float) -> tuple[FloatArray, float]:

@@ -12,7 +12,8 @@ Cartesian frame, metres, its axes E, N, U; the radar's azimuth zero is that fram
 and its horizontal is the E-N plane (no earth curvature, no refraction: for points
 geodetic, convert them to the radar's ENU first, e.g. ``pymap3d.geodetic2enu``).
 
-:func:`to_polar` / :func:`from_polar` convert between the two;
+:func:`to_polar` / :func:`from_polar` convert between the two (checked wrappers of
+:mod:`optmodels.geometry`, the package's one polar convention);
 :func:`radar_covariances` gives :math:`D_i = J_i\,\mathrm{diag}(\sigma_r^2, \sigma_\beta^2,
 \sigma_\varepsilon^2)\,J_i^T`.
 """
@@ -22,6 +23,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike
 
+from optmodels import geometry
 from optmodels.core import (
     MAX_MAGNITUDE,
     FloatArray,
@@ -47,9 +49,8 @@ def _site_offsets(where: str, points: ArrayLike, site: ArrayLike) -> tuple[Float
 def to_polar(points: ArrayLike, site: ArrayLike) -> FloatArray:
     """``(N, 3)`` columns range (m), azimuth (rad, clockwise from north, in (−π, π]),
     elevation (rad, up) of ENU ``points`` (m) seen from ``site`` (m)."""
-    d, r = _site_offsets("plane.to_polar", points, site)
-    return np.column_stack([r, np.arctan2(d[:, 0], d[:, 1]), np.arcsin(np.clip(d[:, 2] / r,
-                                                                               -1.0, 1.0))])
+    d, _ = _site_offsets("plane.to_polar", points, site)
+    return geometry.to_polar3d(d)
 
 
 def from_polar(polar: ArrayLike, site: ArrayLike) -> FloatArray:
@@ -58,9 +59,7 @@ def from_polar(polar: ArrayLike, site: ArrayLike) -> FloatArray:
     ``U = r sin ε`` (plus the site)."""
     p = as_finite_array("plane.from_polar polar", polar, shape=(None, 3), max_abs=MAX_MAGNITUDE)
     st = as_finite_array("plane.from_polar site", site, shape=(3,), max_abs=MAX_MAGNITUDE)
-    r, az, el = p[:, 0], p[:, 1], p[:, 2]
-    return st + np.column_stack([r * np.cos(el) * np.sin(az), r * np.cos(el) * np.cos(az),
-                                 r * np.sin(el)])
+    return st + geometry.from_polar3d(p)
 
 
 def radar_covariances(

@@ -27,7 +27,7 @@ from optmodels.core import (
 )
 from optmodels.plane.closedform import _closed_form_from_sums, _scaled_sums
 from optmodels.plane.data import PlaneData
-from optmodels.plane.nlp import Formulation, solve
+from optmodels.plane.generic import Formulation, solve
 from optmodels.plane.statistics import _planarity_arrays
 
 
@@ -127,7 +127,7 @@ def identify_sequence(
     formulation : {"reduced", "full"}
         Formulation of those generic re-solves.
     """
-    data = PlaneData(points, cov, alpha2)
+    data = PlaneData(points, cov, alpha2)  # type: ignore[arg-type]  # (checked there)
     t = as_finite_array("plane.identify_sequence times", times, shape=(data.n_points,))
     if np.any(np.diff(t) <= 0):
         raise ProblemError("plane.identify_sequence times: must be strictly increasing")

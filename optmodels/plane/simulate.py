@@ -151,7 +151,7 @@ def plane_change_track(
 def false_alarm_runs(hours: float, seed: int = 0, *, window: str | None = "40s",
                      false_alarm_rate_per_h: float = 1.0, sigma: float = 50.0,
                      errors: str = "isotropic", run_hours: float = 1.0,
-                     **kw: float) -> dict[str, float]:
+                     **kw: Any) -> dict[str, float]:
     """False alarms of :func:`optmodels.plane.tracking.track` on planar tracks (a turn of
     ``radius1`` in one plane, ``tilt_deg=0``), ``hours`` of track in runs of ``run_hours``.
 
@@ -183,7 +183,7 @@ def false_alarm_runs(hours: float, seed: int = 0, *, window: str | None = "40s",
 def detection_runs(runs: int, seed: int = 0, *, tilt_deg: float = 30.0,
                    window: str | None = "40s", sigma: float = 50.0,
                    errors: str = "isotropic", false_alarm_rate_per_h: float = 1.0,
-                   **kw: float) -> dict[str, Any]:
+                   **kw: Any) -> dict[str, Any]:
     """Detection delay of :func:`optmodels.plane.tracking.track` on
     :func:`plane_change_track` (``runs`` seeded runs). ``delay`` (runs,) s from the change
     to the first alarm at or after it (inf: none); ``early`` (runs,) alarms before it;

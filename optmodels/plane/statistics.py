@@ -26,13 +26,13 @@ from optmodels.core import (
 from optmodels.plane.closedform import closed_form
 from optmodels.plane.data import (
     PlaneData,
-    PlaneSolution,
     _check_plane,
     _quad_forms,
     reduced_objective,
 )
 from optmodels.plane.general import line_test
-from optmodels.plane.nlp import solve
+from optmodels.plane.generic import solve
+from optmodels.plane.solution import PlaneSolution
 
 
 @dataclass(frozen=True)
@@ -100,7 +100,7 @@ class PlanarityTest:
 
 def _planarity_arrays(
     stat: FloatArray, n: FloatArray, level: float, line_stat: FloatArray,
-    determined: FloatArray | bool = True,
+    determined: np.ndarray | bool = True,
 ) -> dict[str, FloatArray]:
     """The χ²(N − 3) test, the rule (1.17) and the line test, vectorised.
 

@@ -29,7 +29,6 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from optmodels.core import (
-    REJECT_TOL,
     FloatArray,
     ProblemError,
     as_count,
@@ -39,23 +38,20 @@ from optmodels.core import (
     as_probability,
     timed,
 )
-from optmodels.plane.closedform import _closed_form_from_sums
 from optmodels.plane.data import PlaneData
 from optmodels.plane.detector import (
-    chow_statistic,
-    detectable_tilt,
     detector_threshold,
     noncentrality_for_power,
-    reference_tilt_sd,
-    score_info_moments,
-    score_info_points,
-    velocity_direction,
 )
 from optmodels.plane.statistics import _planarity_arrays
-from optmodels.plane.verify import _tangent_basis
+from optmodels.plane.track_steps import (
+    _detect,
+    _fits_general,
+    _fits_proportional,
+    _lows,
+    _splits,
+)
 from optmodels.plane.windows import (
-    Moments,
-    range_moments,
     track_spread,
     window_label,
     window_spec,
@@ -244,120 +240,6 @@ def _scales_arg(scales: Any, window: float | int | None) -> tuple[float, ...]:
     return tuple(sorted(set(out)))
 
 
-def _lows(t: FloatArray, window: float | int | None, origin: int) -> np.ndarray:
-    """First index of each step's window (all N steps), clipped at ``origin``."""
-    n = len(t)
-    if window is None:
-        lo = np.zeros(n, dtype=np.int64)
-    elif isinstance(window, int):
-        lo = np.arange(n, dtype=np.int64) - window + 1
-    else:
-        lo = np.searchsorted(t, t - window, side="right").astype(np.int64)
-    return np.maximum(lo, origin)
-
-
-def _splits(t: FloatArray, scale: float, window: float | int | None) -> np.ndarray:
-    """Split index s_j (last point of the reference) of every step j for one scale."""
-    n = len(t)
-    if isinstance(window, int):
-        return np.arange(n, dtype=np.int64) - int(scale)
-    return (np.searchsorted(t, t - scale, side="right") - 1).astype(np.int64)
-
-
-@dataclass
-class _Fits:
-    """Window fits of the indices ``base..end-1`` (row r ↔ index base + r)."""
-
-    normal: FloatArray
-    offset: FloatArray
-    stat: FloatArray
-    count: FloatArray
-    line_stat: FloatArray
-    line_dir: FloatArray
-    err: FloatArray
-    resolved: np.ndarray
-    base: int = 0
-    moments: Moments | None = None
-    info_cold: int = 0
-    warm: FloatArray | None = None
-
-
-def _fits_proportional(data: PlaneData, lo: np.ndarray, base: int, end: int,
-                       spread: float, lv: float) -> _Fits:
-    """Closed form of the windows ``[lo_i, i]``, ``base <= i < end``."""
-    assert data.base_cov is not None and data.alpha2 is not None
-    hi = np.arange(base, end)
-    lo = lo[base:end]
-    w = 1.0 / data.alpha2
-    mom = range_moments(data.points, w, lo, hi, origin=int(lo.min()), spread=spread)
-    count = mom.count
-    eig = _closed_form_from_sums(mom.s0, np.zeros_like(mom.mean), mom.q, mom.qabs,
-                                 count, data.base_cov / spread**2)
-    normal = eig.normal
-    offset = np.sum(normal * mom.mean, axis=1)  # (1.7) about the window's weighted mean
-    lead = np.take_along_axis(normal, np.argmax(normal != 0, axis=-1)[:, None], -1)[:, 0]
-    flip = (offset < 0) | ((offset == 0) & (lead < 0))
-    normal = np.where(flip[:, None], -normal, normal)
-    offset = np.abs(offset)
-    stat = eig.check.rho
-    line_stat = eig.lam[:, 0] + eig.lam[:, 1]
-    err = eig.check.step
-    small = count < 4
-    with np.errstate(invalid="ignore", divide="ignore"):
-        arr = _planarity_arrays(stat, np.maximum(count, 4.0), lv, line_stat,
-                                (err <= REJECT_TOL) & ~small)
-    return _Fits(normal=normal, offset=offset, stat=np.where(small, np.nan, stat),
-                 count=count, line_stat=line_stat, line_dir=eig.line, err=err,
-                 resolved=arr["resolved"], base=base, moments=mom)
-
-
-def _fits_general(data: PlaneData, lo: np.ndarray, base: int, end: int, lv: float,
-                  warm: FloatArray | None) -> _Fits:
-    """fit_general on every window ``[lo_i, i]``, ``base <= i < end``, warm-started from
-    the previous window's normal (cold again where the warm run is not OK)."""
-    from optmodels.plane.general import fit_general
-
-    m = end - base
-    out = _Fits(normal=np.full((m, 3), np.nan), offset=np.full(m, np.nan),
-                stat=np.full(m, np.nan), count=np.zeros(m), line_stat=np.full(m, np.nan),
-                line_dir=np.full((m, 3), np.nan), err=np.full(m, np.inf),
-                resolved=np.zeros(m, dtype=bool), base=base)
-    for r in range(m):
-        i = base + r
-        a = int(lo[i])
-        out.count[r] = i - a + 1
-        if out.count[r] < 4:
-            continue
-        x = data.points[a: i + 1]
-        c = data.covs[a: i + 1]
-        try:
-            fit = fit_general(x, c, normal0=warm, level=lv)
-            cold = warm is None
-            if warm is not None and not fit.ok:
-                fit = fit_general(x, c, level=lv)
-                cold = True
-        except ProblemError:  # collinear (or identical) to round-off: no plane
-            y = x - x.mean(axis=0)
-            d = np.linalg.svd(y, full_matrices=False)[2][0]
-            out.line_dir[r] = d if d[np.argmax(np.abs(d))] > 0 else -d
-            out.stat[r] = 0.0
-            out.line_stat[r] = 0.0
-            warm = None
-            continue
-        out.normal[r] = fit.normal
-        out.offset[r] = fit.offset
-        out.stat[r] = fit.objective
-        out.line_stat[r] = fit.line_statistic
-        out.line_dir[r] = fit.line_direction
-        out.err[r] = fit.numerical_error
-        out.resolved[r] = bool(fit.resolved and fit.ok)
-        if fit.ok:
-            warm = fit.normal
-        out.info_cold += int(cold)
-    out.warm = warm
-    return out
-
-
 # =========================================================================== entry
 def track(
     times: ArrayLike,
@@ -435,8 +317,53 @@ def track(
         Naming the argument (``"plane.track <argument>"``; the points and covariances are
         checked by :class:`PlaneData`).
     """
+    setup = _validate(times, points, cov, window=window, window_points=window_points,
+                      window_seconds=window_seconds, level=level,
+                      false_alarm_rate_per_h=false_alarm_rate_per_h, alpha2=alpha2,
+                      start=start, scales=scales, power=power, min_reference=min_reference,
+                      max_reference_sd=max_reference_sd, false_alarm_rate=false_alarm_rate)
+    rec = _records(setup.n - setup.first)
+    with timed() as tm:
+        restarts = _run(setup, rec)
+    return _package(setup, rec, restarts, tm.elapsed)
+
+
+@dataclass(frozen=True)
+class _Setup:
+    """The checked arguments of :func:`track` and what follows from them alone."""
+
+    data: PlaneData
+    t: FloatArray
+    win: float | int | None
+    lv: float
+    far_h: float
+    pw: float
+    min_ref: int
+    max_sd: float
+    sc: tuple[float, ...]
+    first: int
+    dt: float
+    thr: float
+    p_test: float
+    lam_star: float
+    general: bool
+    spread: float
+    splits: list[np.ndarray]
+
+    @property
+    def n(self) -> int:
+        return self.data.n_points
+
+
+def _validate(times: ArrayLike, points: ArrayLike, cov: ArrayLike, *, window: str | None,
+              window_points: int | None, window_seconds: float | None, level: float,
+              false_alarm_rate_per_h: float, alpha2: ArrayLike | None, start: float | None,
+              scales: Any, power: float, min_reference: int, max_reference_sd: float,
+              false_alarm_rate: Any) -> _Setup:
+    """Every argument of :func:`track` checked (one ``ProblemError`` naming it), and the
+    detector's threshold, the scales and the splits."""
     try:
-        data = PlaneData(points, cov, alpha2)
+        data = PlaneData(points, cov, alpha2)  # type: ignore[arg-type]  # (checked there)
     except ProblemError as exc:
         raise ProblemError(f"{_W}: {exc}") from None
     n = data.n_points
@@ -452,7 +379,6 @@ def track(
                            if isinstance(false_alarm_rate, int | float) else
                            f"{_W} false_alarm_rate: renamed false_alarm_rate_per_h (per hour)")
     far_h = as_positive(f"{_W} false_alarm_rate_per_h", false_alarm_rate_per_h)
-    far = far_h / 3600.0
     pw = as_probability(f"{_W} power", power, low_open=True, high_open=True)
     min_ref = as_count(f"{_W} min_reference", min_reference, minimum=4)
     max_sd = as_positive(f"{_W} max_reference_sd", max_reference_sd, allow_inf=True)
@@ -465,182 +391,119 @@ def track(
                                f"{3.0 * dt:g} s")
     if start is None:
         first = 3
+        if first >= n:  # issue 28: the message named "t = None"
+            raise ProblemError(f"{_W} times: {n} measurements; a step needs at least 4")
     else:
         t0 = as_number(f"{_W} start", start)
         first = max(int(np.searchsorted(t, t0, side="left")), 3)
-    if first >= n:
-        raise ProblemError(f"{_W} start: no step with at least 4 measurements at or after "
-                           f"t = {start}")
+        if first >= n:
+            raise ProblemError(f"{_W} start: no step with at least 4 measurements at or "
+                               f"after t = {t0:g} s")
     dt = float(np.median(np.diff(t)))
-    thr, p_test = detector_threshold(far, dt, len(sc))
+    thr, p_test = detector_threshold(far_h / 3600.0, dt, len(sc))
     if not p_test < 0.5:
         raise ProblemError(f"{_W} false_alarm_rate_per_h: {far_h:g} per hour with a sampling "
                            f"interval of {dt:g} s and {len(sc)} scales gives a per-test "
                            f"level {p_test:.3g}; must be < 0.5")
-    lam_star = noncentrality_for_power(thr, pw)
-    general = not data.proportional
-    spread = track_spread(data.points)
-    splits = [_splits(t, s, win) for s in sc]
+    return _Setup(data=data, t=t, win=win, lv=lv, far_h=far_h, pw=pw, min_ref=min_ref,
+                  max_sd=max_sd, sc=sc, first=first, dt=dt, thr=thr, p_test=p_test,
+                  lam_star=noncentrality_for_power(thr, pw), general=not data.proportional,
+                  spread=track_spread(data.points),
+                  splits=[_splits(t, s, win) for s in sc])
 
-    k_all = n - first
-    rec: dict[str, Any] = {
-        "normal": np.full((k_all, 3), np.nan), "offset": np.full(k_all, np.nan),
-        "stat": np.full(k_all, np.nan), "count": np.zeros(k_all),
-        "wstart": np.full(k_all, np.nan), "line_stat": np.full(k_all, np.nan),
-        "line_dir": np.full((k_all, 3), np.nan), "err": np.full(k_all, np.inf),
-        "resolved": np.zeros(k_all, dtype=bool), "det": np.full(k_all, np.nan),
-        "change": np.zeros(k_all, dtype=bool), "ctime": np.full(k_all, np.nan),
-        "tilt": np.full(k_all, np.nan), "tilt_any": np.full(k_all, np.nan),
+
+def _records(k: int) -> dict[str, Any]:
+    """The per-step arrays of :func:`track`, NaN/empty for the ``k`` reported steps."""
+    return {
+        "normal": np.full((k, 3), np.nan), "offset": np.full(k, np.nan),
+        "stat": np.full(k, np.nan), "count": np.zeros(k),
+        "wstart": np.full(k, np.nan), "line_stat": np.full(k, np.nan),
+        "line_dir": np.full((k, 3), np.nan), "err": np.full(k, np.inf),
+        "resolved": np.zeros(k, dtype=bool), "det": np.full(k, np.nan),
+        "change": np.zeros(k, dtype=bool), "ctime": np.full(k, np.nan),
+        "tilt": np.full(k, np.nan), "tilt_any": np.full(k, np.nan),
     }
+
+
+def _run(st: _Setup, rec: dict[str, Any]) -> list[int]:
+    """The steps, chunk by chunk, into ``rec``; returns the restart indices. Steps are
+    evaluated in chunks, so that a restart costs O(chunk), not O(N): a chunk needs the fits
+    of its steps and of the reference windows of its splits."""
+    data, t, win, splits, first, n = st.data, st.t, st.win, st.splits, st.first, st.n
     restarts: list[int] = []
-    # steps are evaluated in chunks, so that a restart costs O(chunk), not O(N): a chunk
-    # needs the fits of its steps and of the reference windows of its splits
     lo0 = _lows(t, win, 0)
     reach = max(int(np.max(np.arange(n) - sp_idx)) for sp_idx in splits)
     w_max = 0 if win is None else int(np.max(np.arange(n) - lo0)) + 1
     # (general D_i: a fit per step, so a smaller chunk wastes less after an alarm)
-    chunk0 = max(64, 2 * (reach + w_max)) if general else max(512, 4 * (reach + w_max))
-    with timed() as tm:
-        origin = 0
-        report = first
-        warm: FloatArray | None = None
-        while report < n:
-            lo = np.maximum(lo0, origin)
-            size = chunk0 if win is not None else max(chunk0, report - origin)
-            end = min(n, report + size)
-            base = max(origin, min(int(sp_idx[report]) for sp_idx in splits))
-            base = min(base, report)
-            fits = (_fits_general(data, lo, base, end, lv, warm) if general
-                    else _fits_proportional(data, lo, base, end, spread, lv))
-            det, arg_s, tilt, tilt_any = _detect(data, t, fits, origin, report, end,
-                                                 splits, min_ref, spread, lam_star,
-                                                 general, max_sd)
-            alarms = np.flatnonzero(det > thr)
-            stop = end if alarms.size == 0 else report + int(alarms[0]) + 1
-            rows = np.arange(report, stop)
-            r_fit = rows - base
-            r_out = rows - first
-            for key, src in (("normal", fits.normal), ("offset", fits.offset),
-                             ("stat", fits.stat), ("count", fits.count),
-                             ("line_stat", fits.line_stat), ("line_dir", fits.line_dir),
-                             ("err", fits.err), ("resolved", fits.resolved)):
-                rec[key][r_out] = src[r_fit]
-            rec["wstart"][r_out] = t[lo[rows]]
-            rec["det"][r_out] = det[: stop - report]
-            rec["tilt"][r_out] = tilt[: stop - report]
-            rec["tilt_any"][r_out] = tilt_any[: stop - report]
-            warm = fits.warm
-            if alarms.size == 0:
-                report = end
-                continue
-            j = stop - 1
-            s_hat = int(arg_s[stop - 1 - report])
-            rec["change"][j - first] = True
-            rec["ctime"][j - first] = t[s_hat]
-            restarts.append(s_hat + 1)
-            origin = s_hat + 1
-            report = j + 1
+    chunk0 = max(64, 2 * (reach + w_max)) if st.general else max(512, 4 * (reach + w_max))
+    origin = 0
+    report = first
+    warm: FloatArray | None = None
+    while report < n:
+        lo = np.maximum(lo0, origin)
+        size = chunk0 if win is not None else max(chunk0, report - origin)
+        end = min(n, report + size)
+        base = max(origin, min(int(sp_idx[report]) for sp_idx in splits))
+        base = min(base, report)
+        fits = (_fits_general(data, lo, base, end, st.lv, warm) if st.general
+                else _fits_proportional(data, lo, base, end, st.spread, st.lv))
+        det, arg_s, tilt, tilt_any = _detect(data, t, fits, origin, report, end,
+                                             splits, st.min_ref, st.spread, st.lam_star,
+                                             st.general, st.max_sd)
+        alarms = np.flatnonzero(det > st.thr)
+        stop = end if alarms.size == 0 else report + int(alarms[0]) + 1
+        rows = np.arange(report, stop)
+        r_fit = rows - base
+        r_out = rows - first
+        for key, src in (("normal", fits.normal), ("offset", fits.offset),
+                         ("stat", fits.stat), ("count", fits.count),
+                         ("line_stat", fits.line_stat), ("line_dir", fits.line_dir),
+                         ("err", fits.err), ("resolved", fits.resolved)):
+            rec[key][r_out] = src[r_fit]
+        rec["wstart"][r_out] = t[lo[rows]]
+        rec["det"][r_out] = det[: stop - report]
+        rec["tilt"][r_out] = tilt[: stop - report]
+        rec["tilt_any"][r_out] = tilt_any[: stop - report]
+        warm = fits.warm
+        if alarms.size == 0:
+            report = end
+            continue
+        j = stop - 1
+        s_hat = int(arg_s[stop - 1 - report])
+        rec["change"][j - first] = True
+        rec["ctime"][j - first] = t[s_hat]
+        restarts.append(s_hat + 1)
+        origin = s_hat + 1
+        report = j + 1
+    return restarts
 
+
+def _package(st: _Setup, rec: dict[str, Any], restarts: list[int], elapsed: float
+             ) -> PlaneTrack:
+    """The :class:`PlaneTrack` of the steps: the planarity and line tests per step, the
+    estimates blanked where not resolved."""
     resolved = rec["resolved"]
     count = rec["count"]
     with np.errstate(invalid="ignore"):
         arr = _planarity_arrays(np.nan_to_num(rec["stat"], nan=0.0), np.maximum(count, 4.0),
-                                lv, np.nan_to_num(rec["line_stat"], nan=0.0), resolved)
+                                st.lv, np.nan_to_num(rec["line_stat"], nan=0.0), resolved)
     normal = np.where(resolved[:, None], rec["normal"], np.nan)
     offset = np.where(resolved, rec["offset"], np.nan)
     line_dir = np.where(resolved[:, None], np.nan, rec["line_dir"])
-    k = k_all
+    k = len(count)
     return PlaneTrack(
-        times=t[first:], n_points=count, window_start=rec["wstart"], normals=normal,
+        times=st.t[st.first:], n_points=count, window_start=rec["wstart"], normals=normal,
         offsets=offset, statistic=rec["stat"], dof=count - 3.0,
         threshold=np.asarray(arr["threshold"], dtype=float), p_value=arr["p_value"],
         resolved=resolved, planar=arr["planar"] & np.isfinite(rec["stat"]),
         line_statistic=rec["line_stat"],
         line_threshold=np.asarray(arr["line_threshold"], dtype=float),
         line_direction=line_dir, numerical_error=rec["err"], change=rec["change"],
-        detector=rec["det"], detector_threshold=np.full(k, thr),
+        detector=rec["det"], detector_threshold=np.full(k, st.thr),
         change_time=rec["ctime"], detectable_tilt=rec["tilt"],
-        detectable_tilt_any=rec["tilt_any"], level=lv,
-        false_alarm_rate_per_h=far_h, power=pw, window=win, scales=sc,
-        method="general" if general else "closed_form", test_level=p_test,
-        solve_time=tm.elapsed, info={"restarts": restarts, "noncentrality": lam_star,
-                                     "dt": dt},
+        detectable_tilt_any=rec["tilt_any"], level=st.lv,
+        false_alarm_rate_per_h=st.far_h, power=st.pw, window=st.win, scales=st.sc,
+        method="general" if st.general else "closed_form", test_level=st.p_test,
+        solve_time=elapsed, info={"restarts": restarts, "noncentrality": st.lam_star,
+                                  "dt": st.dt},
     )
-
-
-def _detect(data: PlaneData, t: FloatArray, fits: _Fits, origin: int, report: int,
-            end: int, splits: list[np.ndarray], min_ref: int, spread: float,
-            lam_star: float, general: bool, max_sd: float
-            ) -> tuple[FloatArray, np.ndarray, FloatArray, FloatArray]:
-    """Detector statistic (max over scales), its split index and the detectable tilts for
-    the steps ``report..end-1`` (the fits hold the windows ``fits.base..end-1``)."""
-    steps = np.arange(report, end)
-    best = np.full(len(steps), -np.inf)
-    arg = np.full(len(steps), -1, dtype=np.int64)
-    tilt = np.full(len(steps), np.inf)
-    tilt_any = np.full(len(steps), np.inf)
-    any_test = np.zeros(len(steps), dtype=bool)
-    for sp_idx in splits:
-        s = sp_idx[steps]
-        ok = (s >= origin) & (steps - s >= 3)
-        rows = np.where(ok, s - fits.base, 0)
-        ok &= fits.resolved[rows] & (fits.count[rows] >= min_ref)
-        if not np.any(ok):
-            continue
-        jj = steps[ok]
-        ss = s[ok]
-        ra = ss - fits.base
-        na = fits.normal[ra]
-        aa = fits.offset[ra]
-        junction = data.points[ss]
-        if general:
-            ja = np.empty((len(jj), 3, 3))
-            ba = np.empty((len(jj), 3))
-            jb = np.empty_like(ja)
-            bb = np.empty_like(ba)
-            ell = np.empty(len(jj))
-            frames = _tangent_basis(na)
-            for q, (j, s_, nrm, off) in enumerate(zip(jj, ss, na, aa, strict=True)):
-                a0 = int(s_ - fits.count[s_ - fits.base] + 1)
-                xa = data.points[a0: s_ + 1]
-                ell[q] = max(float(np.sqrt(np.mean(np.sum((xa - xa.mean(0)) ** 2, 1))))
-                             / spread, 1e-300)
-                ja[q], ba[q] = score_info_points(nrm, off, junction[q], xa,
-                                                 data.covs[a0: s_ + 1], spread, ell[q],
-                                                 frames[q])
-                jb[q], bb[q] = score_info_points(nrm, off, junction[q],
-                                                 data.points[s_ + 1: j + 1],
-                                                 data.covs[s_ + 1: j + 1], spread, ell[q],
-                                                 frames[q])
-        else:
-            assert fits.moments is not None and data.base_cov is not None
-            assert data.alpha2 is not None
-            ma = fits.moments
-            mom_a = Moments(s0=ma.s0[ra], mean=ma.mean[ra], q=ma.q[ra], qabs=ma.qabs[ra],
-                            count=ma.count[ra], spread=spread,
-                            recomputed=ma.recomputed[ra])
-            mom_b = range_moments(data.points, 1.0 / data.alpha2, ss + 1, jj,
-                                  origin=int(ss.min()) + 1, spread=spread)
-            ell = np.sqrt(np.maximum(np.trace(mom_a.q, axis1=1, axis2=2) / mom_a.s0,
-                                     1e-300))
-            ja, ba = score_info_moments(na, aa, junction, mom_a, data.base_cov, ell)
-            jb, bb = score_info_moments(na, aa, junction, mom_b, data.base_cov, ell)
-        firm = reference_tilt_sd(ja, ell) <= max_sd
-        ja = np.where(firm[:, None, None], ja, np.eye(3))  # (placeholder where not firm)
-        u = np.where(firm, chow_statistic(ja, ba, jb, bb), -np.inf)
-        back = np.minimum(5, fits.count[ra].astype(np.int64) - 1)
-        vel = velocity_direction(na, _tangent_basis(na), data.points, ss, back)
-        th = np.where(firm, detectable_tilt(ja, jb, ell, lam_star, vel), np.inf)
-        th_any = np.where(firm, detectable_tilt(ja, jb, ell, lam_star), np.inf)
-        pos = np.flatnonzero(ok)
-        better = u > best[pos]
-        best[pos[better]] = u[better]
-        arg[pos[better]] = ss[better]
-        tilt[pos] = np.minimum(tilt[pos], th)
-        tilt_any[pos] = np.minimum(tilt_any[pos], th_any)
-        any_test[pos] |= firm
-    best = np.where(any_test, best, np.nan)
-    tilt = np.where(any_test, tilt, np.nan)
-    tilt_any = np.where(any_test, tilt_any, np.nan)
-    return best, arg, tilt, tilt_any
-

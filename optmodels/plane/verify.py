@@ -20,7 +20,6 @@ from optmodels.core import FloatArray, Status, failure, finish
 from optmodels.plane.data import (
     _EPS,
     PlaneData,
-    PlaneSolution,
     _canonical_sign,
     _oblique_projection,
     _weighted_offset,
@@ -28,6 +27,7 @@ from optmodels.plane.data import (
     objective,
     project,
 )
+from optmodels.plane.solution import PlaneSolution, _failure
 
 
 def _roundoff(count: int | FloatArray) -> FloatArray | float:
@@ -186,7 +186,8 @@ def _finish(
         projected = project(data, normal, offset)
     else:
         unit = normal / np.linalg.norm(normal)
-        opt = _oblique_projection(data.points, data.covs, unit, offset / np.linalg.norm(normal))
+        opt = _oblique_projection(data.points, data.covs, unit,
+                                  float(offset / np.linalg.norm(normal)))
         e = projected - opt
         dist2 = np.sum(e * np.linalg.solve(data.covs, e[..., None])[..., 0], axis=1)
         checks["projection"] = float(np.sqrt(np.max(np.abs(dist2))))
@@ -211,18 +212,8 @@ def _finish(
     )
     # the one gate (core.finish) on the dimensionless checks; a refused plane is returned
     # without an estimate (its numbers stay in info["rejected"] for diagnosis)
-    return finish(sol, checks, reject=_no_plane,
+    return finish(sol, checks, reject=_failure,
                   note=lambda v: f"re-check of (1.2)-(1.3): worst {v.worst:.2g} ({v.key})")
-
-
-def _no_plane(sol: PlaneSolution) -> PlaneSolution:
-    """The failure form of a plane solution: NaN normal and offset, no projected points;
-    what the solver returned is kept in ``info["rejected"]``."""
-    sol.info["rejected"] = {"normal": sol.normal, "offset": sol.offset}
-    sol.normal = np.full(3, np.nan)
-    sol.offset = float("nan")
-    sol.projected = np.empty((0, 3))
-    return sol
 
 
 def _resolve(sol: PlaneSolution, data: PlaneData, level: float | None) -> PlaneSolution:
@@ -243,7 +234,7 @@ def _resolve(sol: PlaneSolution, data: PlaneData, level: float | None) -> PlaneS
                              "exact": lt.exact}
     if lt.resolved:
         return sol
-    sol = _no_plane(sol)
+    sol = _failure(sol)
     sol.status = Status.ERROR
     sol.message = (f"unresolved: the points lie on a line at level {lt.level:g} (line "
                    f"statistic {lt.statistic:.6g} <= {lt.threshold:.6g}, chi2({lt.dof})): "

@@ -251,10 +251,10 @@ def window_spec(window: str | None = None, *, window_points: int | None = None,
     if not isinstance(window, str):
         raise ProblemError(f"{where} window: {window!r} does not say its unit (points or "
                            f"seconds?); {_WINDOW_HELP}")
-    return _parse_window_text(window, where)
+    return parse_window_text(window, where)
 
 
-def _parse_window_text(text: str, where: str) -> float | int | None:
+def parse_window_text(text: str, where: str) -> float | int | None:
     """``"40s"`` / ``"40 s"`` → 40.0 s; ``"100pts"`` / ``"100 points"`` → 100 points;
     ``"growing"`` → ``None``; anything else (a bare ``"40"``) refused."""
     raw = text.strip().lower().replace(" ", "")

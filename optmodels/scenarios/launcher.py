@@ -18,6 +18,7 @@ from typing import Literal
 
 import numpy as np
 
+from optmodels import seeds
 from optmodels.core import FloatArray, ProblemError, as_choice, as_count, as_positive
 from optmodels.trajectories import TrajectoryData
 
@@ -48,14 +49,9 @@ class TrajectoryScenario:
 
 
 def _rng(seed: int | np.random.Generator | None, where: str) -> np.random.Generator:
-    if isinstance(seed, np.random.Generator):
-        return seed
-    if isinstance(seed, int | np.integer | float | str | bytes | bool | np.bool_):
-        seed = as_count(f"{where} seed", seed)
-    try:
-        return np.random.default_rng(seed)
-    except (TypeError, ValueError) as exc:
-        raise ProblemError(f"{where} seed: not usable as a seed ({exc})") from None
+    """A Generator as given, seeded from a whole number >= 0 (or a sequence of them), or a
+    fresh one for ``None`` (:func:`optmodels.seeds.as_generator`)."""
+    return seeds.as_generator(f"{where} seed", seed, allow_none=True)
 
 
 def _measure(rng: np.random.Generator, times: list[FloatArray], start: FloatArray,
@@ -88,14 +84,14 @@ def launcher_release(seed: int | np.random.Generator | None = None, *,
     family = as_choice(f"{where} family", family, ("diverging", "parallel"))  # type: ignore
     sigma = as_positive(f"{where} sigma", sigma)
     rng = _rng(seed, where)
-    times = []
+    times: list[FloatArray] = []
     for _ in range(q):
         first = rng.uniform(60.0, 200.0)
         n = int(rng.integers(60, 181))
         t = first + 10.0 * np.arange(n)
         keep = rng.random(n) > 0.3  # missed detections
         keep[:2] = True
-        times.append(t[keep])
+        times.append(np.asarray(t[keep], dtype=float))
     if family == "diverging":
         start = np.zeros(q)
         velocity = np.sort(rng.uniform(-4.0, 4.0, q))

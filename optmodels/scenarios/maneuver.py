@@ -10,13 +10,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from optmodels import seeds
 from optmodels.core import (
     FloatArray,
     ProblemError,
     as_choice,
     as_count,
     as_finite_array,
-    as_generator,
     as_number,
     as_positive,
 )
@@ -64,8 +64,9 @@ class ManeuverScenario:
 
 
 def _rng(seed: int | np.random.Generator, where: str = "scenarios") -> np.random.Generator:
-    """A Generator as given, or seeded from a whole number >= 0 (or a sequence of them)."""
-    return as_generator(where, seed)
+    """A Generator as given, or seeded from a whole number >= 0 (or a sequence of them)
+    (:func:`optmodels.seeds.as_generator`)."""
+    return seeds.as_generator(f"{where} seed", seed)
 
 
 def paper_plane_example(

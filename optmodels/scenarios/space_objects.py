@@ -16,6 +16,7 @@ import numpy as np
 from scipy.sparse import csgraph
 from scipy.spatial.distance import pdist, squareform
 
+from optmodels import seeds
 from optmodels.core import FloatArray, ProblemError, as_count, as_positive, as_probability
 
 __all__ = ["MAX_CLUTTER", "MAX_OBJECTS", "MAX_SESSIONS", "Session", "SpaceScenario",
@@ -76,14 +77,7 @@ def space_objects(seed: int | np.random.Generator, *, q: int = 4, sessions: int 
         Naming the argument, for a wrong type or value.
     """
     w = "scenarios.space_objects"
-    if isinstance(seed, np.random.Generator):
-        rng = seed
-    else:
-        try:
-            rng = np.random.default_rng(seed)
-        except (TypeError, ValueError) as exc:
-            raise ProblemError(f"{w} seed: expected an integer seed or a numpy Generator, "
-                               f"got {seed!r} ({exc})") from None
+    rng = seeds.as_generator(f"{w} seed", seed, allow_none=True)
     q = as_count(f"{w} q", q, minimum=1, maximum=MAX_OBJECTS)
     sessions = as_count(f"{w} sessions", sessions, minimum=1, maximum=MAX_SESSIONS)
     separation = as_positive(f"{w} separation", separation)

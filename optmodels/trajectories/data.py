@@ -74,7 +74,7 @@ class TrajectoryData:
     scalar_sigma2: float | None = field(init=False, repr=False)
     #: the times as given (s), stacked like ``t``; ``t`` is ``raw_t - epoch``
     raw_t: FloatArray = field(init=False, repr=False)
-    _cache: dict[str, Any] = field(init=False, repr=False)
+    _cache: dict[Any, Any] = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
         where = "trajectories.TrajectoryData"

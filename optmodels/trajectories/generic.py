@@ -33,7 +33,7 @@ from optmodels.core import FloatArray, ProblemError, as_choice, as_instance, tim
 from optmodels.trajectories.data import Family, FamilyName, TrajectoryData, resolve_family
 from optmodels.trajectories.fits import _anchors, _fit
 from optmodels.trajectories.moments import _stats
-from optmodels.trajectories.solution import TrajectorySolution, _finish_solve, _nan_solution
+from optmodels.trajectories.solution import TrajectorySolution, _failure, _finish_solve
 
 #: Default solver options: the back-end's table for equality-constrained least squares
 #: (the same object; the reasons for each value are given there).
@@ -164,7 +164,7 @@ def _parametric_model(data: TrajectoryData, fam: Family, formulation: str
     else:
         struct = _digest(data.obj, tau0 / ts, sw, dt0 / ts, u0 / ts, si, vi)
     key = (formulation, fam.start_groups, fam.velocity_groups, n, q, d, struct)
-    model = _MODELS.get(key)
+    model: Any = _MODELS.get(key)
     cached = model is not None
     if model is None:
         target = cp.Parameter((n, d), name="target")
@@ -320,8 +320,9 @@ def solve(data: TrajectoryData, family: FamilyName | Family = "diverging", *,
     common["build_time"] += tb.elapsed
     common["method"] = f"{res.method} ({form}{', compiled model reused' if cached else ''})"
     if not ok:
-        return _nan_solution(data, fam, fit, {}, common, None)
+        return _failure(data, fam, fit, {}, common, None)
+    assert theta is not None
     if not np.all(np.isfinite(theta)):
         common["message"] += "; the solver returned non-finite values"
-        return _nan_solution(data, fam, fit, {}, common, None)
+        return _failure(data, fam, fit, {}, common, None)
     return _finish_solve(data, fam, fit, theta, lines, common)

@@ -12,7 +12,7 @@ import numpy as np
 from scipy import stats
 
 from optmodels.core import ProblemError, Status, as_choice, as_instance, as_probability
-from optmodels.trajectories.closed_forms import closed_form
+from optmodels.trajectories.closedform import closed_form
 from optmodels.trajectories.data import Family, FamilyName, TrajectoryData, resolve_family
 from optmodels.trajectories.fits import _fit, _kind
 from optmodels.trajectories.moments import EPS, _stats

@@ -1,6 +1,6 @@
 """The solution of paper 002's problem (:class:`TrajectorySolution`: θ, each object's line,
 Ψ (14), the re-check's residuals), the packing of a fit -- or of a failure, with NaN
-estimates -- into it (:func:`_package`, :func:`_nan_solution`), and the end of every
+estimates -- into it (:func:`_package`, :func:`_failure`), and the end of every
 solve and closed form: :func:`_finish` (the one gate :func:`optmodels.core.finish` on the
 NumPy residuals of :mod:`.verify`, then the coarse-time / far-epoch downgrade) and
 :func:`_finish_solve` (a generic solve's point: re-check, line residuals, gate).
@@ -101,7 +101,7 @@ def _package(data: TrajectoryData, fam: Family, fit: _Fit, theta: FloatArray,
         dof=(data.n_measurements - fam.n_params) * data.dim, _data=data, **common)
 
 
-def _nan_solution(data: TrajectoryData, fam: Family, fit: _Fit, residuals: dict[str, float],
+def _failure(data: TrajectoryData, fam: Family, fit: _Fit, residuals: dict[str, float],
                   common: dict[str, Any], rejected: FloatArray | None) -> TrajectorySolution:
     nan = np.full((fam.n_params, data.dim), np.nan)
     sol = _package(data, fam, fit, nan, residuals, float("nan"), common)
@@ -118,7 +118,7 @@ def _finish(data: TrajectoryData, fam: Family, fit: _Fit, theta: FloatArray,
             keep: _Fit | None = None) -> TrajectorySolution:
     """Pack θ and pass it through the one gate (:func:`optmodels.core.finish`, ``strict``
     for a solver's claim, see :func:`optmodels.core.gate`). Refused: the failure form
-    (:func:`_nan_solution`, θ kept in ``info["rejected_theta"]``), or with ``keep`` (the
+    (:func:`_failure`, θ kept in ``info["rejected_theta"]``), or with ``keep`` (the
     misprinted (13)) the numbers under status ERROR, packed with the fit ``keep``.
     Accepted: :func:`~.verify._downgrade` (coarse times, far epoch). ``diag`` goes to
     ``info`` except for a refused solver point."""
@@ -129,7 +129,7 @@ def _finish(data: TrajectoryData, fam: Family, fit: _Fit, theta: FloatArray,
         if keep is not None:
             out = _package(data, fam, keep, theta, residuals, objective, failed)
         else:
-            out = _nan_solution(data, fam, fit, residuals, failed, theta)
+            out = _failure(data, fam, fit, residuals, failed, theta)
         if not strict:
             out.info.update(diag)
         return out
@@ -148,7 +148,8 @@ def _solve_note(v: Verdict) -> str:
 
 
 def _finish_solve(data: TrajectoryData, fam: Family, fit: _Fit, theta: FloatArray,
-                  lines: tuple[FloatArray, ...] | None, common: dict[str, Any]
+                  lines: tuple[FloatArray, FloatArray, FloatArray, FloatArray] | None,
+                  common: dict[str, Any]
                   ) -> TrajectorySolution:
     """End of :func:`~.generic.solve` for a finite solver point θ (and the solver's own
     lines, constrained formulation): the re-check against the original problem

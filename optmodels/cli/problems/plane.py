@@ -11,7 +11,7 @@ import argparse
 import csv
 import io as _stdio
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 
@@ -74,10 +74,10 @@ def _plane_fit(args: argparse.Namespace) -> Outcome:
     from optmodels.io import read_plane_csv
 
     method = _method(args)
-    formulation = "full" if args.formulation == "closed-form" else args.formulation
+    formulation: Literal["full", "reduced"] = (
+        "full" if args.formulation == "closed-form" else args.formulation)
     with _reading(str(args.file)):
-        cols = read_plane_csv(args.file)
-        cols = _time_range(cols, args.file, args.start, args.end)
+        cols = _time_range(read_plane_csv(args.file), args.file, args.start, args.end)
         if "cov" in cols:
             if args.sigma2 is not None or args.cov is not None:
                 raise ProblemError("--sigma2/--cov: the file has per-point covariances "
@@ -186,10 +186,10 @@ def _time_range(cols: dict[str, Any], file: Path, start: float | None,
 def _parse_window(text: str) -> float | int | None:
     """``--window``: ``40s`` (seconds), ``100pts`` (points) or ``growing``; a bare number
     is refused (points or seconds?), as in :func:`optmodels.plane.windows.window_spec`."""
-    from optmodels.plane.windows import _parse_window_text
+    from optmodels.plane.windows import parse_window_text
 
     try:
-        return _parse_window_text(text, "--window")
+        return parse_window_text(text, "--window")
     except ProblemError:
         raise argparse.ArgumentTypeError(
             f"{text!r} does not say its unit: write seconds like 40s, a number of "
@@ -297,8 +297,7 @@ def _cli_row(row: dict[str, Any]) -> dict[str, Any]:
 
 
 def _plane_track(args: argparse.Namespace) -> Outcome:
-    from optmodels.io import read_plane_csv
-    from optmodels.io.paths import _write_text
+    from optmodels.io import atomic_write, read_plane_csv
     from optmodels.plane.tracking import track
     from optmodels.plane.windows import window_label
 
@@ -315,7 +314,8 @@ def _plane_track(args: argparse.Namespace) -> Outcome:
     status = _step_status(trk)
     rows = [{**_cli_row(r), "status": s} for r, s in zip(trk.to_rows(), status, strict=True)]
     if out_path is not None:
-        _write_text(out_path, _csv_text(rows), newline="")
+        with atomic_write(out_path, name="--out", newline="") as fh:
+            fh.write(_csv_text(rows))
     counts = {s: status.count(s) for s in ("optimal", "optimal_inaccurate", "unresolved",
                                            "error")}
     ok = counts["error"] == 0

@@ -63,8 +63,8 @@ def _declared() -> dict[str, Callable[..., Study]]:
         found += [c for c in vars(mod).values() if isinstance(c, type)
                   and c.__module__ == mod.__name__
                   and isinstance(c.__dict__.get("name"), str) and "problem" in c.__dict__]
-    found.sort(key=lambda c: (order.get(c.problem, len(order)), c.name))
-    return {c.name: c for c in found}
+    found.sort(key=lambda c: (order.get(c.__dict__["problem"], len(order)), c.__dict__["name"]))
+    return {c.__dict__["name"]: c for c in found}
 
 
 #: Built-in studies by name (the CLI's ``optmodels montecarlo NAME``): every study class

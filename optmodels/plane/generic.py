@@ -15,7 +15,7 @@ maximum of the profile (issue 19: N = 10⁴ with 3 starts 2.2 s → 0.37 s).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any, Literal
 
 import casadi as ca
@@ -42,7 +42,8 @@ from optmodels.core import (
     as_instance,
     timed,
 )
-from optmodels.plane.data import PlaneData, PlaneSolution, _oblique_projection, _weighted_offset
+from optmodels.plane.data import PlaneData, _oblique_projection, _weighted_offset
+from optmodels.plane.solution import PlaneSolution
 from optmodels.plane.verify import _finish, _profile_check, _resolve
 
 Formulation = Literal["full", "reduced"]
@@ -92,7 +93,7 @@ def _full_problem(n: int) -> dict[str, Any]:
     p_pts = ca.MX.sym("xs", 3, n)
     p_w = ca.MX.sym("Dinv", 6, n)
     e = x - p_pts
-    f = 0
+    f: Any = 0
     for r, (j, k) in enumerate(_IU):
         f = f + (1.0 if j == k else 2.0) * ca.dot(p_w[r, :], e[j, :] * e[k, :])
     g = ca.vertcat((ca.mtimes(nv.T, x) - a).T, ca.dot(nv, nv) - 1.0)
@@ -180,7 +181,7 @@ def _reduced_problem(n: int) -> dict[str, Any]:
     p_pts = ca.MX.sym("xs", 3, n)
     p_d = ca.MX.sym("D", 6, n)
     resid = a - ca.mtimes(nv.T, p_pts)
-    den = 0
+    den: Any = 0
     for r, (j, k) in enumerate(_IU):
         den = den + (1.0 if j == k else 2.0) * nv[j] * nv[k] * p_d[r, :]
     return {
@@ -343,14 +344,52 @@ def solve(
     noise standard deviations; then :func:`optmodels.core.verified_status`. A stationary
     point with negative curvature (saddle or maximum) is reported as ERROR.
     """
+    formulation, auto, n_starts, via_reduced = _check_args(
+        data, formulation, starts, plugin, ipopt_options, plugin_options, via_reduced)
+    sc = _Scaled.of(data)
+    if initial_normal is not None:
+        n0 = as_finite_array("plane.solve initial_normal", initial_normal, shape=(3,))
+        if not np.linalg.norm(n0) > 0:
+            raise ProblemError("plane.solve initial_normal: must be non-zero")
+        start_normals = [n0 / np.linalg.norm(n0)]
+    else:
+        start_normals = list(_principal_axes(sc.points)[:n_starts])
+    built = _build(formulation, sc, plugin, ipopt_options, plugin_options, via_reduced)
+    runs = _Runs()
+    best: PlaneSolution | None = None
+    first_fail: PlaneSolution | None = None
+    curvature = float("nan")
+    for nv0 in start_normals:
+        if auto and data.proportional and len(runs.objectives) == 1 and best is not None \
+                and curvature > 0:
+            # Under (1.4) a local minimum of Φ on the sphere is the global one.
+            break
+        sol, curv_i = _run_start(data, sc, built, formulation, plugin, nv0, runs)
+        if sol.ok and (best is None or sol.objective < best.objective):
+            best = sol
+            curvature = curv_i
+        elif not sol.ok and first_fail is None:
+            first_fail = sol
+    out = best if best is not None else first_fail
+    assert out is not None
+    return _resolve(_package(out, built, runs, via_reduced), data, level)
+
+
+def _check_args(data: PlaneData, formulation: Any, starts: Any, plugin: Any,
+                ipopt_options: Any, plugin_options: Any, via_reduced: Any
+                ) -> tuple[Formulation, bool, int, bool]:
+    """The arguments of :func:`solve` checked: the formulation, whether the starts are
+    automatic, how many axes to start from, and whether the full NLP starts from the
+    reduced one."""
     as_instance("plane.solve data", data, PlaneData)
-    formulation = as_choice("plane.solve formulation", formulation,  # type: ignore[assignment]
-                            ("full", "reduced"))
+    form: Formulation = as_choice(  # type: ignore[assignment]
+        "plane.solve formulation", formulation, ("full", "reduced"))
     auto = isinstance(starts, str) and starts == "auto"
+    n_starts = 3
     if not auto:
         if isinstance(starts, str):
             raise ProblemError(f"plane.solve starts: expected 'auto', 1, 2 or 3, got {starts!r}")
-        starts = as_count("plane.solve starts", starts, minimum=1, maximum=3)
+        n_starts = as_count("plane.solve starts", starts, minimum=1, maximum=3)
     if not isinstance(plugin, str) or not plugin:
         raise ProblemError(f"plane.solve plugin: expected a CasADi nlpsol name, got {plugin!r}")
     for name, opts in (("ipopt_options", ipopt_options), ("plugin_options", plugin_options)):
@@ -358,19 +397,30 @@ def solve(
                                  or not all(isinstance(k, str) for k in opts)):
             raise ProblemError(f"plane.solve {name}: expected a dict with str keys or None, "
                                f"got {type(opts).__name__}")
-    via_reduced = as_flag("plane.solve via_reduced", via_reduced if via_reduced is not None
-                          else plugin == "ipopt")
-    via_reduced = via_reduced and formulation == "full"
-    sc = _Scaled.of(data)
-    n_pts = data.n_points
-    if initial_normal is not None:
-        n0 = as_finite_array("plane.solve initial_normal", initial_normal, shape=(3,))
-        if not np.linalg.norm(n0) > 0:
-            raise ProblemError("plane.solve initial_normal: must be non-zero")
-        start_normals = [n0 / np.linalg.norm(n0)]
-    else:
-        start_normals = list(_principal_axes(sc.points)[: 3 if auto else int(starts)])
+    reduced_first = as_flag("plane.solve via_reduced", via_reduced if via_reduced is not None
+                            else plugin == "ipopt")
+    return form, auto, n_starts, reduced_first and form == "full"
 
+
+@dataclass
+class _Built:
+    """The NLP(s) of one :func:`solve` and their parameter vectors."""
+
+    nlp: Any
+    params: FloatArray
+    fresh: bool
+    build_time: float
+    reduced: Any = None
+    reduced_params: FloatArray | None = None
+
+
+def _build(formulation: Formulation, sc: _Scaled, plugin: str,
+           ipopt_options: dict[str, Any] | None, plugin_options: dict[str, Any] | None,
+           via_reduced: bool) -> _Built:
+    """The NLP from the back-end's cache (built when new) and its parameters (the scaled
+    points and the covariances, or their inverses for ``"full"``)."""
+    n_pts = len(sc.points)
+    red_built, red_params = None, None
     with timed() as t_prep:
         try:
             if plugin == "ipopt":
@@ -384,102 +434,110 @@ def solve(
         pts_param = sc.points.T.ravel(order="F")
         if formulation == "full":
             params = np.concatenate(
-                [pts_param, _upper(np.linalg.inv(sc.covs)).ravel(order="F")])
+                [pts_param,
+                 _upper(np.asarray(np.linalg.inv(sc.covs), dtype=float)).ravel(order="F")])
         else:
             params = np.concatenate([pts_param, _upper(sc.covs).ravel(order="F")])
         if via_reduced:
             red_built, red_fresh = _get_nlp("reduced", n_pts, ipopt_options)
             fresh = fresh or red_fresh
             red_params = np.concatenate([pts_param, _upper(sc.covs).ravel(order="F")])
-    build_time = t_prep.elapsed  # includes the construction when it happened here
+    # build_time includes the construction when it happened here
+    return _Built(nlp=built, params=params, fresh=fresh, build_time=t_prep.elapsed,
+                  reduced=red_built, reduced_params=red_params)
 
-    best: PlaneSolution | None = None
-    first_fail: PlaneSolution | None = None
-    start_objs: list[float] = []
-    start_status: list[str] = []
-    start_iters: list[int] = []
-    total_solve = 0.0
-    total_iter = 0
-    red_solve, red_iter = 0.0, 0
-    method = f"casadi:{plugin}:{formulation}"
-    curvature = float("nan")
-    for nv0 in start_normals:
-        if auto and data.proportional and len(start_objs) == 1 and best is not None \
-                and curvature > 0:
-            # Under (1.4) a local minimum of Φ on the sphere is the global one.
-            break
-        # Start plane (nv0, b0): b0 and the x_i are the best ones *for that plane* --
-        # the weighted offset and the oblique projections (1.8), not orthogonal ones,
-        # which under anisotropic D_i start far from optimal and cost IPOPT dozens of
-        # iterations. This uses only the start plane (the axis, or with via_reduced the
-        # reduced NLP's local minimum from the axis), never the closed-form solution.
-        if via_reduced:
-            nv0, b0, t_red, it_red = _reduced_start(red_built, red_params, sc, nv0)
-            red_solve += t_red
-            red_iter += it_red
-        else:
-            b0 = _weighted_offset(sc.points, sc.covs, nv0)[2]
-        if formulation == "full":
-            x_start = _oblique_projection(sc.points, sc.covs, nv0, b0)
-            x0 = np.concatenate([x_start.T.ravel(order="F"), nv0, [b0]])
-        else:
-            x0 = np.concatenate([nv0, [b0]])
-        res, xopt = run_nlpsol(built, x0=x0, p=params)
-        total_solve += res.solve_time
-        total_iter += res.iterations or 0
-        start_iters.append(res.iterations or 0)
-        k = 3 * n_pts if formulation == "full" else 0
-        normal, b = xopt[k : k + 3], float(xopt[k + 3])
-        # The solver's own normal (not renormalised), so that a violated ‖n‖ = 1 shows in
-        # the residuals; "full" reports its own x_i, "reduced" projects by (1.8).
-        offset = b * sc.scale + float(normal @ sc.center)
-        x_scaled = xopt[:k].reshape(n_pts, 3) if formulation == "full" else None
-        proj = None
-        if x_scaled is not None and np.all(np.isfinite(xopt)):
-            proj = x_scaled * sc.scale + sc.center
-        status = res.status
-        message = res.message
-        curv_i, step_i = float("nan"), float("inf")
-        if np.all(np.isfinite(normal)) and np.linalg.norm(normal) > 0:
-            chk = _profile_check(sc.points, sc.covs, normal / np.linalg.norm(normal))
-            curv_i, step_i = float(chk.curvature[0]), float(chk.step[0])
-            # IPOPT's precision limit: accept only a point verified independently
-            # (the re-check in _finish then applies to it like to any other).
-            status, message = accept_precision_limit(
-                status, message, step_i, f" (KKT point verified: Newton step {step_i:.1e} "
-                f"rad, curvature {curv_i:.2f})")
-            if status.ok and curv_i < -_SADDLE_RTOL:
-                status = Status.ERROR
-                message += f"; not a minimum of (1.12)-(1.13): profile curvature {curv_i:.2g}" \
-                    " (a saddle or maximum)"
-        sol = _finish(data, normal, offset, status=status, method=method,
-                      stationarity=step_i, message=message, projected=proj,
-                      info={"min_curvature": curv_i})
-        start_objs.append(sol.objective)
-        start_status.append(res.message)
-        if sol.ok and (best is None or sol.objective < best.objective):
-            best = sol
-            curvature = curv_i
-        elif not sol.ok and first_fail is None:
-            first_fail = sol
-    out = best if best is not None else first_fail
-    assert out is not None
+
+@dataclass
+class _Runs:
+    """What every start of :func:`solve` reported (its ``info``)."""
+
+    objectives: list[float] = field(default_factory=list)
+    status: list[str] = field(default_factory=list)
+    iterations: list[int] = field(default_factory=list)
+    solve_time: float = 0.0
+    total_iterations: int = 0
+    reduced_time: float = 0.0
+    reduced_iterations: int = 0
+
+
+def _run_start(data: PlaneData, sc: _Scaled, built: _Built, formulation: Formulation,
+               plugin: str, nv0: FloatArray, runs: _Runs) -> tuple[PlaneSolution, float]:
+    """One start of :func:`solve` from the normal ``nv0``, re-checked and gated
+    (:func:`optmodels.plane.verify._finish`); returns the solution and its profile
+    curvature, and records the run in ``runs``."""
+    n_pts = data.n_points
+    # Start plane (nv0, b0): b0 and the x_i are the best ones *for that plane* --
+    # the weighted offset and the oblique projections (1.8), not orthogonal ones,
+    # which under anisotropic D_i start far from optimal and cost IPOPT dozens of
+    # iterations. This uses only the start plane (the axis, or with via_reduced the
+    # reduced NLP's local minimum from the axis), never the closed-form solution.
+    if built.reduced is not None:
+        assert built.reduced_params is not None
+        nv0, b0, t_red, it_red = _reduced_start(built.reduced, built.reduced_params, sc, nv0)
+        runs.reduced_time += t_red
+        runs.reduced_iterations += it_red
+    else:
+        b0 = _weighted_offset(sc.points, sc.covs, nv0)[2]
+    if formulation == "full":
+        x_start = _oblique_projection(sc.points, sc.covs, nv0, b0)
+        x0 = np.concatenate([x_start.T.ravel(order="F"), nv0, [b0]])
+    else:
+        x0 = np.concatenate([nv0, [b0]])
+    res, xopt = run_nlpsol(built.nlp, x0=x0, p=built.params)
+    runs.solve_time += res.solve_time
+    runs.total_iterations += res.iterations or 0
+    runs.iterations.append(res.iterations or 0)
+    k = 3 * n_pts if formulation == "full" else 0
+    normal, b = xopt[k : k + 3], float(xopt[k + 3])
+    # The solver's own normal (not renormalised), so that a violated ‖n‖ = 1 shows in
+    # the residuals; "full" reports its own x_i, "reduced" projects by (1.8).
+    offset = b * sc.scale + float(normal @ sc.center)
+    x_scaled = xopt[:k].reshape(n_pts, 3) if formulation == "full" else None
+    proj = None
+    if x_scaled is not None and np.all(np.isfinite(xopt)):
+        proj = x_scaled * sc.scale + sc.center
+    status = res.status
+    message = res.message
+    curv_i, step_i = float("nan"), float("inf")
+    if np.all(np.isfinite(normal)) and np.linalg.norm(normal) > 0:
+        chk = _profile_check(sc.points, sc.covs, normal / np.linalg.norm(normal))
+        curv_i, step_i = float(chk.curvature[0]), float(chk.step[0])
+        # IPOPT's precision limit: accept only a point verified independently
+        # (the re-check in _finish then applies to it like to any other).
+        status, message = accept_precision_limit(
+            status, message, step_i, f" (KKT point verified: Newton step {step_i:.1e} "
+            f"rad, curvature {curv_i:.2f})")
+        if status.ok and curv_i < -_SADDLE_RTOL:
+            status = Status.ERROR
+            message += f"; not a minimum of (1.12)-(1.13): profile curvature {curv_i:.2g}" \
+                " (a saddle or maximum)"
+    sol = _finish(data, normal, offset, status=status, method=f"casadi:{plugin}:{formulation}",
+                  stationarity=step_i, message=message, projected=proj,
+                  info={"min_curvature": curv_i})
+    runs.objectives.append(sol.objective)
+    runs.status.append(res.message)
+    return sol, curv_i
+
+
+def _package(out: PlaneSolution, built: _Built, runs: _Runs, via_reduced: bool
+             ) -> PlaneSolution:
+    """The chosen start's solution with the times and the ``info`` of every start."""
     verification = out.info.get("verification", {})
     curvature = float(out.info.get("min_curvature", float("nan")))
-    out.build_time = build_time
-    out.solve_time = total_solve + red_solve
-    out.iterations = total_iter
+    out.build_time = built.build_time
+    out.solve_time = runs.solve_time + runs.reduced_time
+    out.iterations = runs.total_iterations
     out.info = {
-        "start_objectives": start_objs,
-        "start_status": start_status,
-        "start_iterations": start_iters,
-        "starts": len(start_objs),
+        "start_objectives": runs.objectives,
+        "start_status": runs.status,
+        "start_iterations": runs.iterations,
+        "starts": len(runs.objectives),
         "min_curvature": curvature,
-        "cached_build": not fresh,
+        "cached_build": not built.fresh,
         "via_reduced": via_reduced,
-        "reduced_iterations": red_iter,
-        "reduced_solve_time": red_solve,
+        "reduced_iterations": runs.reduced_iterations,
+        "reduced_solve_time": runs.reduced_time,
         "verification": verification,
         **({"rejected": out.info["rejected"]} if "rejected" in out.info else {}),
     }
-    return _resolve(out, data, level)
+    return out

@@ -3,7 +3,7 @@
 equations (3) of any other family -- re-checked against the original problem with
 :func:`optmodels.core.verified_status`. The algebra itself is in :mod:`.fits`.
 
-(Named ``closed_forms`` so that the module does not shadow the function
+(Named ``closedform``, as in every problem package, so that the module does not shadow the function
 ``optmodels.trajectories.closed_form``.)
 """
 

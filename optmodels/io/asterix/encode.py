@@ -135,12 +135,14 @@ def _assemble(fn: str, cat: int, n: int, items: list[_Item], per_block: int) -> 
         out[start[m] + j] = fs[m, j]
     cur = start + nfs
     for it in items:
-        p = it.present
-        at = cur if p is None else cur[p]
-        raw = it.raw if p is None else it.raw[p]
+        step: int | np.ndarray
+        if it.present is None:
+            at, raw, step = cur, it.raw, it.nbytes
+        else:
+            at, raw, step = cur[it.present], it.raw[it.present], it.nbytes * it.present
         for q in range(it.nbytes):
             out[at + q] = (raw >> np.uint64(8 * (it.nbytes - 1 - q))) & np.uint64(0xFF)
-        cur = cur + (it.nbytes if p is None else it.nbytes * p)
+        cur = cur + step
     return out.tobytes()
 
 

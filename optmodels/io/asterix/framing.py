@@ -69,7 +69,8 @@ def is_asterix_bytes(head: bytes, size: int, blocks: int,
     if len(head) < 4 or head[:4] == b"PAR1" or head[:2] == b"PK":
         return False
     # framing first (cheap, no library import): CSV/Parquet/text fail here
-    pos, found = 0, []
+    pos = 0
+    found: list[tuple[int, int, int]] = []  # (category, offset, length) of each block
     while pos < len(head) and len(found) < blocks:
         if pos + 3 > len(head):
             break

@@ -3,6 +3,7 @@ pcapng captures) into SI tables, times on one continuous axis."""
 
 from __future__ import annotations
 
+import dataclasses
 import datetime as _dt
 import math
 import mmap
@@ -209,7 +210,7 @@ def _join(parts: list[dict[str, np.ndarray]], cls: type | None = None
     assert cls is not None
     ints = ("sac", "sic", "address", "mode3a", "offset", "file")
     return {name: np.zeros(0, np.int64 if name in ints else float)
-            for name in cls.__dataclass_fields__}
+            for name in (f.name for f in dataclasses.fields(cls))}
 
 
 def _map(path: Path) -> Any:

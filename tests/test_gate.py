@@ -88,7 +88,7 @@ def test_plane_solve_corrupted_point(monkeypatch: pytest.MonkeyPatch,
                                      expect: Status) -> None:
     rng = np.random.default_rng(1)
     data = plane_data(rng)
-    real = plane.nlp.run_nlpsol
+    real = plane.generic.run_nlpsol
 
     def corrupted(*args: Any, **kwargs: Any) -> tuple[Any, np.ndarray]:
         res, x = real(*args, **kwargs)
@@ -96,7 +96,7 @@ def test_plane_solve_corrupted_point(monkeypatch: pytest.MonkeyPatch,
         x[:3] = rotate(x[:3] / np.linalg.norm(x[:3]), turn, rng)
         return res, x
 
-    monkeypatch.setattr(plane.nlp, "run_nlpsol", corrupted)
+    monkeypatch.setattr(plane.generic, "run_nlpsol", corrupted)
     sol = plane.solve(data, "reduced", starts=1)
     decided(verdicts, sol, expect)
     # a refused plane carries no estimate; the corrupted point is kept for diagnosis
@@ -165,7 +165,7 @@ def test_trajectories_closed_form_corrupted_kernel(monkeypatch: pytest.MonkeyPat
     fam = tr.resolve_family("diverging", data.n_objects)
     honest = tr.closed_form(data)
     verdicts.clear()
-    mod = tr.closed_forms
+    mod = tr.closedform
     real = mod._fit
 
     def corrupted(*args: Any, **kwargs: Any) -> Any:
@@ -317,7 +317,7 @@ def field_data() -> bf.FieldData:
 def _kkt_gradient(data: bf.FieldData, phi: np.ndarray) -> float:
     """Φ¹ᵀRφ relative to Φ¹ᵀRΦ⁰, recomputed here from the public sets and R."""
     phi0, phi1 = bf.uncertainty_sets(data)
-    r = bf.selection._r_matrix(data)
+    r = bf.problem.r_matrix(data)
     return float(np.max(np.abs(phi1.T @ (r @ phi)))) / float(np.max(np.abs(phi1.T @ (r @ phi0))))
 
 
@@ -328,7 +328,7 @@ def test_biasfield_closed_form_corrupted_kernel(monkeypatch: pytest.MonkeyPatch,
                                                 expect: Status) -> None:
     honest = bf.closed_form(field_data)
     verdicts.clear()
-    mod = bf.selection
+    mod = bf.closedform
     real = mod.splinalg.splu
 
     class Bad:
@@ -369,7 +369,7 @@ def test_biasfield_solve_corrupted_point(monkeypatch: pytest.MonkeyPatch,
                                          eps: float, expect: Status) -> None:
     honest = bf.closed_form(field_data)
     verdicts.clear()
-    monkeypatch.setattr(bf.selection, "_run", _scale_variables(bf.selection._run, 1 + eps))
+    monkeypatch.setattr(bf.problem, "run_solver", _scale_variables(bf.problem.run_solver, 1 + eps))
     sol = bf.solve(field_data)
     decided(verdicts, sol, expect)
     assert sol.residuals["stationarity"] == pytest.approx(eps, rel=1e-2)
@@ -385,7 +385,7 @@ def test_biasfield_lipschitz_corrupted_point(monkeypatch: pytest.MonkeyPatch,
                                              verdicts: list[Verdict],
                                              field_data: bf.FieldData, eps: float,
                                              expect: Status) -> None:
-    monkeypatch.setattr(bf.lipschitz, "_run", _scale_variables(bf.lipschitz._run, 1 + eps))
+    monkeypatch.setattr(bf.problem, "run_solver", _scale_variables(bf.problem.run_solver, 1 + eps))
     sol = bf.solve_lipschitz(field_data)
     decided(verdicts, sol, expect)
     assert REJECT_TOL >= sol.max_residual > VERIFY_TOL if expect is SMALL \

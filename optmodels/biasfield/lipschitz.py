@@ -15,6 +15,7 @@ import numpy as np
 
 from optmodels.backends.profiles import DEFAULTS, solver_options
 from optmodels.biasfield.fielddata import FieldData
+from optmodels.biasfield import problem
 from optmodels.biasfield.problem import (
     FieldSolution,
     check_arguments,
@@ -23,8 +24,6 @@ from optmodels.biasfield.problem import (
     pack_solution,
 )
 
-# the solver call under the name tests/test_gate.py patches (``bf.lipschitz._run``)
-from optmodels.biasfield.problem import run_solver as _run
 from optmodels.biasfield.verify import box_feasibility, lipschitz_residuals, verify_solution
 from optmodels.core import ProblemError, as_positive, timed
 
@@ -96,7 +95,7 @@ def solve_lipschitz(data: FieldData, *, box: tuple[float, float] | None = None,
         prob = cp.Problem(cp.Minimize(lip), cons + box_cons + cap_cons)
     # the SOCP is solved to the solvers' own default accuracy (Clarabel's 1e-10 gap of the
     # QP defaults ends "inaccurate" here); the certificate is re-checked below anyway
-    res = _run(fn, prob, solver, solver_options("socp", solver, options))
+    res = problem.run_solver(fn, prob, solver, solver_options("socp", solver, options))
     common = res.common()
     common["build_time"] += tb.elapsed
     common["method"] = method

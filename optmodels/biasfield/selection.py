@@ -41,16 +41,13 @@ import cvxpy as cp
 import numpy as np
 from scipy import sparse
 
-# tests/test_gate.py corrupts the closed form's factorisation through this name
-# (``bf.selection.splinalg.splu``; the closed form is in closedform.py)
-from scipy.sparse import linalg as splinalg  # noqa: F401
-
 from optmodels.backends.profiles import DEFAULTS, solver_options
 from optmodels.biasfield.closedform import closed_form
 from optmodels.biasfield.fielddata import FieldData
 from optmodels.biasfield.identifiability import Identifiability, identifiability
 from optmodels.biasfield.lipschitz import SOCP_DEFAULTS as SOCP_DEFAULTS
 from optmodels.biasfield.lipschitz import solve_lipschitz
+from optmodels.biasfield import problem
 from optmodels.biasfield.problem import (
     FieldSolution,
     check_arguments,
@@ -70,8 +67,6 @@ from optmodels.biasfield.problem import p_full as p_full
 # ``sel._r_matrix`` (to go when they call ``r_matrix``)
 from optmodels.biasfield.problem import r_matrix as _r_matrix  # noqa: F401
 
-# the solver call under the name tests/test_gate.py patches (``bf.selection._run``)
-from optmodels.biasfield.problem import run_solver as _run
 from optmodels.biasfield.verify import (
     box_feasibility,
     condition_number,
@@ -156,7 +151,7 @@ def solve(data: FieldData, *, box: tuple[float, float] | None = None,
         box_cons = [u <= bound / sc, -u <= bound / sc] if bound is not None else []
         prob = cp.Problem(cp.Minimize(obj), cons + box_cons)
     opts = solver_options("qp", solver, options)
-    res = _run(fn, prob, solver, opts)
+    res = problem.run_solver(fn, prob, solver, opts)
     common = res.common()
     common["build_time"] += tb.elapsed
     common["method"] = method

@@ -14,8 +14,8 @@ import cvxpy as cp
 import numpy as np
 
 from optmodels.backends.profiles import DEFAULTS, solver_options
-from optmodels.biasfield.fielddata import FieldData
 from optmodels.biasfield import problem
+from optmodels.biasfield.fielddata import FieldData
 from optmodels.biasfield.problem import (
     FieldSolution,
     check_arguments,
@@ -23,7 +23,6 @@ from optmodels.biasfield.problem import (
     lipschitz_data,
     pack_solution,
 )
-
 from optmodels.biasfield.verify import box_feasibility, lipschitz_residuals, verify_solution
 from optmodels.core import ProblemError, as_positive, timed
 

@@ -42,12 +42,12 @@ import numpy as np
 from scipy import sparse
 
 from optmodels.backends.profiles import DEFAULTS, solver_options
+from optmodels.biasfield import problem
 from optmodels.biasfield.closedform import closed_form
 from optmodels.biasfield.fielddata import FieldData
 from optmodels.biasfield.identifiability import Identifiability, identifiability
 from optmodels.biasfield.lipschitz import SOCP_DEFAULTS as SOCP_DEFAULTS
 from optmodels.biasfield.lipschitz import solve_lipschitz
-from optmodels.biasfield import problem
 from optmodels.biasfield.problem import (
     FieldSolution,
     check_arguments,
@@ -66,7 +66,6 @@ from optmodels.biasfield.problem import p_full as p_full
 # the former private spellings: solvers_cmp/biasfield.py and tests/test_gate.py call
 # ``sel._r_matrix`` (to go when they call ``r_matrix``)
 from optmodels.biasfield.problem import r_matrix as _r_matrix  # noqa: F401
-
 from optmodels.biasfield.verify import (
     box_feasibility,
     condition_number,

@@ -353,24 +353,25 @@ def adsb_height_spikes(obj: np.ndarray, t: FloatArray, height: FloatArray, *,
                        vertical_rate: float = 100.0) -> np.ndarray:
     """(n,) True for the ADS-B geometric heights that are spikes.
 
-    Reports sorted by (object, time). Each finite height h_k is compared with the median
-    of the finite heights of the same object among its ``neighbours`` reports on each
-    side (itself excluded; at least 2 needed, else the report is kept): a spike when
-    |h_k − median| > ``tolerance`` + ``vertical_rate`` · τ_k (m; τ_k the largest time
-    distance, s, to a neighbour used). The median of the neighbours of a steady climb or
-    descent is the report's own height to within half a step of vertical motion, and one
-    or two consecutive outliers never carry the median (4 neighbours), so an isolated
-    altitude spike (the +7.8 km of a corrupted I021/140) is caught whatever its size
-    while 100 m/s (≈ 20 000 ft/min, beyond any airliner) of true vertical motion is not.
-    Vectorised over all objects at once (a per-object ``scipy.signal.medfilt`` loop costs
-    a Python call per aircraft and does not exclude the report itself or handle gaps).
+    Reports sorted by (object, time). A Hampel filter: each finite height h_k is compared
+    with the median of the finite heights of the same object among itself and its
+    ``neighbours`` reports on each side (at least 3 values, else the report is kept): a
+    spike when |h_k − median| > ``tolerance`` + ``vertical_rate`` · τ_k (m; τ_k the
+    largest time distance, s, to a neighbour used). The median of a steady climb or
+    descent is the report's own height, and one or two consecutive outliers never carry
+    the median of five, so an isolated altitude spike (the +7.8 km of a corrupted
+    I021/140) is caught whatever its size while 100 m/s (≈ 20 000 ft/min, beyond any
+    airliner) of true vertical motion is not. A longer run of bad heights carries the
+    median and is left to the flight-level check of :func:`read_recording`. Vectorised
+    over all objects at once (``scipy.signal.medfilt`` works on one series: a Python call
+    per aircraft, and it pads the ends and gaps with zeros).
     """
     h = np.asarray(height, dtype=float)
     n = h.size
     out = np.zeros(n, dtype=bool)
     if n < 3:
         return out
-    vals, dist = [], []
+    vals, dist = [np.where(np.isfinite(h), h, np.nan)], [np.zeros(n)]
     for d in [*range(-neighbours, 0), *range(1, neighbours + 1)]:
         j = np.arange(n) + d
         ok = (j >= 0) & (j < n)
@@ -379,7 +380,7 @@ def adsb_height_spikes(obj: np.ndarray, t: FloatArray, height: FloatArray, *,
         vals.append(np.where(ok, h[jc], np.nan))
         dist.append(np.where(ok, np.abs(t[jc] - t), 0.0))
     v = np.stack(vals, axis=1)
-    enough = np.sum(np.isfinite(v), axis=1) >= 2
+    enough = np.sum(np.isfinite(v), axis=1) >= 3
     judged = enough & np.isfinite(h)
     if not judged.any():
         return out

@@ -193,9 +193,6 @@ def _read_input(args: argparse.Namespace, *, locate: bool, clean: bool,
 
 
 def _biasfield_build(args: argparse.Namespace) -> Outcome:
-    from optmodels import biasfield as bf
-    from optmodels.biasfield.pipeline import save_field_data
-
     if Path(args.out).is_dir():
         raise ProblemError(f"--out: {args.out} is an existing folder; give a FILE name "
                            "(e.g. fielddata.npz)")
@@ -203,6 +200,9 @@ def _biasfield_build(args: argparse.Namespace) -> Outcome:
     coverage = getattr(args, "coverage", "union")
     stage = ["reading the recording"]
     with interrupt_note(stage, out, []):
+        from optmodels import biasfield as bf
+        from optmodels.biasfield.pipeline import save_field_data
+
         # the reading here; placement, cleaning, fits, cells: the one chain
         # (biasfield.pipeline); a site no plot carries is refused whatever the coverage
         say(args, f"reading {args.recording[0]} ...")
@@ -338,11 +338,11 @@ def _load_field(args: argparse.Namespace, radars: Any) -> Any:
 
 
 def _biasfield_correct(args: argparse.Namespace) -> Outcome:
-    from optmodels.biasfield.usage import correct_plots
-
     out = writable_file("--out", Path(args.out))  # before any work
     stage = ["reading the recording"]
     with interrupt_note(stage, out, []):
+        from optmodels.biasfield.usage import correct_plots
+
         say(args, f"reading {args.recording[0]} ...")
         inp = _read_input(args, locate=False, clean=False)  # one row per plot read
         radars, plots = inp["radars"], inp["plots"]

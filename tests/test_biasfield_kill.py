@@ -87,6 +87,7 @@ def _kill_trials(argv: list[str], targets: dict[Path, object], seed: int) -> lis
     return codes
 
 
+@pytest.mark.slow
 def test_kill_build_leaves_the_previous_field_data(small: dict[str, Path]) -> None:
     tmp = small["tmp"]
     _kill_trials(["biasfield", "build", str(small["rec"]), "--radars", str(small["sites"]),
@@ -94,6 +95,7 @@ def test_kill_build_leaves_the_previous_field_data(small: dict[str, Path]) -> No
                  seed=11)
 
 
+@pytest.mark.slow
 def test_kill_solve_leaves_the_previous_field(small: dict[str, Path]) -> None:
     tmp = small["tmp"]
     n = _csv_rows(tmp / "solved" / "field.csv")
@@ -138,6 +140,7 @@ def test_kill_fieldmap_save_in_a_loop(small: dict[str, Path], tmp_path: Path) ->
         assert fm.field.shape == FieldMap.load(src).field.shape
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("verb", ["build", "correct"])
 def test_ctrl_c_says_what_was_and_was_not_written(small: dict[str, Path], verb: str) -> None:
     """SIGINT part-way: exit 130, one line naming the output not written and that the

@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from optmodels.cli.args import _count, _positive
+from optmodels.cli.args import _count, _finite, _positive
 from optmodels.cli.contract import (
     Outcome,
     _group,
@@ -526,7 +526,7 @@ def register(sub: Any) -> None:
     bs.add_argument("--out", default="biasfield_out", metavar="FOLDER",
                     help="output FOLDER for field.csv, field.npz and the two maps")
     bs.set_defaults(func=_biasfield_solve, printer=_print_biasfield_solve)
-    register_simulate(bsub, positive, _count)
+    register_simulate(bsub, positive, _count, _finite())
     bc = _leaf(bsub, "correct", "plots corrected with a field: one CSV row per plot read")
     _recording_args(bc, positive)
     bc.add_argument("--field", type=Path, required=True,

@@ -259,24 +259,6 @@ def print_build(res: dict[str, Any]) -> None:
 
 
 # --------------------------------------------------------------------------- simulate
-def _parse_start(text: str) -> float:
-    """``--start HH:MM[:SS]`` or seconds after UTC midnight."""
-    try:
-        if ":" in text:
-            parts = [float(v) for v in text.split(":")]
-            if len(parts) not in (2, 3):
-                raise ValueError
-            sec = parts[0] * 3600 + parts[1] * 60 + (parts[2] if len(parts) == 3 else 0.0)
-        else:
-            sec = float(text)
-    except ValueError:
-        raise ProblemError(f"--start: expected HH:MM[:SS] or seconds after UTC midnight, "
-                           f"got {text!r}") from None
-    if not 0.0 <= sec < 86400.0:
-        raise ProblemError(f"--start: {text!r} is not a time of day in [00:00, 24:00)")
-    return sec
-
-
 def _simulate(args: argparse.Namespace) -> tuple[dict[str, Any], bool]:
     from optmodels.biasfield.simulate import simulate_recording
 
@@ -284,12 +266,12 @@ def _simulate(args: argparse.Namespace) -> tuple[dict[str, Any], bool]:
     for f in ("recording.ast", "sites.csv"):
         if (out / f).is_dir():
             raise ProblemError(f"--out: {out / f} is a folder; cannot write the {f} there")
-    say(args, f"simulating {args.radars} radars, {args.aircraft} aircraft, "
+    say(args, f"simulating {args.n_radars} radars, {args.aircraft} aircraft, "
               f"{args.duration:g} s and encoding ASTERIX ...")
-    sim = simulate_recording(out, seed=args.seed, radars=args.radars, aircraft=args.aircraft,
+    sim = simulate_recording(out, seed=args.seed, radars=args.n_radars, aircraft=args.aircraft,
                              duration=args.duration, spacing=args.spacing,
                              max_range=args.max_range, biases=args.biases,
-                             start=_parse_start(args.start),
+                             start=args.start,
                              adsb_interval=args.adsb_interval, adsb_spikes=args.adsb_spikes)
     res = sim.to_dict()
     res["next"] = (f"optmodels biasfield build {sim.recording} --radars {sim.sites} "
@@ -318,14 +300,14 @@ false plots, clutter or multipath); ADS-B is the exact truth, every aircraft equ
 true height; each bias field is smooth on the plane and constant in time and height."""
 
 
-def register_simulate(bsub: Any, positive: Any, count: Any) -> None:
+def register_simulate(bsub: Any, positive: Any, count: Any, finite: Any) -> None:
     """``optmodels biasfield simulate``."""
     p = _leaf(bsub, "simulate", "a simulated ASTERIX recording and its sites CSV")
     p.description = SIMULATE_HELP
     p.add_argument("--out", default="biasfield_sim", metavar="FOLDER",
                    help="output FOLDER: recording.ast and sites.csv")
-    p.add_argument("--seed", type=int, default=0, help="seed of every random draw")
-    p.add_argument("--radars", type=count(2), default=4,
+    p.add_argument("--seed", type=count(0), default=0, help="seed of every random draw")
+    p.add_argument("--n-radars", type=count(2), default=4,
                    help="number of radars, on a ring about the origin")
     p.add_argument("--spacing", type=positive, default=150e3,
                    help="radius of the ring of sites, m")
@@ -335,8 +317,8 @@ def register_simulate(bsub: Any, positive: Any, count: Any) -> None:
     p.add_argument("--duration", type=positive, default=1800.0, help="simulated span, s")
     p.add_argument("--biases", choices=("smooth", "linear", "constant", "zero"),
                    default="smooth", help="each radar's bias field")
-    p.add_argument("--start", default="10:00:00", metavar="HH:MM[:SS]",
-                   help="UTC time of day of the first second")
+    p.add_argument("--start", type=finite, default=36000.0,
+                   help="UTC time of day of simulated time 0, s after midnight (36000: 10:00)")
     p.add_argument("--adsb-interval", type=count(1), default=1,
                    help="seconds between two ADS-B reports of an aircraft")
     p.add_argument("--adsb-spikes", type=count(0), default=0,

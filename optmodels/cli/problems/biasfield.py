@@ -386,9 +386,11 @@ def _biasfield_registration(args: argparse.Namespace) -> Outcome:
     from optmodels.biasfield.referee import absolute_error, adsb_reference
     from optmodels.biasfield.usage import registration_error
 
+    say(args, f"reading {args.recording[0]} ...")
     inp = _read_input(args, locate=True, clean=args.clean)
     radars, plots = inp["radars"], inp["plots"]
     within = _load_field(args, radars) if args.field else None
+    say(args, f"placing {len(plots)} plots and measuring the registration ...")
     z = plots.cartesian(radars)  # placed once for both figures (3-D: exact, ~11 s / 10⁶)
     reg = registration_error(plots, radars, area=args.area, within=within, positions=z)
     res: dict[str, Any] = {"source": inp["source"],

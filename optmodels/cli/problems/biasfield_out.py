@@ -274,6 +274,7 @@ def _simulate(args: argparse.Namespace) -> tuple[dict[str, Any], bool]:
                              start=args.start,
                              adsb_interval=args.adsb_interval, adsb_spikes=args.adsb_spikes)
     res = sim.to_dict()
+    res["recording"], res["sites"] = str(sim.recording.resolve()), str(sim.sites.resolve())
     res["next"] = (f"optmodels biasfield build {sim.recording} --radars {sim.sites} "
                    f"--out {out / 'fielddata.npz'}")
     return res, True

@@ -104,6 +104,11 @@ def test_corrected_rows_join_back_to_the_recording(walk: dict) -> None:
     d = np.deg2rad(az) - ref.plots.azimuth
     assert np.max(np.abs(np.angle(np.exp(1j * d)))) <= np.deg2rad(5e-10) + 1e-12  # "%.9f"°
     assert [r["address"] for r in rows] == [lib.icao24[o] for o in lib.plots.object]
+    # each plot's own CAT048 record (for a rewrite of the recording): same address and time
+    assert lib.record is not None and np.unique(lib.record).size == len(rows)
+    np.testing.assert_array_equal(c.address[lib.record], lib.addresses[lib.plots.object])
+    np.testing.assert_array_equal(c.time[lib.record], lib.plots.time)
+    np.testing.assert_array_equal(c.offset[lib.record], lib.offset)
     assert cor["corrected"] == int(ref.covered.sum()) >= 0.9 * len(rows)
     assert sum(cor["reasons"].values()) == len(rows)
 

@@ -140,7 +140,11 @@ class Recording:
     object numbering), ``radars`` (the 3-D :class:`RadarSet`), ``addresses`` (per object
     its 24-bit ICAO address), ``height_source`` (per plot an index into
     :data:`HEIGHT_SOURCES`), ``mode3a`` (per plot, −1 if absent), ``epoch``
-    (``datetime64[ns]`` of the UTC midnight the times count from, or None), ``report``."""
+    (``datetime64[ns]`` of the UTC midnight the times count from, or None), ``report``;
+    per plot, where its CAT048 record is: ``record`` (its row in
+    :attr:`AsterixData.cat048 <optmodels.io.asterix.AsterixData>`), ``offset`` (byte offset
+    in its file) and ``file`` (index into the paths read) -- what a rewrite of the
+    recording with corrected plots needs."""
 
     plots: PlotTable
     adsb: AdsbReports
@@ -150,6 +154,9 @@ class Recording:
     mode3a: np.ndarray
     epoch: np.datetime64 | None
     report: RecordingReport
+    record: np.ndarray | None = None
+    offset: np.ndarray | None = None
+    file: np.ndarray | None = None
 
     @property
     def dropped(self) -> dict[str, int]:
@@ -344,8 +351,10 @@ def read_recording(paths: str | os.PathLike[str] | Iterable[str | os.PathLike[st
     report = RecordingReport(len(c), len(plots), dropped, heights, len(a), len(adsb),
                              adsb_dropped, dict(data.records), dict(data.dropped), unknown,
                              int(spikes.sum()))
+    rows = np.flatnonzero(keep)[order_p]
     return Recording(plots, adsb, radars, addresses, source[order_p],
-                     c.mode3a[keep][order_p], data.epoch, report)
+                     c.mode3a[keep][order_p], data.epoch, report, rows,
+                     np.asarray(c.offset)[rows], np.asarray(c.file)[rows])
 
 
 def adsb_height_spikes(obj: np.ndarray, t: FloatArray, height: FloatArray, *,

@@ -281,3 +281,19 @@ def test_a_long_height_spike_gives_the_flight_level_height(tmp_path: Path) -> No
     assert np.max(np.abs(r.plots.height - 10_000.0)) <= 0.25 * 100 * 0.3048 / 2 + 15.0
     assert r.report.heights[HEIGHT_SOURCES[3]] == int(np.sum(r.height_source == 3))
     assert set(src[~near]) == {"adsb"}
+
+
+def test_simulate_refuses_bad_arguments(tmp_path: Path) -> None:
+    """One ProblemError naming the argument (API) and exit 2 with one line (CLI)."""
+    from optmodels.biasfield.simulate import simulate_recording
+    from optmodels.core import ProblemError
+
+    for kw, name in (({"radars": 1}, "radars"), ({"start": 90000.0}, "start"),
+                     ({"biases": "wavy"}, "biases"), ({"aircraft": 0}, "aircraft"),
+                     ({"adsb_interval": 0.5}, "adsb_interval")):
+        with pytest.raises(ProblemError, match=name):
+            simulate_recording(tmp_path / "x", **kw)
+    assert not (tmp_path / "x" / "recording.ast").exists()
+    bad = run_cli("biasfield", "simulate", "--out", tmp_path / "y", "--start", "90000",
+                  expect=None)
+    assert_error(bad, 2, "start")

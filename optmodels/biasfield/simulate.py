@@ -41,7 +41,6 @@ import numpy as np
 from optmodels.biasfield.recording import R_ISA
 from optmodels.core import (
     FloatArray,
-    ProblemError,
     as_choice,
     as_count,
     as_number,
@@ -221,14 +220,9 @@ def simulate_recording(folder: str | os.PathLike[str], *, seed: int = 0, radars:
             flight_level=_flight_level(geo[rows, 2]), address=addr[who[rows]])))
     sources.sort(key=lambda s: s[0])
     rec = out / "recording.ast"
-    try:
-        with atomic_write(rec, name=f"{fn} folder", binary=True) as fh:
-            for _, block in sources:
-                fh.write(block)
-    except ProblemError:
-        raise
-    except OSError as exc:  # pragma: no cover - atomic_write turns these into ProblemError
-        raise ProblemError(f"{rec}: cannot write ({exc})") from None
+    with atomic_write(rec, name=f"{fn} folder", binary=True) as fh:  # OSError -> ProblemError
+        for _, block in sources:
+            fh.write(block)
     sites = out / "sites.csv"
     _write_sites(sites, r, sac, first_sic)
     return SimulatedRecording(

@@ -58,15 +58,18 @@ def test_round_trip_build_solve_correct_registration(recording: dict[str, Path])
     with corrected.open(encoding="utf-8") as fh:
         rows = list(csv.DictReader(fh))
     assert len(rows) == len(lib.plots)
-    assert list(rows[0]) == ["time", "radar", "object", "range", "azimuth", "height",
-                             "covered"]
+    assert list(rows[0]) == ["radar", "sac", "sic", "address", "time", "time_of_day", "utc",
+                             "range", "azimuth", "height", "height_source", "covered",
+                             "reason"]
     fm = FieldMap.load(field)
     ok = lib.plots.locatable(lib.radars)
     ref = correct_plots(lib.plots.subset(ok), lib.radars, fm)
     got_r = np.array([float(r["range"]) for r in rows])[ok]
     got_a = np.deg2rad(np.array([float(r["azimuth"]) for r in rows]))[ok]
-    np.testing.assert_allclose(got_r, ref.plots.range, rtol=0, atol=1e-6)
-    np.testing.assert_allclose(got_a, ref.plots.azimuth, rtol=0, atol=1e-12)
+    # printed as "%.3f" m and "%.9f" deg in [0, 360)
+    np.testing.assert_allclose(got_r, ref.plots.range, rtol=0, atol=5e-4 + 1e-9)
+    d = np.angle(np.exp(1j * (got_a - ref.plots.azimuth)))
+    assert np.max(np.abs(d)) <= np.deg2rad(5e-10) + 1e-12
     covered = np.array([int(r["covered"]) for r in rows])[ok].astype(bool)
     np.testing.assert_array_equal(covered, ref.covered)
     # the field exists where all four radars see the traffic: about a third of the plots

@@ -273,7 +273,8 @@ def read_radars(path: str | os.PathLike[str], *,
 
 
 def read_plots(path: str | os.PathLike[str], radars: RadarSet, *, azimuth_unit: str = "deg",
-               drop_out_of_range: bool = False) -> tuple[PlotTable, dict[str, int]]:
+               drop_out_of_range: bool = False, labels: list[str] | None = None
+               ) -> tuple[PlotTable, dict[str, int]]:
     """Radar plots of paper 001 ((1): range and azimuth per radar and instant).
 
     Columns ``time`` (s), ``radar`` (a name of ``radars``, or its index), ``range`` (m,
@@ -281,7 +282,10 @@ def read_plots(path: str | os.PathLike[str], radars: RadarSet, *, azimuth_unit: 
     -- the radar's own north in 3-D --, or radians with ``azimuth_unit="rad"``; within
     ±360° / ±2π), optional ``object`` (track label; empty, ``-1`` or ``nan`` for unknown)
     and optional ``height`` (target height, m above the WGS-84 ellipsoid; empty or
-    ``nan`` for unknown), which a 3-D radar set needs.
+    ``nan`` for unknown), which a 3-D radar set needs. Without an ``object`` column, an
+    ``address`` column (the ICAO address that ``optmodels biasfield correct`` writes)
+    labels the tracks. ``labels``: a list that receives, per object index, its label as
+    written in the file (so that a writer can give the plots their own names back).
 
     Returns
     -------
@@ -323,11 +327,15 @@ def read_plots(path: str | os.PathLike[str], radars: RadarSet, *, azimuth_unit: 
         raise ProblemError(f"{tab.path}: unknown radar id(s) {unknown[:5]} (first at "
                            f"{tab.where(i)}; known: {radars.names})")
     radar = np.array([lookup[r] for r in raw], dtype=np.int64)
-    if "object" in tab.cols:
-        obj_raw = tab.text("object")
+    label_col = "object" if "object" in tab.cols else "address" if "address" in tab.cols \
+        else None
+    if label_col is not None:
+        obj_raw = tab.text(label_col)
         ids = {o: k for k, o in enumerate(dict.fromkeys(o for o in obj_raw if o not in
                                                          ("", "-1", "nan", "None")))}
         obj = np.array([ids.get(o, -1) for o in obj_raw], dtype=np.int64)
+        if labels is not None:
+            labels[:] = list(ids)
     else:
         obj = np.full(t.size, -1, dtype=np.int64)
     height = None

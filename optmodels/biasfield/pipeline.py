@@ -29,7 +29,7 @@ from optmodels.biasfield.cells import Diagnostics, FieldData, build_field_data
 from optmodels.biasfield.data import PlotTable, RadarSet
 from optmodels.core import ProblemError, as_instance
 
-__all__ = ["FieldBuild", "field_data_from_plots"]
+__all__ = ["FieldBuild", "field_data_from_plots", "field_data_names", "save_field_data"]
 
 
 @dataclass
@@ -135,3 +135,40 @@ def field_data_from_plots(plots: PlotTable, radars: RadarSet, *, cells: int | Ar
         dropped[reason] = dropped.get(reason, 0) + int(n)
     return FieldBuild(fd, diag, plots, dropped, cleaning, [str(w.message) for w in caught],
                       timings)
+
+
+def save_field_data(data: FieldData, path: Any, *, names: tuple[str, ...] | list[str] = (),
+                    name: str = "biasfield.save_field_data path") -> Any:
+    """Write ``data`` to the ``.npz`` :meth:`FieldData.load
+    <optmodels.biasfield.cells.FieldData.load>` reads (the keys of ``FieldData.save``),
+    with the radars' ``names`` if given, exactly at ``path`` and atomically
+    (:func:`optmodels.io.save_npz`: a kill part-way leaves the previous file readable).
+    Returns the path written."""
+    from scipy import sparse
+
+    from optmodels.io import save_npz
+
+    data = as_instance("biasfield.save_field_data data", data, FieldData)
+    upper = sparse.triu(data.adjacency, k=1).tocoo()
+    arrays: dict[str, Any] = {"radars": data.radars, "centers": data.centers, "xi": data.xi,
+                              "edges": np.column_stack([upper.row, upper.col]).astype(np.int64),
+                              "P": data.P}
+    for key in ("xi_cov", "jacobians", "heights", "geodetic", "origin", "seen"):
+        if getattr(data, key) is not None:
+            arrays[key] = getattr(data, key)
+    names = tuple(str(v) for v in names)
+    if names:
+        if len(names) != data.m:
+            raise ProblemError(f"biasfield.save_field_data names: {len(names)} names for "
+                               f"{data.m} radars")
+        arrays["names"] = np.array(names, dtype=str)
+    return save_npz(path, name=name, **arrays)
+
+
+def field_data_names(path: Any) -> tuple[str, ...]:
+    """The radar names a FieldData ``.npz`` carries (written by :func:`save_field_data`,
+    e.g. by ``optmodels biasfield build``); ``()`` for a file without them."""
+    from optmodels.io import read_npz
+
+    d = read_npz(path, what="FieldData .npz", required=("radars",))
+    return tuple(str(v) for v in d["names"]) if "names" in d else ()

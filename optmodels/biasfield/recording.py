@@ -23,6 +23,15 @@ Heights of the plots (m above the WGS-84 ellipsoid), in this order:
    FL 300. Use it only where no ADS-B height exists;
 3. NaN (counted) when neither exists; such plots cannot be placed on the plane by a 3-D
    radar set (:meth:`PlotTable.locatable`).
+
+Heights you can trust (issue 24): before the interpolation, the CAT021 geometric heights
+are cleaned (:func:`adsb_height_spikes`: a report whose height departs from the median of
+its neighbours of the same address by more than a physical bound is a spike; its height
+is discarded, its position kept), and an interpolated ADS-B height that disagrees with the
+plot's own flight level by more than ``height_margin`` + ``height_margin_rel`` · H_p (m;
+default 300 m + 8 %: the ISA's error budget above at ±20 K and ±30 hPa, with the geoid)
+is rejected for the flight-level height (source ``"flight level, ADS-B rejected"``,
+counted in ``report.heights``; the spikes in ``report.adsb_heights_rejected``).
 """
 
 from __future__ import annotations
@@ -45,13 +54,13 @@ from optmodels.core import (
     as_positive,
 )
 
-__all__ = ["AdsbReports", "Recording", "RecordingReport", "fl_to_height", "read_recording",
-           "read_sites"]
+__all__ = ["AdsbReports", "Recording", "RecordingReport", "adsb_height_spikes", "fl_to_height",
+           "read_recording", "read_sites"]
 
 #: Earth radius of the ISA geopotential ↔ geometric conversion (m, ICAO Doc 7488).
 R_ISA = 6_356_766.0
 #: Height sources of :attr:`Recording.height_source`.
-HEIGHT_SOURCES = ("none", "adsb", "flight level")
+HEIGHT_SOURCES = ("none", "adsb", "flight level", "flight level, ADS-B rejected")
 
 
 def fl_to_height(pressure_altitude: Any, geoid_undulation: float = 0.0) -> FloatArray:
@@ -96,7 +105,9 @@ class RecordingReport:
     ``dropped`` (plots by reason), ``heights`` (kept plots by height source),
     ``adsb_read``, ``adsb_kept``, ``adsb_dropped`` (by reason), ``records`` (records per
     ASTERIX category read), ``decoder`` (reports the decoder itself discarded),
-    ``unknown_ids`` (the SAC/SIC pairs of the plots dropped as "unknown SAC/SIC")."""
+    ``unknown_ids`` (the SAC/SIC pairs of the plots dropped as "unknown SAC/SIC"),
+    ``adsb_heights_rejected`` (CAT021 geometric heights discarded as spikes,
+    :func:`adsb_height_spikes`; the reports' positions are kept)."""
 
     plots_read: int
     plots_kept: int
@@ -108,6 +119,7 @@ class RecordingReport:
     records: dict[int, int] = field(default_factory=dict)
     decoder: dict[str, int] = field(default_factory=dict)
     unknown_ids: tuple[tuple[int, int], ...] = ()
+    adsb_heights_rejected: int = 0
 
     def as_dict(self) -> dict[str, Any]:
         """JSON-ready (for ``--json``)."""
@@ -117,7 +129,8 @@ class RecordingReport:
                 "adsb_dropped": dict(self.adsb_dropped),
                 "records": {f"CAT{k:03d}": v for k, v in self.records.items()},
                 "decoder_dropped": dict(self.decoder),
-                "unknown_sac_sic": [list(i) for i in self.unknown_ids]}
+                "unknown_sac_sic": [list(i) for i in self.unknown_ids],
+                "adsb_heights_rejected": self.adsb_heights_rejected}
 
 
 @dataclass(frozen=True)
@@ -127,7 +140,11 @@ class Recording:
     object numbering), ``radars`` (the 3-D :class:`RadarSet`), ``addresses`` (per object
     its 24-bit ICAO address), ``height_source`` (per plot an index into
     :data:`HEIGHT_SOURCES`), ``mode3a`` (per plot, −1 if absent), ``epoch``
-    (``datetime64[ns]`` of the UTC midnight the times count from, or None), ``report``."""
+    (``datetime64[ns]`` of the UTC midnight the times count from, or None), ``report``;
+    per plot, where its CAT048 record is: ``record`` (its row in
+    :attr:`AsterixData.cat048 <optmodels.io.asterix.AsterixData>`), ``offset`` (byte offset
+    in its file) and ``file`` (index into the paths read) -- what a rewrite of the
+    recording with corrected plots needs."""
 
     plots: PlotTable
     adsb: AdsbReports
@@ -137,6 +154,9 @@ class Recording:
     mode3a: np.ndarray
     epoch: np.datetime64 | None
     report: RecordingReport
+    record: np.ndarray | None = None
+    offset: np.ndarray | None = None
+    file: np.ndarray | None = None
 
     @property
     def dropped(self) -> dict[str, int]:
@@ -193,7 +213,9 @@ def read_recording(paths: str | os.PathLike[str] | Iterable[str | os.PathLike[st
                    origin: tuple[float, float, float] | str | None = None,
                    date: Any = None, max_gap: float = 20.0, geoid_undulation: float = 0.0,
                    drop_out_of_range: bool = True,
-                   editions: dict[int, tuple[int, int]] | None = None) -> Recording:
+                   editions: dict[int, tuple[int, int]] | None = None,
+                   height_margin: float = 300.0, height_margin_rel: float = 0.08,
+                   clean_heights: bool = True) -> Recording:
     """Read an ASTERIX recording (CAT048 plots, CAT021 ADS-B; one file or several) into the
     bias-field tables.
 
@@ -218,6 +240,13 @@ def read_recording(paths: str | os.PathLike[str] | Iterable[str | os.PathLike[st
     drop_out_of_range
         Drop (and count) plots beyond their radar's ``max_range`` (default) instead of
         refusing the recording.
+    height_margin, height_margin_rel
+        An ADS-B height farther than ``height_margin`` (m) + ``height_margin_rel`` · H_p
+        from the plot's own flight-level height (H_p its pressure altitude, m) is rejected
+        for the flight-level height (default 300 m + 8 %: the ISA error budget of the
+        module docstring at ±20 K mean temperature and ±30 hPa, plus the geoid).
+    clean_heights
+        Discard the CAT021 height spikes first (:func:`adsb_height_spikes`, default).
 
     Raises
     ------
@@ -252,6 +281,10 @@ def read_recording(paths: str | os.PathLike[str] | Iterable[str | os.PathLike[st
         raise ProblemError(f"{fn} radars: need a 3-D RadarSet (geodetic sites) with SAC/SIC "
                            "ids, e.g. from read_sites")
     max_gap = as_positive(f"{fn} max_gap", max_gap)
+    height_margin = as_positive(f"{fn} height_margin (m)", height_margin)
+    height_margin_rel = as_number(f"{fn} height_margin_rel", height_margin_rel, low=0.0,
+                                  high=1.0)
+    clean_heights = as_flag(f"{fn} clean_heights", clean_heights)
     drop_out_of_range = as_flag(f"{fn} drop_out_of_range", drop_out_of_range)
     fl_to_height(0.0, geoid_undulation)  # checks it
     data = read_asterix([Path(p) if isinstance(p, str) else p for p in _paths(paths)],
@@ -295,21 +328,75 @@ def read_recording(paths: str | os.PathLike[str] | Iterable[str | os.PathLike[st
                        a.latitude[a_keep][order], a.longitude[a_keep][order],
                        a.height[a_keep][order], a.pressure_altitude[a_keep][order])
 
-    # --- plot heights
+    # --- plot heights: CAT021 spikes out, then interpolated, then checked against FL
+    spikes = (adsb_height_spikes(adsb.object, adsb.time, adsb.height) if clean_heights
+              else np.zeros(len(adsb), dtype=bool))
+    h_clean = np.where(spikes, np.nan, adsb.height)
     p_t = c.time[keep]
     p_obj = np.searchsorted(addresses, c.address[keep])
-    h_adsb = _interp_by_object(adsb.object, adsb.time, adsb.height, p_obj, p_t, max_gap)
-    h_fl = fl_to_height(c.pressure_altitude[keep], geoid_undulation)
-    source = np.where(np.isfinite(h_adsb), 1, np.where(np.isfinite(h_fl), 2, 0))
-    height = np.where(source == 1, h_adsb, np.where(source == 2, h_fl, np.nan))
+    h_adsb = _interp_by_object(adsb.object, adsb.time, h_clean, p_obj, p_t, max_gap)
+    hp = c.pressure_altitude[keep]
+    h_fl = fl_to_height(hp, geoid_undulation)
+    off = (np.isfinite(h_adsb) & np.isfinite(h_fl)
+           & (np.abs(h_adsb - h_fl) > height_margin + height_margin_rel * np.abs(hp)))
+    source = np.where(off, 3, np.where(np.isfinite(h_adsb), 1,
+                                       np.where(np.isfinite(h_fl), 2, 0)))
+    height = np.where(source == 1, h_adsb, np.where(source >= 2, h_fl, np.nan))
     order_p = np.argsort(p_t, kind="stable")
     plots = PlotTable(p_t[order_p], radar[keep][order_p], c.range[keep][order_p],
                       c.azimuth[keep][order_p], p_obj[order_p], height[order_p])
     heights = {HEIGHT_SOURCES[k]: int(np.sum(source == k)) for k in (1, 2, 0)}
+    if (source == 3).any():
+        heights[HEIGHT_SOURCES[3]] = int(np.sum(source == 3))
     report = RecordingReport(len(c), len(plots), dropped, heights, len(a), len(adsb),
-                             adsb_dropped, dict(data.records), dict(data.dropped), unknown)
+                             adsb_dropped, dict(data.records), dict(data.dropped), unknown,
+                             int(spikes.sum()))
+    rows = np.flatnonzero(keep)[order_p]
     return Recording(plots, adsb, radars, addresses, source[order_p],
-                     c.mode3a[keep][order_p], data.epoch, report)
+                     c.mode3a[keep][order_p], data.epoch, report, rows,
+                     np.asarray(c.offset)[rows], np.asarray(c.file)[rows])
+
+
+def adsb_height_spikes(obj: np.ndarray, t: FloatArray, height: FloatArray, *,
+                       neighbours: int = 2, tolerance: float = 150.0,
+                       vertical_rate: float = 100.0) -> np.ndarray:
+    """(n,) True for the ADS-B geometric heights that are spikes.
+
+    Reports sorted by (object, time). A Hampel filter: each finite height h_k is compared
+    with the median of the finite heights of the same object among itself and its
+    ``neighbours`` reports on each side (at least 3 values, else the report is kept): a
+    spike when |h_k − median| > ``tolerance`` + ``vertical_rate`` · τ_k (m; τ_k the
+    largest time distance, s, to a neighbour used). The median of a steady climb or
+    descent is the report's own height, and one or two consecutive outliers never carry
+    the median of five, so an isolated altitude spike (the +7.8 km of a corrupted
+    I021/140) is caught whatever its size while 100 m/s (≈ 20 000 ft/min, beyond any
+    airliner) of true vertical motion is not. A longer run of bad heights carries the
+    median and is left to the flight-level check of :func:`read_recording`. Vectorised
+    over all objects at once (``scipy.signal.medfilt`` works on one series: a Python call
+    per aircraft, and it pads the ends and gaps with zeros).
+    """
+    h = np.asarray(height, dtype=float)
+    n = h.size
+    out = np.zeros(n, dtype=bool)
+    if n < 3:
+        return out
+    vals, dist = [np.where(np.isfinite(h), h, np.nan)], [np.zeros(n)]
+    for d in [*range(-neighbours, 0), *range(1, neighbours + 1)]:
+        j = np.arange(n) + d
+        ok = (j >= 0) & (j < n)
+        jc = np.clip(j, 0, n - 1)
+        ok &= (obj[jc] == obj) & np.isfinite(h[jc])
+        vals.append(np.where(ok, h[jc], np.nan))
+        dist.append(np.where(ok, np.abs(t[jc] - t), 0.0))
+    v = np.stack(vals, axis=1)
+    enough = np.sum(np.isfinite(v), axis=1) >= 3
+    judged = enough & np.isfinite(h)
+    if not judged.any():
+        return out
+    med = np.nanmedian(v[judged], axis=1)
+    tau = np.max(np.stack(dist, axis=1)[judged], axis=1)
+    out[judged] = np.abs(h[judged] - med) > tolerance + vertical_rate * tau
+    return out
 
 
 def _interp_by_object(obj: np.ndarray, t: FloatArray, v: FloatArray, q_obj: np.ndarray,

@@ -21,7 +21,7 @@ from optmodels import plots
 from optmodels.biasfield import selection as sel
 from optmodels.biasfield.referee import adsb_field, compare_fields
 from optmodels.biasfield.usage import score
-from optmodels.io import markdown_table, write_json
+from optmodels.io import atomic_write, markdown_table, write_json
 from optmodels.scenarios.radar_network import radar_network
 
 __all__ = ["run_biasfield_demo"]
@@ -271,5 +271,6 @@ standard errors.
 Exact for a constant field; for a smooth field the χ² test rejects it and different
 trajectories give incompatible estimates — the paper's observation.
 """
-    (out / "report.md").write_text(report)
+    with atomic_write(out / "report.md") as fh:  # all or nothing
+        fh.write(report)
     return summary

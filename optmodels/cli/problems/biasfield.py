@@ -13,15 +13,27 @@ from typing import Any
 
 import numpy as np
 
-from optmodels.cli.args import _count, _positive
+from optmodels.cli.args import _count, _finite, _positive
 from optmodels.cli.contract import (
-    _OK_STATUSES,
     Outcome,
     _group,
     _leaf,
-    _out_dir,
-    _out_file,
     _reading,
+)
+from optmodels.cli.problems.biasfield_out import (
+    CORRECTED_COLUMNS,
+    NOT_LOCATABLE,
+    OBJECTIVE_NOTE,
+    corrected_columns,
+    field_rows,
+    interrupt_note,
+    print_build,
+    print_solve,
+    register_simulate,
+    say,
+    writable_dir,
+    writable_file,
+    write_corrected,
 )
 from optmodels.core import ProblemError, as_positive
 from optmodels.execution import scheduler_argument
@@ -100,7 +112,8 @@ def _read_input(args: argparse.Namespace, *, locate: bool, clean: bool,
                            f"{len(args.recording)}")
     kinds = ["asterix" if _is_asterix(f) else "table" for f in files]
     adsb_report: dict[str, Any] | None = None
-    adsb = None
+    adsb = rec = None
+    labels: list[str] = []
     read_dropped: dict[str, int] = {}
     if "asterix" in kinds:
         if kinds[0] != "asterix":
@@ -139,7 +152,8 @@ def _read_input(args: argparse.Namespace, *, locate: bool, clean: bool,
         with _reading(str(files[0])):
             plots, read_dropped = bf.read_plots(files[0], radars,
                                                 azimuth_unit=args.azimuth_unit,
-                                                drop_out_of_range=args.drop_out_of_range)
+                                                drop_out_of_range=args.drop_out_of_range,
+                                                labels=labels)
         geometry = args.geometry
         if geometry == "auto":
             geometry = "3d" if (org_used is not None and plots.height is not None) else "2d"
@@ -174,26 +188,35 @@ def _read_input(args: argparse.Namespace, *, locate: bool, clean: bool,
         cleaning = crep.to_dict(max_rows=args.max_rows)
     return {"radars": radars, "plots": plots, "source": source, "org_used": org_used,
             "origin": origin, "adsb_report": adsb_report, "adsb": adsb,
-            "dropped": dropped, "cleaning": cleaning, "n_read": n_read}
+            "dropped": dropped, "cleaning": cleaning, "n_read": n_read,
+            "recording": rec, "labels": labels}
 
 
 def _biasfield_build(args: argparse.Namespace) -> Outcome:
-    from optmodels import biasfield as bf
-
-    out = _out_file("--out", _npz_name(Path(args.out)))
+    if Path(args.out).is_dir():
+        raise ProblemError(f"--out: {args.out} is an existing folder; give a FILE name "
+                           "(e.g. fielddata.npz)")
+    out = writable_file("--out", _npz_name(Path(args.out)))  # before any work
     coverage = getattr(args, "coverage", "union")
-    # the reading here; placement, cleaning, fits, cells: the one chain (biasfield.pipeline)
-    # a site no plot carries is refused whatever the coverage (a wrong SAC/SIC, mostly)
-    inp = _read_input(args, locate=False, clean=False, require_all=True)
-    radars, org_used = inp["radars"], inp["org_used"]
-    extra = {} if args.scheduler == "serial" else {"scheduler": args.scheduler}
-    build = bf.field_data_from_plots(inp["plots"], radars, cells=args.cells,
-                                     knot_spacing=args.knot_spacing, coverage=coverage,
-                                     clean=args.clean, locate=True,
-                                     progress=not getattr(args, "json", False), **extra)
-    fd, diag = build.data, build.diagnostics
-    with _reading(f"--out {out}"):
-        fd.save(out)
+    stage = ["reading the recording"]
+    with interrupt_note(stage, out, []):
+        from optmodels import biasfield as bf
+        from optmodels.biasfield.pipeline import save_field_data
+
+        # the reading here; placement, cleaning, fits, cells: the one chain
+        # (biasfield.pipeline); a site no plot carries is refused whatever the coverage
+        say(args, f"reading {args.recording[0]} ...")
+        inp = _read_input(args, locate=False, clean=False, require_all=True)
+        radars, org_used = inp["radars"], inp["org_used"]
+        extra = {} if args.scheduler == "serial" else {"scheduler": args.scheduler}
+        stage[0] = "building the field data (cleaning, track fits, cells)"
+        build = bf.field_data_from_plots(inp["plots"], radars, cells=args.cells,
+                                         knot_spacing=args.knot_spacing, coverage=coverage,
+                                         clean=args.clean, locate=True,
+                                         progress=not getattr(args, "json", False), **extra)
+        fd, diag = build.data, build.diagnostics
+        stage[0] = f"writing {out}"
+        save_field_data(fd, out, names=radars.names, name="--out")
     chk = bf.residual_check(diag.fits, radars.m)
     dropped = dict(inp["dropped"])
     for reason, n in build.dropped.items():
@@ -218,21 +241,7 @@ def _biasfield_build(args: argparse.Namespace) -> Outcome:
 
 
 def _print_biasfield_build(res: dict[str, Any]) -> None:
-    print(f"wrote {res['out']}: {res['cells']} cells, radars {', '.join(res['radars'])} "
-          f"({res['geometry']}), {res['plots']} plots read, {res['plots_used']} used; "
-          f"dropped plots {res['dropped_plots'] or 'none'}, "
-          f"dropped cells {res['dropped_cells']}")
-    if "cells_per_radar" in res:
-        print(f"coverage {res['coverage']}: cells per radar "
-              + ", ".join(f"{k} {v}" for k, v in res["cells_per_radar"].items())
-              + "; radars per cell " + ", ".join(f"{k}: {v}" for k, v in
-                                                 res["radars_per_cell"].items()))
-    if res["origin"] is not None:
-        print(f"origin {res['origin']} ({res['origin_source']})")
-    if res["adsb"]:
-        print(f"ADS-B: {res['adsb']}")
-    print("track model χ²/dof per radar: "
-          + ", ".join(f"{v:.3f}" for v in res["track_chi2_per_dof"]))
+    print_build(res)
 
 
 def _parse_box(text: str) -> tuple[float, float]:
@@ -270,9 +279,17 @@ def _biasfield_solve(args: argparse.Namespace) -> Outcome:
     if args.solver == "closed-form":
         print("optmodels: note: --solver closed-form is now --method closed-form",
               file=sys.stderr)
-    out = _out_dir("--out", args.out)
+    from optmodels.biasfield.pipeline import field_data_names
+    from optmodels.biasfield.summary import radar_baseline
+    from optmodels.io import save_npz, write_csv
+
+    out = writable_dir("--out", args.out)  # before any work
+    for name in ("field.npz", "field.csv"):
+        if (out / name).is_dir():
+            raise ProblemError(f"--out: {out / name} is a folder; cannot write {name}")
     with _reading(str(args.file)):
         fd = bf.FieldData.load(args.file)
+        names = field_data_names(args.file)
     if args.lipschitz:
         sol = bf.solve_lipschitz(fd, box=box, solver=args.solver)
     elif closed:
@@ -281,26 +298,22 @@ def _biasfield_solve(args: argparse.Namespace) -> Outcome:
         sol = bf.solve(fd, box=box, solver=args.solver, formulation=args.formulation)
     res: dict[str, Any] = {"status": sol.status.value, "method": sol.method,
                            "message": sol.message, "objective": sol.objective,
+                           "objective_note": OBJECTIVE_NOTE,
                            "lipschitz": sol.lipschitz, "residuals": sol.residuals,
-                           "cells": fd.k, "out": str(Path(out).resolve())}
+                           "cells": fd.k, "out": str(Path(out).resolve()),
+                           "radar_names": list(names)}
     if sol.status.ok:
-        with _reading(f"--out {out}"):
-            # the frame, so that `biasfield correct` can check the radar set it is applied to
-            frame: dict[str, Any] = {"chain": np.array("3d" if fd.is_3d else "2d")}
-            if fd.is_3d:
-                frame.update(geodetic=fd.geodetic, origin=fd.origin)
-            np.savez_compressed(out / "field.npz", field=sol.field, eta=sol.eta,
-                                centers=fd.centers, radars=fd.radars, active=sol.active,
-                                **frame, **({} if fd.seen is None else {"seen": fd.seen}))
-            with (out / "field.csv").open("w", encoding="utf-8") as fh:
-                fh.write("cell,x,y,radar,range_bias_m,azimuth_bias_deg,active_range,"
-                         "active_azimuth\n")
-                for k in range(fd.k):
-                    for i in range(fd.m):
-                        f = sol.field[k, i]
-                        fh.write(f"{k},{fd.centers[k, 0]!r},{fd.centers[k, 1]!r},{i},"
-                                 f"{float(f[0])!r},{float(np.rad2deg(f[1]))!r},"
-                                 f"{int(sol.active[k, i, 0])},{int(sol.active[k, i, 1])}\n")
+        # the frame, so that `biasfield correct` can check the radar set it is applied to
+        frame: dict[str, Any] = {"chain": np.array("3d" if fd.is_3d else "2d")}
+        if fd.is_3d:
+            frame.update(geodetic=fd.geodetic, origin=fd.origin)
+        if names:
+            frame["names"] = np.array(names, dtype=str)
+        save_npz(out / "field.npz", name="--out", field=sol.field, eta=sol.eta,
+                 centers=fd.centers, radars=fd.radars, active=sol.active,
+                 **frame, **({} if fd.seen is None else {"seen": fd.seen}))
+        write_csv(out / "field.csv", field_rows(fd, sol, names))
+        res["radars"] = radar_baseline(sol.field, fd.centers, fd.radars, fd.subsets, names)
         for comp, name in ((1, "azimuth"), (0, "range")):
             plt_.bias_maps(out / f"{name}_map.png", fd.centers, {"estimate": sol.field},
                            fd.radars, component=comp)
@@ -310,11 +323,7 @@ def _biasfield_solve(args: argparse.Namespace) -> Outcome:
 
 
 def _print_biasfield_solve(res: dict[str, Any]) -> None:
-    print(f"{res['method']}: {res['status']} ({res['message']})")
-    if res["status"] in _OK_STATUSES:
-        lip = f", L = {res['lipschitz']:.4g}" if res["lipschitz"] is not None else ""
-        print(f"J = {res['objective']:.6g}{lip}, {res.get('active_bounds', 0)} active bounds; "
-              f"wrote {', '.join(res['files'])} to {res['out']}")
+    print_solve(res)
 
 
 def _load_field(args: argparse.Namespace, radars: Any) -> Any:
@@ -329,54 +338,59 @@ def _load_field(args: argparse.Namespace, radars: Any) -> Any:
 
 
 def _biasfield_correct(args: argparse.Namespace) -> Outcome:
-    from optmodels.biasfield.usage import correct_plots
+    out = writable_file("--out", Path(args.out))  # before any work
+    stage = ["reading the recording"]
+    with interrupt_note(stage, out, []):
+        from optmodels.biasfield.usage import correct_plots
 
-    out = _out_file("--out", Path(args.out))
-    inp = _read_input(args, locate=False, clean=False)  # one row per plot read
-    radars, plots = inp["radars"], inp["plots"]
-    fm = _load_field(args, radars)
-    # plots a 3-D radar set cannot place (no height, slant range below the height
-    # difference) are written as read, with covered = 0
-    ok = plots.locatable(radars) if getattr(radars, "is_3d", False) else np.ones(
-        len(plots), dtype=bool)
-    rng, az = plots.range.copy(), plots.azimuth.copy()
-    covered = np.zeros(len(plots), dtype=bool)
-    if ok.any():
-        cor = correct_plots(plots.subset(ok), radars, fm)
-        rng[ok], az[ok] = cor.plots.range, cor.plots.azimuth
-        covered[ok] = cor.covered
-    height = (np.full(len(plots), np.nan) if plots.height is None
-              else np.asarray(plots.height, dtype=float))
-    names = radars.names
-    with _reading(f"--out {out}"), out.open("w", encoding="utf-8") as fh:
-        fh.write("time,radar,object,range,azimuth,height,covered\n")
-        for k in range(len(plots)):
-            h = "" if not np.isfinite(height[k]) else repr(float(height[k]))
-            fh.write(f"{float(plots.time[k])!r},{names[int(plots.radar[k])]},"
-                     f"{int(plots.object[k])},{float(rng[k])!r},"
-                     f"{float(np.rad2deg(az[k]))!r},{h},{int(covered[k])}\n")
+        say(args, f"reading {args.recording[0]} ...")
+        inp = _read_input(args, locate=False, clean=False)  # one row per plot read
+        radars, plots = inp["radars"], inp["plots"]
+        fm = _load_field(args, radars)
+        # plots a 3-D radar set cannot place (no height, slant range below the height
+        # difference) are written as read, with covered = 0
+        ok = plots.locatable(radars) if getattr(radars, "is_3d", False) else np.ones(
+            len(plots), dtype=bool)
+        rng, az = plots.range.copy(), plots.azimuth.copy()
+        covered = np.zeros(len(plots), dtype=bool)
+        reason = np.full(len(plots), NOT_LOCATABLE, dtype="<U20")
+        stage[0] = "correcting the plots"
+        say(args, f"correcting {int(ok.sum())} plots ...")
+        if ok.any():
+            cor = correct_plots(plots.subset(ok), radars, fm)
+            rng[ok], az[ok] = cor.plots.range, cor.plots.azimuth
+            covered[ok] = cor.covered
+            reason[ok] = cor.reason
+        stage[0] = f"writing {out}"
+        say(args, f"writing {out} ...")
+        write_corrected(out, corrected_columns(inp, rng, az, covered, reason))
     n_cov = int(covered.sum())
+    reasons = {str(k): int(v) for k, v in zip(*np.unique(reason, return_counts=True),
+                                                strict=True)}
     return {"out": str(Path(out).resolve()), "field": str(args.field), "source": inp["source"],
             "geometry": "3d" if getattr(radars, "is_3d", False) else "2d",
             "plots": len(plots), "corrected": n_cov, "not_covered": int(len(plots) - n_cov),
-            "not_locatable": int(np.sum(~ok)), "radars": list(names),
-            "units": {"time": "s", "range": "m", "azimuth": "deg clockwise from the radar's "
-                      "own north", "height": "m above the WGS-84 ellipsoid"},
-            "origin": inp["org_used"]}, n_cov > 0
+            "not_locatable": int(np.sum(~ok)), "reasons": reasons, "radars": list(radars.names),
+            "columns": CORRECTED_COLUMNS, "origin": inp["org_used"]}, n_cov > 0
 
 
 def _print_biasfield_correct(res: dict[str, Any]) -> None:
     print(f"wrote {res['out']}: {res['plots']} plots, {res['corrected']} corrected, "
-          f"{res['not_covered']} outside the field's area (written as read)")
+          f"{res['not_covered']} written as read")
+    for why, n in res["reasons"].items():
+        if why != "covered":
+            print(f"  {n} not corrected: {why}")
 
 
 def _biasfield_registration(args: argparse.Namespace) -> Outcome:
     from optmodels.biasfield.referee import absolute_error, adsb_reference
     from optmodels.biasfield.usage import registration_error
 
+    say(args, f"reading {args.recording[0]} ...")
     inp = _read_input(args, locate=True, clean=args.clean)
     radars, plots = inp["radars"], inp["plots"]
     within = _load_field(args, radars) if args.field else None
+    say(args, f"placing {len(plots)} plots and measuring the registration ...")
     z = plots.cartesian(radars)  # placed once for both figures (3-D: exact, ~11 s / 10⁶)
     reg = registration_error(plots, radars, area=args.area, within=within, positions=z)
     res: dict[str, Any] = {"source": inp["source"],
@@ -514,13 +528,16 @@ def register(sub: Any) -> None:
     bs.add_argument("--out", default="biasfield_out", metavar="FOLDER",
                     help="output FOLDER for field.csv, field.npz and the two maps")
     bs.set_defaults(func=_biasfield_solve, printer=_print_biasfield_solve)
+    register_simulate(bsub, positive, _count, _finite())
     bc = _leaf(bsub, "correct", "plots corrected with a field: one CSV row per plot read")
     _recording_args(bc, positive)
     bc.add_argument("--field", type=Path, required=True,
                     help="DIR/field.npz written by `biasfield solve`")
     bc.add_argument("--out", type=Path, default=Path("corrected.csv"), metavar="FILE",
-                    help="CSV FILE: time (s), radar, object, range (m), azimuth (deg, clockwise "
-                    "from the radar's own north), height (m above the ellipsoid), covered")
+                    help="CSV FILE, one row per plot read: " + ", ".join(CORRECTED_COLUMNS)
+                    + " (the radar's name and SAC/SIC, the ICAO address in hex, times in s "
+                    "and UTC, range m, azimuth deg in [0, 360), height m and its source, "
+                    "covered and why not)")
     bc.set_defaults(func=_biasfield_correct, printer=_print_biasfield_correct, adsb=None)
     br = _leaf(bsub, "registration", "cross-radar registration error (and against ADS-B)")
     _recording_args(br, positive)

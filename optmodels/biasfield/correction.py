@@ -1,0 +1,111 @@
+r"""Plots corrected with a bias field (paper 001, after section 4): :func:`correct_plots`
+(f_i subtracted from radar i's range and azimuth at each plot's position, fixed point),
+:class:`Corrected` and the reasons a plot is left as read (:data:`REASONS`,
+:func:`seen_by_others`). Split out of ``usage.py``; the names are re-exported there
+unchanged."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from optmodels.biasfield.data import PlotTable, RadarSet
+from optmodels.biasfield.fieldmap import FieldMap
+from optmodels.biasfield.geometry import wrap_angle
+from optmodels.core import (
+    FloatArray,
+    as_count,
+    as_instance,
+    as_positive,
+)
+
+__all__ = ["REASONS", "Corrected", "correct_plots", "seen_by_others"]
+
+
+# ----------------------------------------------------------------------------- correct
+@dataclass(frozen=True)
+class Corrected:
+    """:func:`correct_plots`' result: the corrected ``plots`` (same rows and order), the
+    ``bias`` (n, 2) subtracted from each (range m, azimuth rad; 0 where not corrected) and
+    ``covered`` (n,) where the field was defined (elsewhere the plot is left as read);
+    ``reason`` (n,) str, why (:data:`REASONS`): ``"covered"``, ``"one radar only"`` (no
+    other radar has a plot of the same object within ``window`` s: no cross-radar data
+    can place a field there) or ``"outside every cell"`` (seen by two radars or more, or
+    of an unknown object, but outside the cells of its radar)."""
+
+    plots: PlotTable
+    bias: FloatArray
+    covered: np.ndarray
+    reason: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype="<U18"))
+
+    @property
+    def n_uncovered(self) -> int:
+        return int(np.sum(~self.covered))
+
+
+#: The values of :attr:`Corrected.reason`.
+REASONS = ("covered", "one radar only", "outside every cell")
+
+
+def seen_by_others(plots: PlotTable, window: float = 60.0) -> np.ndarray:
+    """(n,) True where another radar has a plot of the same object (``plots.object`` ≥ 0)
+    within ``window`` seconds: the plot is seen by two radars or more."""
+    window = as_positive("biasfield.seen_by_others window (s)", window)
+    out = np.zeros(len(plots), dtype=bool)
+    known = np.flatnonzero(plots.object >= 0)
+    if known.size == 0:
+        return out
+    t = plots.time[known]
+    # one sorted key per (object, time): objects spaced farther apart than any time gap
+    span = float(t.max() - t.min()) + 4.0 * window + 1.0
+    key = plots.object[known].astype(np.float64) * span + (t - t.min())
+    r = plots.radar[known]
+    for i in np.unique(r):
+        other = np.sort(key[r != i])
+        mine = np.flatnonzero(r == i)
+        if other.size == 0:
+            continue
+        lo = np.searchsorted(other, key[mine] - window, side="left")
+        hi = np.searchsorted(other, key[mine] + window, side="right")
+        out[known[mine]] = hi > lo
+    return out
+
+
+def correct_plots(plots: PlotTable, radars: RadarSet, field: FieldMap, *,
+                  passes: int = 2, window: float = 60.0) -> Corrected:
+    """Plots with the estimated bias removed: range − f_r(x), azimuth − f_α(x) for each
+    plot of radar i, x its position on the common plane.
+
+    The bias is a function of the true position; it is evaluated at the plot's position,
+    then (``passes`` ≥ 2) again at the corrected position (a fixed-point iteration that
+    converges at the rate ‖∇f‖ ≈ 1e-3 per pass). Plots outside the covered area are left
+    uncorrected and flagged in ``covered``, with the ``reason`` per plot
+    (:attr:`Corrected.reason`; ``window`` (s) the time within which another radar's plot
+    of the same object counts as seeing it). With per-cell subsets (``field.seen``) each
+    radar is corrected over its own cells. Heights and every other column are kept.
+    """
+    fn = "biasfield.correct_plots"
+    plots = as_instance(f"{fn} plots", plots, PlotTable)
+    radars = as_instance(f"{fn} radars", radars, RadarSet)
+    field = as_instance(f"{fn} field", field, FieldMap)
+    passes = as_count(f"{fn} passes", passes, minimum=1, maximum=10)
+    field.check_radars(radars, fn)
+    n = len(plots)
+    bias = np.zeros((n, 2))
+    out = plots
+    covered = np.ones(n, dtype=bool)
+    for _ in range(passes):
+        pos = out.cartesian(radars)
+        b = field.at_radar(pos, plots.radar)  # (n, 2), each plot's own radar
+        covered = np.all(np.isfinite(b), axis=1)
+        bias = np.where(covered[:, None], b, 0.0)
+        out = replace(plots, range=np.abs(plots.range - bias[:, 0]),
+                      azimuth=wrap_angle(plots.azimuth - bias[:, 1]))
+    reason = np.full(n, REASONS[0], dtype="<U18")
+    if not covered.all():
+        miss = ~covered
+        single = miss & ~seen_by_others(plots, window) & (plots.object >= 0)
+        reason[miss] = REASONS[2]
+        reason[single] = REASONS[1]
+    return Corrected(out, bias, covered, reason)

@@ -1,0 +1,328 @@
+"""The outputs of the ``optmodels biasfield`` verbs: output paths checked before any work,
+interrupts that say what was and was not written, ``corrected.csv`` with each plot's
+identity, ``field.csv`` through :func:`optmodels.io.write_csv`, the per-radar summary,
+readable text, and ``optmodels biasfield simulate``. Every file goes through
+:func:`optmodels.io.atomic_write` / :func:`~optmodels.io.save_npz` /
+:func:`~optmodels.io.write_csv` (a kill part-way leaves the previous file readable)."""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import os
+import sys
+import tempfile
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from optmodels.cli.contract import _leaf
+from optmodels.core import ProblemError
+
+#: Columns of ``corrected.csv`` and their units (``--json`` echoes them).
+CORRECTED_COLUMNS = {
+    "radar": "the radar's name (sites CSV)",
+    "sac": "its System Area Code (I048/010; empty for a CSV input without sac)",
+    "sic": "its System Identification Code",
+    "address": "ICAO 24-bit address, 6 hex digits (I048/220); a CSV input's object label",
+    "time": "s since the recording's UTC midnight (--date) or its first day",
+    "time_of_day": "s after UTC midnight, [0, 86400) (I048/140); empty for a CSV input",
+    "utc": "UTC date-time, ISO 8601 with ms (only with --date or a dated recording)",
+    "range": "corrected slant range, m",
+    "azimuth": "corrected azimuth, deg clockwise from the radar's own north, [0, 360)",
+    "height": "target height, m above the WGS-84 ellipsoid (empty if unknown)",
+    "height_source": "adsb | flight level | flight level, ADS-B rejected | input | none",
+    "covered": "1 corrected, 0 written as read",
+    "reason": "covered | one radar only | outside every cell | not locatable",
+}
+NOT_LOCATABLE = "not locatable"
+
+
+# --------------------------------------------------------------------------- paths
+def _probe(flag: str, folder: Path) -> None:
+    """Create and remove a temporary file in ``folder``: refused (exit 2) before any work
+    if the folder cannot be written (permission, read-only or virtual file system)."""
+    try:
+        fd, name = tempfile.mkstemp(prefix=".optmodels-probe.", dir=folder)
+    except OSError as exc:
+        raise ProblemError(f"{flag}: cannot write in {folder} ({exc.strerror or exc})"
+                           ) from None
+    os.close(fd)
+    with contextlib.suppress(OSError):
+        os.unlink(name)
+
+
+def writable_file(flag: str, path: str | os.PathLike[str]) -> Path:
+    """``--out FILE``: not an existing folder, its folder created if missing and writable;
+    checked before any work."""
+    from optmodels.io import output_file
+
+    p = Path(path)
+    if p.is_dir():
+        raise ProblemError(f"{flag}: {p} is an existing folder; give a file name (this "
+                           "flag names a FILE)")
+    try:
+        p = output_file(p, name=flag)
+    except ProblemError as exc:
+        raise ProblemError(f"{flag}: {exc}") from None
+    _probe(flag, p.parent)
+    return p
+
+
+def writable_dir(flag: str, path: str | os.PathLike[str]) -> Path:
+    """``--out FOLDER``: created if missing, not a file, writable; before any work."""
+    from optmodels.io import output_dir
+
+    try:
+        p = output_dir(path, name=flag)
+    except ProblemError as exc:
+        raise ProblemError(f"{flag}: {exc}") from None
+    _probe(flag, p)
+    return p
+
+
+@contextlib.contextmanager
+def interrupt_note(stage: list[str], out: Path, written: list[str]) -> Iterator[None]:
+    """Ctrl-C inside the block becomes ``KeyboardInterrupt`` with a message that says
+    what was and was not written (the CLI contract exits 130 with it)."""
+    try:
+        yield
+    except KeyboardInterrupt:
+        done = f"written: {', '.join(written)}" if written else "nothing written"
+        raise KeyboardInterrupt(
+            f"interrupted while {stage[0]}: {out} not written (a previous {out.name}, if "
+            f"any, is unchanged); {done}") from None
+
+
+def say(args: argparse.Namespace, text: str) -> None:
+    """A progress line on stderr: not under ``--json``, only when stderr is a terminal."""
+    if not getattr(args, "json", False) and sys.stderr.isatty():
+        print(text, file=sys.stderr, flush=True)
+
+
+# --------------------------------------------------------------------------- correct
+def _fmt(fmt: str, v: np.ndarray) -> np.ndarray:
+    """``fmt`` of each finite value; empty where NaN."""
+    s = np.char.mod(fmt, np.where(np.isfinite(v), v, 0.0))
+    return np.where(np.isfinite(v), s, "")
+
+
+def corrected_columns(inp: dict[str, Any], rng: np.ndarray, az: np.ndarray,
+                      covered: np.ndarray, reason: np.ndarray) -> dict[str, np.ndarray]:
+    """The columns of ``corrected.csv`` (:data:`CORRECTED_COLUMNS`), as string arrays, for
+    the plots of ``inp`` (``_read_input``'s result, one row per plot read)."""
+    from optmodels.biasfield.recording import HEIGHT_SOURCES
+
+    radars, plots, rec = inp["radars"], inp["plots"], inp.get("recording")
+    n = len(plots)
+    names = np.asarray(radars.names, dtype=object)
+    cols: dict[str, np.ndarray] = {"radar": names[plots.radar].astype(str)}
+    if radars.ids:
+        ids = np.asarray(radars.ids, dtype=np.int64)
+        cols["sac"] = ids[plots.radar, 0].astype(str)
+        cols["sic"] = ids[plots.radar, 1].astype(str)
+    else:
+        cols["sac"] = cols["sic"] = np.full(n, "", dtype=object).astype(str)
+    if rec is not None:
+        hexes = np.array([f"{int(a):06x}" for a in rec.addresses] + [""])
+        cols["address"] = hexes[np.where(plots.object >= 0, plots.object, -1)]
+    else:
+        labels = np.array([*inp.get("labels", []), ""], dtype=object).astype(str)
+        ok = (plots.object >= 0) & (plots.object < labels.size - 1)
+        cols["address"] = labels[np.where(ok, plots.object, -1)]
+    t = np.asarray(plots.time, dtype=float)
+    cols["time"] = np.char.mod("%.7f", t)  # the I140 LSB is 1/128 s
+    if rec is not None:
+        cols["time_of_day"] = np.char.mod("%.7f", np.mod(t, 86400.0))
+        if rec.epoch is not None:
+            us = np.round(t * 1e6).astype(np.int64).astype("timedelta64[us]")
+            stamp = np.datetime_as_string(np.datetime64(rec.epoch, "us") + us, unit="ms")
+            cols["utc"] = np.char.add(stamp.astype(str), "Z")
+        else:
+            cols["utc"] = np.full(n, "", dtype="<U1")
+    else:
+        cols["time_of_day"] = cols["utc"] = np.full(n, "", dtype="<U1")
+    cols["range"] = np.char.mod("%.3f", rng)
+    deg = np.mod(np.rad2deg(az), 360.0)
+    deg = np.where(deg >= 360.0 - 5e-10, 0.0, deg)  # what "%.9f" would print as 360
+    cols["azimuth"] = np.char.mod("%.9f", deg)
+    h = (np.full(n, np.nan) if plots.height is None else np.asarray(plots.height, float))
+    cols["height"] = _fmt("%.2f", h)
+    if rec is not None:
+        cols["height_source"] = np.asarray(HEIGHT_SOURCES)[rec.height_source]
+    else:
+        cols["height_source"] = np.where(np.isfinite(h), "input", "none")
+    cols["covered"] = covered.astype(np.int64).astype(str)
+    cols["reason"] = np.asarray(reason).astype(str)
+    return {k: cols[k] for k in CORRECTED_COLUMNS}
+
+
+def write_corrected(out: Path, cols: dict[str, np.ndarray], chunk: int = 200_000) -> None:
+    """``corrected.csv`` atomically (:func:`optmodels.io.atomic_write`), in chunks of
+    rows (a cell with a comma or quote is quoted by the :mod:`csv` module)."""
+    import csv
+
+    from optmodels.io import atomic_write
+
+    names = list(cols)
+    n = len(next(iter(cols.values()))) if cols else 0
+    with atomic_write(out, name="--out", newline="") as fh:
+        w = csv.writer(fh, lineterminator="\n")
+        w.writerow(names)
+        for a in range(0, n, chunk):
+            w.writerows(zip(*(cols[c][a:a + chunk].tolist() for c in names), strict=True))
+
+
+# --------------------------------------------------------------------------- solve
+def field_rows(fd: Any, sol: Any, names: tuple[str, ...]) -> list[dict[str, Any]]:
+    """``field.csv``: one row per (cell, radar that sees it): numbers as numbers, radars by
+    name."""
+    seen = fd.subsets
+    labels = names or tuple(f"R{i + 1}" for i in range(fd.m))
+    rows = []
+    for k in range(fd.k):
+        for i in np.flatnonzero(seen[k]):
+            rows.append({"cell": k, "x_m": float(fd.centers[k, 0]),
+                         "y_m": float(fd.centers[k, 1]), "radar": labels[int(i)],
+                         "range_bias_m": float(sol.field[k, i, 0]),
+                         "azimuth_bias_deg": float(np.rad2deg(sol.field[k, i, 1])),
+                         "active_range": int(sol.active[k, i, 0]),
+                         "active_azimuth": int(sol.active[k, i, 1])})
+    return rows
+
+
+#: What ``objective`` in ``solve --json`` is.
+OBJECTIVE_NOTE = ("J of (9): the smoothness functional, Σ over neighbouring cells of the "
+                  "squared bias differences in the metric P divided by the squared centre "
+                  "distance (P-weighted (m, rad)² per m²); a figure of merit for comparing "
+                  "methods on the same data, not an error in metres")
+
+
+def print_solve(res: dict[str, Any]) -> None:
+    from optmodels.cli.contract import _OK_STATUSES
+
+    print(f"{res['method']}: {res['status']} ({res['message']})")
+    if res["status"] not in _OK_STATUSES:
+        return
+    lip = f", Lipschitz constant {res['lipschitz']:.4g}" if res["lipschitz"] is not None \
+        else ""
+    print(f"{res['cells']} cells{lip}, {res.get('active_bounds', 0)} active bounds; wrote "
+          f"{', '.join(res['files'])} to {res['out']}")
+    print("per radar, the constant-plus-gain baseline fitted to the field (± its fit's "
+          "standard error) and the field's spread over the radar's cells:")
+    print(f"  {'radar':<8}{'cells':>6}  {'range bias m':>16}  {'gain ppm':>14}  "
+          f"{'azimuth bias deg':>20}  {'spread m':>9}  {'spread deg':>10}")
+    for r in res.get("radars", []):
+        if not r.get("cells"):
+            print(f"  {r['radar']:<8}{0:>6}  (no cell)")
+            continue
+        print(f"  {r['radar']:<8}{r['cells']:>6}  "
+              f"{r['range_bias_m']:>8.1f} ± {r['range_bias_sigma_m']:<5.1f}  "
+              f"{r['range_gain_ppm']:>6.0f} ± {r['range_gain_sigma_ppm']:<5.0f}  "
+              f"{r['azimuth_bias_deg']:>9.4f} ± {r['azimuth_bias_sigma_deg']:<7.4f}  "
+              f"{r['range_spread_m']:>9.1f}  {r['azimuth_spread_deg']:>10.4f}")
+
+
+# --------------------------------------------------------------------------- build
+def print_build(res: dict[str, Any]) -> None:
+    print(f"wrote {res['out']}")
+    print(f"  {res['cells']} cells ({res['coverage']} coverage), radars "
+          f"{', '.join(res['radars'])} ({res['geometry']} chain, {res['source']} input)")
+    print(f"  plots: {res['plots']} read, {res['plots_used']} used in the track fits")
+    for reason, n in (res["dropped_plots"] or {}).items():
+        print(f"    dropped {n}: {reason}")
+    if res.get("cells_per_radar"):
+        print("  cells per radar: " + ", ".join(f"{k} {v}" for k, v in
+                                                res["cells_per_radar"].items()))
+        print("  radars per cell: " + ", ".join(f"{v} cells seen by {k}" for k, v in
+                                                res["radars_per_cell"].items()))
+    if res["dropped_cells"]:
+        print(f"  cells dropped for lack of data: {res['dropped_cells']}")
+    if res["origin"] is not None:
+        lat, lon, h = res["origin"]
+        print(f"  common plane origin {lat:.6f}° N, {lon:.6f}° E, {h:.1f} m "
+              f"({res['origin_source']})")
+    ad = res.get("adsb")
+    if ad:
+        hs = ", ".join(f"{k} {v}" for k, v in ad.get("heights", {}).items())
+        print(f"  ASTERIX: {ad.get('plots_read', 0)} CAT048 plots, {ad.get('reports', 0)} "
+              f"CAT021 reports ({ad.get('adsb_heights_rejected', 0)} height spikes "
+              f"rejected); plot heights from {hs or 'n/a'}")
+    print("  track model χ²/dof per radar (≈ 1 when the noise model fits): "
+          + ", ".join(f"{n} {v:.2f}" for n, v in zip(res["radars"],
+                                                     res["track_chi2_per_dof"],
+                                                     strict=False)))
+    for w in res.get("warnings", []):
+        print(f"  warning: {w}")
+
+
+# --------------------------------------------------------------------------- simulate
+def _simulate(args: argparse.Namespace) -> tuple[dict[str, Any], bool]:
+    from optmodels.biasfield.simulate import simulate_recording
+
+    out = writable_dir("--out", args.out)
+    for f in ("recording.ast", "sites.csv"):
+        if (out / f).is_dir():
+            raise ProblemError(f"--out: {out / f} is a folder; cannot write the {f} there")
+    say(args, f"simulating {args.n_radars} radars, {args.aircraft} aircraft, "
+              f"{args.duration:g} s and encoding ASTERIX ...")
+    sim = simulate_recording(out, seed=args.seed, radars=args.n_radars, aircraft=args.aircraft,
+                             duration=args.duration, spacing=args.spacing,
+                             max_range=args.max_range, biases=args.biases,
+                             start=args.start,
+                             adsb_interval=args.adsb_interval, adsb_spikes=args.adsb_spikes)
+    res = sim.to_dict()
+    res["recording"], res["sites"] = str(sim.recording.resolve()), str(sim.sites.resolve())
+    res["next"] = (f"optmodels biasfield build {sim.recording} --radars {sim.sites} "
+                   f"--out {out / 'fielddata.npz'}")
+    return res, True
+
+
+def _print_simulate(res: dict[str, Any]) -> None:
+    print(f"wrote {res['recording']} ({res['cat048']} CAT048 plots of radars "
+          f"{', '.join(res['radars'])}, {res['cat021']} CAT021 reports of {res['aircraft']} "
+          f"aircraft, {res['spikes']} height spikes) and {res['sites']}")
+    print(f"next: {res['next']}")
+
+
+SIMULATE_HELP = """\
+A simulated recording to try the bias field on: a ring of radars, random traffic, each
+radar's bias field and noise, written as ASTERIX (CAT048 plots with flight levels and
+ICAO addresses, CAT021 ADS-B) in FOLDER/recording.ast, with FOLDER/sites.csv. Then:
+build -> solve -> correct -> registration (see the README).
+
+How the simulated traffic differs from real traffic: aircraft enter at uniform random
+places and times and fly random legs and turns (no airways or terminal areas); every
+radar sees every aircraft in range and above its horizon on every scan (no missed or
+false plots, clutter or multipath); ADS-B is the exact truth, every aircraft equipped
+(but for --adsb-spikes); flight levels are the exact standard-atmosphere image of the
+true height; each bias field is smooth on the plane and constant in time and height."""
+
+
+def register_simulate(bsub: Any, positive: Any, count: Any, finite: Any) -> None:
+    """``optmodels biasfield simulate``."""
+    p = _leaf(bsub, "simulate", "a simulated ASTERIX recording and its sites CSV")
+    p.description = SIMULATE_HELP
+    p.add_argument("--out", default="biasfield_sim", metavar="FOLDER",
+                   help="output FOLDER: recording.ast and sites.csv")
+    p.add_argument("--seed", type=count(0), default=0, help="seed of every random draw")
+    p.add_argument("--n-radars", type=count(2), default=4,
+                   help="number of radars, on a ring about the origin")
+    p.add_argument("--spacing", type=positive, default=150e3,
+                   help="radius of the ring of sites, m")
+    p.add_argument("--max-range", type=positive, default=250e3,
+                   help="each radar's maximum slant range, m")
+    p.add_argument("--aircraft", type=count(1), default=30, help="number of aircraft")
+    p.add_argument("--duration", type=positive, default=1800.0, help="simulated span, s")
+    p.add_argument("--biases", choices=("smooth", "linear", "constant", "zero"),
+                   default="smooth", help="each radar's bias field")
+    p.add_argument("--start", type=finite, default=36000.0,
+                   help="UTC time of day of simulated time 0, s after midnight (36000: 10:00)")
+    p.add_argument("--adsb-interval", type=count(1), default=1,
+                   help="seconds between two ADS-B reports of an aircraft")
+    p.add_argument("--adsb-spikes", type=count(0), default=0,
+                   help="CAT021 reports given a +7.8 km altitude spike (to see the "
+                        "reader's cleaning at work)")
+    p.set_defaults(func=_simulate, printer=_print_simulate)

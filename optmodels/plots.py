@@ -19,8 +19,11 @@ if TYPE_CHECKING:
 
 
 def _save(fig: Figure, path: Path, *, bbox: str | None = None) -> Path:
+    from optmodels.io import atomic_write
+
     fig.tight_layout()
-    fig.savefig(path, dpi=110, bbox_inches=bbox)
+    with atomic_write(path, binary=True) as fh:  # a kill keeps the previous figure
+        fig.savefig(fh, dpi=110, bbox_inches=bbox, format=Path(path).suffix[1:] or "png")
     plt.close(fig)
     return path
 
@@ -279,7 +282,10 @@ def bias_maps(path: Path, centers: FloatArray, panels: dict[str, FloatArray],
                       fontsize=8)
     what = "range bias" if component == 0 else "azimuth bias"
     fig.colorbar(im, ax=axes.ravel().tolist(), shrink=0.8, label=f"{what}, {unit}")
-    fig.savefig(path, dpi=100)
+    from optmodels.io import atomic_write
+
+    with atomic_write(path, binary=True) as fh:  # a kill keeps the previous figure
+        fig.savefig(fh, dpi=100, format=Path(path).suffix[1:] or "png")
     plt.close(fig)
     return path
 

@@ -25,7 +25,7 @@ TRIALS = 3
 
 @pytest.fixture(scope="module")
 def small(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
-    from optmodels.biasfield.simulate import simulate_recording
+    from optmodels.scenarios.recording import simulate_recording
 
     tmp = tmp_path_factory.mktemp("kill")
     sim = simulate_recording(tmp / "sim", seed=5, aircraft=8, duration=600.0,

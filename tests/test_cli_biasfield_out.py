@@ -213,8 +213,8 @@ def _spike_recording(tmp_path: Path, spike: slice) -> tuple[Path, Path, dict]:
     +7.8 km."""
     import pymap3d
 
-    from optmodels.biasfield.simulate import _flight_level
     from optmodels.io import encode_cat021, encode_cat048
+    from optmodels.scenarios.recording import _flight_level
 
     site = (55.0, 83.0, 200.0)
     sites = tmp_path / "sites.csv"
@@ -285,8 +285,8 @@ def test_a_long_height_spike_gives_the_flight_level_height(tmp_path: Path) -> No
 
 def test_simulate_refuses_bad_arguments(tmp_path: Path) -> None:
     """One ProblemError naming the argument (API) and exit 2 with one line (CLI)."""
-    from optmodels.biasfield.simulate import simulate_recording
     from optmodels.core import ProblemError
+    from optmodels.scenarios.recording import simulate_recording
 
     for kw, name in (({"radars": 1}, "radars"), ({"start": 90000.0}, "start"),
                      ({"biases": "wavy"}, "biases"), ({"aircraft": 0}, "aircraft"),

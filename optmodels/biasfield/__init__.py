@@ -54,13 +54,19 @@ from optmodels.biasfield.geometry import (
 from optmodels.biasfield.ingest import read_plots, read_radars, read_tracks
 from optmodels.biasfield.lipschitz import solve_lipschitz
 from optmodels.biasfield.paths import AircraftPaths
-from optmodels.biasfield.pipeline import FieldBuild, field_data_from_plots
+from optmodels.biasfield.pipeline import (
+    FieldBuild,
+    field_data_from_plots,
+    field_data_names,
+    save_field_data,
+)
 from optmodels.biasfield.polyline import hat_basis
 from optmodels.biasfield.problem import FieldSolution
 from optmodels.biasfield.recording import (
     AdsbReports,
     Recording,
     RecordingReport,
+    adsb_height_spikes,
     fl_to_height,
     read_recording,
     read_sites,
@@ -74,6 +80,7 @@ from optmodels.biasfield.referee import (
     compare_fields,
 )
 from optmodels.biasfield.selection import solve
+from optmodels.biasfield.summary import radar_baseline
 from optmodels.biasfield.tracks import ResidualCheck, TrackFit, fit_tracks, residual_check
 from optmodels.biasfield.usage import (
     Corrected,
@@ -111,6 +118,7 @@ __all__ = [
     "TrackFit",
     "absolute_error",
     "adsb_field",
+    "adsb_height_spikes",
     "adsb_reference",
     "azimuth_bias_baseline",
     "bias_from_shift",
@@ -121,6 +129,7 @@ __all__ = [
     "compare_fields",
     "correct_plots",
     "field_data_from_plots",
+    "field_data_names",
     "field_map",
     "fit_tracks",
     "fl_to_height",
@@ -132,6 +141,7 @@ __all__ = [
     "neighbours",
     "place_centers",
     "polar_jacobian",
+    "radar_baseline",
     "read_plots",
     "read_radars",
     "read_recording",
@@ -139,6 +149,7 @@ __all__ = [
     "read_tracks",
     "registration_error",
     "residual_check",
+    "save_field_data",
     "score",
     "seen_by_others",
     "shift_from_bias",

@@ -197,7 +197,8 @@ class FieldData:
         return int(self.centers.shape[0])
 
     def save(self, path: str | Path) -> None:
-        """Write an ``.npz`` (radars, centers, xi, edges (E, 2), P[, xi_cov])."""
+        """Write an ``.npz`` (radars, centers, xi, edges (E, 2), P[, xi_cov]) onto exactly
+        ``path``, atomically (:func:`optmodels.io.save_npz`)."""
         upper = sparse.triu(self.adjacency, k=1).tocoo()
         arrays = {"radars": self.radars, "centers": self.centers, "xi": self.xi,
                   "edges": np.column_stack([upper.row, upper.col]).astype(np.int64),
@@ -205,14 +206,10 @@ class FieldData:
         for name in ("xi_cov", "jacobians", "heights", "geodetic", "origin", "seen"):
             if getattr(self, name) is not None:
                 arrays[name] = getattr(self, name)
-        if not isinstance(path, str | Path):
-            raise ProblemError(f"biasfield.FieldData.save path: expected a file name, got "
-                               f"{type(path).__name__}")
-        try:
-            np.savez_compressed(path, **arrays)  # type: ignore[arg-type]
-        except OSError as exc:
-            raise ProblemError(f"biasfield.FieldData.save path: cannot write {path} ({exc})"
-                               ) from None
+        from optmodels.io import save_npz
+
+        # exactly ``path`` (no ``.npz`` appended), all or nothing (a kill keeps the old file)
+        save_npz(path, name="biasfield.FieldData.save path", **arrays)
 
     @classmethod
     def load(cls, path: str | Path) -> FieldData:

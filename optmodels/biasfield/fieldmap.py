@@ -14,8 +14,8 @@ from numpy.typing import ArrayLike
 from scipy.spatial import Delaunay, QhullError, cKDTree
 
 from optmodels.biasfield import geometry3d as g3
-from optmodels.biasfield.cells import FieldData
 from optmodels.biasfield.data import RadarSet
+from optmodels.biasfield.fielddata import FieldData
 from optmodels.core import (
     MAX_MAGNITUDE,
     FloatArray,
@@ -30,7 +30,7 @@ __all__ = ["FieldMap", "field_map"]
 
 
 # ----------------------------------------------------------------------------- the map
-class _Triangles:
+class Triangles:
     """The Delaunay triangulation of the centres with its own point location and
     barycentric coordinates.
 
@@ -130,7 +130,7 @@ class FieldMap:
                                f"{f.shape}")
         self._set_frame(f.shape[1])
         try:
-            tri = _Triangles(c)
+            tri = Triangles(c)
         except QhullError as exc:
             raise ProblemError("biasfield.FieldMap centers (m): the centres span no area "
                                f"(collinear or repeated: {str(exc).splitlines()[0]})") from None
@@ -165,7 +165,7 @@ class FieldMap:
             entry = None
             if idx.size >= 3:
                 try:
-                    entry = (idx, _Triangles(c[idx]), cKDTree(c[idx]))
+                    entry = (idx, Triangles(c[idx]), cKDTree(c[idx]))
                 except QhullError:
                     entry = None
             own[i] = entry
@@ -285,7 +285,7 @@ class FieldMap:
         idx, tri, tree = entry
         return self._interp(p, tri, tree, self.field[idx, i:i + 1], extend)[:, 0]
 
-    def _interp(self, p: FloatArray, tri: _Triangles, tree: cKDTree, values: FloatArray,
+    def _interp(self, p: FloatArray, tri: Triangles, tree: cKDTree, values: FloatArray,
                 extend: bool = False) -> FloatArray:
         """P1 interpolant of ``values`` (K', q, 2) on ``tri``; NaN outside it or farther
         than ``max_distance`` from every node; a node's value bit for bit. ``extend``

@@ -112,7 +112,7 @@ class _Table:
         return v
 
 
-def _table(path: str | os.PathLike[str], what: str) -> _Table:
+def table_file(path: str | os.PathLike[str], what: str) -> _Table:
     """Read a CSV (as text) or a Parquet file (``.parquet``/``.pq``, as arrays)."""
     p = as_path(f"biasfield.read_{what} path", path)
     if p.suffix.lower() in (".parquet", ".pq"):
@@ -218,7 +218,7 @@ def read_radars(path: str | os.PathLike[str], *,
     mode = origin if isinstance(origin, str) and origin in ("mean", "first") else None
     org_given = None if origin is None or mode is not None else _as_origin(
         f"{fn} origin", origin)
-    tab = _table(path, "radars")
+    tab = table_file(path, "radars")
     names = tab.text("name")
     seen: dict[str, int] = {}
     for i, name in enumerate(names):
@@ -303,7 +303,7 @@ def read_plots(path: str | os.PathLike[str], radars: RadarSet, *, azimuth_unit: 
     as_instance("biasfield.read_plots radars", radars, RadarSet)
     unit = as_choice("biasfield.read_plots azimuth_unit", azimuth_unit, ("deg", "rad"))
     as_flag("biasfield.read_plots drop_out_of_range", drop_out_of_range)
-    tab = _table(path, "plots")
+    tab = table_file(path, "plots")
     raw = tab.text("radar")
     t = tab.numeric("time")
     rng = tab.numeric("range")
@@ -412,7 +412,7 @@ def read_tracks(path: str | os.PathLike[str], origin: GeodeticOrigin, *, step: f
     as_flag(f"{fn} report", report)
     lim = as_instance(f"{fn} limits", limits, CleaningLimits)
     sig = as_positive(f"{fn} sigma (m)", sigma, allow_zero=True)
-    tab = _table(path, "tracks")
+    tab = table_file(path, "tracks")
     obj = np.array(tab.text("object"))
     empty = np.flatnonzero(obj == "")
     if empty.size:

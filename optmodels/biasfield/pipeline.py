@@ -25,8 +25,9 @@ from typing import Any, Literal
 import numpy as np
 from numpy.typing import ArrayLike
 
-from optmodels.biasfield.cells import Diagnostics, FieldData, build_field_data
+from optmodels.biasfield.cells import Diagnostics, build_field_data
 from optmodels.biasfield.data import PlotTable, RadarSet
+from optmodels.biasfield.fielddata import FieldData
 from optmodels.core import ProblemError, as_instance
 
 __all__ = ["FieldBuild", "field_data_from_plots", "field_data_names", "save_field_data"]

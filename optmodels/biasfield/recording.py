@@ -189,9 +189,9 @@ def read_sites(path: str | os.PathLike[str], *,
         Naming the file, line and column (as :func:`~optmodels.biasfield.ingest.read_radars`),
         and if ``sac``/``sic`` or ``lat``/``lon`` are missing.
     """
-    from optmodels.biasfield.ingest import _table, read_radars
+    from optmodels.biasfield.ingest import read_radars, table_file
 
-    tab = _table(path, "radars")
+    tab = table_file(path, "radars")
     for col in ("sac", "sic", "lat", "lon", "alt"):
         tab.need(col)
     radars, _ = read_radars(path, origin="mean" if origin is None else origin,

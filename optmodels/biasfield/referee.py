@@ -41,19 +41,17 @@ from scipy.sparse import linalg as splinalg
 from scipy.spatial import cKDTree
 
 from optmodels.biasfield import geometry3d as g3
+from optmodels.biasfield.correction import correct_plots
 from optmodels.biasfield.data import PlotTable, RadarSet
 from optmodels.biasfield.fielddata import FieldData
+from optmodels.biasfield.fieldmap import FieldMap, Triangles, field_map
 from optmodels.biasfield.geometry import wrap_angle
 from optmodels.biasfield.problem import check_graph, r_matrix
-from optmodels.biasfield.usage import (
-    FieldMap,
+from optmodels.biasfield.registration import (
     RegistrationError,
-    _plane_positions,
-    _systematic_square,
-    _Triangles,
-    correct_plots,
-    field_map,
+    plane_positions,
     registration_error,
+    systematic_square,
 )
 from optmodels.core import (
     MAX_MAGNITUDE,
@@ -264,7 +262,7 @@ def _adsb_system(fn: str, data: FieldData, plots: PlotTable, radars: RadarSet,
     ADS-B position, its row of A (the plot's cell, or the P1 weights at the ADS-B
     position) and its weight (V_i + σ_ref² J Jᵀ)⁻¹."""
     k, m = data.k, data.m
-    tri = _Triangles(data.centers)
+    tri = Triangles(data.centers)
     sums = np.zeros((k, m, 2))
     counts = np.zeros((k, m), dtype=np.int64)
     has = np.all(np.isfinite(ref), axis=1)
@@ -427,7 +425,7 @@ def absolute_error(plots: PlotTable, radars: RadarSet, reference: ArrayLike, *,
     radars = as_instance(f"{fn} radars", radars, RadarSet)
     area = as_positive(f"{fn} area (m)", area)
     ref = _reference(fn, plots, reference)
-    z = _plane_positions(fn, plots, radars, positions)
+    z = plane_positions(fn, plots, radars, positions)
     ok = np.all(np.isfinite(ref), axis=1) & (plots.object >= 0)
     if within is not None:
         within = as_instance(f"{fn} within", within, FieldMap)
@@ -451,7 +449,7 @@ def absolute_error(plots: PlotTable, radars: RadarSet, reference: ArrayLike, *,
             sel = label == c
             if sel.sum() < min_samples:
                 continue
-            est = _systematic_square(d[sel], plots.object[rows][sel])
+            est = systematic_square(d[sel], plots.object[rows][sel])
             if est is None:
                 continue
             s_i += sel.sum() * est[0]

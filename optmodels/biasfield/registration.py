@@ -64,7 +64,7 @@ class RegistrationError:
                           for p, v in self.pairs.items()}}
 
 
-def _plane_positions(fn: str, plots: PlotTable, radars: RadarSet,
+def plane_positions(fn: str, plots: PlotTable, radars: RadarSet,
                      positions: ArrayLike | None) -> FloatArray:
     """The plots' positions (n, 2) on the common plane: ``positions`` checked, or computed
     (``plots.cartesian(radars)``, exact in 3-D)."""
@@ -101,7 +101,7 @@ def _local_quadratic(t: FloatArray, z: FloatArray, tq: FloatArray, half: float
     return out, ok
 
 
-def _systematic_square(d: FloatArray, obj: np.ndarray) -> tuple[float, float] | None:
+def systematic_square(d: FloatArray, obj: np.ndarray) -> tuple[float, float] | None:
     """|d̄|² less its noise, an unbiased estimate of the squared systematic difference (it
     can be negative; only sums of it are clipped at 0): the area mean d̄ over every
     sample, and its variance estimated from the scatter of the per-aircraft means about
@@ -152,7 +152,7 @@ def registration_error(plots: PlotTable, radars: RadarSet, *, area: float = 25e3
         within = as_instance(f"{fn} within", within, FieldMap)
         within.check_radars(radars, f"{fn} within")
     plots.check(radars)
-    z = _plane_positions(fn, plots, radars, positions)
+    z = plane_positions(fn, plots, radars, positions)
     inside = np.ones(len(plots), dtype=bool) if within is None else within.covered(z)
     keep = plots.object >= 0
     tracks: dict[tuple[int, int], np.ndarray] = {}
@@ -210,7 +210,7 @@ def registration_error(plots: PlotTable, radars: RadarSet, *, area: float = 25e3
             dc, oc = d[sel], obj[sel]
             if dc.shape[0] < min_samples:
                 continue
-            est = _systematic_square(dc, oc)
+            est = systematic_square(dc, oc)
             if est is None:
                 continue
             sys_sum += dc.shape[0] * est[0]

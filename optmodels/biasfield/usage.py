@@ -39,17 +39,12 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from optmodels.biasfield.cells import FieldData, uncertainty_sets
 from optmodels.biasfield.correction import REASONS, correct_plots, seen_by_others
 from optmodels.biasfield.correction import Corrected as Corrected
+from optmodels.biasfield.fielddata import FieldData, uncertainty_sets
 from optmodels.biasfield.fieldmap import FieldMap, field_map
-from optmodels.biasfield.fieldmap import _points as _points
-from optmodels.biasfield.fieldmap import _Triangles as _Triangles
 from optmodels.biasfield.geometry import wrap_angle
 from optmodels.biasfield.registration import RegistrationError, registration_error
-from optmodels.biasfield.registration import _local_quadratic as _local_quadratic
-from optmodels.biasfield.registration import _plane_positions as _plane_positions
-from optmodels.biasfield.registration import _systematic_square as _systematic_square
 from optmodels.core import (
     MAX_MAGNITUDE,
     FloatArray,

@@ -20,6 +20,7 @@ from optmodels.scenarios.radar_network import (
     radar_network,
     simulate_plots,
 )
+from optmodels.scenarios.recording import SimulatedRecording, simulate_recording
 
 __all__ = [
     "PAPER_RADIUS",
@@ -29,6 +30,7 @@ __all__ = [
     "ManeuverTrack",
     "RadarCell",
     "RadarNetworkScenario",
+    "SimulatedRecording",
     "TrajectoryScenario",
     "climb_turn_track",
     "encounter",
@@ -41,5 +43,6 @@ __all__ = [
     "radar_network",
     "radar_plane",
     "simulate_plots",
+    "simulate_recording",
     "two_source_plane",
 ]

@@ -260,7 +260,7 @@ def print_build(res: dict[str, Any]) -> None:
 
 # --------------------------------------------------------------------------- simulate
 def _simulate(args: argparse.Namespace) -> tuple[dict[str, Any], bool]:
-    from optmodels.biasfield.simulate import simulate_recording
+    from optmodels.scenarios.recording import simulate_recording
 
     out = writable_dir("--out", args.out)
     for f in ("recording.ast", "sites.csv"):

@@ -297,3 +297,59 @@ def test_simulate_refuses_bad_arguments(tmp_path: Path) -> None:
     bad = run_cli("biasfield", "simulate", "--out", tmp_path / "y", "--start", "90000",
                   expect=None)
     assert_error(bad, 2, "start")
+
+
+def test_correct_format_asterix_replaces_only_i040(walk: dict) -> None:
+    """``correct --format asterix``: the corrected recording reads back with the same
+    records in the same order, every column but range/azimuth equal, the covered plots'
+    range and azimuth equal to corrected.csv's within one I040 LSB (1/256 NM, 360°/2¹⁶)
+    and the others unchanged (the bytes: tests/test_asterix_rewrite.py)."""
+    from optmodels.io import read_asterix
+
+    out = walk["tmp"] / "corrected.ast"
+    res = run_cli("biasfield", "correct", walk["rec"], "--radars", walk["sites"], "--field",
+                  walk["tmp"] / "solved" / "field.npz", "--date", DATE, "--format",
+                  "asterix", "--out", out, "--json").json()
+    assert res["format"] == "asterix" and res["corrected"] == walk["correct"]["corrected"]
+    a = read_asterix([walk["rec"]], date=DATE)
+    b = read_asterix([out], date=DATE)
+    assert len(b.cat048) == len(a.cat048) and len(b.cat021) == len(a.cat021)
+    for name in ("time", "sac", "sic", "address", "pressure_altitude"):
+        assert np.array_equal(getattr(a.cat048, name), getattr(b.cat048, name),
+                              equal_nan=True), name
+    rows = _rows(walk["tmp"] / "corrected.csv")
+    cov = np.array([r["covered"] == "1" for r in rows])
+    assert cov.sum() > 0  # (all of them on this small network)
+    # the CSV's rows are one per plot read, in the order the plots were read: match the
+    # records by (SAC/SIC, address, time of day) as the join-back test does
+    key_b = {(int(b.cat048.sac[k]), int(b.cat048.sic[k]), int(b.cat048.address[k]),
+              round(float(np.mod(b.cat048.time[k], 86400.0)) * 128)): k
+             for k in range(len(b.cat048))}
+    lsb_r, lsb_a = 1852.0 / 256.0, 360.0 / 2**16
+    changed = 0
+    for r, c in zip(rows, cov, strict=True):
+        k = key_b[(int(r["sac"]), int(r["sic"]), int(r["address"], 16),
+                   round(float(r["time_of_day"]) * 128))]
+        if c:
+            assert abs(b.cat048.range[k] - float(r["range"])) <= lsb_r
+            d = (np.rad2deg(b.cat048.azimuth[k]) - float(r["azimuth"]) + 180.0) % 360.0 - 180.0
+            assert abs(d) <= lsb_a
+            changed += int(abs(b.cat048.range[k] - a.cat048.range[k]) > lsb_r / 2)
+        else:
+            assert b.cat048.range[k] == a.cat048.range[k]
+            assert b.cat048.azimuth[k] == a.cat048.azimuth[k]
+    assert changed > 0.5 * cov.sum()  # the biases are tens of metres: most ranges move
+
+
+def test_correct_format_asterix_refuses_a_csv_recording(tmp_path: Path) -> None:
+    """A CSV/Parquet recording has no CAT048 records to rewrite: exit 2, one line."""
+    plots = tmp_path / "plots.csv"
+    plots.write_text("time,radar,range,azimuth\n0,0,1000,10\n", encoding="utf-8")
+    sites = tmp_path / "sites.csv"
+    sites.write_text("name,x,y\nR1,0,0\nR2,5000,0\n", encoding="utf-8")
+    field = tmp_path / "field.npz"
+    np.savez(field, x=np.zeros(1))
+    r = run_cli("biasfield", "correct", plots, "--radars", sites, "--field", field,
+                "--format", "asterix", "--out", tmp_path / "c.ast", expect=2)
+    assert len(r.err.strip().splitlines()) == 1
+    assert "--format asterix" in r.err and "not an ASTERIX recording" in r.err

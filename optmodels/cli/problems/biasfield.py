@@ -339,6 +339,14 @@ def _load_field(args: argparse.Namespace, radars: Any) -> Any:
 
 def _biasfield_correct(args: argparse.Namespace) -> Outcome:
     out = writable_file("--out", Path(args.out))  # before any work
+    if args.format == "asterix":
+        from optmodels.io import is_asterix
+
+        for f in args.recording:
+            if not is_asterix(f):
+                raise ProblemError(f"biasfield correct --format asterix: {f} is not an ASTERIX "
+                                   "recording (datablocks or a pcap/pcapng capture); a "
+                                   "CSV/Parquet recording is corrected with --format csv")
     stage = ["reading the recording"]
     with interrupt_note(stage, out, []):
         from optmodels.biasfield.usage import correct_plots
@@ -363,15 +371,38 @@ def _biasfield_correct(args: argparse.Namespace) -> Outcome:
             reason[ok] = cor.reason
         stage[0] = f"writing {out}"
         say(args, f"writing {out} ...")
-        write_corrected(out, corrected_columns(inp, rng, az, covered, reason))
+        if args.format == "asterix":
+            _write_corrected_asterix(args, inp, out, rng, az, covered)
+        else:
+            write_corrected(out, corrected_columns(inp, rng, az, covered, reason))
     n_cov = int(covered.sum())
     reasons = {str(k): int(v) for k, v in zip(*np.unique(reason, return_counts=True),
                                                 strict=True)}
-    return {"out": str(Path(out).resolve()), "field": str(args.field), "source": inp["source"],
+    return {"out": str(Path(out).resolve()), "format": args.format, "field": str(args.field),
+            "source": inp["source"],
             "geometry": "3d" if getattr(radars, "is_3d", False) else "2d",
             "plots": len(plots), "corrected": n_cov, "not_covered": int(len(plots) - n_cov),
             "not_locatable": int(np.sum(~ok)), "reasons": reasons, "radars": list(radars.names),
             "columns": CORRECTED_COLUMNS, "origin": inp["org_used"]}, n_cov > 0
+
+
+def _write_corrected_asterix(args: argparse.Namespace, inp: dict[str, Any], out: Path,
+                             rng: np.ndarray, az: np.ndarray, covered: np.ndarray) -> None:
+    """``correct --format asterix``: the recording written again record for record, only
+    I048/040 (slant range m, azimuth rad clockwise from the radar's north) of the corrected
+    plots replaced (:func:`optmodels.io.rewrite_cat048_positions`); the other plots'
+    records, every other item and every other category are copied as read."""
+    from optmodels.io import rewrite_cat048_positions
+    from optmodels.io.asterix.reports import RECORD_SHIFT
+
+    rec = inp.get("recording")
+    if rec is None or rec.file is None or rec.offset is None:
+        raise ProblemError("biasfield correct --format asterix: the recording is not ASTERIX "
+                           f"({inp['source']}); a CSV/Parquet recording is corrected with "
+                           "--format csv")
+    ids = (np.asarray(rec.file, np.int64) << RECORD_SHIFT) + np.asarray(rec.offset, np.int64)
+    rewrite_cat048_positions(list(args.recording), out, record_id=ids[covered],
+                             range_m=rng[covered], azimuth_rad=az[covered])
 
 
 def _print_biasfield_correct(res: dict[str, Any]) -> None:
@@ -533,6 +564,10 @@ def register(sub: Any) -> None:
     _recording_args(bc, positive)
     bc.add_argument("--field", type=Path, required=True,
                     help="DIR/field.npz written by `biasfield solve`")
+    bc.add_argument("--format", choices=("csv", "asterix"), default="csv",
+                    help="csv: the table below; asterix: a corrected CAT048 recording, every "
+                    "record as read with only I040 (range, azimuth) of the corrected plots "
+                    "replaced, for replay into a tracker (give --out FILE.ast)")
     bc.add_argument("--out", type=Path, default=Path("corrected.csv"), metavar="FILE",
                     help="CSV FILE, one row per plot read: " + ", ".join(CORRECTED_COLUMNS)
                     + " (the radar's name and SAC/SIC, the ICAO address in hex, times in s "

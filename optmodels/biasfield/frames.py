@@ -167,8 +167,9 @@ def _timestamps(t: np.ndarray, epoch: Any) -> Any:
         i = int(np.flatnonzero(bad)[0])
         raise ProblemError(
             f"frames.to_frame epoch: {int(bad.sum())} times (first {t[i]:.6g} s, row {i}) "
-            f"fall outside datetime64[ns] from the epoch {e.isoformat()} (1677-09-21 to "
-            f"2262-04-11); are they in seconds? (epoch=None writes float seconds)")
+            f"fall outside datetime64[ns] (1677-09-21 to 2262-04-11, within ±292 years of "
+            f"the epoch {e.isoformat()}); are they in seconds? (epoch=None writes float "
+            f"seconds)")
     return e + pd.to_timedelta(np.round(t * 1e9).astype(np.int64), unit="ns")
 
 

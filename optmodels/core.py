@@ -46,6 +46,7 @@ __all__ = [
     "failure",
     "finish",
     "gate",
+    "json_document",
     "json_text",
     "to_jsonable",
 ]
@@ -436,6 +437,33 @@ def json_text(obj: Any, *, indent: int | None = 2) -> str:
     return json.dumps(to_jsonable(obj), indent=indent, allow_nan=False)
 
 
+def json_document(text: str, *, where: str) -> Any:
+    """The one strict JSON reader: the document of ``text``, or one :class:`ProblemError`
+    naming ``where`` (the file or the flag) for invalid JSON (with line and column), a
+    non-standard ``NaN``/``Infinity`` constant, a key given twice in one object (the
+    standard library keeps the last silently; issue 28) or nesting too deep."""
+
+    def constant(name: str) -> Any:
+        raise ProblemError(f"{where}: {name} is not valid JSON (give a finite number or null)")
+
+    def pairs(items: list[tuple[str, Any]]) -> dict[str, Any]:
+        out: dict[str, Any] = {}
+        for key, value in items:
+            if key in out:
+                raise ProblemError(f"{where}: the key {key!r} is given twice in one JSON "
+                                   f"object (which one is meant?)")
+            out[key] = value
+        return out
+
+    try:
+        return json.loads(text, parse_constant=constant, object_pairs_hook=pairs)
+    except json.JSONDecodeError as exc:
+        raise ProblemError(f"{where}: not valid JSON (line {exc.lineno}, column {exc.colno}: "
+                           f"{exc.msg})") from None
+    except RecursionError:
+        raise ProblemError(f"{where}: JSON nested too deeply") from None
+
+
 # --------------------------------------------------------------------------- timing
 class Timer:
     """Accumulating wall-clock timer: ``with timer: ...`` adds to ``timer.elapsed``."""
@@ -596,6 +624,11 @@ def check_spd_stack(name: str, mats: FloatArray, *, rtol: float = 1e-10) -> None
     """
     if mats.ndim < 2 or mats.shape[-1] != mats.shape[-2]:
         raise ProblemError(f"{name}: expected square matrices, got shape {mats.shape}")
+    if mats.shape[-1] == 0:  # found by the sweep: a raw "cannot reshape" from fuse((0, 0))
+        raise ProblemError(f"{name}: empty (0 × 0) matrices (shape {mats.shape}): a "
+                           f"covariance needs a dimension ≥ 1")
+    if mats.size == 0:  # a stack of no matrices: nothing to check
+        return
     flat = mats.reshape(-1, mats.shape[-1], mats.shape[-1])
     scale = np.max(np.abs(flat), axis=(1, 2))
     asym = np.max(np.abs(flat - flat.transpose(0, 2, 1)), axis=(1, 2))

@@ -173,3 +173,35 @@ def test_non_tabular_and_failure_forms() -> None:
     f = failure(plane.PlaneSolution, "closed_form", "collinear")
     assert f.to_rows() == []
     assert list(f.to_frame().columns) == ["point", "x_m", "y_m", "z_m"]
+
+
+def test_json_document_refuses_duplicate_keys_and_constants() -> None:
+    from optmodels.core import json_document
+
+    assert json_document('{"a": [1, 2.5], "b": {"c": null}}', where="case.json") == {
+        "a": [1, 2.5], "b": {"c": None}}
+    with pytest.raises(ProblemError, match=r"^case.json: the key 'pd' is given twice"):
+        json_document('{"pd": 0.9, "rho": 0.1, "pd": 0.5}', where="case.json")
+    with pytest.raises(ProblemError, match=r"^x: the key 'k' is given twice"):
+        json_document('[{"o": {"k": 1, "k": 1}}]', where="x")
+    with pytest.raises(ProblemError, match=r"^--param: NaN is not valid JSON"):
+        json_document('{"a": NaN}', where="--param")
+    with pytest.raises(ProblemError, match=r"^f: not valid JSON \(line 2, column 1"):
+        json_document('{"a": 1,\n}', where="f")
+    with pytest.raises(ProblemError, match=r"nested too deeply"):
+        json_document("[" * 100000 + "]" * 100000, where="f")
+
+
+def test_empty_matrices_are_one_problem_error() -> None:
+    """(0, 0) covariances (fuse on empty arrays raised a raw reshape ValueError)."""
+    from optmodels import fusion as fu
+
+    with pytest.raises(ProblemError, match=r"^cov: empty \(0 × 0\)"):
+        check_spd("cov", np.zeros((0, 0)))
+    check_spd_stack("covs", np.zeros((0, 2, 2)))          # no matrices: nothing to check
+    for args in ((np.zeros(0), np.zeros((0, 0)), np.zeros(0), np.zeros((0, 0))),
+                 (np.zeros((0, 0)),) * 4):
+        with pytest.raises(ProblemError, match=r"^fusion.fuse S1: empty"):
+            fu.fuse(*args)
+    with pytest.raises(ProblemError, match=r"^fusion.weight_matrix S1: empty"):
+        fu.weight_matrix(np.zeros((0, 0)), np.zeros((0, 0)))

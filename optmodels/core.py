@@ -8,7 +8,10 @@ subclass of :class:`Solution` carrying the common fields below plus its own.
 
 from __future__ import annotations
 
+import datetime
 import enum
+import json
+import os
 import time
 from collections.abc import Callable, Iterable, Iterator, Mapping
 from contextlib import contextmanager
@@ -19,17 +22,21 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 __all__ = [
+    "TABLES",
+    "Column",
     "OptModelsError",
     "ProblemError",
     "Solution",
     "SolveError",
     "SolverNotAvailable",
     "Status",
+    "TableSpec",
     "Timer",
     "Verdict",
     "as_choice",
     "as_count",
     "as_finite_array",
+    "as_float_array",
     "as_instance",
     "as_number",
     "as_positive",
@@ -39,6 +46,9 @@ __all__ = [
     "failure",
     "finish",
     "gate",
+    "json_document",
+    "json_text",
+    "to_jsonable",
 ]
 
 FloatArray = NDArray[np.float64]
@@ -251,27 +261,207 @@ class Solution:
         return self
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON-ready dictionary of every field (arrays become lists)."""
-        out: dict[str, Any] = {}
-        for f in fields(self):
-            out[f.name] = _jsonable(getattr(self, f.name))
+        """JSON-ready dictionary of every field through the package's one encoder
+        :func:`to_jsonable` (arrays become lists, NaN and ±inf ``None``)."""
+        return {f.name: to_jsonable(getattr(self, f.name)) for f in fields(self)}
+
+    # ------------------------------------------------------------------ tables
+    def table_spec(self) -> TableSpec | None:
+        """The :class:`TableSpec` of this solution's per-item results (``None``: not
+        tabular). A subclass declares it as the class attribute ``table`` (the problem
+        packages' specs are in :data:`TABLES` until they carry their own)."""
+        spec = getattr(type(self), "table", None)
+        if spec is None:
+            spec = TABLES.get(f"{type(self).__module__}.{type(self).__qualname__}")
+        return spec
+
+    def table_columns(self) -> dict[str, np.ndarray]:
+        """The per-item results as named 1-D columns of one length (the row index first):
+        see :class:`TableSpec` for the names. A failure form (no estimate) has no rows.
+
+        Raises
+        ------
+        ProblemError
+            ``<Class>.to_rows``: the solution is not tabular (one vector and its
+            covariance, e.g. a fused estimate: use :meth:`to_dict`), or its per-item fields
+            disagree on the number of items.
+        """
+        name = type(self).__name__
+        spec = self.table_spec()
+        if spec is None:
+            raise ProblemError(f"{name}.to_rows: this result is not a table (no per-item "
+                               f"fields); use to_dict()")
+        arrays = {c.field: np.asarray(getattr(self, c.field)) for c in spec.columns}
+        empty = any(a.size == 0 for a in arrays.values())
+        n = 0 if empty or not arrays else next(iter(arrays.values())).shape[0]
+        out: dict[str, np.ndarray] = {spec.index: np.arange(n)}
+        for col in spec.columns:
+            arr = arrays[col.field]
+            if n == 0:  # a failure form: no rows (the columns of its arrays' shapes)
+                arr = arr[:0] if arr.ndim and arr.shape[0] == 0 else np.empty(0, arr.dtype)
+            if arr.ndim == 0 or arr.shape[0] != n:
+                raise ProblemError(f"{name}.to_rows: {col.field} has shape {arr.shape}, not "
+                                   f"{n} items")
+            out.update(col.split(arr, n))
+        return out
+
+    def to_rows(self) -> list[dict[str, Any]]:
+        """One dict per item (point, cell, object, measurement: :class:`TableSpec`'s
+        ``index``), with Python numbers (NaN kept), e.g. for :func:`csv.DictWriter`.
+        Solution-level values (status, objective, method) are not repeated per row; see
+        :meth:`to_frame`'s ``attrs``. Raises :class:`ProblemError` if not tabular."""
+        cols = self.table_columns()
+        names = list(cols)
+        lists = [cols[k].tolist() for k in names]
+        return [dict(zip(names, vals, strict=True)) for vals in zip(*lists, strict=True)]
+
+    def to_frame(self) -> Any:
+        """The :meth:`to_rows` table as a ``pandas.DataFrame`` (one row per item, columns
+        in the same order, units in the column names), with ``attrs`` holding ``status``,
+        ``method`` and ``objective``. Needs pandas (``pip install optmodels[frames]``).
+        Raises :class:`ProblemError` if not tabular."""
+        try:
+            import pandas as pd
+        except ImportError as exc:  # pragma: no cover - pandas comes with the extras
+            raise ProblemError(f"{type(self).__name__}.to_frame: pandas is needed (pip "
+                               f"install pandas)") from exc
+        df = pd.DataFrame(self.table_columns())
+        df.attrs.update(status=self.status.value, method=self.method,
+                        objective=float(self.objective))
+        return df
+
+
+@dataclass(frozen=True)
+class Column:
+    """One per-item field of a :class:`TableSpec`: the solution's attribute ``field``
+    (first axis: the items). A 1-D field is one column ``name`` (default: ``field``); a
+    field (n, k) gives ``labels`` (k of them, units in the names) prefixed by ``name``
+    (``""``: the labels alone), a field (n, m, k) one group per middle index ``j``:
+    ``{name}{j}_{label}`` (``radar0_range_bias_m``). Without ``labels`` the last axis is
+    numbered (``start_0``, ``start_1``)."""
+
+    field: str
+    name: str | None = None
+    labels: tuple[str, ...] | None = None
+
+    def split(self, arr: np.ndarray, n: int) -> dict[str, np.ndarray]:
+        """The columns of ``arr`` (n, ...)."""
+        base = self.field if self.name is None else self.name
+        if arr.ndim == 1:
+            return {base: arr}
+        flat = arr.reshape(n, int(np.prod(arr.shape[1:-1])), arr.shape[-1])
+        k = arr.shape[-1]
+        labels = self.labels if self.labels is not None and len(self.labels) == k else \
+            tuple(str(i) for i in range(k))
+        out: dict[str, np.ndarray] = {}
+        for j in range(flat.shape[1]):
+            mid = "" if arr.ndim == 2 else str(j)
+            head = f"{base}{mid}"
+            for i, lab in enumerate(labels):
+                key = f"{head}_{lab}" if head else lab
+                out[key] = flat[:, j, i]
         return out
 
 
-def _jsonable(value: Any) -> Any:
-    if isinstance(value, Status):
-        return value.value
+@dataclass(frozen=True)
+class TableSpec:
+    """How a solution is a table: ``index`` names the row-number column (``"point"``,
+    ``"cell"``, ``"object"``, ``"measurement"``), ``columns`` the per-item fields
+    (:class:`Column`), all with the same first axis."""
+
+    index: str
+    columns: tuple[Column, ...]
+
+
+#: The tabular solutions of the problem packages, by ``module.QualName`` (a subclass's own
+#: ``table`` class attribute takes precedence): per point of a plane fit its projection,
+#: per cell of a bias field its centre and the field per radar (range m, azimuth rad) with
+#: the active bounds, per object of a family of lines its start and velocity, per
+#: measurement of an assignment its group (index into ``partition``, −1 background), per
+#: trial of the two-site joint ML its position.
+TABLES: dict[str, TableSpec] = {
+    "optmodels.plane.data.PlaneSolution": TableSpec("point", (
+        Column("projected", "", ("x_m", "y_m", "z_m")),)),
+    "optmodels.biasfield.problem.FieldSolution": TableSpec("cell", (
+        Column("centers", "", ("x_m", "y_m")),
+        Column("field", "radar", ("range_bias_m", "azimuth_bias_rad")),
+        Column("active", "radar", ("range_active", "azimuth_active")))),
+    "optmodels.trajectories.solution.TrajectorySolution": TableSpec("object", (
+        Column("start"), Column("velocity"))),
+    "optmodels.assignment.data.AssignmentSolution": TableSpec("measurement", (
+        Column("assignment", "group"),)),
+    "optmodels.fusion.two_site_ml.JointMLSolution": TableSpec("trial", (
+        Column("estimate", "", ("x_m", "y_m")), Column("stationarity"))),
+}
+
+
+# --------------------------------------------------------------------------- JSON
+def to_jsonable(value: Any) -> Any:
+    """The package's one JSON encoder (``Solution.to_dict``, the CLI's ``--json``, the
+    JSON files it writes): plain Python values for strict JSON. NumPy arrays become
+    (nested) lists, NumPy scalars numbers, enums their value, paths text, mappings dicts
+    with text keys, tuples/lists/sets lists; NaN **and ±inf become** ``None`` (strict JSON
+    has neither; README, "Command line"). Other objects are returned as they are
+    (:func:`json_text` then refuses them with ``TypeError``)."""
+    if isinstance(value, bool | np.bool_):
+        return bool(value)
+    if isinstance(value, float | np.floating):
+        x = float(value)
+        return x if np.isfinite(x) else None
+    if isinstance(value, np.integer):
+        return int(value)
+    if isinstance(value, enum.Enum):
+        return to_jsonable(value.value)
     if isinstance(value, np.ndarray):
-        return value.tolist()
+        if value.dtype.kind in "biu":
+            return value.tolist()
+        return to_jsonable(value.tolist())
     if isinstance(value, np.generic):
-        return value.item()
-    if isinstance(value, dict):
-        return {str(k): _jsonable(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [_jsonable(v) for v in value]
-    if isinstance(value, float) and not np.isfinite(value):
-        return None if np.isnan(value) else ("inf" if value > 0 else "-inf")
+        return to_jsonable(value.item())
+    if isinstance(value, Mapping):
+        return {str(k): to_jsonable(v) for k, v in value.items()}
+    if isinstance(value, list | tuple | set | frozenset):
+        return [to_jsonable(v) for v in value]
+    if isinstance(value, os.PathLike):
+        return os.fspath(value)
+    if isinstance(value, datetime.date):
+        return value.isoformat()
+    if isinstance(value, complex):
+        return None if not np.isfinite(value) else [value.real, value.imag]
     return value
+
+
+def json_text(obj: Any, *, indent: int | None = 2) -> str:
+    """``obj`` as one strict JSON document (``allow_nan=False``) through
+    :func:`to_jsonable`; ``TypeError`` for an object it cannot encode."""
+    return json.dumps(to_jsonable(obj), indent=indent, allow_nan=False)
+
+
+def json_document(text: str, *, where: str) -> Any:
+    """The one strict JSON reader: the document of ``text``, or one :class:`ProblemError`
+    naming ``where`` (the file or the flag) for invalid JSON (with line and column), a
+    non-standard ``NaN``/``Infinity`` constant, a key given twice in one object (the
+    standard library keeps the last silently; issue 28) or nesting too deep."""
+
+    def constant(name: str) -> Any:
+        raise ProblemError(f"{where}: {name} is not valid JSON (give a finite number or null)")
+
+    def pairs(items: list[tuple[str, Any]]) -> dict[str, Any]:
+        out: dict[str, Any] = {}
+        for key, value in items:
+            if key in out:
+                raise ProblemError(f"{where}: the key {key!r} is given twice in one JSON "
+                                   f"object (which one is meant?)")
+            out[key] = value
+        return out
+
+    try:
+        return json.loads(text, parse_constant=constant, object_pairs_hook=pairs)
+    except json.JSONDecodeError as exc:
+        raise ProblemError(f"{where}: not valid JSON (line {exc.lineno}, column {exc.colno}: "
+                           f"{exc.msg})") from None
+    except RecursionError:
+        raise ProblemError(f"{where}: JSON nested too deeply") from None
 
 
 # --------------------------------------------------------------------------- timing
@@ -299,6 +489,84 @@ def timed() -> Iterator[Timer]:
 
 
 # --------------------------------------------------------------------------- checks
+def _entries(n: int | None) -> str:
+    return "a scalar" if n is None else f"{n} entr{'y' if n == 1 else 'ies'}"
+
+
+def _ragged_text(value: Any, depth: int = 0) -> str:
+    """Where a nested sequence stops being rectangular ("item 1 has 2 entries, item 0 has
+    3", "in item 4: ..."), for the message of a ragged input; "" if it cannot tell."""
+    if depth > 8 or not isinstance(value, list | tuple | np.ndarray):
+        return ""
+    lens = [len(v) if isinstance(v, list | tuple) or (isinstance(v, np.ndarray) and v.ndim)
+            else None for v in value]
+    for j, n in enumerate(lens):
+        if n != lens[0]:
+            return f"item {j} has {_entries(n)}, item 0 has {_entries(lens[0])}"
+    for i, item in enumerate(value):
+        inner = _ragged_text(item, depth + 1)
+        if inner:
+            return f"in item {i}: {inner}"
+    return ""
+
+
+_REAL_TYPES = (bool, int, float, np.bool_, np.integer, np.floating)
+
+
+def as_float_array(name: str, value: Any) -> FloatArray:
+    """``value`` as a float64 array, or one :class:`ProblemError` naming ``name``: the root
+    of every array check (:func:`as_finite_array` and the data classes' ``__post_init__``).
+
+    Refused: ragged nested sequences (rows of different lengths, which NumPy ≥ 1.24 turns
+    into a raw ``ValueError``, or an object array of rows), object arrays holding anything
+    but real numbers, strings and bytes (``"1.5"`` would otherwise be parsed silently),
+    ``None`` entries, complex values, dates and mappings. Booleans are read as 0/1. Shape
+    and finiteness are not checked here.
+    """
+    if value is None:
+        raise ProblemError(f"{name}: not a numeric array (got None)")
+    if isinstance(value, str | bytes | Mapping | set | frozenset):
+        raise ProblemError(f"{name}: not a numeric array (got {type(value).__name__} "
+                           f"{_scalar_text(value)})")
+    try:
+        raw = np.asarray(value)
+    except (TypeError, ValueError, OverflowError) as exc:
+        where = _ragged_text(value)
+        if "inhomogeneous" in str(exc) or where:
+            raise ProblemError(f"{name}: a ragged nested sequence (rows of different "
+                               f"lengths{': ' + where if where else ''}); give a "
+                               f"rectangular array") from None
+        raise ProblemError(f"{name}: not a numeric array ({exc})") from None
+    kind = raw.dtype.kind
+    if kind == "c":
+        raise ProblemError(f"{name}: complex values are not accepted (give real numbers)")
+    if kind in "USV":
+        raise ProblemError(f"{name}: not a numeric array (text entries, dtype {raw.dtype}: "
+                           f"text is not parsed here, convert it first)")
+    if kind in "mM":
+        raise ProblemError(f"{name}: not a numeric array (dtype {raw.dtype}: convert "
+                           f"times to seconds first)")
+    if kind == "O":
+        # one pass over the entries' types (C speed), not over the entries
+        for typ in set(map(type, raw.flat)):
+            if issubclass(typ, _REAL_TYPES):
+                continue
+            if issubclass(typ, np.ndarray | list | tuple):
+                where = _ragged_text(value)
+                raise ProblemError(f"{name}: a ragged nested sequence (rows of different "
+                                   f"lengths{': ' + where if where else ''}); give a "
+                                   f"rectangular array")
+            if issubclass(typ, complex | np.complexfloating):
+                raise ProblemError(f"{name}: complex values are not accepted (give real "
+                                   f"numbers)")
+            raise ProblemError(f"{name}: not a numeric array (an entry of type "
+                               f"{typ.__name__})")
+    try:
+        return np.asarray(raw, dtype=float)
+    except (TypeError, ValueError, OverflowError) as exc:
+        raise ProblemError(f"{name}: not a numeric array ({exc})") from None
+
+
 def as_finite_array(
     name: str,
     value: ArrayLike,
@@ -316,12 +584,7 @@ def as_finite_array(
         Naming ``name``, if the value is not numeric, has the wrong number of dimensions
         or shape (``None`` in ``shape`` matches any length), or has NaN/inf entries.
     """
-    if np.iscomplexobj(value):
-        raise ProblemError(f"{name}: complex values are not accepted (give real numbers)")
-    try:
-        arr = np.asarray(value, dtype=float)
-    except (TypeError, ValueError, OverflowError) as exc:
-        raise ProblemError(f"{name}: not a numeric array ({exc})") from exc
+    arr = as_float_array(name, value)
     if ndim is not None:
         allowed = (ndim,) if isinstance(ndim, int) else ndim
         if arr.ndim not in allowed:
@@ -361,6 +624,11 @@ def check_spd_stack(name: str, mats: FloatArray, *, rtol: float = 1e-10) -> None
     """
     if mats.ndim < 2 or mats.shape[-1] != mats.shape[-2]:
         raise ProblemError(f"{name}: expected square matrices, got shape {mats.shape}")
+    if mats.shape[-1] == 0:  # found by the sweep: a raw "cannot reshape" from fuse((0, 0))
+        raise ProblemError(f"{name}: empty (0 × 0) matrices (shape {mats.shape}): a "
+                           f"covariance needs a dimension ≥ 1")
+    if mats.size == 0:  # a stack of no matrices: nothing to check
+        return
     flat = mats.reshape(-1, mats.shape[-1], mats.shape[-1])
     scale = np.max(np.abs(flat), axis=(1, 2))
     asym = np.max(np.abs(flat - flat.transpose(0, 2, 1)), axis=(1, 2))

@@ -146,3 +146,120 @@ def test_frame_errors() -> None:
         from_frame(plots)
     with pytest.raises(ProblemError, match=r"to_frame table"):
         to_frame([1, 2, 3])
+
+
+# ------------------------------------------------------- issue 28.4 / 26.2: both ways
+def test_times_beyond_datetime64_ns_are_refused_not_nat() -> None:
+    """to_frame with an epoch: times that datetime64[ns] cannot hold (here 1e10 s = 317
+    years after 2026) are one ProblemError naming the epoch, with no RuntimeWarning and
+    no NaT; the last representable day is still written exactly."""
+    import warnings
+
+    rng = np.random.default_rng(8)
+    last = (pd.Timestamp("2262-04-10", tz="UTC") - pd.Timestamp("2026-01-01", tz="UTC"))
+    edge = last.total_seconds()
+    for t_big, ok in ((1e10, False), (-1e10, False), (edge, True)):
+        plots = PlotTable(np.array([0.0, t_big]), np.array([0, 0]), np.array([1e3, 2e3]),
+                          rng.uniform(-1, 1, 2), np.array([-1, -1]))
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            if not ok:
+                with pytest.raises(ProblemError, match=r"to_frame epoch: 1 times .*"
+                                                       r"datetime64\[ns\]"):
+                    to_frame(plots, epoch="2026-01-01")
+                continue
+            df = to_frame(plots, epoch="2026-01-01")
+        assert not df["timestamp"].isna().any()
+        assert df["timestamp"].iloc[1] == pd.Timestamp("2262-04-10", tz="UTC")
+        back = from_frame(df, epoch="2026-01-01")
+        np.testing.assert_allclose(back.time, plots.time, rtol=0, atol=TOL_T)
+
+
+def _plots_frame(**over: list) -> pd.DataFrame:
+    cols = {"timestamp": [0.0, 1.0, 2.0], "radar": [0, 1, 0], "range": [1e3, 2e3, 3e3],
+            "azimuth": [10.0, 359.5, -90.0]}
+    cols.update(over)
+    return pd.DataFrame(cols)
+
+
+def test_plots_from_frame_refuse_bad_radar_azimuth_object() -> None:
+    radars = RadarSet(np.array([[0.0, 0.0], [1e4, 0.0]]), [30.0, 30.0], [1e-3, 1e-3],
+                      [2.5e5, 2.5e5], ("A", "B"))
+    good = from_frame(_plots_frame(), radars=radars)
+    np.testing.assert_allclose(good.azimuth, np.radians([10.0, 359.5, -90.0]), rtol=1e-15)
+    np.testing.assert_array_equal(good.radar, [0, 1, 0])
+    with pytest.raises(ProblemError, match=r"from_frame radar: 1 radar indices not ≥ 0 "
+                                           r"\(first -1 at row 1\)"):
+        from_frame(_plots_frame(radar=[0, -1, 0]))
+    with pytest.raises(ProblemError, match=r"radar: 1 radar indices not in 0..1 .*first 99"):
+        from_frame(_plots_frame(radar=[0, 99, 0]), radars=radars)
+    with pytest.raises(ProblemError, match=r"from_frame azimuth: 1 values outside ±360° .*"
+                                           r"first 1e\+06 at row 2"):
+        from_frame(_plots_frame(azimuth=[10.0, 20.0, 1e6]))
+    with pytest.raises(ProblemError, match=r"from_frame object: .*-2 at row 0"):
+        from_frame(_plots_frame(object=[-2, 0, 1]))
+    with pytest.raises(ProblemError, match=r"from_frame range: 1 negative"):
+        from_frame(_plots_frame(range=[1e3, -5.0, 1e3]))
+    with pytest.raises(ProblemError, match=r"from_frame radars: expected a RadarSet"):
+        from_frame(_plots_frame(), radars=3)
+
+
+def _traffic_frame(rng: np.random.Generator, n: int = 30) -> tuple[pd.DataFrame, dict]:
+    """A frame as the traffic library's Flight.data has it (feet, knots, ft/min, tz-aware
+    UTC timestamps) and the truth in SI."""
+    geo_m = rng.uniform(300.0, 12000.0, n)
+    baro_m = geo_m - rng.uniform(-200.0, 200.0, n)
+    t = np.sort(rng.uniform(0.0, 3600.0, n))
+    df = pd.DataFrame({
+        "timestamp": pd.Timestamp("2026-05-04", tz="UTC") + pd.to_timedelta(t, unit="s"),
+        "icao24": "4ca123", "callsign": "EIN123", "latitude": rng.uniform(50, 52, n),
+        "longitude": rng.uniform(-1, 1, n), "altitude": baro_m / 0.3048,
+        "geoaltitude": geo_m / 0.3048, "groundspeed": rng.uniform(200, 450, n),
+        "track": rng.uniform(0, 360, n), "vertical_rate": rng.uniform(-2000, 2000, n)})
+    return df, {"t": t, "geo": geo_m, "baro": baro_m}
+
+
+def test_traffic_frames_are_converted_from_feet() -> None:
+    """convention='traffic': altitude is barometric ft -> pressure altitude (m),
+    geoaltitude geometric ft -> height above the ellipsoid (m); and back."""
+    df, truth = _traffic_frame(np.random.default_rng(9))
+    rep = from_frame(df, convention="traffic")
+    np.testing.assert_allclose(rep.height, truth["geo"], rtol=1e-12)
+    np.testing.assert_allclose(rep.pressure_altitude, truth["baro"], rtol=1e-12)
+    np.testing.assert_allclose(rep.time, truth["t"], rtol=0, atol=TOL_T)
+    # written back in the traffic convention: feet again, and marked
+    out = to_frame(rep, epoch="2026-05-04", convention="traffic")
+    assert out.attrs["optmodels.convention"] == "traffic"
+    np.testing.assert_allclose(out["altitude"], df["altitude"], rtol=1e-12)
+    np.testing.assert_allclose(out["geoaltitude"], df["geoaltitude"], rtol=1e-12)
+    again = from_frame(out)                             # the mark says: traffic
+    np.testing.assert_allclose(again.height, truth["geo"], rtol=1e-12)
+    # the traffic library without geoaltitude: height unknown (NaN), baro still read
+    only_baro = from_frame(df.drop(columns="geoaltitude"), convention="traffic")
+    assert np.all(np.isnan(only_baro.height))
+    np.testing.assert_allclose(only_baro.pressure_altitude, truth["baro"], rtol=1e-12)
+
+
+def test_ambiguous_altitude_units_are_refused() -> None:
+    df, _ = _traffic_frame(np.random.default_rng(10))
+    # a traffic frame without the convention: refused (it would be 3.28x heights)
+    with pytest.raises(ProblemError, match=r"from_frame convention: .*traffic library's"):
+        from_frame(df)
+    # a hand-made frame with 'altitude' only: metres or barometric feet?
+    plain = df.drop(columns="geoaltitude")
+    with pytest.raises(ProblemError, match=r"'altitude' may be metres .* or the traffic"):
+        from_frame(plain)
+    # contradictions between the convention given and the columns or the mark
+    with pytest.raises(ProblemError, match=r"'optmodels' has no 'geoaltitude'"):
+        from_frame(df, convention="optmodels")
+    ours = to_frame(_adsb(np.random.default_rng(11)))
+    with pytest.raises(ProblemError, match=r"'traffic' given, but the frame was written "
+                                           r"with convention 'optmodels'"):
+        from_frame(ours, convention="traffic")
+    with pytest.raises(ProblemError, match=r"convention: expected one of"):
+        from_frame(df, convention="feet")
+    # stated: metres above the ellipsoid, read as they are (one aircraft, rows already in
+    # time order, so the order is the frame's)
+    rep = from_frame(plain, convention="optmodels")
+    np.testing.assert_array_equal(rep.height, plain["altitude"].to_numpy())
+    assert np.all(np.isnan(rep.pressure_altitude))

@@ -13,7 +13,6 @@ import argparse
 import contextlib
 import ctypes
 import json
-import math
 import os
 import sys
 import traceback
@@ -23,8 +22,13 @@ from typing import Any, NoReturn
 
 import numpy as np
 
-from optmodels.core import OptModelsError, ProblemError, SolveError, SolverNotAvailable
-from optmodels.io import json_default
+from optmodels.core import (
+    OptModelsError,
+    ProblemError,
+    SolveError,
+    SolverNotAvailable,
+    json_text,
+)
 
 #: Exit statuses (:mod:`optmodels.cli`'s docstring).
 EXIT_OK, EXIT_NOT_OK, EXIT_INPUT, EXIT_INTERNAL, EXIT_INTERRUPTED = 0, 1, 2, 3, 130
@@ -41,9 +45,17 @@ def _reading(label: str) -> Iterator[None]:
     """Errors raised while reading or validating the user's input are the user's: a raw
     exception from a reader or a data constructor (``float(None)``, a ragged list, a file
     that is not UTF-8, ...) becomes one :class:`ProblemError` naming ``label`` (the file
-    or the flag), i.e. exit 2 instead of a traceback."""
+    or the flag), i.e. exit 2 instead of a traceback; a ProblemError about the content
+    is prefixed with the file's name ``label`` unless it names it already (a label
+    that is a flag, ``--s1/--s2``, is left to the verb, which names the flag)."""
     try:
         yield
+    except ProblemError as exc:
+        # a data class's refusal of a file's content ("... means: a ragged nested
+        # sequence") also names the file (a flag's block names its flag itself)
+        if label and not label.startswith("--") and label not in str(exc):
+            raise ProblemError(f"{label}: {exc}") from exc
+        raise
     except OptModelsError:
         raise
     except UnicodeDecodeError as exc:
@@ -122,21 +134,11 @@ def _stdout_to_stderr() -> Iterator[None]:
             os.close(saved)
 
 
-def _jsonable(value: Any) -> Any:
-    """NaN/±inf -> None (strict JSON has no such numbers); containers recursively."""
-    if isinstance(value, float):
-        return value if math.isfinite(value) else None
-    if isinstance(value, dict):
-        return {k: _jsonable(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [_jsonable(v) for v in value]
-    return value
-
-
 def _dumps(obj: Any) -> str:
-    """One strict JSON document (NumPy arrays and scalars as lists and numbers)."""
-    plain = json.loads(json.dumps(obj, default=json_default))
-    return json.dumps(_jsonable(plain), indent=2, allow_nan=False)
+    """One strict JSON document through the package's one encoder
+    (:func:`optmodels.core.json_text`: NumPy arrays and scalars as lists and numbers,
+    NaN/±inf as ``null``), the same as ``Solution.to_dict()``."""
+    return json_text(obj, indent=2)
 
 
 def _emit(text: str) -> None:

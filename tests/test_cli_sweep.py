@@ -219,8 +219,6 @@ def test_every_flag_keeps_the_exit_code_contract(inputs: dict[str, Path]) -> Non
 
 
 # ------------------------------------------------------------ the small silent cases
-@pytest.mark.xfail(strict=True, reason="optmodels/cli/problems/biasfield.py line 96 reads "
-                   "`--origin ''` as no origin (`if args.origin`); see notes/robust.md")
 def test_empty_origin_is_refused(inputs: dict[str, Path]) -> None:
     run = run_cli("biasfield", "build", inputs["damaged"], "--radars", inputs["damaged"],
                   "--origin", "", expect=None)

@@ -98,6 +98,9 @@ class FieldData:
             raise ProblemError(f"radars: expected (m, 2) with m ≥ 2, got {self.radars.shape}")
         self.centers = as_finite_array("centers", self.centers, ndim=2, max_abs=MAX_MAGNITUDE)
         k = self.centers.shape[0]
+        if k < 1:
+            raise ProblemError("biasfield.FieldData centers: no cell (K = 0); the field needs "
+                               "at least one cell centre")
         self.xi = as_finite_array("xi", self.xi, shape=(k, m, 2), max_abs=MAX_MAGNITUDE)
         self.adjacency = as_adjacency(self.adjacency, k)
         if self.centers.shape[1] != 2:

@@ -4,14 +4,13 @@
 from __future__ import annotations
 
 import argparse
-import json
 from typing import Any
 
 import numpy as np
 
 from optmodels.cli.args import _count
 from optmodels.cli.contract import Outcome, _leaf, _out_file, _reading
-from optmodels.core import ProblemError
+from optmodels.core import ProblemError, json_document
 from optmodels.execution import scheduler_argument
 
 
@@ -26,9 +25,11 @@ def _montecarlo(args: argparse.Namespace) -> Outcome:
         key, sep, val = item.partition("=")
         if not sep or not key:
             raise ProblemError(f"--param: expected NAME=VALUE, got {item!r}")
-        try:
-            params[key] = json.loads(val)
-        except json.JSONDecodeError:
+        try:  # a JSON value (the one strict reader: no NaN, no key given twice) or text
+            params[key] = json_document(val, where=f"--param {key}")
+        except ProblemError:
+            if val.lstrip().startswith(("{", "[")):  # meant as JSON: say what is wrong
+                raise
             params[key] = val
     with _reading("--param"):
         study = mc.study(args.study, **params)

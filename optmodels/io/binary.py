@@ -8,7 +8,6 @@ document (``NaN``/``Infinity`` refused). No equations (file handling only).
 
 from __future__ import annotations
 
-import json
 import os
 import zipfile
 import zlib
@@ -18,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from optmodels.core import ProblemError
+from optmodels.core import ProblemError, json_document
 from optmodels.io.paths import as_path, input_file, read_text
 
 # --------------------------------------------------------------------------- .npz
@@ -89,27 +88,18 @@ def read_npz(path: str | os.PathLike[str], *, what: str = ".npz archive",
 
 # --------------------------------------------------------------------------- JSON, .npy
 def read_json(path: str | os.PathLike[str], *, what: str = "JSON file") -> Any:
-    """The document of a UTF-8 JSON file (BOM allowed); ``NaN``/``Infinity`` refused.
+    """The document of a UTF-8 JSON file (BOM allowed), read by the package's one strict
+    reader (:func:`optmodels.core.json_document`): ``NaN``/``Infinity`` and a key given twice
+    in one object refused.
 
     Raises
     ------
     ProblemError
         Naming the file: any problem of :func:`read_text`; invalid JSON (with the line
-        and column); a non-standard ``NaN``/``Infinity`` constant.
+        and column); a non-standard ``NaN``/``Infinity`` constant; a duplicated key.
     """
     p = as_path("path", path)
-    text = read_text(p, what=what)
-
-    def constant(name: str) -> Any:
-        raise ProblemError(f"{p}: {name} is not valid JSON (give a finite number or null)")
-
-    try:
-        return json.loads(text, parse_constant=constant)
-    except json.JSONDecodeError as exc:
-        raise ProblemError(f"{p}: not valid JSON (line {exc.lineno}, column {exc.colno}: "
-                           f"{exc.msg})") from None
-    except RecursionError:
-        raise ProblemError(f"{p}: JSON nested too deeply") from None
+    return json_document(read_text(p, what=what), where=str(p))
 
 
 def read_npy(path: str | os.PathLike[str], *, what: str = ".npy array") -> np.ndarray:

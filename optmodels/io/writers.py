@@ -11,14 +11,13 @@ from __future__ import annotations
 
 import csv
 import io as _stdio
-import json
 import os
 from collections.abc import Iterable, Mapping, Sequence
 from typing import Any
 
 import numpy as np
 
-from optmodels.core import FloatArray, ProblemError, as_finite_array
+from optmodels.core import FloatArray, ProblemError, as_finite_array, json_text, to_jsonable
 from optmodels.io.paths import _write_text, output_file
 
 
@@ -80,8 +79,9 @@ def csv_cell(v: Any) -> Any:
 
 
 def write_json(path: str | os.PathLike[str], obj: Any) -> None:
-    """``obj`` as indented JSON (NumPy arrays and scalars as lists and numbers). Missing
-    parent folders are created.
+    """``obj`` as indented strict JSON through the package's one encoder
+    (:func:`optmodels.core.to_jsonable`: NumPy arrays and scalars as lists and numbers,
+    NaN and ±inf as ``null``). Missing parent folders are created.
 
     Raises
     ------
@@ -89,16 +89,16 @@ def write_json(path: str | os.PathLike[str], obj: Any) -> None:
         Naming the path if it is a directory or cannot be written.
     """
     p = output_file(path, name="io.write_json path")
-    _write_text(p, json.dumps(obj, indent=2, default=json_default) + "\n")
+    _write_text(p, json_text(obj) + "\n")
 
 
 def json_default(o: Any) -> Any:
-    """``json.dumps(default=...)`` for NumPy arrays and scalars."""
-    if isinstance(o, np.ndarray):
-        return o.tolist()
-    if isinstance(o, np.generic):
-        return o.item()
-    raise TypeError(f"not JSON serialisable: {type(o).__name__}")
+    """``json.dumps(default=...)`` for NumPy arrays and scalars, through the package's one
+    encoder (:func:`optmodels.core.to_jsonable`; NaN and ±inf become ``null``)."""
+    out = to_jsonable(o)
+    if out is o:
+        raise TypeError(f"not JSON serialisable: {type(o).__name__}")
+    return out
 
 
 def markdown_table(rows: Iterable[Mapping[str, Any]], columns: Sequence[str],

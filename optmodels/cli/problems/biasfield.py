@@ -105,7 +105,7 @@ def _read_input(args: argparse.Namespace, *, locate: bool, clean: bool,
     from optmodels.biasfield.cleaning import clean_plots
     from optmodels.biasfield.ingest import read_tracks
 
-    origin = _parse_origin(args.origin) if args.origin else None
+    origin = _parse_origin(args.origin) if args.origin is not None else None
     files = list(args.recording) + ([args.adsb] if getattr(args, "adsb", None) else [])
     if len(args.recording) > 2:
         raise ProblemError(f"RECORDING: at most two files (plots, then ADS-B), got "

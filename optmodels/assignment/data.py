@@ -282,8 +282,8 @@ def _logpdf(x: FloatArray, mean: FloatArray, cov: FloatArray) -> FloatArray:
         2 * math.pi)
 
 
-def candidate_groups(data: AssignmentData, *,
-                     limit: int | None = None) -> list[tuple[int, ...]]:
+def candidate_groups(data: AssignmentData, *, limit: int | None = None,
+                     model_gate: bool = True) -> list[tuple[int, ...]]:
     """Singletons and the groups allowed by ``max_group_size`` and ``group_gate`` (cliques
     of the gate graph: members pairwise within the gate under K_i + K_j), in
     lexicographic order by size.
@@ -293,6 +293,7 @@ def candidate_groups(data: AssignmentData, *,
     u_ij > PAIR_NEGLECT, :meth:`AssignmentData.pair_edges`). A group outside it needs an
     unresolved neglected pair in every spanning tree, so the prior mass of all variants
     that use one is at most Σ_neglected u_ij ≤ PAIR_NEGLECT · Q(Q − 1)/2.
+    ``model_gate=False`` ignores that gate (every subset, as without a sensor).
 
     Raises
     ------
@@ -314,7 +315,7 @@ def candidate_groups(data: AssignmentData, *,
             f"few objects are rarely plausible)")
 
     gated = data.group_gate is not None and np.isfinite(data.group_gate)
-    if data._pair_u is not None and not gated:
+    if data._pair_u is not None and not gated and model_gate:
         return _connected_groups(data, size, limit, refuse)
     if not gated:
         total = sum(int(comb(q, k, exact=True)) for k in range(1, size + 1))

@@ -49,9 +49,9 @@ from optmodels.assignment.data import (
     AssignmentData,
     AssignmentSolution,
     _finish_point,
-    _group_matrix,
     block_log_prior,
     entry_log_likelihoods,
+    group_arrays,
 )
 from optmodels.assignment.sensor import PAIR_NEGLECT
 from optmodels.core import FloatArray, ProblemError, Status, timed
@@ -79,7 +79,7 @@ def gated_entries(data: AssignmentData, groups: list[tuple[int, ...]], bonus: fl
                   ) -> tuple[np.ndarray, np.ndarray, FloatArray]:
     """The (measurement, group) pairs that can carry a needed column γ_iS (module
     docstring, item 1) and their gains ln φ_iS + ``bonus``: (rows, cols, gain)."""
-    n, d = data.n, data.means.shape[1]
+    n = data.n
     empty = np.zeros(0, dtype=int)
     if n == 0:
         return empty, empty.copy(), np.zeros(0)
@@ -89,15 +89,18 @@ def gated_entries(data: AssignmentData, groups: list[tuple[int, ...]], bonus: fl
     if m2max <= 0:
         return empty, empty.copy(), np.zeros(0)
     r_max = float(np.linalg.eigvalsh(noise)[:, -1].max())
-    wm = _group_matrix(data, groups)
-    q = data.q
-    mean = np.asarray(wm @ data.means)
-    cov = np.asarray(wm.power(2) @ data.covs.reshape(q, d * d)).reshape(-1, d, d)
+    mean, cov = group_arrays(data, groups)
     radius = np.sqrt(m2max * (np.linalg.eigvalsh(cov)[:, -1] + r_max)) * (1 + 1e-9)
-    lists = cKDTree(data.measurements).query_ball_point(mean, radius, return_sorted=False)
-    lens = np.fromiter(map(len, lists), dtype=int, count=len(groups))
-    cols = np.repeat(np.arange(len(groups)), lens)
-    rows = np.fromiter(itertools.chain.from_iterable(lists), dtype=int, count=int(lens.sum()))
+    if n * len(groups) <= 4096:  # all pairs directly: cheaper than a tree (measured)
+        dist = np.linalg.norm(data.measurements[None, :, :] - mean[:, None, :], axis=2)
+        cols, rows = np.nonzero(dist <= radius[:, None])
+    else:
+        lists = cKDTree(data.measurements).query_ball_point(mean, radius,
+                                                            return_sorted=False)
+        lens = np.fromiter(map(len, lists), dtype=int, count=len(groups))
+        cols = np.repeat(np.arange(len(groups)), lens)
+        rows = np.fromiter(itertools.chain.from_iterable(lists), dtype=int,
+                           count=int(lens.sum()))
     return rows, cols, entry_log_likelihoods(data, groups, rows, cols) + bonus
 
 
@@ -154,11 +157,28 @@ def prune_entries(data: AssignmentData, groups: list[tuple[int, ...]], p0: Float
 
 
 # ----------------------------------------------------------------------------- the model
+class Rows:
+    """A sparse matrix as (row, col, value) triplets, applied by ``@`` with
+    :func:`numpy.bincount` (what the re-check needs; building a scipy.sparse matrix costs
+    ~0.3 ms each, measured, a tenth of a small scan's budget)."""
+
+    def __init__(self, r: np.ndarray, c: np.ndarray, v: FloatArray,
+                 shape: tuple[int, int]) -> None:
+        self.r, self.c, self.v, self.shape = r, c, v, shape
+
+    def __matmul__(self, x: FloatArray) -> FloatArray:
+        return np.bincount(self.r, weights=self.v * x[self.c], minlength=self.shape[0])
+
+    def tocsr(self) -> sps.csr_matrix:
+        return sps.csr_matrix((self.v, (self.r, self.c)), shape=self.shape)
+
+
 def sparse_model(data: AssignmentData, groups: list[tuple[int, ...]], p0: FloatArray,
                  keep: np.ndarray, keep_gain: FloatArray
-                 ) -> tuple[FloatArray, sps.csr_matrix, sps.csr_matrix, FloatArray]:
+                 ) -> tuple[FloatArray, Rows, Rows, FloatArray]:
     """The MILP of :func:`~optmodels.assignment.milp._build_model` (no cuts) from sparse
-    arrays: x = (z_S, γ_iS for ``keep`` (K, 2) = (i, group), γ_i0); c, A_eq, A_ub, b_ub."""
+    arrays: x = (z_S, γ_iS for ``keep`` (K, 2) = (i, group), γ_i0); c, A_eq, A_ub, b_ub
+    (``Rows(...).tocsr()`` gives the scipy matrices)."""
     q, n, n_g, n_k = data.q, data.n, len(groups), len(keep)
     c = np.concatenate([p0, keep_gain, np.full(n, -math.log(data.volume))])
     cols = n_g + n_k + n
@@ -168,19 +188,45 @@ def sparse_model(data: AssignmentData, groups: list[tuple[int, ...]], p0: FloatA
     member_c = np.repeat(np.arange(n_g), sizes)
     rows = np.concatenate([member_r, q + keep[:, 0], q + np.arange(n)])
     colx = np.concatenate([member_c, n_g + np.arange(n_k), n_g + n_k + np.arange(n)])
-    a_eq = sps.csr_matrix((np.ones(len(rows)), (rows, colx)), shape=(q + n, cols))
-    a_ub = sps.csr_matrix((np.concatenate([-np.ones(n_g), np.ones(n_k)]),
-                           (np.concatenate([np.arange(n_g), keep[:, 1]]),
-                            np.concatenate([np.arange(n_g), n_g + np.arange(n_k)]))),
-                          shape=(n_g, cols))
+    a_eq = Rows(rows, colx, np.ones(len(rows)), (q + n, cols))
+    a_ub = Rows(np.concatenate([np.arange(n_g), keep[:, 1]]),
+                np.concatenate([np.arange(n_g), n_g + np.arange(n_k)]),
+                np.concatenate([-np.ones(n_g), np.ones(n_k)]), (n_g, cols))
     return c, a_eq, a_ub, np.zeros(n_g)
 
 
-def _highs_solve(c: FloatArray, a: sps.csc_matrix, lo: FloatArray, hi: FloatArray,
-                 gap: float, limit: float | None, verbose: bool
+def _components(n_nodes: int, ea: np.ndarray, eb: np.ndarray) -> tuple[int, np.ndarray]:
+    """Connected components (count, label per node): scipy's csgraph, or for a few edges
+    a union-find in NumPy-free Python (below ~2000 edges it is faster than building the
+    sparse graph, measured)."""
+    if len(ea) > 2000:
+        graph = sps.coo_matrix((np.ones(len(ea)), (ea, eb)), shape=(n_nodes, n_nodes))
+        return connected_components(graph, directed=False)
+    parent = list(range(n_nodes))
+
+    def find(a: int) -> int:
+        while parent[a] != a:
+            parent[a] = parent[parent[a]]
+            a = parent[a]
+        return a
+
+    for a, b in zip(ea.tolist(), eb.tolist(), strict=True):
+        ra, rb = find(a), find(b)
+        if ra != rb:
+            parent[ra] = rb
+    roots = [find(a) for a in range(n_nodes)]
+    _, label = np.unique(roots, return_inverse=True)
+    return int(label.max(initial=-1)) + 1, label.reshape(-1)
+
+
+def _highs_solve(c: FloatArray, ar: np.ndarray, ac: np.ndarray, av: FloatArray,
+                 shape: tuple[int, int], lo: FloatArray, hi: FloatArray, gap: float,
+                 limit: float | None, verbose: bool
                  ) -> tuple[Status, FloatArray | None, float, float | None, str, float]:
-    """max cᵀx, lo ≤ A x ≤ hi, x binary, by HiGHS directly: status, x, objective, the
-    MIP gap reached, HiGHS' message, seconds."""
+    """max cᵀx, lo ≤ A x ≤ hi (A from the triplets ``ar``, ``ac``, ``av``), x binary, by
+    HiGHS directly: status, x, objective, the MIP gap reached, HiGHS' message, seconds."""
+    order = np.lexsort((ar, ac))  # column-wise
+    start = np.concatenate([[0], np.cumsum(np.bincount(ac, minlength=shape[1]))])
     hs = highspy_module()
     h = hs.Highs()
     h.setOptionValue("output_flag", bool(verbose))
@@ -188,17 +234,17 @@ def _highs_solve(c: FloatArray, a: sps.csc_matrix, lo: FloatArray, hi: FloatArra
     if limit is not None:
         h.setOptionValue("time_limit", float(limit))
     lp = hs.HighsLp()
-    lp.num_col_, lp.num_row_ = a.shape[1], a.shape[0]
+    lp.num_col_, lp.num_row_ = shape[1], shape[0]
     lp.col_cost_ = c
-    lp.col_lower_ = np.zeros(a.shape[1])
-    lp.col_upper_ = np.ones(a.shape[1])
+    lp.col_lower_ = np.zeros(shape[1])
+    lp.col_upper_ = np.ones(shape[1])
     lp.row_lower_, lp.row_upper_ = lo, hi
     lp.sense_ = hs.ObjSense.kMaximize
     lp.a_matrix_.format_ = hs.MatrixFormat.kColwise
-    lp.a_matrix_.start_ = a.indptr
-    lp.a_matrix_.index_ = a.indices
-    lp.a_matrix_.value_ = a.data
-    lp.integrality_ = [hs.HighsVarType.kInteger] * a.shape[1]
+    lp.a_matrix_.start_ = start.astype(np.int32)
+    lp.a_matrix_.index_ = ar[order].astype(np.int32)
+    lp.a_matrix_.value_ = av[order]
+    lp.integrality_ = [hs.HighsVarType.kInteger] * shape[1]
     with timed() as ts:
         h.passModel(lp)
         h.run()
@@ -240,10 +286,11 @@ def solve_decomposed(data: AssignmentData, groups: list[tuple[int, ...]], *, gap
         # components on objects 0..Q-1 and measurements Q..Q+N-1
         first = np.fromiter((g[0] for g in groups), dtype=int, count=n_g)
         merged = [g for g in groups if len(g) > 1]
-        ea = [a for g in merged for a in g[:-1]] + (q + keep[:, 0]).tolist()
-        eb = [b for g in merged for b in g[1:]] + first[keep[:, 1]].tolist()
-        graph = sps.coo_matrix((np.ones(len(ea)), (ea, eb)), shape=(q + n, q + n))
-        n_comp, label = connected_components(graph, directed=False)
+        ea = np.array([a for g in merged for a in g[:-1]] + (q + keep[:, 0]).tolist(),
+                      dtype=int)
+        eb = np.array([b for g in merged for b in g[1:]] + first[keep[:, 1]].tolist(),
+                      dtype=int)
+        n_comp, label = _components(q + n, ea, eb)
         col_comp = np.concatenate([label[first], label[q + keep[:, 0]], label[q:]])
         n_obj = np.bincount(label[:q], minlength=n_comp)
         contended = np.zeros(n_comp, dtype=bool)
@@ -282,15 +329,22 @@ def solve_decomposed(data: AssignmentData, groups: list[tuple[int, ...]], *, gap
             raise ProblemError(f"{where}: {len(sel_c)} binary columns in the contended "
                                f"components, above the limit {MAX_MILP_COLUMNS:.0e}; lower "
                                f"max_group_size")
-        g_on = contended[label[first]]
-        rows_eq = np.flatnonzero(np.concatenate([contended[label[:q]],
-                                                 contended[label[q:]]]))
-        rows_ub = np.flatnonzero(g_on)
-        a = sps.vstack([a_eq[rows_eq], a_ub[rows_ub]], format="csc")[:, sel_c]
-        lo = np.concatenate([np.ones(len(rows_eq)), np.full(len(rows_ub), -np.inf)])
-        hi = np.concatenate([np.ones(len(rows_eq)), b_ub[rows_ub]])
+        row_on = np.concatenate([contended[label[:q]], contended[label[q:]],
+                                 contended[label[first]]])
+        new_row = np.cumsum(row_on) - 1
+        new_col = np.full(len(c), -1)
+        new_col[sel_c] = np.arange(len(sel_c))
+        r_all = np.concatenate([a_eq.r, a_ub.r + q + n])
+        c_all = np.concatenate([a_eq.c, a_ub.c])
+        v_all = np.concatenate([a_eq.v, a_ub.v])
+        on = row_on[r_all] & (new_col[c_all] >= 0)
+        n_eq = int(row_on[:q + n].sum())
+        n_rows = int(row_on.sum())
+        lo = np.concatenate([np.ones(n_eq), np.full(n_rows - n_eq, -np.inf)])
+        hi = np.concatenate([np.ones(n_eq), b_ub[row_on[q + n:]]])
         status, xs, obj, gap_reached, text, t_milp = _highs_solve(
-            c[sel_c], a.tocsc(), lo, hi, gap, limit, verbose)
+            c[sel_c], new_row[r_all[on]], new_col[c_all[on]], v_all[on],
+            (n_rows, len(sel_c)), lo, hi, gap, limit, verbose)
         solve_t += t_milp
         msg = f"decomposed; HiGHS on {int(contended.sum())} contended components: {text}"
         info["milp_columns"] = len(sel_c)

@@ -482,7 +482,7 @@ def group_arrays(data: AssignmentData, groups: Sequence[tuple[int, ...]]
     mean, cov = np.empty((len(groups), d)), np.empty((len(groups), d, d))
     amp = None if data.sensor is None or isinstance(data.sensor.weights, str) \
         else data.sensor.weights
-    for s_ in np.unique(sizes):
+    for s_ in sorted(set(sizes.tolist())):
         at = np.flatnonzero(sizes == s_)
         mem = np.array([groups[c] for c in at], dtype=int).reshape(len(at), s_)
         if s_ == 1:

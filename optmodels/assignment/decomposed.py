@@ -54,6 +54,7 @@ from optmodels.assignment.data import (
     group_arrays,
 )
 from optmodels.assignment.sensor import PAIR_NEGLECT
+from optmodels.backends.profiles import milp_options
 from optmodels.core import FloatArray, ProblemError, Status, timed
 
 #: Binary columns of the batched MILP of the contended components (z_S + γ_iS + γ_i0).
@@ -125,7 +126,7 @@ def prune_entries(data: AssignmentData, groups: list[tuple[int, ...]], p0: Float
     skeys, sgain = keys[order], gain[order]
     index = {g: c for c, g in enumerate(groups)}
     keep_g = sizes == 1
-    for size in np.unique(sizes[sizes > 1]):
+    for size in sorted(set(sizes[sizes > 1].tolist())):
         cs = np.flatnonzero(sizes == size)
         members = np.array([groups[c] for c in cs], dtype=int)  # (G_s, s); singleton j is j
         split = p0[members].sum(axis=1)
@@ -229,17 +230,18 @@ def _highs_solve(c: FloatArray, ar: np.ndarray, ac: np.ndarray, av: FloatArray,
     start = np.concatenate([[0], np.cumsum(np.bincount(ac, minlength=shape[1]))])
     hs = highspy_module()
     h = hs.Highs()
-    h.setOptionValue("output_flag", bool(verbose))
-    # Measured on HiGHS 1.16 (a 10-binary model, 2 busy cores): 20-33 ms per run with the
-    # defaults, 13 ms single-threaded, 0.7 ms single-threaded without the feasibility-jump
-    # heuristic (a heuristic only: optimality is still proven by the branch and bound).
-    # HiGHS' thread pool is global: "threads" takes effect if this is the process's first
-    # HiGHS run (else the pool it has is used)
+    # the project's HiGHS profile for this model (optmodels.backends.profiles.milp_options:
+    # mip_abs_gap 1e-12 with a zero gap, presolve off, the time limit), the same as the
+    # CVXPY path's; then, measured on HiGHS 1.16 (a 10-binary model, 2 busy cores): 20-33
+    # ms per run with the default threads and heuristics, 13 ms single-threaded, 0.7 ms
+    # single-threaded without the feasibility-jump heuristic (a heuristic only: optimality
+    # is still proven by the branch and bound). HiGHS' thread pool is global: "threads"
+    # takes effect if this is the process's first HiGHS run (else its pool is used)
+    for key, value in milp_options("HIGHS", gap, limit, verbose=verbose,
+                                   where="assignment.solve").items():
+        h.setOptionValue(key, value)
     h.setOptionValue("threads", 1)
     h.setOptionValue("mip_heuristic_run_feasibility_jump", False)
-    h.setOptionValue("mip_rel_gap", float(gap))
-    if limit is not None:
-        h.setOptionValue("time_limit", float(limit))
     lp = hs.HighsLp()
     lp.num_col_, lp.num_row_ = shape[1], shape[0]
     lp.col_cost_ = c

@@ -123,10 +123,13 @@ def _scene(rng: np.random.Generator, clusters: int, per: int, n_extra: int = 1) 
 
 
 @pytest.mark.parametrize("seed", range(6))
-def test_decomposed_equals_monolithic_and_brute_force(seed: int) -> None:
-    """The decomposed MAP (default) equals the monolithic CVXPY MILP (the original form)
-    in score, partition and assignment; on small scenes also the paper's enumeration
-    (brute force); the scene has several components and at least one contended."""
+def test_decomposed_equals_monolithic_and_brute_force(seed: int,
+                                                      monkeypatch: pytest.MonkeyPatch) -> None:
+    """The decomposed MAP (default: small contended components by their variants) equals
+    the same with every contended component in the one HiGHS model, and the monolithic
+    CVXPY MILP (the original form), in score, partition and assignment; on small scenes
+    also the paper's enumeration (brute force); several components, ≥ 1 contended."""
+    from optmodels.assignment import decomposed
     rng = np.random.default_rng(100 + seed)
     small = seed < 3
     m, k, z, r, res = _scene(rng, 1 if small else 4, 3 if small else 4)
@@ -137,7 +140,12 @@ def test_decomposed_equals_monolithic_and_brute_force(seed: int) -> None:
     assert a.method == "highs:decomposed" and b.method.startswith("cvxpy")
     assert a.log_score == pytest.approx(b.log_score, abs=1e-8 * max(1, abs(b.log_score)))
     assert a.partition == b.partition and list(a.assignment) == list(b.assignment)
-    assert a.info["contended_components"] >= 1
+    assert a.info["contended_components"] >= 1 and a.info["enumerated_components"] >= 1
+    monkeypatch.setattr(decomposed, "ENUMERATE_OBJECTS", 0)
+    h = asg.solve(d)
+    assert h.info["milp_columns"] > 0 and h.partition == a.partition
+    assert list(h.assignment) == list(a.assignment)
+    assert h.log_score == pytest.approx(a.log_score, abs=1e-8 * max(1, abs(a.log_score)))
     if small:
         bf = asg.brute_force(d)
         assert a.log_score == pytest.approx(bf.log_score, abs=1e-9 * max(1, abs(bf.log_score)))

@@ -232,15 +232,13 @@ def _highs_solve(c: FloatArray, ar: np.ndarray, ac: np.ndarray, av: FloatArray,
     h = hs.Highs()
     # the project's HiGHS profile for this model (optmodels.backends.profiles.milp_options:
     # mip_abs_gap 1e-12 with a zero gap, presolve off, the time limit), the same as the
-    # CVXPY path's; then, measured on HiGHS 1.16 (a 10-binary model, 2 busy cores): 20-33
-    # ms per run with the default threads and heuristics, 13 ms single-threaded, 0.7 ms
-    # single-threaded without the feasibility-jump heuristic (a heuristic only: optimality
-    # is still proven by the branch and bound). HiGHS' thread pool is global: "threads"
-    # takes effect if this is the process's first HiGHS run (else its pool is used)
+    # CVXPY path's; and without the feasibility-jump heuristic, measured on HiGHS 1.16 at
+    # 13-23 ms per run even for 10 binaries (a heuristic only: optimality is still proven
+    # by the branch and bound). "threads" is not set: HiGHS' thread pool is global and a
+    # run asking for another size than the pool's fails (seen after a CVXPY HiGHS solve)
     for key, value in milp_options("HIGHS", gap, limit, verbose=verbose,
                                    where="assignment.solve").items():
         h.setOptionValue(key, value)
-    h.setOptionValue("threads", 1)
     h.setOptionValue("mip_heuristic_run_feasibility_jump", False)
     lp = hs.HighsLp()
     lp.num_col_, lp.num_row_ = shape[1], shape[0]
@@ -330,6 +328,26 @@ def solve_decomposed(data: AssignmentData, groups: list[tuple[int, ...]], *, gap
             bounds = np.flatnonzero(np.diff(comp_e[several])) + 1
             for part in np.split(several, bounds):
                 _take(x, n_g, n_k, keep, _lsa(keep[part], kgain[part] - bg, part))
+        # small contended components: every unresolved variant, each by its linear
+        # assignment (the paper's per-variant problem (14), exact); larger ones: HiGHS
+        enumerated = 0
+        if contended.any():
+            g_comp = label[first]
+            for comp in np.flatnonzero(contended):
+                if n_obj[comp] > ENUMERATE_OBJECTS:
+                    continue
+                gi = np.flatnonzero(g_comp == comp)
+                ei = np.flatnonzero(comp_e == comp)
+                got = _enumerate(groups, gi, p0, keep, kgain - bg, ei)
+                if got is None:
+                    continue
+                on, chosen = got
+                x[gi] = 0.0
+                x[on] = 1.0
+                _take(x, n_g, n_k, keep, chosen)
+                contended[comp] = False
+                enumerated += 1
+    info["enumerated_components"] = enumerated
     status, gap_reached, msg, solve_t = Status.OPTIMAL, 0.0, "decomposed", tc.elapsed
     solver_obj = float(c @ x)
     if contended.any():
@@ -372,6 +390,68 @@ def solve_decomposed(data: AssignmentData, groups: list[tuple[int, ...]], *, gap
               "solve_time": solve_t, "iterations": None, "message": msg}
     return _finish_point(data, groups, keep, x, a_eq, a_ub, b_ub, solver_obj, (), None,
                          common=common, gap_reached=gap_reached, gap=gap, info=info)
+
+
+#: Contended components of at most this many objects (and at most ENUMERATE_VARIANTS
+#: unresolved variants) are solved by enumerating the variants: a HiGHS run costs 1-25 ms
+#: on a busy 2-core machine even for 10 binaries, a small component's variants 0.1 ms.
+ENUMERATE_OBJECTS = 6
+ENUMERATE_VARIANTS = 64
+
+
+def _enumerate(groups: list[tuple[int, ...]], gi: np.ndarray, p0: FloatArray,
+               keep: np.ndarray, value: FloatArray, ei: np.ndarray
+               ) -> tuple[np.ndarray, np.ndarray] | None:
+    """The best hypothesis of one component: every partition of its objects into its kept
+    groups (exact covers), each scored by the linear assignment of its measurements to the
+    blocks or the background (``value`` = gain − background > 0 per kept column); the
+    groups on and the columns chosen, or None above ENUMERATE_VARIANTS variants."""
+    containing: dict[int, list[int]] = {}
+    for g in gi.tolist():
+        for j in groups[g]:
+            containing.setdefault(j, []).append(g)
+    objs = sorted(containing)
+    parts: list[list[int]] = []
+
+    def cover(left: frozenset[int], chosen: list[int]) -> bool:
+        if not left:
+            parts.append(list(chosen))
+            return len(parts) <= ENUMERATE_VARIANTS
+        j = min(left)
+        for g in containing[j]:
+            mem = groups[g]
+            if all(m in left for m in mem):
+                if not cover(left - set(mem), [*chosen, g]):
+                    return False
+        return True
+
+    if not cover(frozenset(objs), []):
+        return None
+    rows = keep[ei, 0]
+    meas = sorted(set(rows.tolist()))
+    mrow = {m: r for r, m in enumerate(meas)}
+    best: tuple[float, list[int], np.ndarray] | None = None
+    for part in parts:
+        col = {g: k for k, g in enumerate(part)}
+        mine = np.array([k for k in ei.tolist() if int(keep[k, 1]) in col], dtype=int)
+        total = float(p0[part].sum())
+        chosen = np.zeros(0, dtype=int)
+        if len(mine):
+            mat = np.full((len(meas), len(part) + len(meas)), -1e300)
+            mat[:, len(part):] = 0.0
+            r_ = [mrow[int(keep[k, 0])] for k in mine]
+            c_ = [col[int(keep[k, 1])] for k in mine]
+            mat[r_, c_] = value[mine]
+            rr, cc = linear_sum_assignment(mat, maximize=True)
+            pick = {(a, b) for a, b in zip(rr.tolist(), cc.tolist(), strict=True)
+                    if b < len(part)}
+            chosen = np.array([k for k, a, b in zip(mine.tolist(), r_, c_, strict=True)
+                               if (a, b) in pick], dtype=int)
+            total += float(value[chosen].sum())
+        if best is None or total > best[0] + 1e-12 * max(1.0, abs(total)):
+            best = (total, part, chosen)
+    assert best is not None  # the singletons always cover
+    return np.array(best[1], dtype=int), best[2]
 
 
 def _take(x: FloatArray, n_g: int, n_k: int, keep: np.ndarray, ent: np.ndarray) -> None:

@@ -391,6 +391,8 @@ class Resolution:
         """The quadrature u_ij of the pairs (ii, jj) in the frame of :meth:`_frame`,
         chunked (:data:`QUADRATURE_BYTES` of work arrays per batch), clipped."""
         u = np.empty(len(ii))
+        if not len(ii):
+            return u
         d = pos.shape[1]
         if self.polar:
             half = np.array([self.range, self.azimuth])

@@ -23,13 +23,17 @@ arrays only:
    MILP separates: the MAP is the union of the component MAPs (``docs/formulations.md``).
    Components without objects: background. With one object: the best column in closed
    form. Several objects, no merged group: a linear assignment
-   (:func:`scipy.optimize.linear_sum_assignment`). With merged groups ("contended"): all
-   of them in one HiGHS model (``highspy``, built from the same sparse matrices), so
-   HiGHS' fixed cost is paid once per scan.
+   (:func:`scipy.optimize.linear_sum_assignment`). With merged groups ("contended"): up
+   to :data:`ENUMERATE_OBJECTS` objects and :data:`ENUMERATE_VARIANTS` unresolved
+   variants, every variant by its linear assignment (the paper's per-variant problem
+   (14), exact); the others all in one HiGHS model (``highspy``, built from the same
+   sparse triplets), so HiGHS' fixed cost is paid at most once per scan.
 4. **Re-check** of the assembled point against the whole model and the recomputed score
    (13) (:func:`~optmodels.assignment.data._recheck`, as for the CVXPY path).
 
-Measured (``solvers_cmp/assignment_scale.py``): see the user guide.
+Measured (``python -m solvers_cmp.assignment_scale``, 2-core VM at load ≈ 10, medians):
+per scan 0.09 s at Q = 1000 and 0.60 s at Q = 3000 (under an 8 GiB address-space limit)
+against 0.20 s / 1.42 s for a vectorised numpy + scipy GNN on the same scans.
 """
 
 from __future__ import annotations

@@ -436,14 +436,38 @@ def _perturbed(monkeypatch: pytest.MonkeyPatch, *, objective: float = 0.0,
     monkeypatch.setattr(asg_milp, "solve_problem", fake)
 
 
-def test_milp_answer_is_rechecked(monkeypatch: pytest.MonkeyPatch) -> None:
+def _perturbed_direct(monkeypatch: pytest.MonkeyPatch, *, objective: float = 0.0,
+                      point: Callable[[np.ndarray], np.ndarray] | None = None,
+                      gap: float | None = None) -> None:
+    """The same faults injected into the direct HiGHS call of the decomposed path."""
+    from optmodels.assignment import decomposed
+
+    real = decomposed._highs_solve
+
+    def fake(*args, **kw):  # type: ignore[no-untyped-def]
+        status, x, obj, g, text, t = real(*args, **kw)
+        x = x if point is None else point(x)
+        return status, x, obj * (1 + objective), g if gap is None else gap, text, t
+
+    monkeypatch.setattr(decomposed, "_highs_solve", fake)
+
+
+@pytest.mark.parametrize("model", ["cvxpy", "decomposed"])
+def test_milp_answer_is_rechecked(monkeypatch: pytest.MonkeyPatch, model: str) -> None:
     """The MILP's point is re-checked in NumPy: honest solves have residuals ≤ 1e-9 (exact
     0/1 values; objective = recomputed score to round-off); a solver objective off by
     1e-5 (relative, between VERIFY_TOL and REJECT_TOL) is OPTIMAL_INACCURATE, off by 1e-2
     an ERROR; a point that is not a hypothesis (an object in two blocks, a fractional
     value) is refused, never returned as a solution."""
     d = case(np.random.default_rng(7), 4, 4, rho=0.3)
-    honest = asg.solve(d)
+    if model == "decomposed":  # the component goes to HiGHS (not the small enumeration)
+        from optmodels.assignment import decomposed
+
+        monkeypatch.setattr(decomposed, "ENUMERATE_OBJECTS", 0)
+    honest = asg.solve(d, model=model)
+    perturb = _perturbed if model == "cvxpy" else _perturbed_direct
+    assert model == "cvxpy" or honest.info["contended_components"] == 1 == honest.info[
+        "components"]  # the whole scene is the one HiGHS model
     assert honest.status is Status.OPTIMAL
     assert set(honest.residuals) >= {"integrality", "exact_cover", "one_source",
                                      "block_capacity", "objective"}
@@ -451,30 +475,30 @@ def test_milp_answer_is_rechecked(monkeypatch: pytest.MonkeyPatch) -> None:
     rel = abs(honest.log_score)
     assert rel > 1.0  # so the relative objective residual is the perturbation itself
     with monkeypatch.context() as m:
-        _perturbed(m, objective=10 * VERIFY_TOL)
-        s = asg.solve(d)
+        perturb(m, objective=10 * VERIFY_TOL)
+        s = asg.solve(d, model=model)
         assert s.status is Status.OPTIMAL_INACCURATE
         assert s.residuals["objective"] == pytest.approx(10 * VERIFY_TOL, rel=1e-6)
         assert s.partition == honest.partition
     with monkeypatch.context() as m:
-        _perturbed(m, objective=10 * REJECT_TOL)
-        s = asg.solve(d)
+        perturb(m, objective=10 * REJECT_TOL)
+        s = asg.solve(d, model=model)
         assert s.status is Status.ERROR and not s.ok and s.partition == []
         with pytest.raises(SolveError):
             s.require_ok()
     with monkeypatch.context() as m:
-        _perturbed(m, point=lambda x: np.ones_like(x))  # every group and pair "on"
-        s = asg.solve(d)
+        perturb(m, point=lambda x: np.ones_like(x))  # every group and pair "on"
+        s = asg.solve(d, model=model)
         assert s.status is Status.ERROR and "re-check failed" in s.message
         assert s.residuals["exact_cover"] >= 1.0
     with monkeypatch.context() as m:
-        _perturbed(m, point=lambda x: np.where(x > 0.5, 1 - 1e-4, x))  # fractional
-        s = asg.solve(d)
+        perturb(m, point=lambda x: np.where(x > 0.5, 1 - 1e-4, x))  # fractional
+        s = asg.solve(d, model=model)
         assert s.status is Status.OPTIMAL_INACCURATE  # 1e-4: between the two tolerances
         assert s.residuals["integrality"] == pytest.approx(1e-4, rel=1e-6)
     with monkeypatch.context() as m:  # a solver that stopped at a 1e-3 relative MIP gap
-        _perturbed(m, gap=1e-3)
-        s = asg.solve(d, mip_gap=1e-2)
+        perturb(m, gap=1e-3)
+        s = asg.solve(d, mip_gap=1e-2, model=model)
         assert s.status is Status.OPTIMAL_INACCURATE and "not proven optimal" in s.message
         assert s.mip_gap == pytest.approx(1e-3, rel=1e-12)
 

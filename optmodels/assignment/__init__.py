@@ -18,6 +18,9 @@ is in :mod:`~optmodels.assignment.data`, the MILP and its exact pruning in
 * :mod:`~optmodels.assignment.solvers`: MILP solver names, gap/time-limit options, the
   HiGHS banner;
 * :mod:`~optmodels.assignment.milp`: :func:`solve`, the sparse MILP and its pruning;
+* :mod:`~optmodels.assignment.decomposed`: the scale path of :func:`solve` (the model's
+  gate, exact pruning on the gated entries, the exact split into connected components,
+  closed forms and one direct HiGHS model per scan; issue 25);
 * :mod:`~optmodels.assignment.linear`: :func:`linear_assignment` (merges disallowed);
 * :mod:`~optmodels.assignment.kbest`: :func:`k_best`, :class:`KBest` (marginals);
 * :mod:`~optmodels.assignment.sensor`: the sensor's resolution model :class:`Resolution`
@@ -34,6 +37,7 @@ To monkeypatch what a function uses, patch the submodule that uses it (e.g.
 """
 
 from optmodels.assignment.data import MAX_CANDIDATE_GROUPS as MAX_CANDIDATE_GROUPS
+from optmodels.assignment.data import MAX_TABLE_ENTRIES as MAX_TABLE_ENTRIES
 from optmodels.assignment.data import (
     AssignmentData,
     AssignmentSolution,
@@ -42,6 +46,7 @@ from optmodels.assignment.data import (
     log_likelihoods,
     score,
 )
+from optmodels.assignment.data import PairTable as PairTable
 from optmodels.assignment.data import Partition as Partition
 from optmodels.assignment.data import _as_assignment as _as_assignment
 from optmodels.assignment.data import _as_partition as _as_partition
@@ -49,6 +54,7 @@ from optmodels.assignment.data import _canonical as _canonical
 from optmodels.assignment.data import _logpdf as _logpdf
 from optmodels.assignment.data import _recheck as _recheck
 from optmodels.assignment.data import group_moments as group_moments
+from optmodels.assignment.decomposed import MAX_MILP_COLUMNS as MAX_MILP_COLUMNS
 from optmodels.assignment.hypotheses import BRUTE_FORCE_LIMIT as BRUTE_FORCE_LIMIT
 from optmodels.assignment.hypotheses import COUNT_LIMIT as COUNT_LIMIT
 from optmodels.assignment.hypotheses import _assignments as _assignments
@@ -70,6 +76,7 @@ from optmodels.assignment.milp import MAX_MODEL_COLUMNS as MAX_MODEL_COLUMNS
 from optmodels.assignment.milp import _build_model as _build_model
 from optmodels.assignment.milp import _prune as _prune
 from optmodels.assignment.milp import solve
+from optmodels.assignment.sensor import PAIR_NEGLECT as PAIR_NEGLECT
 from optmodels.assignment.sensor import (
     Resolution,
     cartesian_to_polar,

@@ -30,7 +30,13 @@ import numpy as np
 import scipy.sparse as sps
 from scipy.special import comb
 
-from optmodels.assignment.sensor import Resolution, log_group_weight
+from optmodels.assignment.sensor import (
+    MAX_PAIR_TABLE_BYTES,
+    PAIR_NEGLECT,
+    U_FLOOR,
+    Resolution,
+    log_group_weight,
+)
 from optmodels.core import (
     VERIFY_TOL,
     FloatArray,
@@ -55,6 +61,64 @@ Partition = list[tuple[int, ...]]
 #: most; beyond it the gate/max_group_size must be tightened. The count is checked while
 #: the cliques grow, before anything of that size is allocated.
 MAX_CANDIDATE_GROUPS = 100_000
+
+
+# ----------------------------------------------------------------------------- pairs
+class PairTable:
+    """The sensor's pair probabilities u_ij stored for the gated pairs only
+    (:meth:`~optmodels.assignment.sensor.Resolution.gated_pairs`); every other pair is
+    neglected (u_ij ≤ PAIR_NEGLECT, read as U_FLOOR). Indexed like the dense (Q, Q) table
+    (``u[i, j]``, ``u[np.ix_(a, b)]``), which is what the group weights read."""
+
+    def __init__(self, q: int, ii: np.ndarray, jj: np.ndarray, u: FloatArray) -> None:
+        self.q, self.ii, self.jj, self.u = q, ii, jj, u
+        self._map = {(int(a), int(b)): float(v) for a, b, v in zip(ii, jj, u, strict=True)}
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return (self.q, self.q)
+
+    def _one(self, a: int, b: int) -> float:
+        if a == b:
+            return 1.0
+        return self._map.get((a, b) if a < b else (b, a), U_FLOOR)
+
+    def __getitem__(self, key: Any) -> Any:
+        rows, cols = key
+        if np.ndim(rows) == 0 and np.ndim(cols) == 0:
+            return self._one(int(rows), int(cols))
+        r, c = np.broadcast_arrays(np.asarray(rows, dtype=int), np.asarray(cols, dtype=int))
+        return np.array([self._one(a, b) for a, b in zip(r.ravel().tolist(),
+                                                          c.ravel().tolist(), strict=True)]
+                        ).reshape(r.shape)
+
+    def edges(self, neglect: float = PAIR_NEGLECT) -> tuple[np.ndarray, np.ndarray]:
+        """The pairs (i < j) with u_ij above ``neglect``: the edges of the gating graph."""
+        on = self.u > neglect
+        return self.ii[on], self.jj[on]
+
+    def log_not_merged_total(self) -> float:
+        """Σ_{i<j} ln(1 − u_ij) over every pair (the neglected ones at U_FLOOR)."""
+        rest = self.q * (self.q - 1) // 2 - len(self.u)
+        return float(np.sum(np.log1p(-self.u)) + rest * math.log1p(-U_FLOOR))
+
+    def dense(self, where: str) -> FloatArray:
+        """The (Q, Q) table (diagonal 1), refused above MAX_PAIR_TABLE_BYTES."""
+        if self.q * self.q * 8 > MAX_PAIR_TABLE_BYTES:
+            raise ProblemError(f"{where}: the dense (Q, Q) table for Q = {self.q} needs "
+                               f"{self.q * self.q * 8 / 2**30:.3g} GiB; read the gated pairs "
+                               f"from AssignmentData.pair_table instead")
+        out = np.full((self.q, self.q), U_FLOOR)
+        np.fill_diagonal(out, 1.0)
+        out[self.ii, self.jj] = out[self.jj, self.ii] = self.u
+        return out
+
+
+def _dense_edges(u: FloatArray, neglect: float = PAIR_NEGLECT
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    ii, jj = np.triu_indices(u.shape[0], 1)
+    on = u[ii, jj] > neglect
+    return ii[on], jj[on]
 
 
 # ----------------------------------------------------------------------------- data
@@ -91,7 +155,7 @@ class AssignmentData:
     log_likelihood: Callable[[AssignmentData, tuple[int, ...]], FloatArray] | None = None
     block_log_prior: Callable[[tuple[int, ...], bool], float] | None = None
     sensor: Resolution | None = None
-    _pair_u: FloatArray | None = field(default=None, init=False, repr=False, compare=False)
+    _pair_u: Any = field(default=None, init=False, repr=False, compare=False)
     _log_w: dict[tuple[int, ...], float] = field(default_factory=dict, init=False,
                                                   repr=False, compare=False)
     _conn: dict[Any, float] = field(default_factory=dict, init=False, repr=False,
@@ -133,7 +197,13 @@ class AssignmentData:
                 raise ProblemError(f"{w} sensor: give sensor or your own block_log_prior, "
                                    f"not both")
             self.sensor._check(f"{w} sensor", d, q)
-            self._pair_u = self.sensor.pair_probabilities(self.means, self.covs)
+            if type(self.sensor).pair_probabilities is Resolution.pair_probabilities:
+                # the model's own gate: only the pairs that can be unresolved (k-d tree)
+                self._pair_u = PairTable(q, *self.sensor._gated_pairs(
+                    f"{w} sensor", self.means, self.covs, PAIR_NEGLECT))
+            else:  # a subclass with its own (dense) pair model
+                self._pair_u = np.asarray(self.sensor.pair_probabilities(self.means,
+                                                                         self.covs))
         elif self.rho is None:
             raise ProblemError(f"{w} rho: required without a sensor (the constant merge "
                                f"prior, in (0, 1])")
@@ -161,11 +231,38 @@ class AssignmentData:
         :func:`score` leaves C out (it is the same for every hypothesis)."""
         if self._pair_u is None:
             return 0.0
+        if isinstance(self._pair_u, PairTable):
+            return self._pair_u.log_not_merged_total()
         return float(np.sum(np.log1p(-self._pair_u[np.triu_indices(self.q, 1)])))
 
     def pair_unresolved(self) -> FloatArray | None:
-        """The sensor's pair probabilities u_ij (Q, Q), or None without a sensor."""
-        return None if self._pair_u is None else self._pair_u.copy()
+        """The sensor's pair probabilities u_ij (Q, Q), or None without a sensor; the
+        neglected pairs (u_ij ≤ PAIR_NEGLECT, proven by the gate) read U_FLOOR. Refused
+        (ProblemError) where the dense table would exceed 2 GiB: use :attr:`pair_table`."""
+        if self._pair_u is None:
+            return None
+        if isinstance(self._pair_u, PairTable):
+            return self._pair_u.dense("assignment.AssignmentData.pair_unresolved")
+        return self._pair_u.copy()
+
+    @property
+    def pair_table(self) -> PairTable | None:
+        """The gated pairs (i < j, u_ij) as a :class:`PairTable`, or None without a
+        sensor (a sensor subclass's dense table is returned gated the same way)."""
+        if self._pair_u is None or isinstance(self._pair_u, PairTable):
+            return self._pair_u
+        ii, jj = np.triu_indices(self.q, 1)
+        on = self._pair_u[ii, jj] > U_FLOOR
+        return PairTable(self.q, ii[on], jj[on], self._pair_u[ii[on], jj[on]])
+
+    def pair_edges(self) -> tuple[np.ndarray, np.ndarray]:
+        """The gating graph's edges: pairs (i < j) with u_ij > PAIR_NEGLECT (empty without
+        a sensor)."""
+        if self._pair_u is None:
+            return np.zeros(0, dtype=int), np.zeros(0, dtype=int)
+        if isinstance(self._pair_u, PairTable):
+            return self._pair_u.edges()
+        return _dense_edges(self._pair_u)
 
     @property
     def q(self) -> int:
@@ -186,11 +283,18 @@ def _logpdf(x: FloatArray, mean: FloatArray, cov: FloatArray) -> FloatArray:
         2 * math.pi)
 
 
-def candidate_groups(data: AssignmentData, *,
-                     limit: int | None = None) -> list[tuple[int, ...]]:
+def candidate_groups(data: AssignmentData, *, limit: int | None = None,
+                     model_gate: bool = True) -> list[tuple[int, ...]]:
     """Singletons and the groups allowed by ``max_group_size`` and ``group_gate`` (cliques
     of the gate graph: members pairwise within the gate under K_i + K_j), in
     lexicographic order by size.
+
+    With a ``sensor`` and no finite ``group_gate`` the gate follows from the resolution
+    model: the groups are the connected subsets of the gating graph (edges: the pairs with
+    u_ij > PAIR_NEGLECT, :meth:`AssignmentData.pair_edges`). A group outside it needs an
+    unresolved neglected pair in every spanning tree, so the prior mass of all variants
+    that use one is at most Σ_neglected u_ij ≤ PAIR_NEGLECT · Q(Q − 1)/2.
+    ``model_gate=False`` ignores that gate (every subset, as without a sensor).
 
     Raises
     ------
@@ -212,6 +316,8 @@ def candidate_groups(data: AssignmentData, *,
             f"few objects are rarely plausible)")
 
     gated = data.group_gate is not None and np.isfinite(data.group_gate)
+    if data._pair_u is not None and not gated and model_gate:
+        return _connected_groups(data, size, limit, refuse)
     if not gated:
         total = sum(int(comb(q, k, exact=True)) for k in range(1, size + 1))
         if total > limit:
@@ -239,6 +345,38 @@ def candidate_groups(data: AssignmentData, *,
         frontier = nxt
         if not frontier:
             break
+    return out
+
+
+def _connected_groups(data: AssignmentData, size: int, limit: int,
+                      refuse: Callable[[str], ProblemError]) -> list[tuple[int, ...]]:
+    """Singletons and the connected subsets (2 ≤ |S| ≤ ``size``) of the gating graph,
+    sorted within each size; refused above ``limit`` while they grow."""
+    ii, jj = data.pair_edges()
+    out: list[tuple[int, ...]] = [(j,) for j in range(data.q)]
+    if size < 2 or len(ii) == 0:
+        return out
+    nbrs: dict[int, set[int]] = {}
+    for a, b in zip(ii.tolist(), jj.tolist(), strict=True):
+        nbrs.setdefault(a, set()).add(b)
+        nbrs.setdefault(b, set()).add(a)
+    cur = sorted({(a, b) for a, b in zip(ii.tolist(), jj.tolist(), strict=True)})
+    for s_ in range(2, size + 1):
+        if len(out) + len(cur) > limit:
+            raise refuse(f"more than {limit}")
+        out.extend(cur)
+        if s_ == size:
+            break
+        nxt: set[tuple[int, ...]] = set()
+        for g in cur:
+            members = set(g)
+            for v in set().union(*(nbrs[x] for x in g)) - members:
+                nxt.add(tuple(sorted((*g, v))))
+            if len(out) + len(nxt) > limit:
+                raise refuse(f"more than {limit}")
+        if not nxt:
+            break
+        cur = sorted(nxt)
     return out
 
 
@@ -289,11 +427,80 @@ def log_likelihoods(data: AssignmentData, groups: Sequence[tuple[int, ...]]) -> 
                                    f"(or −inf) for block {g}, got shape {v.shape}")
             out[:, c] = v
         return out
+    if data.n * len(groups) > MAX_TABLE_ENTRIES:
+        raise ProblemError(f"assignment.log_likelihoods: the N × groups table is {data.n} × "
+                           f"{len(groups)} = {data.n * len(groups):.3g} entries, above "
+                           f"{MAX_TABLE_ENTRIES:.0e} ({MAX_TABLE_ENTRIES * 8 / 2**30:.2g} GiB); "
+                           f"solve computes only the gated entries, or pass fewer groups")
     if data.n:
-        for start in range(0, len(groups), _CHUNK):
-            part = groups[start:start + _CHUNK]
+        d = data.means.shape[1]
+        per_group = data.n * d * (d + 4) * 8 * (2 if data.per_measurement_cov else 1)
+        step = max(1, min(_CHUNK, _WORK_BYTES // max(1, per_group)))
+        for start in range(0, len(groups), step):
+            part = groups[start:start + step]
             out[:, start:start + len(part)] = _default_loglik(data, part).T
     return out
+
+
+def entry_log_likelihoods(data: AssignmentData, groups: Sequence[tuple[int, ...]],
+                          rows: np.ndarray, cols: np.ndarray) -> FloatArray:
+    """ln φ_iS (5) of the entries (i = ``rows[k]``, S = ``groups[cols[k]]``) only, the
+    default Gaussian model N(x_i; Σ w_j m_j, Σ w_j² K_j + R_i), batched in chunks of
+    bounded work memory (the Cholesky factors of the entries' (d, d) covariances)."""
+    d = data.means.shape[1]
+    out = np.empty(len(rows))
+    if not len(rows):
+        return out
+    mean, cov = group_arrays(data, groups)
+    const = 0.5 * d * math.log(2 * math.pi)
+    step = max(1, _WORK_BYTES // (8 * d * (d + 4) * 4))
+    for a in range(0, len(rows), step):
+        r, c = rows[a:a + step], cols[a:a + step]
+        noise = data.meas_cov[r] if data.per_measurement_cov else data.meas_cov
+        s2 = cov[c] + noise
+        if d == 2:  # closed-form 2 × 2 (np.linalg's batched calls cost ~5x more, measured)
+            det = s2[:, 0, 0] * s2[:, 1, 1] - s2[:, 0, 1] * s2[:, 1, 0]
+            dx = data.measurements[r] - mean[c]
+            m2 = (s2[:, 1, 1] * dx[:, 0] ** 2 - (s2[:, 0, 1] + s2[:, 1, 0]) * dx[:, 0]
+                  * dx[:, 1] + s2[:, 0, 0] * dx[:, 1] ** 2) / det
+            out[a:a + step] = -0.5 * m2 - 0.5 * np.log(det) - const
+            continue
+        chol = np.linalg.cholesky(s2)
+        z = np.linalg.solve(chol, (data.measurements[r] - mean[c])[..., None])[..., 0]
+        logdet = np.sum(np.log(np.diagonal(chol, axis1=-2, axis2=-1)), axis=-1)
+        out[a:a + step] = -0.5 * np.sum(z**2, axis=-1) - logdet - const
+    return out
+
+
+def group_arrays(data: AssignmentData, groups: Sequence[tuple[int, ...]]
+                 ) -> tuple[FloatArray, FloatArray]:
+    """Every group's centroid Σ w_j m_j (G, d) and Σ w_j² K_j (G, d, d) (as
+    :func:`group_moments`), batched per group size with NumPy (no sparse matrix: its
+    construction alone costs ~0.3 ms, measured, a tenth of a small scan's budget)."""
+    d = data.means.shape[1]
+    sizes = np.fromiter(map(len, groups), dtype=int, count=len(groups))
+    mean, cov = np.empty((len(groups), d)), np.empty((len(groups), d, d))
+    amp = None if data.sensor is None or isinstance(data.sensor.weights, str) \
+        else data.sensor.weights
+    for s_ in sorted(set(sizes.tolist())):
+        at = np.flatnonzero(sizes == s_)
+        mem = np.array([groups[c] for c in at], dtype=int).reshape(len(at), s_)
+        if s_ == 1:
+            mean[at], cov[at] = data.means[mem[:, 0]], data.covs[mem[:, 0]]
+            continue
+        if amp is None:
+            w = np.full(mem.shape, 1.0 / s_)
+        else:
+            w = amp[mem] / amp[mem].sum(axis=1, keepdims=True)
+        mean[at] = np.einsum("gs,gsd->gd", w, data.means[mem])
+        cov[at] = np.einsum("gs,gsab->gab", w**2, data.covs[mem])
+    return mean, cov
+
+
+#: Entries of a dense ln φ table refused by :func:`log_likelihoods` (8 bytes each: 2 GiB),
+#: and the work memory (bytes) of one batch of Cholesky factors.
+MAX_TABLE_ENTRIES = 2**28
+_WORK_BYTES = 64 * 2**20
 
 
 #: Groups per batch of the default likelihood (bounds the (groups, N, d, d) work arrays).
@@ -340,13 +547,19 @@ def score(data: AssignmentData, partition: Partition, assignment: Sequence[int],
     """score(H) of a hypothesis: ``assignment[i]`` indexes ``partition`` or is −1."""
     blocks = _as_partition("assignment.score partition", partition, data.q)
     a = _as_assignment("assignment.score assignment", assignment, data.n, len(blocks))
-    used = [k for k in a if k >= 0]
-    ll = loglik if loglik is not None else dict(zip(blocks, log_likelihoods(data, blocks).T,
-                                                    strict=True))
-    s = sum(block_log_prior(data, b, k in used) for k, b in enumerate(blocks))
-    for i, k in enumerate(a):
-        s += float(ll[blocks[k]][i]) if k >= 0 else -math.log(data.volume)
-    return s
+    used = {k for k in a if k >= 0}
+    s = math.fsum(block_log_prior(data, b, k in used) for k, b in enumerate(blocks))
+    rows = np.array([i for i, k in enumerate(a) if k >= 0], dtype=int)
+    if loglik is not None:
+        vals = [float(loglik[blocks[a[i]]][i]) for i in rows]
+    elif data.log_likelihood is not None:  # the user's model: one (N,) call per used block
+        ub = sorted(used)
+        table = dict(zip(ub, log_likelihoods(data, [blocks[k] for k in ub]).T, strict=True))
+        vals = [float(table[a[i]][i]) for i in rows]
+    else:  # the default model on the assigned entries only
+        vals = entry_log_likelihoods(data, blocks, rows, np.array([a[i] for i in rows],
+                                                                  dtype=int)).tolist()
+    return s + math.fsum(vals) - (data.n - len(rows)) * math.log(data.volume)
 
 
 def _as_partition(name: str, partition: Any, q: int) -> Partition:

@@ -43,12 +43,14 @@ from optmodels.assignment.data import (
     candidate_groups,
     log_likelihoods,
 )
+from optmodels.assignment.decomposed import highspy_module, solve_decomposed
 from optmodels.backends.cvxpy_backend import as_milp_solver, solve_problem
 from optmodels.backends.profiles import milp_options
 from optmodels.core import (
     FloatArray,
     ProblemError,
     Status,
+    as_choice,
     as_flag,
     as_instance,
     as_number,
@@ -172,8 +174,10 @@ def _build_model(data: AssignmentData, groups: list[tuple[int, ...]], gain: Floa
 def solve(data: AssignmentData, *, solver: str = "HIGHS", mip_gap: float = 0.0,
           time_limit: float | None = None, fixed_partition: Partition | None = None,
           prune: bool = True, exclude: Sequence[AssignmentSolution] = (),
-          **options: Any) -> AssignmentSolution:
-    """The joint MAP hypothesis of (13)-(14) as one MILP (CVXPY; HiGHS by default).
+          model: str = "auto", **options: Any) -> AssignmentSolution:
+    """The joint MAP hypothesis of (13)-(14) as one MILP (HiGHS by default): decomposed
+    into the connected components of the model's graph (direct HiGHS,
+    :mod:`~optmodels.assignment.decomposed`) or as one CVXPY model (the original form).
 
     Parameters
     ----------
@@ -196,6 +200,14 @@ def solve(data: AssignmentData, *, solver: str = "HIGHS", mip_gap: float = 0.0,
         when hypotheses other than the MAP matter, as in :func:`k_best`).
     exclude : sequence of AssignmentSolution
         Hypotheses to exclude, one sparse no-good cut each.
+    model : {"auto", "decomposed", "cvxpy"}
+        ``"decomposed"``: gated likelihoods, exact pruning, the exact split into
+        connected components (closed forms for the uncontended ones, one direct HiGHS
+        MILP for all contended ones; the same MAP). ``"cvxpy"``: the whole model in
+        CVXPY (the original-form reference). ``"auto"`` (default) takes the decomposed
+        path when it is exact and applies: solver HIGHS, no ``fixed_partition``,
+        ``exclude`` or solver options other than ``verbose``, ``prune=True``, the default
+        likelihood and prior.
     **options
         Passed to the solver (its own names; ``verbose=True`` shows its log).
 
@@ -223,6 +235,17 @@ def solve(data: AssignmentData, *, solver: str = "HIGHS", mip_gap: float = 0.0,
     if isinstance(exclude, AssignmentSolution) or not all(
             isinstance(h, AssignmentSolution) for h in exclude):
         raise ProblemError(f"{w} exclude: expected a sequence of AssignmentSolution")
+    kind = as_choice(f"{w} model", model, ("auto", "decomposed", "cvxpy"))
+    direct_ok = (key == "HIGHS" and fixed_partition is None and not exclude and prune is True
+                 and not set(options) - {"verbose"} and data.log_likelihood is None
+                 and data.block_log_prior is None and highspy_module() is not None)
+    if kind == "decomposed" and not direct_ok:
+        raise ProblemError(f"{w} model: 'decomposed' needs solver HIGHS, no "
+                           f"fixed_partition, exclude or solver options, prune=True and the "
+                           f"default likelihood and prior; use model='cvxpy'")
+    if kind != "cvxpy" and direct_ok:
+        return solve_decomposed(data, candidate_groups(data), gap=gap, limit=limit,
+                                verbose=bool(options.get("verbose", False)), where=w)
     fixed = None
     if fixed_partition is not None:
         fixed = _as_partition(f"{w} fixed_partition", fixed_partition, data.q)

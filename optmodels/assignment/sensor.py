@@ -54,11 +54,14 @@ and the quadratures :func:`_box_probability`, :func:`_ball_probability`.
 
 from __future__ import annotations
 
+import functools
 import math
 from typing import Any
 
 import numpy as np
-from scipy.special import ndtr
+from scipy.spatial import cKDTree
+from scipy.special import ndtr, ndtri
+from scipy.stats import chi2
 
 from optmodels.core import (
     FloatArray,
@@ -79,6 +82,28 @@ U_CEIL_GAP = 1e-12
 _NODES = 96
 _WINDOW = 9.0
 _GL_X, _GL_W = np.polynomial.legendre.leggauss(_NODES)
+#: A pair whose unresolved probability u_ij is proven (by :func:`pair_bounds`) to be at most
+#: this is *neglected*: treated as resolved (u_ij = U_FLOOR), no quadrature, and no candidate
+#: group joins it. The prior mass of every unresolved variant that merges a neglected pair
+#: is at most Σ_neglected u_ij ≤ PAIR_NEGLECT · Q(Q − 1)/2 (4.5e-8 at Q = 3000).
+PAIR_NEGLECT = 1e-15
+#: Work memory of one quadrature batch (bytes): the pairs are integrated in chunks of this
+#: size; the dense (Q, Q) table of :meth:`Resolution.pair_probabilities` is refused above
+#: MAX_PAIR_TABLE_BYTES (a ProblemError naming the remedy, never a raw MemoryError).
+QUADRATURE_BYTES = 64 * 2**20
+MAX_PAIR_TABLE_BYTES = 2 * 2**30
+
+
+@functools.lru_cache(maxsize=64)
+def _chi_quantile(eps: float, d: int) -> float:
+    """t with P(χ²_d > t²) = eps (scipy.stats is slow to call: cached)."""
+    return float(np.sqrt(chi2.isf(eps, d)))
+
+
+def _chunks(total: int, row_bytes: int) -> list[slice]:
+    """Slices of ``total`` rows, each using at most :data:`QUADRATURE_BYTES`."""
+    step = max(1, QUADRATURE_BYTES // max(1, row_bytes))
+    return [slice(a, min(total, a + step)) for a in range(0, total, step)]
 
 
 def _interval_prob(c_lo: FloatArray, c_hi: FloatArray, mu: FloatArray,
@@ -330,33 +355,159 @@ class Resolution:
         k = as_finite_array(f"{w} covs", covs, shape=(q, d, d))
         check_spd_stack(f"{w} covs", k)
         self._check(w, d)
+        if q * q * 8 > MAX_PAIR_TABLE_BYTES:
+            raise ProblemError(
+                f"{w}: the dense (Q, Q) table for Q = {q} needs {q * q * 8 / 2**30:.3g} "
+                f"GiB (limit {MAX_PAIR_TABLE_BYTES / 2**30:.3g} GiB); use "
+                f"Resolution.gated_pairs (the pairs that can be unresolved, as "
+                f"AssignmentData does)")
         out = np.eye(q)
         if q < 2:
             return out
+        pos, kk = self._frame(m, k, w)
         ii, jj = np.triu_indices(q, 1)
+        u = self._pair_u(pos, kk, ii, jj)
+        out[ii, jj] = out[jj, ii] = u
+        return out
+
+    def _frame(self, m: FloatArray, k: FloatArray, w: str
+               ) -> tuple[FloatArray, FloatArray]:
+        """The objects in the cell's frame: polar (range, azimuth) and J K Jᵀ, or the
+        whitened positions E^{-1/2} m and E^{-1/2} K E^{-1/2}."""
+        d = m.shape[1]
         if self.polar:
             site = np.zeros(d) if self.site is None else self.site
             if np.any(np.linalg.norm(m - site, axis=1) <= 0):
                 raise ProblemError(f"{w} means: a prediction at the sensor's site (no "
                                    f"azimuth)")
-            pol = cartesian_to_polar(m, site)
             jac = _polar_jacobian(m, site)
-            pk = jac @ k @ jac.transpose(0, 2, 1)  # (Q, 2, 2)
-            mu = pol[ii] - pol[jj]
-            mu[:, 1] = (mu[:, 1] + math.pi) % (2 * math.pi) - math.pi
-            cov = pk[ii] + pk[jj]
-            u = _box_probability(mu, cov, np.array([self.range, self.azimuth]))
+            return cartesian_to_polar(m, site), jac @ k @ jac.transpose(0, 2, 1)
+        ew, ev = np.linalg.eigh(self.ellipse)
+        white = ev @ np.diag(ew**-0.5) @ ev.T  # E^{-1/2}
+        return m @ white.T, white @ k @ white.T
+
+    def _pair_u(self, pos: FloatArray, kk: FloatArray, ii: FloatArray,
+                jj: FloatArray) -> FloatArray:
+        """The quadrature u_ij of the pairs (ii, jj) in the frame of :meth:`_frame`,
+        chunked (:data:`QUADRATURE_BYTES` of work arrays per batch), clipped."""
+        u = np.empty(len(ii))
+        if not len(ii):
+            return u
+        d = pos.shape[1]
+        if self.polar:
+            half = np.array([self.range, self.azimuth])
+            for sl in _chunks(len(ii), 12 * _NODES * 8):
+                a, b = ii[sl], jj[sl]
+                mu = pos[a] - pos[b]
+                mu[:, 1] = (mu[:, 1] + math.pi) % (2 * math.pi) - math.pi
+                u[sl] = _box_probability(mu, kk[a] + kk[b], half)
         else:
-            ew, ev = np.linalg.eigh(self.ellipse)
-            white = ev @ np.diag(ew**-0.5) @ ev.T  # E^{-1/2}
-            mu = (m[ii] - m[jj]) @ white.T
-            cov = white @ (k[ii] + k[jj]) @ white.T
-            lam, vec = np.linalg.eigh(cov)  # ascending: the narrowest first
-            nu = np.einsum("pdk,pd->pk", vec, mu)
-            u = _ball_probability(nu, np.sqrt(lam), np.ones((len(mu), 1)))[:, 0]
-        u = np.clip(u, U_FLOOR, 1.0 - U_CEIL_GAP)
-        out[ii, jj] = out[jj, ii] = u
-        return out
+            for sl in _chunks(len(ii), 12 * _NODES ** max(1, d - 1) * 8):
+                a, b = ii[sl], jj[sl]
+                lam, vec = np.linalg.eigh(kk[a] + kk[b])  # ascending: the narrowest first
+                nu = np.einsum("pdk,pd->pk", vec, pos[a] - pos[b])
+                u[sl] = _ball_probability(nu, np.sqrt(lam), np.ones((len(a), 1)))[:, 0]
+        return np.clip(u, U_FLOOR, 1.0 - U_CEIL_GAP)
+
+    def pair_bounds(self, means: Any, covs: Any, ii: Any, jj: Any) -> FloatArray:
+        """Upper bounds b_ij ≥ u_ij of the pairs (ii, jj), in closed form (no quadrature).
+
+        Polar cell: u_ij ≤ P(|Δr| < Δr_res) ≤ Φ((Δr_res − |μ_r|)/σ_r), and the same in
+        azimuth; b_ij is the smaller (μ, σ² the predicted difference's mean and variance
+        in that coordinate). Ellipse: with Δ' = E^{-1/2}Δ ~ N(μ', C'), u_ij = P(‖Δ'‖ < 1)
+        ≤ P(χ²_d > (‖μ'‖ − 1)²/(λ_max(C'_i) + λ_max(C'_j))) for ‖μ'‖ > 1 (else 1)."""
+        w = "assignment.Resolution.pair_bounds"
+        m = as_finite_array(f"{w} means", means, ndim=2)
+        q, d = m.shape
+        k = as_finite_array(f"{w} covs", covs, shape=(q, d, d))
+        self._check(w, d)
+        pos, kk = self._frame(m, k, w)
+        return self._bounds(pos, kk, np.asarray(ii, dtype=int), np.asarray(jj, dtype=int))
+
+    def _bounds(self, pos: FloatArray, kk: FloatArray, ii: np.ndarray,
+                jj: np.ndarray) -> FloatArray:
+        d = pos.shape[1]
+        if self.polar:
+            mu = pos[ii] - pos[jj]
+            mu[:, 1] = (mu[:, 1] + math.pi) % (2 * math.pi) - math.pi
+            sd = np.sqrt(np.stack([kk[ii, 0, 0] + kk[jj, 0, 0],
+                                   kk[ii, 1, 1] + kk[jj, 1, 1]], axis=1))
+            half = np.array([self.range, self.azimuth])
+            return ndtr((half - np.abs(mu)) / sd).min(axis=1)
+        lam = np.linalg.eigvalsh(kk)[:, -1]
+        gap = np.maximum(np.linalg.norm(pos[ii] - pos[jj], axis=1) - 1.0, 0.0)
+        out = chi2.sf(gap**2 / (lam[ii] + lam[jj]), d)
+        return np.where(gap > 0, out, 1.0)
+
+    def gated_pairs(self, means: Any, covs: Any, *, neglect: float = PAIR_NEGLECT
+                    ) -> tuple[np.ndarray, np.ndarray, FloatArray]:
+        """The pairs that can be unresolved, found without visiting all Q(Q − 1)/2: the
+        pairs (i < j) whose bound :meth:`pair_bounds` exceeds ``neglect``, with their
+        quadrature u_ij (as :meth:`pair_probabilities`); every other pair has
+        u_ij ≤ ``neglect`` (proven, not estimated).
+
+        Candidates come from a k-d tree (:class:`scipy.spatial.cKDTree`). Polar cell: the
+        points r_i (cos az_i, sin az_i) are at distance D_ij with D² = μ_r² +
+        4 r_i r_j sin²(μ_az/2) ≤ (|μ_r| + r_max |μ_az|)²; a bound above ``neglect`` needs
+        |μ_r| < Δr_res + t σ_r and |μ_az| < Δaz_res + t σ_az (t = Φ⁻¹(1 − neglect)), with
+        σ ≤ σ_i + σ_j, so D_ij < c₀ + a_i + a_j (c₀ = Δr_res + r_max Δaz_res,
+        a_i = t (σ_{r,i} + r_max σ_{az,i})). Ellipse: whitened points, ‖μ'‖ < 1 +
+        t_d (σ_i + σ_j) with t_d² the χ²_d quantile of 1 − neglect. The tree returns the
+        pairs within c₀ + 2 max a_i; the per-pair radius and then the bound filter them.
+
+        Returns
+        -------
+        ii, jj : (P,) int, i < j
+        u : (P,) float, clipped to [U_FLOOR, 1 − U_CEIL_GAP]
+        """
+        w = "assignment.Resolution.gated_pairs"
+        m = as_finite_array(f"{w} means", means, ndim=2)
+        q, d = m.shape
+        k = as_finite_array(f"{w} covs", covs, shape=(q, d, d))
+        check_spd_stack(f"{w} covs", k)
+        self._check(w, d)
+        eps = float(neglect)
+        if not 0.0 < eps < 0.5:
+            raise ProblemError(f"{w} neglect: expected a probability in (0, 0.5), got {eps}")
+        return self._gated_pairs(w, m, k, eps)
+
+    def _gated_pairs(self, w: str, m: FloatArray, k: FloatArray, eps: float
+                     ) -> tuple[np.ndarray, np.ndarray, FloatArray]:
+        """:meth:`gated_pairs` on checked arrays."""
+        q, d = m.shape
+        empty = np.zeros(0, dtype=int)
+        if q < 2:
+            return empty, empty.copy(), np.zeros(0)
+        pos, kk = self._frame(m, k, w)
+        if self.polar:
+            t = float(-ndtri(eps))
+            r = pos[:, 0]
+            pts = r[:, None] * np.column_stack([np.cos(pos[:, 1]), np.sin(pos[:, 1])])
+            rmax = float(r.max())
+            c0 = self.range + rmax * self.azimuth
+            a = t * (np.sqrt(kk[:, 0, 0]) + rmax * np.sqrt(kk[:, 1, 1]))
+        else:
+            t = _chi_quantile(eps, d)
+            pts = pos
+            c0 = 1.0
+            a = t * np.sqrt(np.linalg.eigvalsh(kk)[:, -1])
+        if q <= 64:  # all pairs directly: cheaper than building a tree (measured, ~60 µs)
+            iu = np.triu_indices(q, 1)
+            cand = np.column_stack(iu)
+        else:
+            tree = cKDTree(pts)
+            cand = tree.query_pairs(c0 + 2.0 * float(a.max()), output_type="ndarray")
+        if len(cand) == 0:
+            return empty, empty.copy(), np.zeros(0)
+        ii, jj = np.minimum(cand[:, 0], cand[:, 1]), np.maximum(cand[:, 0], cand[:, 1])
+        dist = np.linalg.norm(pts[ii] - pts[jj], axis=1)
+        near = dist < c0 + a[ii] + a[jj]
+        ii, jj = ii[near], jj[near]
+        keep = self._bounds(pos, kk, ii, jj) > eps
+        ii, jj = ii[keep], jj[keep]
+        order = np.lexsort((jj, ii))
+        ii, jj = ii[order], jj[order]
+        return ii, jj, self._pair_u(pos, kk, ii, jj)
 
     def unresolved_probability(self, means: Any, covs: Any) -> float:
         """The probability that the k objects (means (k, d), m; covs (k, d, d), m²) give

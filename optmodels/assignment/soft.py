@@ -233,7 +233,7 @@ def soft_marginals(data: AssignmentData, *, gate: float | None = None,
         raise ProblemError(f"{w} prob_gate: with your own block_log_prior give "
                            f"prob_gate = 1 (put the gate into the prior)")
     q, n = data.q, data.n
-    groups = candidate_groups(data)
+    groups = candidate_groups(data, model_gate=False)  # its own pruning bounds every group
     ll = log_likelihoods(data, groups) if n else np.zeros((0, len(groups)))
     p1 = np.array([block_log_prior(data, g, True) for g in groups])
     p0 = np.array([block_log_prior(data, g, False) for g in groups])

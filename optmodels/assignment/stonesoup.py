@@ -101,6 +101,14 @@ __all__ = ["MergedDetection", "MergedMeasurementAssociator", "cell_covariance",
 _W = "assignment.MergedMeasurementAssociator"
 
 
+def _number(value: Any, name: str) -> float:
+    """A real number from a Stone Soup property (ProblemError naming it otherwise)."""
+    if isinstance(value, bool) or not isinstance(value, int | float | np.integer |
+                                                 np.floating):
+        raise ProblemError(f"{_W} {name}: expected a number, got {value!r}")
+    return float(value)
+
+
 class MergedDetection(Detection):
     """The pseudo-detection by which one member of an unresolved group is updated:
     ``state_vector`` z'_i, ``measurement_model`` the detection's model with the inflated
@@ -271,10 +279,15 @@ class MergedMeasurementAssociator(DataAssociator):
                            "detection's information shared among its k tracks; a "
                            "conservative guard against re-counting it scan after scan "
                            "when the members' cross-covariances are dropped)")
-    max_group_size: int = Property(default=3, doc="Largest unresolved group considered")
+    max_group_size: int = Property(
+        default=None, doc="Largest unresolved group considered (default, as in the API: "
+                          "any size; with a resolution the groups are the connected "
+                          "subsets of the sensor's gating graph)")
     group_gate: float = Property(
-        default=10.0, doc="Members of a candidate group pairwise within this Mahalanobis "
-                          "distance of each other's predicted measurements (None: no gate)")
+        default=None, doc="Members of a candidate group pairwise within this Mahalanobis "
+                          "distance of each other's predicted measurements (default, as in "
+                          "the API: no gate; with a resolution the gate follows from the "
+                          "resolution model)")
 
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         super().__init__(*args, **kwargs)
@@ -286,20 +299,23 @@ class MergedMeasurementAssociator(DataAssociator):
                                    f"{type(h).__name__}")
         pd = self.prob_detect if self.prob_detect is not None else getattr(
             h, "prob_detect", 0.9)
-        self.prob_detect = as_probability(f"{_W} prob_detect", float(pd), low_open=True,
-                                          high_open=True)
+        self.prob_detect = as_probability(f"{_W} prob_detect", _number(pd, "prob_detect"),
+                                          low_open=True, high_open=True)
         lam = self.clutter_density if self.clutter_density is not None else getattr(
             h, "clutter_spatial_density", None)
         if lam is None:
             raise ProblemError(f"{_W} clutter_density: required (the hypothesiser "
                                f"{type(h).__name__} has no clutter_spatial_density)")
-        self.clutter_density = as_positive(f"{_W} clutter_density", float(lam))
+        self.clutter_density = as_positive(f"{_W} clutter_density",
+                                           _number(lam, "clutter_density"))
         self.rho = as_probability(f"{_W} rho", self.rho, low_open=True)
         for flag in ("merges", "cell_information", "information_split"):
             if not isinstance(getattr(self, flag), bool | np.bool_):
                 raise ProblemError(f"{_W} {flag}: expected True or False, got "
                                    f"{getattr(self, flag)!r}")
-        self.max_group_size = as_count(f"{_W} max_group_size", self.max_group_size, minimum=1)
+        if self.max_group_size is not None:
+            self.max_group_size = as_count(f"{_W} max_group_size", self.max_group_size,
+                                           minimum=1)
         if self.group_gate is not None:
             self.group_gate = as_positive(f"{_W} group_gate", self.group_gate, allow_inf=True)
         if self.resolution is not None:
@@ -343,7 +359,8 @@ class MergedMeasurementAssociator(DataAssociator):
             means, covs, z, noises if len(noises) else np.eye(d),
             volume=1.0 / float(self.clutter_density), pd=float(self.prob_detect),
             rho=None if sensor is not None else float(self.rho), sensor=sensor,
-            max_group_size=int(self.max_group_size) if self.merges else 1,
+            max_group_size=(None if self.max_group_size is None else int(self.max_group_size))
+            if self.merges else 1,
             group_gate=self.group_gate if self.merges else None)
 
     # ------------------------------------------------------------------ associate
@@ -365,15 +382,34 @@ class MergedMeasurementAssociator(DataAssociator):
         tracks = list(tracks)
         dets = list(detections)
         self.last_solution, self.last_groups, self.last_tracks = None, [], tracks
+        if timestamp is None:
+            raise ProblemError(f"{_W}.associate timestamp: required (the scan time the "
+                               f"tracks are predicted to), got None")
+        for k, dt in enumerate(dets):
+            if not isinstance(dt, Detection):
+                raise ProblemError(f"{_W}.associate detections[{k}]: expected a Stone Soup "
+                                   f"Detection, got {type(dt).__name__}")
+            if dt.timestamp is None:
+                raise ProblemError(f"{_W}.associate detections[{k}]: has no timestamp")
         if not tracks:
             return {}
         preds, means, covs = self.predict_measurements(tracks, dets, timestamp, **kwargs)
         d = means.shape[1]
-        z = np.array([np.asarray(dt.state_vector, dtype=float).ravel() for dt in dets]
-                     ).reshape(len(dets), d) if dets else np.zeros((0, d))
+        z = np.zeros((len(dets), d))
+        noises = np.zeros((len(dets), d, d))
+        for k, dt in enumerate(dets):
+            try:
+                v = np.asarray(dt.state_vector, dtype=float).ravel()
+                r = np.asarray(self._model(dt).covar(), dtype=float)
+            except (TypeError, ValueError) as exc:
+                raise ProblemError(f"{_W}.associate detections[{k}]: not numeric "
+                                   f"({exc})") from None
+            if v.shape != (d,) or r.shape != (d, d):
+                raise ProblemError(f"{_W}.associate detections[{k}]: dimension "
+                                   f"{v.shape[0]} (noise {r.shape}), the tracks' predicted "
+                                   f"measurements have {d}: detections of mixed dimension")
+            z[k], noises[k] = v, r
         z = as_finite_array(f"{_W} detections", z, shape=(len(dets), d))
-        noises = np.array([np.asarray(self._model(dt).covar(), dtype=float) for dt in dets]
-                          ).reshape(len(dets), d, d)
         missed = {tr: SingleHypothesis(p, MissedDetection(timestamp=timestamp),
                                        measurement_prediction=None)
                   for tr, p in zip(tracks, preds, strict=True)}

@@ -6,7 +6,9 @@ unresolved group of tracks (optional dependency ``stonesoup``).
 :class:`~optmodels.assignment.stonesoup.MergedMeasurementAssociator` (it subclasses it:
 ``hypothesiser``, ``prob_detect``, ``clutter_density``, ``resolution``, ``rho``,
 ``merges``, ``cell_information``, ``information_split``, ``max_group_size``,
-``group_gate``, with the same defaults) plus the gate, and returns
+``group_gate``; the same defaults except ``max_group_size=3`` and ``group_gate=10``, kept
+here because :func:`~optmodels.assignment.soft.soft_marginals` weighs every subset) plus
+the gate, and returns
 ``{track: MultipleHypothesis}`` like Stone Soup's ``JPDA``, for
 ``MultiTargetMixtureTracker`` unchanged::
 
@@ -106,6 +108,10 @@ class SoftMergedAssociator(MergedMeasurementAssociator):
     After each call ``last_marginals`` holds the :class:`~optmodels.assignment.soft.
     SoftMarginals` (object indices index ``last_tracks``)."""
 
+    max_group_size: int = Property(default=3, doc="Largest unresolved group considered")
+    group_gate: float = Property(
+        default=10.0, doc="Members of a candidate group pairwise within this Mahalanobis "
+                          "distance of each other's predicted measurements (None: no gate)")
     gate: float = Property(
         default=None, doc="Hard gate, Mahalanobis distance of a detection to a block's "
                           "predicted return; None: the hypothesiser's (PDAHypothesiser: "

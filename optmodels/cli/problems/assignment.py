@@ -20,6 +20,9 @@ DEMO_TITLE = ("- [Joint assignment with unresolved groups (paper 004)]"
               "association, closely spaced space objects")
 
 
+#: ``hypotheses_total`` (and the dense ``pair_unresolved``) are reported up to this Q, N.
+COUNTED = 400
+
 _CASE_FIELDS = ("means", "covs", "measurements", "meas_cov", "volume", "pd", "rho",
                 "max_group_size", "group_gate", "sensor")
 #: Required in every case; ``rho`` too unless a ``sensor`` block is given (then not).
@@ -87,12 +90,15 @@ def _assignment_solve(args: argparse.Namespace) -> Outcome:
     case = _read_case(args.case)
     with _reading(args.case):
         data = asg.AssignmentData(**case)
-    total = asg.count_hypotheses(data.q, data.n)
+    # the count is a report (exact big integers, 0.2 s at Q = N = 400): given up to
+    # COUNTED, null beyond; the solve's own limits guard its real cost
+    total = asg.count_hypotheses(data.q, data.n) if max(data.q, data.n) <= COUNTED else None
     if args.method == "milp":
         sol = asg.solve(data, solver=args.solver, time_limit=args.time_limit)
     elif args.method == "brute-force":
-        if total > 10_000_000:
-            raise ProblemError(f"--method brute-force: {total:.3g} hypotheses (more than "
+        if total is None or total > 10_000_000:
+            shown = f"{total:.3g}" if total is not None else f"Q = {data.q}, N = {data.n}: far"
+            raise ProblemError(f"--method brute-force: {shown} hypotheses (more than "
                                "10⁷); use milp")
         sol = asg.brute_force(data)
     else:
@@ -103,7 +109,13 @@ def _assignment_solve(args: argparse.Namespace) -> Outcome:
                            "mip_gap": sol.mip_gap, "solve_time": sol.solve_time,
                            "build_time": sol.build_time, "hypotheses_total": total}
     if data.sensor is not None:
-        res["pair_unresolved"] = data.pair_unresolved()
+        if data.q <= COUNTED:
+            res["pair_unresolved"] = data.pair_unresolved()
+        else:  # the dense table would be Q² numbers: the pairs that can be unresolved
+            table = data.pair_table
+            res["pair_unresolved"] = None
+            res["unresolved_pairs"] = [[int(a), int(b), float(u)] for a, b, u in
+                                       zip(table.ii, table.jj, table.u, strict=True)]
     if args.k and sol.ok:
         kb = asg.k_best(data, args.k, solver=args.solver)
         res["k_best"] = [{"partition": h.partition, "assignment": h.assignment,
@@ -115,8 +127,11 @@ def _assignment_solve(args: argparse.Namespace) -> Outcome:
 
 
 def _print_assignment_solve(res: dict[str, Any]) -> None:
+    total = res["hypotheses_total"]
     print(f"{res['method']}: {res['status']} ({res['message']}); log score "
-          f"{res['log_score']:.6f}; {res['hypotheses_total']} hypotheses in total")
+          f"{res['log_score']:.6f}; "
+          + (f"{total} hypotheses in total" if total is not None else
+             "hypotheses not counted (Q or N above " + str(COUNTED) + ")"))
     if res["status"] not in _OK_STATUSES:
         return
     blocks = ["+".join(map(str, b)) for b in res["partition"]]

@@ -333,7 +333,7 @@ def test_assignment_gap_and_time_limit_reach_highs(monkeypatch: pytest.MonkeyPat
     data = asg.AssignmentData(means, np.stack([0.2 * np.eye(2)] * 3), meas, 0.25 * np.eye(2),
                               9.0, 0.9, 0.3)
     calls = _record_solves(monkeypatch)
-    sol = asg.solve(data, mip_gap=0.0, time_limit=30.0)
+    sol = asg.solve(data, mip_gap=0.0, time_limit=30.0, model="cvxpy")
     assert [_sent(c) for c in calls] == [{"mip_rel_gap": 0.0, "mip_abs_gap": 1e-12,
                                           "output_flag": False, "presolve": "off",
                                           "time_limit": 30.0}]

@@ -411,7 +411,7 @@ def test_assignment_solve_corrupted_point(monkeypatch: pytest.MonkeyPatch,
     same solution); ``milp.solve`` still decides inline until it calls that function (see
     the gate slice's report)."""
     data = assignment_case(np.random.default_rng(9))
-    honest = asg.solve(data)
+    honest = asg.solve(data, model="cvxpy")
     assert honest.status is Status.OPTIMAL and abs(honest.log_score) > 1.0
     real = asg.milp.solve_problem
 
@@ -430,7 +430,7 @@ def test_assignment_solve_corrupted_point(monkeypatch: pytest.MonkeyPatch,
     # the re-check's inputs, whether milp.solve calls _recheck itself or _finish_point does
     monkeypatch.setattr(asg.milp, "_recheck", spy_recheck, raising=False)
     monkeypatch.setattr(asg.data, "_recheck", spy_recheck)
-    sol = asg.solve(data)
+    sol = asg.solve(data, model="cvxpy")
     assert sol.status is expect, sol.message
     assert sol.residuals["objective"] == pytest.approx(rel, rel=1e-6)
     verdicts.clear()

@@ -202,9 +202,9 @@ class Adapter(cases.Adapter):
             # every solver at the one target (issue 27): the back-end's least-squares
             # options (the same for OSQP through CVXPY and through CasADi), then the
             # profile's
-            from optmodels.backends.profiles import defaults
+            from optmodels.backends.profiles import solver_options
 
-            opts = {**defaults("lsq", run.solver), **options}
+            opts = solver_options("lsq", run.solver, options)
             sol = self._fuse(data, method="cvxpy", solver=run.solver, **opts)
         return cases._from_solution(sol, sol.estimate)
 

@@ -115,7 +115,7 @@ def _run_harness(out: Path, problems: Sequence[str], *, sizes: list[int] | None,
     report.write_harness_report(out, rows, profile=profile, time_limit=limit,
                                 error_tol=prof.error_tol, violation_tol=prof.violation_tol,
                                 notes=notes, env=env, skipped=skipped)
-    summary = report.harness_info(rows, limit)
+    summary = report.harness_info(rows, limit, skipped)
     refs = [r for r in rows if r["formulation"] == "closed_form"]
     at_limit = [r for r in rows if r["status"] == "time_limit"]
     return {"out": str(out), "runs": len(rows),

@@ -128,6 +128,18 @@ def summarise(rows: Sequence[dict[str, Any]], time_limit: float, *,
     for k in skipped:
         groups.setdefault((k["problem"], k["formulation"], k["solver"]), []).append(
             {**k, "success": False, "seed": k.get("seed"), "skipped": True})
+    # a case that another solver of the same (problem, formulation) ran but this one
+    # did not (left out, or a sweep with --solvers on part of the cases) counts as its
+    # failure too: every solver of a ranking is measured on the same cases
+    forms: dict[tuple[str, str], set[tuple[Any, ...]]] = {}
+    for (problem, form, _), rs in groups.items():
+        forms.setdefault((problem, form), set()).update(_case_key(r) for r in rs)
+    for (problem, form, solver), rs in groups.items():
+        have = {_case_key(r) for r in rs}
+        for c in sorted(forms[(problem, form)] - have, key=str):
+            rs.append({"problem": problem, "formulation": form, "solver": solver,
+                       "instance": c[0], "size": c[1], "seed": c[2], "success": False,
+                       "skipped": True})
     out = []
     per_case: dict[tuple[str, str, str], dict[tuple[Any, ...], float]] = {}
     for (problem, form, solver), rs in groups.items():
@@ -207,6 +219,7 @@ def rank_rows(rows: list[dict[str, Any]], *,
     def ratio(o: dict[str, Any], ref: dict[str, Any]) -> tuple[float, float, float]:
         assert paired is not None
         d = paired[o["solver"]] - paired[ref["solver"]]
+        # (the same cases for both: the ratio of their shifted means, exactly)
         mid = (o["sgm_total_time"] + SHIFT) / (ref["sgm_total_time"] + SHIFT)
         return mid, float(np.exp(np.quantile(d, a))), float(np.exp(np.quantile(d, 1 - a)))
 

@@ -254,3 +254,22 @@ def test_linear_assignment_is_a_reduction_row_only(tmp_path: Path) -> None:
     best_generic = line.split("|")[3]
     assert "scipy" not in best_generic and "linear assignment" not in best_generic
     assert "scipy (linear assignment)" in line  # in the reduction column
+
+
+def test_a_results_file_of_the_previous_columns_is_set_aside_and_rerun(tmp_path: Path
+                                                                       ) -> None:
+    """A results.csv written before the efficiency columns: its rows cannot be reused
+    (no estimate error), so they move to results.csv.skipped and the runs are redone."""
+    from solvers_cmp.harness.results import COLUMNS
+
+    old_cols = COLUMNS[:COLUMNS.index("estimate_sq_error")]
+    path = tmp_path / "results.csv"
+    path.write_text(",".join(old_cols) + "\n" + ",".join("1" for _ in old_cols) + "\n")
+    rows = harness.run_sweep(["trajectories"], tmp_path, sizes=[10], solvers=["CLARABEL"],
+                             instances=["diverging"], isolate=False, repeats=1)
+    assert len(rows) == 3 and all(np.isfinite(r["crb"]) for r in rows if r["success"])
+    lines = path.read_text().splitlines()
+    assert lines[0] == ",".join(COLUMNS) and len(lines) == 4
+    assert (tmp_path / "results.csv.skipped").read_text().count("\n") == 1
+    cf = next(r for r in rows if r["formulation"] == "closed_form")
+    assert cf["estimate_sq_error"] > 0 and cf["crb"] > 0

@@ -273,3 +273,31 @@ def test_a_results_file_of_the_previous_columns_is_set_aside_and_rerun(tmp_path:
     assert (tmp_path / "results.csv.skipped").read_text().count("\n") == 1
     cf = next(r for r in rows if r["formulation"] == "closed_form")
     assert cf["estimate_sq_error"] > 0 and cf["crb"] > 0
+
+
+def test_the_quick_sweep_leaves_out_too_slow_runs_and_says_so(tmp_path: Path) -> None:
+    """qpOASES on the m = 20 minimum-trace QP is marked too slow
+    (:data:`solvers_cmp.harness.profiles.TOO_SLOW`): the quick sweep does not run it,
+    lists it with its reason in the report and ranks it as a failure."""
+    import csv as _csv
+
+    from optmodels.cli.compare import _run_harness
+    from solvers_cmp.harness.profiles import TOO_SLOW
+
+    res = _run_harness(tmp_path, ["fusion"], sizes=[20], solvers=["CASADI_QPOASES",
+                                                                  "CLARABEL"],
+                       profile="default", seed=0, time_limit=5.0, quick=True,
+                       progress=False, instances=["correlated"], scheduler="serial",
+                       repeats=1)
+    why = TOO_SLOW[("fusion", "CASADI_QPOASES", "min-trace W", None)][1]
+    assert [(k["solver"], k["size"], k["why"]) for k in res["skipped"]] == [
+        ("CASADI_QPOASES", 20, why)]
+    ran = {r["solver"] for r in _csv.DictReader((tmp_path / "results.csv").open())}
+    assert ran == {"numpy", "CLARABEL"}
+    md = (tmp_path / "report.md").read_text()
+    left = md.split("## Left out of this quick sweep")[1].split("\n## ")[0]
+    assert "**CASADI_QPOASES**" in left and why in left
+    summ = {r["solver"]: r for r in _csv.DictReader((tmp_path / "summary.csv").open())}
+    assert float(summ["CASADI_QPOASES"]["success_rate"]) == 0.0
+    assert summ["CASADI_QPOASES"]["skipped"] == "1"
+    assert summ["CLARABEL"]["rank"] == "1"

@@ -100,7 +100,8 @@ def _run_harness(out: Path, problems: Sequence[str], *, sizes: list[int] | None,
                 why = too_slow(case, run)
                 if why is not None:
                     skipped.append({"problem": case.problem, "instance": case.instance,
-                                    "size": case.size, "formulation": run.formulation,
+                                    "size": case.size, "seed": case.seed,
+                                    "formulation": run.formulation,
                                     "solver": run.solver, "why": why})
     rows = harness.run_sweep(problems, out, sizes=plan_sizes, solvers=solvers,
                              profile=profile, seeds=(seed,), time_limit=time_limit,

@@ -128,6 +128,20 @@ class Adapter:
     def make(self, instance: str, size: int, seed: int) -> Any:
         raise NotImplementedError
 
+    def truth(self, instance: str, size: int, seed: int, data: Any) -> tuple[Any, float] | None:
+        """For the statistical-efficiency column (issue 27, item 6): the true parameter of
+        the seeded draw ``make(instance, size, seed)`` in the space of ``Outcome.x`` and the
+        Cramér–Rao bound on the expected squared error E :meth:`sq_error` (x̂, truth) of an
+        unbiased estimate, same units; None (here) where the instance is not a draw from
+        a known truth or has no bound."""
+        return None
+
+    def sq_error(self, x: Any, truth: Any) -> float:
+        """Squared estimation error of one draw, ‖x − truth‖² (the units of
+        :meth:`truth`'s bound)."""
+        d = np.asarray(x, float) - np.asarray(truth, float)
+        return float(np.sum(d * d))
+
     def reference(self, instance: str, data: Any) -> Outcome:
         raise NotImplementedError
 

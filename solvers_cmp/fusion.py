@@ -168,9 +168,22 @@ class Adapter(cases.Adapter):
             system = fu.TwoSiteSystem.on_baseline()
             x = np.array([8_000.0, 30_000.0])
             z = system.sample(x, size, np.random.default_rng([seed, size]))
-            return {"system": system, "z": z,
+            return {"system": system, "z": z, "truth": x,
                     "crb": float(np.sqrt(np.trace(system.crb(x))))}
         return gen(size, seed, instance == "correlated")
+
+    def truth(self, instance: str, size: int, seed: int, data: Any) -> tuple[Any, float] | None:
+        """joint-ml: the true position of the T draws in units of the CRB RMS (x is the
+        estimate / crb), whose bound on the mean squared distance is then 1; the other
+        instances are not draws from a truth (None)."""
+        if instance != "joint-ml":
+            return None
+        return np.asarray(data["truth"], float) / data["crb"], 1.0
+
+    def sq_error(self, x: Any, truth: Any) -> float:
+        """Mean over the T rows of the squared distance to the truth (CRB units)."""
+        d = np.atleast_2d(np.asarray(x, float)) - np.asarray(truth, float)
+        return float(np.mean(np.sum(d * d, axis=1)))
 
     def _fuse(self, d: dict[str, Any], **kw: Any) -> Any:
         from optmodels import fusion as fu
@@ -202,9 +215,9 @@ class Adapter(cases.Adapter):
             # every solver at the one target (issue 27): the back-end's least-squares
             # options (the same for OSQP through CVXPY and through CasADi), then the
             # profile's
-            from optmodels.backends.profiles import defaults
+            from optmodels.backends.profiles import solver_options
 
-            opts = {**defaults("lsq", run.solver), **options}
+            opts = solver_options("lsq", run.solver, options)
             sol = self._fuse(data, method="cvxpy", solver=run.solver, **opts)
         return cases._from_solution(sol, sol.estimate)
 

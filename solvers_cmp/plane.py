@@ -287,12 +287,33 @@ class Adapter(cases.Adapter):
     reductions = ("reduced",)
 
     def make(self, instance: str, size: int, seed: int) -> Any:
-        from optmodels import plane, scenarios
+        from optmodels import plane
+
+        sc = self._scenario(instance, size, seed)
+        return plane.PlaneData(sc.points, sc.cov, sc.alpha2)
+
+    def _scenario(self, instance: str, size: int, seed: int) -> Any:
+        from optmodels import scenarios
 
         rng = np.random.default_rng([seed, size, self.instances.index(instance)])
-        sc = (scenarios.two_source_plane(size, rng) if instance == "two-source"
-              else scenarios.radar_plane(size, rng, geometry="broadside"))
-        return plane.PlaneData(sc.points, sc.cov, sc.alpha2)
+        return (scenarios.two_source_plane(size, rng) if instance == "two-source"
+                else scenarios.radar_plane(size, rng, geometry="broadside"))
+
+    def truth(self, instance: str, size: int, seed: int, data: Any) -> tuple[Any, float]:
+        """The true normal of the draw and the Cramér–Rao bound of the angle, rad²
+        (:func:`optmodels.plane.cramer_rao_bound` at the true points: E angle² ≥
+        angle_rms²)."""
+        from optmodels import plane
+
+        sc = self._scenario(instance, size, seed)
+        crb = plane.cramer_rao_bound(plane.PlaneData(sc.truth, sc.cov, sc.alpha2),
+                                     sc.normal, sc.offset)
+        return np.asarray(sc.normal, float), float(crb.angle_rms) ** 2
+
+    def sq_error(self, x: Any, truth: Any) -> float:
+        from optmodels import plane
+
+        return float(plane.angle_error(np.asarray(x), np.asarray(truth))) ** 2
 
     def reference(self, instance: str, data: Any) -> Outcome:
         from optmodels import plane

@@ -67,8 +67,9 @@ def _benchmark(out: Path, problem: str, bench: list[dict[str, Any]] | None, intr
 
 # ============================================================== the harness report
 _SUMMARY_COLS = ["kind", "rank", "formulation", "solver", "runs", "success_rate",
-                 "sgm_total_time", "total 95% interval (s)", "sgm_solve_time",
-                 "sgm_build_time", "rel_total_time", "max_error", "max_violation"]
+                 "sgm_total_time", "total 95% interval (s)", "× leader (95%)",
+                 "sgm_solve_time", "sgm_build_time", "rel_total_time", "max_error",
+                 "max_violation", "efficiency"]
 _SUMMARY_FMT = {"success_rate": ".0%", "sgm_solve_time": ".2e", "rel_total_time": ".1f",
                 "sgm_build_time": ".2e", "sgm_total_time": ".2e", "max_error": ".1e",
                 "max_violation": ".1e"}
@@ -78,6 +79,22 @@ def _interval(s: dict[str, Any]) -> str:
     return f"{s['sgm_total_lo']:.2e} – {s['sgm_total_hi']:.2e}"
 
 
+def _ratio(s: dict[str, Any]) -> str:
+    """The paired time ratio to the leader of its (problem, formulation) with its 95 %
+    interval; '—' for rows outside the ranking."""
+    if "ratio_to_best" not in s:
+        return "—"
+    return f"{s['ratio_to_best']:.2f} ({s['ratio_lo']:.2f}–{s['ratio_hi']:.2f})"
+
+
+def _eff(s: dict[str, Any]) -> str:
+    """Efficiency Σ CRB / Σ squared error over the draws (:func:`~solvers_cmp.harness.
+    metrics.efficiency`), with the number of draws; '—' where the problem has no bound."""
+    if not s.get("draws"):
+        return "—"
+    return f"{s['efficiency']:.2f} ({s['draws']})"
+
+
 def _display(summary: list[dict[str, Any]]) -> list[dict[str, Any]]:
     """Summary rows for the Markdown tables: the interval as text, ties marked (``1=``),
     no rank for reductions and references."""
@@ -85,6 +102,8 @@ def _display(summary: list[dict[str, Any]]) -> list[dict[str, Any]]:
     for s in summary:
         d = dict(s)
         d["total 95% interval (s)"] = _interval(s)
+        d["× leader (95%)"] = _ratio(s)
+        d["efficiency"] = _eff(s)
         d["rank"] = (f"{s['rank']}{'=' if s.get('tied') else ''}" if "rank" in s else "—")
         out.append(d)
     return out
@@ -102,13 +121,14 @@ FAILURE_KINDS = {
 }
 
 
-def harness_info(rows: list[dict[str, Any]], time_limit: float) -> dict[str, Any]:
+def harness_info(rows: list[dict[str, Any]], time_limit: float,
+                 skipped: list[dict[str, Any]] | None = None) -> dict[str, Any]:
     """The numbers a summary prints: per problem the headline (rank-1 generic solves of
-    the original problem, ties included, with their interval) and the failures by kind
-    (:data:`FAILURE_KINDS`)."""
+    the original problem, ties included, with their interval and efficiency) and the
+    failures by kind (:data:`FAILURE_KINDS`)."""
     from solvers_cmp.harness import summarise
 
-    summary = summarise(rows, time_limit)
+    summary = summarise(rows, time_limit, skipped=skipped or ())
     head = {}
     for s in summary:
         if s["kind"] == "original" and s.get("rank") == 1:
@@ -116,7 +136,10 @@ def harness_info(rows: list[dict[str, Any]], time_limit: float) -> dict[str, Any
                 {"solver": s["solver"], "formulation": s["formulation"],
                  "sgm_total_s": s["sgm_total_time"], "interval_s": [s["sgm_total_lo"],
                                                                     s["sgm_total_hi"]],
-                 "success_rate": s["success_rate"], "tied": bool(s.get("tied"))})
+                 "success_rate": s["success_rate"], "tied": bool(s.get("tied")),
+                 "ratio_to_best": [s.get("ratio_to_best", 1.0), s.get("ratio_lo", 1.0),
+                                   s.get("ratio_hi", 1.0)],
+                 "efficiency": s["efficiency"] if s["draws"] else None})
     kinds: dict[str, int] = {}
     for r in rows:
         if not r["success"]:
@@ -124,6 +147,16 @@ def harness_info(rows: list[dict[str, Any]], time_limit: float) -> dict[str, Any
                 else "inaccurate"
             kinds[k] = kinds.get(k, 0) + 1
     return {"headline": head, "failure_kinds": kinds}
+
+
+def _next(summary: list[dict[str, Any]], form: str) -> str:
+    """The best original row of ``form`` after the rank-1 rows: its solver and paired
+    ratio to the leader (interval), or '—'."""
+    rest = [s for s in summary if s["kind"] == "original" and s["formulation"] == form
+            and s.get("rank", 1) != 1]
+    if not rest:
+        return "—"
+    return f"{rest[0]['solver']} {_ratio(rest[0])}"
 
 
 def _failure_lines(rows: list[dict[str, Any]]) -> list[str]:
@@ -155,10 +188,10 @@ def write_harness_report(out: Path, rows: list[dict[str, Any]], *, profile: str,
     from optmodels import plots
     from solvers_cmp import cases as cs
     from solvers_cmp.harness import summarise
-    from solvers_cmp.harness.metrics import N_BOOT
+    from solvers_cmp.harness.metrics import N_BOOT, TIE_MARGIN
 
     out.mkdir(parents=True, exist_ok=True)
-    summary = summarise(rows, time_limit)
+    summary = summarise(rows, time_limit, skipped=skipped or ())
     write_csv(out / "summary.csv", summary)
     instance_notes = _instance_notes(rows)
     env = env or environment()
@@ -199,6 +232,8 @@ def write_harness_report(out: Path, rows: list[dict[str, Any]], *, profile: str,
                 "success": best[0]["success_rate"],
                 "total (sgm, s)": best[0]["sgm_total_time"],
                 "95% interval (s)": _interval(best[0]),
+                "next (× leader, 95%)": _next(mine_s, form),
+                "efficiency": " / ".join(_eff(s) for s in best),
                 "best reduction": (f"{red[0]['solver']} ({red[0]['formulation']}): "
                                    f"{red[0]['sgm_total_time']:.2e} s") if red else "—",
                 "floor (s)": " / ".join(f"{s['formulation']} {s['sgm_total_time']:.2e}"
@@ -211,8 +246,20 @@ def write_harness_report(out: Path, rows: list[dict[str, Any]], *, profile: str,
               "are **tied** (`1=`) and named together — a rerun may swap them, not the "
               "headline. Reductions (reduced formulations, the linear assignment without "
               "merges) and the floor (closed form, enumeration) have their own rows.\n")
+    md.append("Ties are decided on the cases every solver of the problem ran, *paired*: "
+              "`× leader` is the ratio of a solver's shifted geometric mean to the "
+              "leader's with the 95 % interval of the same bootstrap over the cases (the "
+              "spread of case sizes cancels); a solver is tied with the leader when that "
+              f"interval reaches below {TIE_MARGIN:g} (the run-to-run spread of the same "
+              "solver on this shared machine). A run the quick sweep leaves out as too "
+              "slow counts as a failure of its solver. **Efficiency** (estimation "
+              "problems): Σ Cramér–Rao bound / Σ squared error of the estimate against the "
+              "truth over the seeded draws (number of draws in brackets); 1 = efficient "
+              "(up to the draws' Monte Carlo spread, shared by every solver of the "
+              "problem), below 1 = what an early stop costs the estimate.\n")
     md.append(markdown_table(headline, ["problem", "original problem", "best generic",
                                         "success", "total (sgm, s)", "95% interval (s)",
+                                        "next (× leader, 95%)", "efficiency",
                                         "best reduction", "floor (s)"],
                              {"success": ".0%", "total (sgm, s)": ".2e"}))
     if skipped:

@@ -39,6 +39,12 @@ POINTS = (10, 100, 1000)
 
 def instance(family: str, q: int, n: int, seed: int) -> tr.TrajectoryData:
     """Q objects, N points each at jittered, object-specific times over 0..1000 s, σ = 1."""
+    return draw(family, q, n, seed)[0]
+
+
+def draw(family: str, q: int, n: int, seed: int) -> tuple[tr.TrajectoryData, np.ndarray]:
+    """:func:`instance` and the true θ it was drawn from, in the family's order (paper 002:
+    (y0, V_1..V_Q) diverging, (y0_1..y0_Q, V) parallel)."""
     rng = np.random.default_rng([seed, q, n, FAMILIES.index(family)])
     times = [np.sort(rng.uniform(0, 1000, n)) for _ in range(q)]
     if family == "diverging":
@@ -46,7 +52,9 @@ def instance(family: str, q: int, n: int, seed: int) -> tr.TrajectoryData:
     else:
         start, vel = rng.uniform(-1e3, 1e3, q), np.full(q, 2.0)
     vals = [start[j] + vel[j] * t + rng.normal(0, 1, n) for j, t in enumerate(times)]
-    return tr.TrajectoryData(times, vals, 1.0)
+    theta = (np.concatenate([[start[0]], vel]) if family == "diverging"
+             else np.concatenate([start, [vel[0]]]))
+    return tr.TrajectoryData(times, vals, 1.0), theta
 
 
 def rows(objects: tuple[int, ...] = OBJECTS, points: tuple[int, ...] = POINTS, *,
@@ -127,6 +135,15 @@ class Adapter(cases.Adapter):
         from solvers_cmp.trajectories import instance as gen
 
         return gen(instance, self.objects, size, seed)
+
+    def truth(self, instance: str, size: int, seed: int, data: Any) -> tuple[Any, float]:
+        """The θ of the draw and tr Ψ (14), the covariance of the closed form -- for this
+        linear Gaussian model with σ known the Cramér–Rao bound, which the closed form
+        attains."""
+        from optmodels import trajectories as tr
+
+        theta = draw(instance, self.objects, size, seed)[1]
+        return theta, float(np.trace(tr.covariance(data, instance)))  # type: ignore[arg-type]
 
     def reference(self, instance: str, data: Any) -> Outcome:
         from optmodels import trajectories as tr

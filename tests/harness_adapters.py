@@ -75,6 +75,41 @@ class Trouble(Adapter):
         return Outcome(True, "optimal", 0.0, x, 0.0, 0.001, 0.002, 3)
 
 
+class GaussMean(Adapter):
+    """The analytic case of the statistical-efficiency column: ``size`` draws of
+    N(μ, I₃), estimate μ. The sample mean is efficient (E‖x̄ − μ‖² = 3/size, the
+    Cramér–Rao bound); ``biased`` adds a fixed δ with ‖δ‖² = 3/size, so that its
+    E‖x̂ − μ‖² = 6/size and its efficiency is exactly 1/2."""
+
+    name = "gaussmean"
+    instances = ("only",)
+    sizes = (10,)
+    size_meaning = "draws"
+
+    def make(self, instance: str, size: int, seed: int) -> Any:
+        rng = np.random.default_rng([seed, size])
+        mu = rng.uniform(-5, 5, 3)
+        return {"mu": mu, "z": mu + rng.normal(size=(size, 3))}
+
+    def truth(self, instance: str, size: int, seed: int, data: Any) -> tuple[Any, float]:
+        return data["mu"], 3.0 / size
+
+    def reference(self, instance: str, data: Any) -> Outcome:
+        return Outcome(True, "optimal", 0.0, data["z"].mean(axis=0), 0.0, 0.0, 0.0)
+
+    def runs(self, instance: str) -> list[Run]:
+        return [Run("closed_form", "numpy"), Run("f", "biased")]
+
+    def solve(self, instance: str, data: Any, run: Run, options: dict[str, Any]) -> Outcome:
+        x = data["z"].mean(axis=0)
+        if run.solver == "biased":
+            x = x + np.sqrt(1.0 / len(data["z"]))  # ‖δ‖² = 3/size
+        return Outcome(True, "optimal", 0.0, x, 0.0, 0.0, 1e-4)
+
+    def error(self, x: Any, ref: Any) -> float:
+        return 0.0  # judged on success only; the efficiency is what is tested
+
+
 # ---------------------------------------------------------------- process helpers (Linux /proc)
 def children(pid: int) -> list[int]:
     """PIDs whose parent is ``pid`` (from /proc/*/stat)."""

@@ -225,9 +225,6 @@ def test_empty_origin_is_refused(inputs: dict[str, Path]) -> None:
     assert run.code == 2 and "--origin" in run.err, run.err
 
 
-@pytest.mark.xfail(strict=True, reason="optmodels/cli/problems/assignment.py _read_case "
-                   "parses with json.loads (a key given twice: the last kept silently); "
-                   "core.json_document refuses it; see notes/robust.md")
 def test_duplicated_json_key_is_refused(inputs: dict[str, Path]) -> None:
     text = inputs["case"].read_text()
     dup = inputs["dir"] / "dup.json"

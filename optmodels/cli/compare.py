@@ -100,7 +100,8 @@ def _run_harness(out: Path, problems: Sequence[str], *, sizes: list[int] | None,
                 why = too_slow(case, run)
                 if why is not None:
                     skipped.append({"problem": case.problem, "instance": case.instance,
-                                    "size": case.size, "formulation": run.formulation,
+                                    "size": case.size, "seed": case.seed,
+                                    "formulation": run.formulation,
                                     "solver": run.solver, "why": why})
     rows = harness.run_sweep(problems, out, sizes=plan_sizes, solvers=solvers,
                              profile=profile, seeds=(seed,), time_limit=time_limit,
@@ -115,7 +116,7 @@ def _run_harness(out: Path, problems: Sequence[str], *, sizes: list[int] | None,
     report.write_harness_report(out, rows, profile=profile, time_limit=limit,
                                 error_tol=prof.error_tol, violation_tol=prof.violation_tol,
                                 notes=notes, env=env, skipped=skipped)
-    summary = report.harness_info(rows, limit)
+    summary = report.harness_info(rows, limit, skipped)
     refs = [r for r in rows if r["formulation"] == "closed_form"]
     at_limit = [r for r in rows if r["status"] == "time_limit"]
     return {"out": str(out), "runs": len(rows),

@@ -95,10 +95,13 @@ def _compare_lines(cmp_res: dict[str, Any]) -> list[str]:
             continue
         who = " = ".join(b["solver"] for b in best)
         lo, hi = best[0]["interval_s"]
+        eff = [b["efficiency"] for b in best if b.get("efficiency") is not None]
         lines.append(f"  fastest generic solve of {name}: {who}"
-                     + (" (tied: 95 % intervals overlap)" if len(best) > 1 else "")
+                     + (" (tied: paired 95 % intervals within the noise margin)"
+                        if len(best) > 1 else "")
                      + f", {_ms(best[0]['sgm_total_s'])} build + solve "
-                     f"(95 % interval {_ms(lo)} – {_ms(hi)}, shifted geometric mean)")
+                     f"(95 % interval {_ms(lo)} – {_ms(hi)}, shifted geometric mean)"
+                     + (f", statistical efficiency {min(eff):.2f}" if eff else ""))
     kinds = cmp_res.get("failure_kinds", {})
     if kinds:
         lines.append("  failed runs are results, not errors of the demo: " + "; ".join(

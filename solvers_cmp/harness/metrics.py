@@ -65,29 +65,97 @@ def formulation_kind(problem: str, formulation: str) -> str:
     return "original"
 
 
+#: Paired ratios to the leader below this are ties whatever their interval: the
+#: run-to-run spread of a solver's ratio to the leader on this shared 2-core machine
+#: (issue 27: two quick sweeps 45 min apart, load 0.7 and 10; over the 27 solvers with
+#: every run successful in both the ratio moved by a median 1.22x, by up to 1.73x for 90 %
+#: of them) -- a difference smaller than the machine's own noise is not a ranking.
+TIE_MARGIN = 1.75
+
+
+def _case_key(r: dict[str, Any]) -> tuple[Any, ...]:
+    return (r.get("instance"), r.get("size"), r.get("seed"))
+
+
+def _total(r: dict[str, Any], time_limit: float) -> float:
+    """Build + solve of a successful row (the closed form: its solve); a failure is
+    charged ``time_limit``."""
+    if not r["success"]:
+        return time_limit
+    if r["formulation"] == "closed_form":
+        return float(r["solve_time"])
+    return float(r["solve_time"]) + float(r["build_time"])
+
+
+def efficiency(rows: Sequence[dict[str, Any]]) -> tuple[float, int]:
+    """Statistical efficiency of a solver's estimates (issue 27, item 6): over the rows
+    that carry an estimate error against the truth (``estimate_sq_error``, the squared
+    error of one seeded Monte Carlo draw, in the adapter's units) and its Cramér–Rao bound
+    (``crb``, the bound on the expected squared error, same units),
+    ``Σ crb / Σ estimate_sq_error`` and the number of draws. 1 for an efficient estimator
+    (up to the Monte Carlo spread of the draws, which every solver of the problem shares:
+    the same draws), below 1 for one that pays for an early stop; NaN without draws."""
+    def num(v: Any) -> float:
+        try:
+            return float(v)
+        except (TypeError, ValueError):
+            return float("nan")
+
+    pairs = [(num(r.get("estimate_sq_error")), num(r.get("crb"))) for r in rows]
+    pairs = [(e, c) for e, c in pairs if np.isfinite(e) and np.isfinite(c)]
+    if not pairs:
+        return float("nan"), 0
+    err = sum(e for e, _ in pairs)
+    bound = sum(c for _, c in pairs)
+    return (bound / err if err > 0 else float("inf")), len(pairs)
+
+
 def summarise(rows: Sequence[dict[str, Any]], time_limit: float, *,
-              n_boot: int = N_BOOT, seed: int = 0) -> list[dict[str, Any]]:
+              n_boot: int = N_BOOT, seed: int = 0,
+              skipped: Sequence[dict[str, Any]] = ()) -> list[dict[str, Any]]:
     """Per (problem, formulation, solver): runs, success rate, shifted geometric means of
     solve and build time (failures charged ``time_limit``) and of their sum ``total``
-    with its bootstrap interval (``sgm_total_lo``/``_hi``), each also normalised to the
-    best of its problem, worst error and violation among successes, ``kind`` and, for
-    the ``original`` rows, ``rank`` within (problem, formulation) (1 = best; rows whose
-    interval overlaps the best's share rank 1 and are marked ``tied``;
-    :func:`rank_rows`)."""
+    with its bootstrap interval (``sgm_total_lo``/``_hi``, over the cases), each also
+    normalised to the best of its problem, worst error and violation among successes,
+    the statistical efficiency (:func:`efficiency`: ``efficiency``, ``draws``),
+    ``kind`` and, for the ``original`` rows, ``rank`` within (problem, formulation) with
+    the paired ratio to the leader and its interval (``ratio_to_best``, ``_lo``, ``_hi``;
+    :func:`rank_rows`). ``skipped``: runs the quick sweep left out as too slow (problem,
+    instance, size, formulation, solver): each counts as a failure, so that a solver is
+    never ranked on its easy cases only."""
     groups: dict[tuple[str, str, str], list[dict[str, Any]]] = {}
     for r in rows:
         groups.setdefault((r["problem"], r["formulation"], r["solver"]), []).append(r)
+    for k in skipped:
+        groups.setdefault((k["problem"], k["formulation"], k["solver"]), []).append(
+            {**k, "success": False, "seed": k.get("seed"), "skipped": True})
+    # a case that another solver of the same (problem, formulation) ran but this one
+    # did not (left out, or a sweep with --solvers on part of the cases) counts as its
+    # failure too: every solver of a ranking is measured on the same cases
+    forms: dict[tuple[str, str], set[tuple[Any, ...]]] = {}
+    for (problem, form, _), rs in groups.items():
+        forms.setdefault((problem, form), set()).update(_case_key(r) for r in rs)
+    for (problem, form, solver), rs in groups.items():
+        have = {_case_key(r) for r in rs}
+        for c in sorted(forms[(problem, form)] - have, key=str):
+            rs.append({"problem": problem, "formulation": form, "solver": solver,
+                       "instance": c[0], "size": c[1], "seed": c[2], "success": False,
+                       "skipped": True})
     out = []
+    per_case: dict[tuple[str, str, str], dict[tuple[Any, ...], float]] = {}
     for (problem, form, solver), rs in groups.items():
         succ = [r for r in rs if r["success"]]
         solve = [r["solve_time"] if r["success"] else time_limit for r in rs]
         build = [r["build_time"] if r["success"] else time_limit for r in rs]
-        total = [s + b for s, b in zip(solve, build, strict=True)] if form != "closed_form" \
-            else solve
+        total = [_total(r, time_limit) for r in rs]
+        per_case[(problem, form, solver)] = {_case_key(r): t
+                                             for r, t in zip(rs, total, strict=True)}
         lo, hi = sgm_interval(total, n_boot=n_boot, seed=seed)
+        eff, draws = efficiency([r for r in rs if not r.get("skipped")])
         out.append({
             "problem": problem, "kind": formulation_kind(problem, form),
             "formulation": form, "solver": solver, "runs": len(rs),
+            "skipped": sum(bool(r.get("skipped")) for r in rs),
             "success_rate": len(succ) / len(rs),
             "sgm_solve_time": shifted_geometric_mean(solve),
             "sgm_build_time": shifted_geometric_mean(build),
@@ -95,6 +163,7 @@ def summarise(rows: Sequence[dict[str, Any]], time_limit: float, *,
             "sgm_total_lo": lo, "sgm_total_hi": hi,
             "max_error": max((r["solution_error"] for r in succ), default=float("nan")),
             "max_violation": max((r["max_violation"] for r in succ), default=float("nan")),
+            "efficiency": eff, "draws": draws,
         })
     for problem in {o["problem"] for o in out}:
         mine = [o for o in out if o["problem"] == problem]
@@ -103,28 +172,71 @@ def summarise(rows: Sequence[dict[str, Any]], time_limit: float, *,
             for o in mine:
                 o[key.replace("sgm", "rel")] = (o[key] + SHIFT) / best
         # an original formulation per sub-problem (fusion: WLS, min-trace W, ML are
-        # three problems): ranks within (problem, formulation)
+        # three problems): ranks within (problem, formulation), paired over its cases
         for form in {o["formulation"] for o in mine if o["kind"] == "original"}:
-            rank_rows([o for o in mine if o["kind"] == "original"
-                       and o["formulation"] == form])
+            grp = [o for o in mine if o["kind"] == "original" and o["formulation"] == form]
+            cases = sorted({c for o in grp
+                            for c in per_case[(problem, form, o["solver"])]}, key=str)
+            logs = {o["solver"]: np.log(np.array(
+                [per_case[(problem, form, o["solver"])].get(c, time_limit) for c in cases])
+                + SHIFT) for o in grp}
+            rank_rows(grp, paired=_paired_boot(logs, n_boot, seed))
     order = {"original": 0, "reduction": 1, "reference": 2}
     out.sort(key=lambda o: (o["problem"], order[o["kind"]], o["formulation"],
                             o.get("rank", 0), -o["success_rate"], o["sgm_total_time"]))
     return out
 
 
-def rank_rows(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
-    """Rank rows of one problem in place: by success rate, then ``sgm_total_time``. A row
-    whose success rate equals the leader's and whose interval
-    [``sgm_total_lo``, ``sgm_total_hi``] overlaps the leader's is *tied* with it (rank 1,
-    ``tied=True`` for all of them when there are two or more); the others are ranked
-    after (competition ranking: the next rank is the row's position), a row whose
-    interval overlaps the first row of the rank before sharing that rank."""
+def _paired_boot(logs: dict[str, np.ndarray], n_boot: int, seed: int
+                 ) -> dict[str, np.ndarray]:
+    """Per solver, the bootstrap means of log(total + shift) over the *same* resampled
+    cases for every solver (a paired bootstrap: the spread of case difficulty -- sizes
+    that differ 10× -- cancels in the ratios)."""
+    n = len(next(iter(logs.values()))) if logs else 0
+    if n == 0:
+        return {}
+    idx = np.random.default_rng(seed).integers(0, n, (n_boot, n))
+    return {k: v[idx].mean(axis=1) for k, v in logs.items()}
+
+
+def rank_rows(rows: list[dict[str, Any]], *,
+              paired: dict[str, np.ndarray] | None = None,
+              margin: float = TIE_MARGIN) -> list[dict[str, Any]]:
+    """Rank rows of one (problem, original formulation) in place: by success rate, then
+    ``sgm_total_time``; rank 1 is the leader and every row *tied* with it.
+
+    With ``paired`` (per solver, the paired bootstrap means of log(total + shift),
+    :func:`_paired_boot`): a row is tied with the first row of the current rank when
+    their success rates are equal and the 95 % interval of its time ratio to that row,
+    (t + shift)/(t_head + shift), reaches below ``margin`` (the machine's run-to-run
+    noise, :data:`TIE_MARGIN`); each row gets ``ratio_to_best`` and its interval
+    ``ratio_lo``/``ratio_hi`` against the leader. Without ``paired`` (summaries of rows
+    without cases): tied when the intervals [``sgm_total_lo``, ``sgm_total_hi``]
+    overlap. Ranks are competition ranks (the next rank is the row's position);
+    ``tied=True`` marks every row of a rank with two or more rows."""
     rows.sort(key=lambda o: (-o["success_rate"], o["sgm_total_time"]))
+    a = (1 - LEVEL) / 2
+
+    def ratio(o: dict[str, Any], ref: dict[str, Any]) -> tuple[float, float, float]:
+        assert paired is not None
+        d = paired[o["solver"]] - paired[ref["solver"]]
+        # (the same cases for both: the ratio of their shifted means, exactly)
+        mid = (o["sgm_total_time"] + SHIFT) / (ref["sgm_total_time"] + SHIFT)
+        return mid, float(np.exp(np.quantile(d, a))), float(np.exp(np.quantile(d, 1 - a)))
+
+    def tied(o: dict[str, Any], ref: dict[str, Any]) -> bool:
+        if o["success_rate"] != ref["success_rate"]:
+            return False
+        if paired is not None and o["solver"] in paired and ref["solver"] in paired:
+            return ratio(o, ref)[1] <= margin
+        return _overlap(ref, o)
+
     head: dict[str, Any] | None = None  # the first row of the current rank
     for i, o in enumerate(rows):
         o["tied"] = False
-        if head is not None and _overlap(head, o):
+        if paired is not None and rows[0]["solver"] in paired and o["solver"] in paired:
+            o["ratio_to_best"], o["ratio_lo"], o["ratio_hi"] = ratio(o, rows[0])
+        if head is not None and tied(o, head):
             o["rank"] = head["rank"]
             o["tied"] = head["tied"] = True
         else:

@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from optmodels.core import ProblemError
-from optmodels.execution import LineLog
+from optmodels.execution import LineLog, report_skipped
 from optmodels.io import csv_cell
 
 #: Fixed columns of ``results.csv`` (DESIGN.md, "Solver comparison"), in order.
@@ -24,7 +24,7 @@ COLUMNS = ("problem", "instance", "size", "seed", "formulation", "solver", "sett
            "status", "success", "reason", "objective", "objective_gap", "solution_error",
            "max_violation", "build_time", "solve_time", "iterations", "message",
            "solver_version", "cpu", "time_limit", "options", "repeats", "build_again",
-           "repeats_done")
+           "repeats_done", "estimate_sq_error", "crb")
 #: What identifies a run for resume: the case, the formulation and solver, the settings
 #: profile, the time limit (s), the options that reach the solver (JSON: the profile's and
 #: the back-end's class defaults, :func:`solvers_cmp.harness.profiles.options_key`), the
@@ -65,7 +65,15 @@ def _load_results(rl: LineLog) -> list[dict[str, Any]]:
     lines, tail = rl.open_with_header(head, "a results file of this harness")
     if not lines:
         return []
-    if lines[0].decode(errors="replace").strip() != head:
+    first = lines[0].decode(errors="replace").strip()
+    if first != head and _older_header(first):
+        # a results file of an earlier version of this harness (fewer columns, issue 27
+        # added the efficiency ones): its rows cannot be reused, they are moved to
+        # results.csv.skipped and run again -- never silently mixed in
+        moved = rl.rewrite([head], lines[1:] + ([tail] if tail else []))
+        report_skipped(rl.what, rl.path, len(lines) - 1, len(tail), moved)
+        return []
+    if first != head:
         raise ProblemError(f"{rl.what}: {rl.path} has other columns than this harness "
                            f"writes ({', '.join(COLUMNS)}); use another --out or delete it")
     rows, keep, dropped = [], [head], []
@@ -80,6 +88,17 @@ def _load_results(rl: LineLog) -> list[dict[str, Any]]:
             keep.append(raw.decode())
     rl.keep(keep, dropped, tail)
     return rows
+
+
+def _older_header(first: str) -> bool:
+    """``first`` is the header of an earlier version of this harness: its columns are a
+    strict prefix of :data:`COLUMNS`, from ``problem`` to at least ``repeats_done``."""
+    try:
+        cols = next(csv.reader([first]))
+    except (csv.Error, StopIteration):
+        return False
+    return 0 < len(cols) < len(COLUMNS) and tuple(cols) == COLUMNS[:len(cols)] \
+        and "message" in cols
 
 
 def read_results(path: Path) -> list[dict[str, Any]]:
@@ -108,7 +127,8 @@ def _parse(key: str, v: str) -> Any:
             raise ValueError(f"success: {v!r}")
         return v == "True"
     if key in ("objective", "objective_gap", "solution_error", "max_violation",
-               "build_time", "solve_time", "time_limit", "build_again"):
+               "build_time", "solve_time", "time_limit", "build_again",
+               "estimate_sq_error", "crb"):
         return float(v) if v not in ("", "None") else float("nan")
     return v
 

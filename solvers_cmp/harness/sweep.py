@@ -133,7 +133,8 @@ def _sweep(rl: LineLog, done: dict[tuple[Any, ...], dict[str, Any]],
                         "objective_gap": float("nan"), "solution_error": float("nan"),
                         "max_violation": float("nan"), "build_time": float("nan"),
                         "solve_time": wall if kind != "error" else float("nan"),
-                        "iterations": None,
+                        "iterations": None, "estimate_sq_error": float("nan"),
+                        "crb": float("nan"),
                         "message": (f"killed after the {limit:g} s time limit"
                                     if kind == "time_limit" else
                                     (f"worker died ({res})" if isinstance(res, str)

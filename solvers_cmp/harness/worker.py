@@ -33,6 +33,7 @@ class _State:
     adapter: cs.Adapter | None = None
     data: Any = None
     ref: cs.Outcome | None = None
+    truth: tuple[Any, float] | None = None
 
 
 def _prepare(state: _State, path: str, case: Case) -> dict[str, Any]:
@@ -42,6 +43,7 @@ def _prepare(state: _State, path: str, case: Case) -> dict[str, Any]:
         state.adapter = cs.adapter(case.problem, path)
         state.data = state.adapter.make(case.instance, case.size, case.seed)
         state.ref = state.adapter.reference(case.instance, state.data)
+        state.truth = state.adapter.truth(case.instance, case.size, case.seed, state.data)
         state.key = key
     assert state.ref is not None
     return {"ok": state.ref.ok, "status": state.ref.status, "message": state.ref.message}
@@ -82,7 +84,13 @@ def _execute(state: _State, path: str, case: Case, run: cs.Run,
         "solution_error": float("nan"), "objective_gap": float("nan"),
         "build_again": float(np.median(builds[1:])) if len(builds) > 1 else float("nan"),
         "repeats_done": len(walls),
+        "estimate_sq_error": float("nan"), "crb": float("nan"),
     }
+    if out.ok and out.x is not None and state.truth is not None:
+        # the estimate against the truth of the draw (any estimate the solver calls
+        # optimal, also one above the success bar: what an early stop costs)
+        row["estimate_sq_error"] = ad.sq_error(out.x, state.truth[0])
+        row["crb"] = float(state.truth[1])
     if out.ok and ref.ok:
         row["solution_error"] = ad.error(out.x, ref.x)
         denom = abs(ref.objective) if ref.objective != 0 else 1.0

@@ -6,13 +6,12 @@ assignment part of ``optmodels demo`` and ``optmodels compare --details``."""
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 from typing import Any
 
 from optmodels.cli.args import _count, _positive
 from optmodels.cli.contract import _OK_STATUSES, Outcome, _group, _leaf, _reading
-from optmodels.core import ProblemError
+from optmodels.core import ProblemError, json_document
 
 #: This problem's line in the demo's report/index.md.
 DEMO_TITLE = ("- [Joint assignment with unresolved groups (paper 004)]"
@@ -37,10 +36,7 @@ def _read_case(path_text: str) -> dict[str, Any]:
 
     with _reading(path_text):
         text = read_text(path_text, what="JSON assignment case", name="case")
-        try:
-            case = json.loads(text)
-        except json.JSONDecodeError as exc:
-            raise ProblemError(f"{path_text}: not valid JSON ({exc})") from None
+        case = json_document(text, where=path_text)  # the one strict reader
     if not isinstance(case, dict):
         raise ProblemError(f"{path_text}: expected a JSON object with the fields "
                            f"{', '.join(_CASE_FIELDS[:7])}, got a JSON "

@@ -106,7 +106,7 @@ def benchmark(cells: int = 10_000, *, repeats: int = 3, seed: int = 0,
     cf = bf.closed_form(data)
     box = binding_box(data, cf)
     phi0, phi1 = bf.uncertainty_sets(data)
-    r = sel._r_matrix(data)
+    r = bf.problem.r_matrix(data)
 
     def dense_solve() -> np.ndarray:
         a = (phi1.T @ r @ phi1).toarray()

@@ -228,7 +228,7 @@ def full_nlp_scaling(sizes: Any = SCALING_SIZES, starts: int = 3, repeats: int =
     repeats = as_count("solvers_cmp.plane.full_nlp_scaling repeats", repeats, minimum=1)
     seed = as_count("solvers_cmp.plane.full_nlp_scaling seed", seed)
     via_reduced = as_flag("solvers_cmp.plane.full_nlp_scaling via_reduced", via_reduced)
-    from optmodels.plane import nlp
+    from optmodels.plane import generic
 
     rows: list[dict[str, Any]] = []
     for n in tqdm(sizes, desc="plane full NLP scaling", disable=not progress):
@@ -244,7 +244,7 @@ def full_nlp_scaling(sizes: Any = SCALING_SIZES, starts: int = 3, repeats: int =
 
         rep = repeat(run, repeats, setup=plane.clear_nlp_cache)
         sols = [s.require_ok() for s in rep.results]
-        solver = nlp._get_nlp("full", n, None)[0].solver
+        solver = generic.cached_nlp("full", n, None)[0].solver
         iters = float(np.median([s.iterations for s in sols]))
         solve = float(np.median([s.solve_time for s in sols]))
         red = float(np.median([s.info["reduced_solve_time"] for s in sols]))

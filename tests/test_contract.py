@@ -233,10 +233,7 @@ def test_every_problem_package_has_the_one_skeleton(name: str) -> None:
 # --------------------------------------------------------------------------- private names
 #: Known imports of a private name across packages, in files of other owners (issue 23):
 #: each to be made public or removed, then deleted here.
-PENDING_PRIVATE = {
-    "solvers_cmp/biasfield.py": {"optmodels.biasfield.selection._r_matrix"},
-    "solvers_cmp/plane.py": {"optmodels.plane.generic._get_nlp"},
-}
+PENDING_PRIVATE: dict[str, set[str]] = {}
 
 
 def _package(module: str) -> str:
@@ -254,7 +251,7 @@ def _private_imports() -> dict[str, set[str]]:
     from pathlib import Path
 
     root = Path(__file__).resolve().parents[1]
-    aliases_of = {"nlp": "optmodels.plane.generic"}  # plane/__init__'s temporary alias
+    aliases_of: dict[str, str] = {}  # module aliases of a package __init__ (none now)
 
     def is_module(name: str) -> bool:
         try:

@@ -46,6 +46,7 @@ from optmodels.core import (
     Verdict,
     as_count,
     as_finite_array,
+    as_float_array,
     as_instance,
     as_positive,
     as_probability,
@@ -171,7 +172,8 @@ class AssignmentData:
         self.covs = as_finite_array(f"{w} covs", self.covs, shape=(q, d, d))
         check_spd_stack(f"{w} covs", self.covs)
         meas = self.measurements
-        if meas is not None and not isinstance(meas, str) and np.size(meas) == 0:
+        if meas is not None and not isinstance(meas, str) and as_float_array(
+                f"{w} measurements", meas).size == 0:
             meas = np.zeros((0, d))
         self.measurements = as_finite_array(f"{w} measurements", meas, ndim=2)
         if self.measurements.shape[1] != d:
@@ -303,6 +305,7 @@ def candidate_groups(data: AssignmentData, *, limit: int | None = None,
         while the cliques grow (or, without a gate, from the count Σ_s C(Q, s)), before
         the list or any model of that size is built.
     """
+    as_instance("assignment.candidate_groups data", data, AssignmentData)
     limit = MAX_CANDIDATE_GROUPS if limit is None else as_count(
         "assignment.candidate_groups limit", limit, minimum=1)
     q = data.q
@@ -385,6 +388,11 @@ def block_log_prior(data: AssignmentData, group: tuple[int, ...], detected: bool
     ln w(S) (:func:`~optmodels.assignment.sensor.log_group_weight`: ln P_conn(S) −
     Σ_{i<j∈S} ln(1 − u_ij); ln(u_ij/(1 − u_ij)) for a pair, 0 for a singleton), else the
     constant (|S| − 1) ln ρ; plus ln P_D if detected, else ln(1 − P_D)."""
+    as_instance("assignment.block_log_prior data", data, AssignmentData)
+    group = _as_block("assignment.block_log_prior group", group, data.q)
+    if not isinstance(detected, bool | np.bool_):
+        raise ProblemError(f"assignment.block_log_prior detected: expected True or False, got "
+                           f"{type(detected).__name__}")
     if data.block_log_prior is not None:
         v = float(data.block_log_prior(tuple(group), bool(detected)))
         if not np.isfinite(v):
@@ -414,6 +422,12 @@ def group_moments(data: AssignmentData, group: tuple[int, ...]
 def log_likelihoods(data: AssignmentData, groups: Sequence[tuple[int, ...]]) -> FloatArray:
     """ln φ_iS (N, len(groups)): the user's ``log_likelihood`` or the default model
     N(x_i; Σ w_j m_j, Σ w_j² K_j + R_i) (5), R_i the measurement's own covariance."""
+    as_instance("assignment.log_likelihoods data", data, AssignmentData)
+    if isinstance(groups, str | bytes | dict) or not hasattr(groups, "__iter__"):
+        raise ProblemError(f"assignment.log_likelihoods groups: expected a list of blocks, got "
+                           f"{type(groups).__name__}")
+    groups = [_as_block(f"assignment.log_likelihoods groups[{c}]", g, data.q)
+              for c, g in enumerate(groups)]
     out = np.empty((data.n, len(groups)))
     if data.log_likelihood is not None:
         for c, g in enumerate(groups):
@@ -545,6 +559,7 @@ def _default_loglik(data: AssignmentData, groups: Sequence[tuple[int, ...]]) -> 
 def score(data: AssignmentData, partition: Partition, assignment: Sequence[int],
           loglik: dict[tuple[int, ...], FloatArray] | None = None) -> float:
     """score(H) of a hypothesis: ``assignment[i]`` indexes ``partition`` or is −1."""
+    as_instance("assignment.score data", data, AssignmentData)
     blocks = _as_partition("assignment.score partition", partition, data.q)
     a = _as_assignment("assignment.score assignment", assignment, data.n, len(blocks))
     used = {k for k in a if k >= 0}
@@ -560,6 +575,25 @@ def score(data: AssignmentData, partition: Partition, assignment: Sequence[int],
         vals = entry_log_likelihoods(data, blocks, rows, np.array([a[i] for i in rows],
                                                                   dtype=int)).tolist()
     return s + math.fsum(vals) - (data.n - len(rows)) * math.log(data.volume)
+
+
+def _as_block(name: str, group: Any, q: int) -> tuple[int, ...]:
+    """``group`` as a non-empty tuple of distinct object indices in 0..Q−1 (a block)."""
+    if isinstance(group, tuple) and group and all(
+            isinstance(j, int | np.integer) and not isinstance(j, bool) and 0 <= j < q
+            for j in group) and len(set(group)) == len(group):
+        return group  # the fast path of the solvers' own calls
+    if isinstance(group, str | bytes | dict) or not hasattr(group, "__iter__"):
+        raise ProblemError(f"{name}: expected a block (a tuple of object indices), got "
+                           f"{type(group).__name__}")
+    try:
+        block = tuple(as_count(f"{name} entry", j, maximum=q - 1) for j in group)
+    except TypeError:
+        raise ProblemError(f"{name}: expected a block (a tuple of object indices)") from None
+    if not block or len(set(block)) != len(block):
+        raise ProblemError(f"{name}: expected distinct object indices, at least one, got "
+                           f"{block}")
+    return block
 
 
 def _as_partition(name: str, partition: Any, q: int) -> Partition:

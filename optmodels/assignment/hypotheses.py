@@ -38,13 +38,32 @@ COUNT_LIMIT = 1000
 
 # ----------------------------------------------------------------------------- counting
 def set_partitions(items: Sequence[int]) -> Iterator[Partition]:
-    """Every set partition of ``items`` (Bell(Q) of them), blocks as sorted tuples."""
-    items = list(items)
+    """Every set partition of ``items`` (Bell(Q) of them), blocks as sorted tuples.
+
+    Raises
+    ------
+    ProblemError
+        Naming ``items`` if it is not a sequence of distinct integers (object indices).
+    """
+    name = "assignment.set_partitions items"
+    if isinstance(items, str | bytes | dict) or not hasattr(items, "__iter__"):
+        raise ProblemError(f"{name}: expected a sequence of object indices, got "
+                           f"{type(items).__name__}")
+    try:
+        checked = [as_count(f"{name} entry", j, minimum=0) for j in items]
+    except TypeError:
+        raise ProblemError(f"{name}: expected a sequence of object indices") from None
+    if len(set(checked)) != len(checked):
+        raise ProblemError(f"{name}: the indices must be distinct, got {checked}")
+    return _set_partitions(checked)
+
+
+def _set_partitions(items: list[int]) -> Iterator[Partition]:
     if not items:
         yield []
         return
     first, rest = items[0], items[1:]
-    for part in set_partitions(rest):
+    for part in _set_partitions(rest):
         for k in range(len(part)):
             yield [*part[:k], tuple(sorted((first, *part[k]))), *part[k + 1:]]
         yield [(first,), *part]

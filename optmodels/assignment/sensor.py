@@ -172,7 +172,23 @@ def _ball_probability(nu: FloatArray, sd: FloatArray, c: FloatArray) -> FloatArr
 
 def cartesian_to_polar(points: FloatArray, site: FloatArray) -> FloatArray:
     """(N, d ≥ 2) Cartesian points (m) → (N, 2) range (m, over all coordinates) and
-    azimuth atan2(y − y_s, x − x_s) (rad, counter-clockwise from the x axis)."""
+    azimuth atan2(y − y_s, x − x_s) (rad, counter-clockwise from the x axis).
+
+    Raises
+    ------
+    ProblemError
+        Naming the argument: ``points`` not (N, d ≥ 2) finite, ``site`` not (d,) finite.
+    """
+    pts = as_finite_array("assignment.cartesian_to_polar points", points, ndim=2)
+    if pts.shape[1] < 2:
+        raise ProblemError(f"assignment.cartesian_to_polar points: expected (N, d ≥ 2), got "
+                           f"{pts.shape}")
+    s = as_finite_array("assignment.cartesian_to_polar site", site, shape=(pts.shape[1],))
+    return _cartesian_to_polar(pts, s)
+
+
+def _cartesian_to_polar(points: FloatArray, site: FloatArray) -> FloatArray:
+    """:func:`cartesian_to_polar` without the checks (the model's own calls)."""
     dp = np.asarray(points, dtype=float) - site
     return np.column_stack([np.linalg.norm(dp, axis=1), np.arctan2(dp[:, 1], dp[:, 0])])
 
@@ -233,7 +249,7 @@ def polar_measurement_covs(measurements: Any, site: Any, sigma_range: Any,
         raise ProblemError(f"{w} sigma_azimuth (rad): {sa:g} rad is {np.rad2deg(sa):.3g}°, "
                            "not an angle noise (degrees given as radians?)")
     if kind == "cartesian":
-        pol = cartesian_to_polar(meas, s)
+        pol = _cartesian_to_polar(meas, s)
     else:
         pol = meas
         if np.any(pol[:, 0] < 0):
@@ -381,7 +397,7 @@ class Resolution:
                 raise ProblemError(f"{w} means: a prediction at the sensor's site (no "
                                    f"azimuth)")
             jac = _polar_jacobian(m, site)
-            return cartesian_to_polar(m, site), jac @ k @ jac.transpose(0, 2, 1)
+            return _cartesian_to_polar(m, site), jac @ k @ jac.transpose(0, 2, 1)
         ew, ev = np.linalg.eigh(self.ellipse)
         white = ev @ np.diag(ew**-0.5) @ ev.T  # E^{-1/2}
         return m @ white.T, white @ k @ white.T

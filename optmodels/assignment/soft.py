@@ -152,12 +152,16 @@ def reduce_mixture(weights: FloatArray, means: FloatArray, covs: FloatArray
     """Moment-matched single Gaussian of a mixture (JPDA's reduction; Stone Soup's
     ``gm_reduce_single``): weights (M,) ≥ 0, means (M, n), covs (M, n, n) →
     mean Σ w_m x_m, covariance Σ w_m (P_m + (x_m − x̄)(x_m − x̄)ᵀ), w normalised."""
-    w = np.asarray(weights, dtype=float)
+    fn = "assignment.reduce_mixture"
+    w = as_finite_array(f"{fn} weights", weights, ndim=1)
+    x = as_finite_array(f"{fn} means", means, shape=(w.shape[0], None))
+    p = as_finite_array(f"{fn} covs", covs, shape=(w.shape[0], x.shape[1], x.shape[1]))
+    if w.size == 0 or np.any(w < 0) or not w.sum() > 0:
+        raise ProblemError(f"{fn} weights: expected M ≥ 1 weights ≥ 0 with a positive sum")
     w = w / w.sum()
-    x = np.asarray(means, dtype=float)
     mean = w @ x
     dx = x - mean
-    cov = np.einsum("m,mab->ab", w, np.asarray(covs, dtype=float)) + np.einsum(
+    cov = np.einsum("m,mab->ab", w, p) + np.einsum(
         "m,ma,mb->ab", w, dx, dx)
     return mean, 0.5 * (cov + cov.T)
 

@@ -62,10 +62,6 @@ from optmodels.biasfield.problem import (
 # importable from here as from the one-module selection of before (tests, solvers_cmp)
 from optmodels.biasfield.problem import Sets as Sets
 from optmodels.biasfield.problem import p_full as p_full
-
-# the former private spellings: solvers_cmp/biasfield.py and tests/test_gate.py call
-# ``sel._r_matrix`` (to go when they call ``r_matrix``)
-from optmodels.biasfield.problem import r_matrix as _r_matrix  # noqa: F401
 from optmodels.biasfield.verify import (
     box_feasibility,
     condition_number,

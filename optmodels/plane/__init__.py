@@ -141,8 +141,3 @@ __all__ = [
     "to_polar",
     "track",
 ]
-
-# Temporary (issue 23): the generic solve's module was ``plane.nlp``; tests/test_gate.py and
-# solvers_cmp/plane.py still reach it as ``plane.nlp`` (the integrator renames them, then
-# this line goes).
-from optmodels.plane import generic as nlp  # noqa: F401

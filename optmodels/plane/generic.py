@@ -196,7 +196,7 @@ def _reduced_problem(n: int) -> dict[str, Any]:
 _CACHE_NAMESPACE = "plane"
 
 
-def _get_nlp(
+def cached_nlp(
     formulation: Formulation, n: int, options: dict[str, Any] | None, plugin: str = "ipopt"
 ) -> tuple[BuiltNlp, bool]:
     """Built NLP for this structure, and whether it was built by this call.
@@ -424,9 +424,9 @@ def _build(formulation: Formulation, sc: _Scaled, plugin: str,
     with timed() as t_prep:
         try:
             if plugin == "ipopt":
-                built, fresh = _get_nlp(formulation, n_pts, ipopt_options)
+                built, fresh = cached_nlp(formulation, n_pts, ipopt_options)
             else:
-                built, fresh = _get_nlp(formulation, n_pts, plugin_options, plugin)
+                built, fresh = cached_nlp(formulation, n_pts, plugin_options, plugin)
         except RuntimeError as exc:  # CasADi: unknown plugin/option, missing library
             raise SolverNotAvailable(
                 f"plugin: CasADi nlpsol {plugin!r} could not be built for the plane NLP: "
@@ -439,7 +439,7 @@ def _build(formulation: Formulation, sc: _Scaled, plugin: str,
         else:
             params = np.concatenate([pts_param, _upper(sc.covs).ravel(order="F")])
         if via_reduced:
-            red_built, red_fresh = _get_nlp("reduced", n_pts, ipopt_options)
+            red_built, red_fresh = cached_nlp("reduced", n_pts, ipopt_options)
             fresh = fresh or red_fresh
             red_params = np.concatenate([pts_param, _upper(sc.covs).ravel(order="F")])
     # build_time includes the construction when it happened here

@@ -140,8 +140,3 @@ __all__ = [
     "solve",
     "variance_ratios",
 ]
-
-# Temporary (issue 23): the closed form's module was ``trajectories.closed_forms``;
-# tests/test_gate.py still reaches it by that name (the integrator renames it, then this
-# line goes).
-from optmodels.trajectories import closedform as closed_forms  # noqa: F401

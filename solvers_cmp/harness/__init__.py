@@ -48,7 +48,6 @@ from optmodels.execution import Interrupted as Interrupted
 from optmodels.execution import LineLog as LineLog
 from solvers_cmp.harness.metrics import shifted_geometric_mean, summarise
 from solvers_cmp.harness.planning import Case, Sizes, plan
-from solvers_cmp.harness.planning import _check_scheduler as _check_scheduler
 from solvers_cmp.harness.planning import _counts as _counts
 from solvers_cmp.harness.planning import _names as _names
 from solvers_cmp.harness.profiles import PROFILES, Profile

@@ -2,8 +2,7 @@
 
 :class:`Case` (problem, instance, size, seed), :func:`plan` (adapter path, case and runs
 for every problem × instance × size × seed, the names and numbers checked: ``_names``,
-``_counts``) and :func:`_check_scheduler` (``None``/``"local"``, a Dask address or a
-``distributed.Client``).
+``_counts``); the scheduler is checked by :func:`optmodels.execution.as_scheduler`.
 """
 
 from __future__ import annotations
@@ -22,22 +21,6 @@ class Case:
     instance: str
     size: int
     seed: int
-
-
-def _check_scheduler(scheduler: Any) -> Any:
-    """``None``/``"local"`` (this machine: one isolated worker process), a Dask address
-    or a ``distributed.Client``."""
-    if scheduler is None or scheduler == "local":
-        return None
-    if isinstance(scheduler, str):
-        if "://" not in scheduler or scheduler.endswith("://"):
-            raise ProblemError(f"compare scheduler: expected 'local' or a Dask address "
-                               f"like tcp://host:8786, got {scheduler!r}"[:200])
-        return scheduler
-    if not hasattr(scheduler, "submit") or not hasattr(scheduler, "map"):
-        raise ProblemError(f"compare scheduler: expected 'local', a Dask address or a "
-                           f"distributed.Client, got {type(scheduler).__name__}")
-    return scheduler
 
 
 Sizes = Sequence[int] | Mapping[str, Sequence[int]] | None

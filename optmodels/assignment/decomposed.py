@@ -172,7 +172,9 @@ class Rows:
         self.r, self.c, self.v, self.shape = r, c, v, shape
 
     def __matmul__(self, x: FloatArray) -> FloatArray:
-        return np.bincount(self.r, weights=self.v * x[self.c], minlength=self.shape[0])
+        out: FloatArray = np.bincount(self.r, weights=self.v * x[self.c],
+                                      minlength=self.shape[0]).astype(float, copy=False)
+        return out
 
     def tocsr(self) -> sps.csr_matrix:
         return sps.csr_matrix((self.v, (self.r, self.c)), shape=self.shape)
@@ -352,7 +354,8 @@ def solve_decomposed(data: AssignmentData, groups: list[tuple[int, ...]], *, gap
                 contended[comp] = False
                 enumerated += 1
     info["enumerated_components"] = enumerated
-    status, gap_reached, msg, solve_t = Status.OPTIMAL, 0.0, "decomposed", tc.elapsed
+    gap_reached: float | None = 0.0
+    status, msg, solve_t = Status.OPTIMAL, "decomposed", tc.elapsed
     solver_obj = float(c @ x)
     if contended.any():
         sel_c = np.flatnonzero(contended[col_comp])

@@ -109,6 +109,7 @@ def _assignment_solve(args: argparse.Namespace) -> Outcome:
             res["pair_unresolved"] = data.pair_unresolved()
         else:  # the dense table would be Q² numbers: the pairs that can be unresolved
             table = data.pair_table
+            assert table is not None  # a sensor model is given (the branch's condition)
             res["pair_unresolved"] = None
             res["unresolved_pairs"] = [[int(a), int(b), float(u)] for a, b, u in
                                        zip(table.ii, table.jj, table.u, strict=True)]

@@ -403,7 +403,7 @@ class TableSpec:
 #: measurement of an assignment its group (index into ``partition``, −1 background), per
 #: trial of the two-site joint ML its position.
 TABLES: dict[str, TableSpec] = {
-    "optmodels.plane.data.PlaneSolution": TableSpec("point", (
+    "optmodels.plane.solution.PlaneSolution": TableSpec("point", (
         Column("projected", "", ("x_m", "y_m", "z_m")),)),
     "optmodels.biasfield.problem.FieldSolution": TableSpec("cell", (
         Column("centers", "", ("x_m", "y_m")),

@@ -129,7 +129,7 @@ def test_full_nlp_kkt_nnz_grows_linearly() -> None:
     for n in (1000, 2000):
         sc = scenarios.radar_plane(n, rng)
         plane.solve(plane.PlaneData(sc.points, sc.cov), "full", starts=1)
-        solver = nlp._get_nlp("full", n, None)[0].solver
+        solver = nlp.cached_nlp("full", n, None)[0].solver
         jac = solver.get_function("nlp_jac_g").sparsity_out(1).nnz()
         hess = solver.get_function("nlp_hess_l").sparsity_out(0).nnz()
         nnz[n] = (jac, hess, jac + hess)

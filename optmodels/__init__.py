@@ -25,8 +25,14 @@ from optmodels.core import (
 
 __version__ = "0.1.0"
 
-__all__ = ["OptModelsError", "ProblemError", "Solution", "SolveError", "SolverNotAvailable",
-           "Status"]
+__all__ = [
+    "OptModelsError",
+    "ProblemError",
+    "Solution",
+    "SolveError",
+    "SolverNotAvailable",
+    "Status",
+]
 __all__ += sorted(_registry.names())  # the registered problems (lazy, see __getattr__)
 
 

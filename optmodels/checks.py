@@ -45,8 +45,10 @@ def _ragged_text(value: Any, depth: int = 0) -> str:
     3", "in item 4: ..."), for the message of a ragged input; "" if it cannot tell."""
     if depth > 8 or not isinstance(value, list | tuple | np.ndarray):
         return ""
-    lens = [len(v) if isinstance(v, list | tuple) or (isinstance(v, np.ndarray) and v.ndim)
-            else None for v in value]
+    lens = [
+        len(v) if isinstance(v, list | tuple) or (isinstance(v, np.ndarray) and v.ndim) else None
+        for v in value
+    ]
     for j, n in enumerate(lens):
         if n != lens[0]:
             return f"item {j} has {_entries(n)}, item 0 has {_entries(lens[0])}"
@@ -73,26 +75,32 @@ def as_float_array(name: str, value: Any) -> FloatArray:
     if value is None:
         raise ProblemError(f"{name}: not a numeric array (got None)")
     if isinstance(value, str | bytes | Mapping | set | frozenset):
-        raise ProblemError(f"{name}: not a numeric array (got {type(value).__name__} "
-                           f"{_scalar_text(value)})")
+        raise ProblemError(
+            f"{name}: not a numeric array (got {type(value).__name__} {_scalar_text(value)})"
+        )
     try:
         raw = np.asarray(value)
     except (TypeError, ValueError, OverflowError) as exc:
         where = _ragged_text(value)
         if "inhomogeneous" in str(exc) or where:
-            raise ProblemError(f"{name}: a ragged nested sequence (rows of different "
-                               f"lengths{': ' + where if where else ''}); give a "
-                               f"rectangular array") from None
+            raise ProblemError(
+                f"{name}: a ragged nested sequence (rows of different "
+                f"lengths{': ' + where if where else ''}); give a "
+                f"rectangular array"
+            ) from None
         raise ProblemError(f"{name}: not a numeric array ({exc})") from None
     kind = raw.dtype.kind
     if kind == "c":
         raise ProblemError(f"{name}: complex values are not accepted (give real numbers)")
     if kind in "USV":
-        raise ProblemError(f"{name}: not a numeric array (text entries, dtype {raw.dtype}: "
-                           f"text is not parsed here, convert it first)")
+        raise ProblemError(
+            f"{name}: not a numeric array (text entries, dtype {raw.dtype}: "
+            f"text is not parsed here, convert it first)"
+        )
     if kind in "mM":
-        raise ProblemError(f"{name}: not a numeric array (dtype {raw.dtype}: convert "
-                           f"times to seconds first)")
+        raise ProblemError(
+            f"{name}: not a numeric array (dtype {raw.dtype}: convert times to seconds first)"
+        )
     if kind == "O":
         # one pass over the entries' types (C speed), not over the entries
         for typ in set(map(type, raw.flat)):
@@ -100,14 +108,14 @@ def as_float_array(name: str, value: Any) -> FloatArray:
                 continue
             if issubclass(typ, np.ndarray | list | tuple):
                 where = _ragged_text(value)
-                raise ProblemError(f"{name}: a ragged nested sequence (rows of different "
-                                   f"lengths{': ' + where if where else ''}); give a "
-                                   f"rectangular array")
+                raise ProblemError(
+                    f"{name}: a ragged nested sequence (rows of different "
+                    f"lengths{': ' + where if where else ''}); give a "
+                    f"rectangular array"
+                )
             if issubclass(typ, complex | np.complexfloating):
-                raise ProblemError(f"{name}: complex values are not accepted (give real "
-                                   f"numbers)")
-            raise ProblemError(f"{name}: not a numeric array (an entry of type "
-                               f"{typ.__name__})")
+                raise ProblemError(f"{name}: complex values are not accepted (give real numbers)")
+            raise ProblemError(f"{name}: not a numeric array (an entry of type {typ.__name__})")
     try:
         return np.asarray(raw, dtype=float)
     except (TypeError, ValueError, OverflowError) as exc:
@@ -150,9 +158,11 @@ def as_finite_array(
         bad = int(np.size(arr) - np.count_nonzero(np.isfinite(arr)))
         raise ProblemError(f"{name}: {bad} entries are NaN or infinite")
     if max_abs is not None and arr.size and float(np.max(np.abs(arr))) > max_abs:
-        raise ProblemError(f"{name}: |entries| up to {float(np.max(np.abs(arr))):.3g}, above "
-                           f"{max_abs:.0e} (squares and sums of squares would overflow "
-                           "float64; change units)")
+        raise ProblemError(
+            f"{name}: |entries| up to {float(np.max(np.abs(arr))):.3g}, above "
+            f"{max_abs:.0e} (squares and sums of squares would overflow "
+            "float64; change units)"
+        )
     return arr
 
 
@@ -172,8 +182,10 @@ def check_spd_stack(name: str, mats: FloatArray, *, rtol: float = 1e-10) -> None
     if mats.ndim < 2 or mats.shape[-1] != mats.shape[-2]:
         raise ProblemError(f"{name}: expected square matrices, got shape {mats.shape}")
     if mats.shape[-1] == 0:  # found by the sweep: a raw "cannot reshape" from fuse((0, 0))
-        raise ProblemError(f"{name}: empty (0 × 0) matrices (shape {mats.shape}): a "
-                           f"covariance needs a dimension ≥ 1")
+        raise ProblemError(
+            f"{name}: empty (0 × 0) matrices (shape {mats.shape}): a "
+            f"covariance needs a dimension ≥ 1"
+        )
     if mats.size == 0:  # a stack of no matrices: nothing to check
         return
     flat = mats.reshape(-1, mats.shape[-1], mats.shape[-1])
@@ -275,14 +287,16 @@ def as_number(
     return x
 
 
-def as_positive(name: str, value: Any, *, allow_zero: bool = False,
-                allow_inf: bool = False) -> float:
+def as_positive(
+    name: str, value: Any, *, allow_zero: bool = False, allow_inf: bool = False
+) -> float:
     """A scalar > 0 (≥ 0 with ``allow_zero``); see :func:`as_number`."""
     return as_number(name, value, low=0.0, low_open=not allow_zero, allow_inf=allow_inf)
 
 
-def as_probability(name: str, value: Any, *, low_open: bool = False,
-                   high_open: bool = False) -> float:
+def as_probability(
+    name: str, value: Any, *, low_open: bool = False, high_open: bool = False
+) -> float:
     """A probability in [0, 1] (ends excluded on request); see :func:`as_number`."""
     return as_number(name, value, low=0.0, high=1.0, low_open=low_open, high_open=high_open)
 
@@ -333,13 +347,16 @@ def as_generator(where: str, seed: Any) -> np.random.Generator:
     if isinstance(seed, np.random.Generator):
         return seed
     if isinstance(seed, bool | np.bool_ | float | str | bytes) or seed is None:
-        raise ProblemError(f"{where} seed: expected a whole number >= 0 or a "
-                           f"numpy.random.Generator, got {seed!r}")
+        raise ProblemError(
+            f"{where} seed: expected a whole number >= 0 or a numpy.random.Generator, got {seed!r}"
+        )
     try:
         return np.random.default_rng(seed)
     except (TypeError, ValueError) as exc:
-        raise ProblemError(f"{where} seed: expected a whole number >= 0 or a "
-                           f"numpy.random.Generator, got {seed!r} ({exc})") from None
+        raise ProblemError(
+            f"{where} seed: expected a whole number >= 0 or a "
+            f"numpy.random.Generator, got {seed!r} ({exc})"
+        ) from None
 
 
 def as_instance(name: str, value: Any, cls: type) -> Any:

@@ -98,7 +98,6 @@ __all__ = [
 ]
 
 
-
 # --------------------------------------------------------------------------- status
 class Status(enum.Enum):
     """Outcome of a solve, common to all back-ends."""
@@ -167,8 +166,13 @@ def _worst(residuals: Mapping[str, float], ignore: Iterable[str]) -> tuple[str, 
     return key, worst
 
 
-def gate(status: Status, residuals: Mapping[str, float], *, ignore: Iterable[str] = (),
-         strict: bool = False) -> Verdict:
+def gate(
+    status: Status,
+    residuals: Mapping[str, float],
+    *,
+    ignore: Iterable[str] = (),
+    strict: bool = False,
+) -> Verdict:
     """The one verification gate: the status of a claimed solution after the NumPy re-check
     whose residuals (dimensionless, by name) are ``residuals``.
 
@@ -180,8 +184,12 @@ def gate(status: Status, residuals: Mapping[str, float], *, ignore: Iterable[str
     """
     key, worst = _worst(residuals, ignore)
     new = verified_status(status, worst)
-    if strict and new == Status.OPTIMAL_INACCURATE and status == Status.OPTIMAL_INACCURATE \
-            and worst > VERIFY_TOL:
+    if (
+        strict
+        and new == Status.OPTIMAL_INACCURATE
+        and status == Status.OPTIMAL_INACCURATE
+        and worst > VERIFY_TOL
+    ):
         new = Status.ERROR
     return Verdict(status=new, before=status, worst=worst, key=key)
 
@@ -189,10 +197,15 @@ def gate(status: Status, residuals: Mapping[str, float], *, ignore: Iterable[str
 S = TypeVar("S", bound="Solution")
 
 
-def finish(solution: S, checks: Mapping[str, float] | None = None, *,
-           ignore: Iterable[str] = (), strict: bool = False,
-           reject: Callable[[S], S | None] | None = None,
-           note: Callable[[Verdict], str] | None = None) -> S:
+def finish(
+    solution: S,
+    checks: Mapping[str, float] | None = None,
+    *,
+    ignore: Iterable[str] = (),
+    strict: bool = False,
+    reject: Callable[[S], S | None] | None = None,
+    note: Callable[[Verdict], str] | None = None,
+) -> S:
     """End of every solve and closed form: :func:`gate` on ``checks`` (default: the
     solution's own ``residuals``), the status set on ``solution``, and, if the gate changed
     it, ``note(verdict)`` appended to the message (default: "<key> <worst> fails the NumPy
@@ -200,8 +213,12 @@ def finish(solution: S, checks: Mapping[str, float] | None = None, *,
     not OK from the solver) is replaced by the problem's failure form: ``reject(solution)``
     (mutates it, or returns the replacement; without ``reject`` the numbers stay, for
     diagnosis, under a status that is not OK). Returns the solution."""
-    verdict = gate(solution.status, solution.residuals if checks is None else checks,
-                   ignore=ignore, strict=strict)
+    verdict = gate(
+        solution.status,
+        solution.residuals if checks is None else checks,
+        ignore=ignore,
+        strict=strict,
+    )
     solution.status = verdict.status
     if verdict.changed:
         text = (note or _default_note)(verdict)
@@ -215,17 +232,26 @@ def finish(solution: S, checks: Mapping[str, float] | None = None, *,
 
 
 def _default_note(v: Verdict) -> str:
-    return (f"{v.key} residual {v.worst:.1e} fails the NumPy check" if v.status == Status.ERROR
-            else f"{v.key} residual {v.worst:.1e} (NumPy check)")
+    return (
+        f"{v.key} residual {v.worst:.1e} fails the NumPy check"
+        if v.status == Status.ERROR
+        else f"{v.key} residual {v.worst:.1e} (NumPy check)"
+    )
 
 
-def failure(cls: type[S], method: str, message: str, *, status: Status = Status.ERROR,
-            **fields: Any) -> S:
+def failure(
+    cls: type[S], method: str, message: str, *, status: Status = Status.ERROR, **fields: Any
+) -> S:
     """The one failure constructor: a ``cls`` solution with no estimate (objective NaN,
     the estimate fields at their NaN/empty defaults unless given in ``fields``) and a
     status that is not OK (an OK ``status`` becomes ERROR)."""
-    return cls(status=status if not status.ok else Status.ERROR, objective=float("nan"),
-               method=method, message=message, **fields)
+    return cls(
+        status=status if not status.ok else Status.ERROR,
+        objective=float("nan"),
+        method=method,
+        message=message,
+        **fields,
+    )
 
 
 @dataclass
@@ -312,8 +338,9 @@ class Solution:
         name = type(self).__name__
         spec = self.table_spec()
         if spec is None:
-            raise ProblemError(f"{name}.to_rows: this result is not a table (no per-item "
-                               f"fields); use to_dict()")
+            raise ProblemError(
+                f"{name}.to_rows: this result is not a table (no per-item fields); use to_dict()"
+            )
         arrays = {c.field: np.asarray(getattr(self, c.field)) for c in spec.columns}
         empty = any(a.size == 0 for a in arrays.values())
         n = 0 if empty or not arrays else next(iter(arrays.values())).shape[0]
@@ -323,8 +350,9 @@ class Solution:
             if n == 0:  # a failure form: no rows (the columns of its arrays' shapes)
                 arr = arr[:0] if arr.ndim and arr.shape[0] == 0 else np.empty(0, arr.dtype)
             if arr.ndim == 0 or arr.shape[0] != n:
-                raise ProblemError(f"{name}.to_rows: {col.field} has shape {arr.shape}, not "
-                                   f"{n} items")
+                raise ProblemError(
+                    f"{name}.to_rows: {col.field} has shape {arr.shape}, not {n} items"
+                )
             out.update(col.split(arr, n))
         return out
 
@@ -346,11 +374,13 @@ class Solution:
         try:
             import pandas as pd
         except ImportError as exc:  # pragma: no cover - pandas comes with the extras
-            raise ProblemError(f"{type(self).__name__}.to_frame: pandas is needed (pip "
-                               f"install pandas)") from exc
+            raise ProblemError(
+                f"{type(self).__name__}.to_frame: pandas is needed (pip install pandas)"
+            ) from exc
         df = pd.DataFrame(self.table_columns())
-        df.attrs.update(status=self.status.value, method=self.method,
-                        objective=float(self.objective))
+        df.attrs.update(
+            status=self.status.value, method=self.method, objective=float(self.objective)
+        )
         return df
 
 
@@ -374,8 +404,11 @@ class Column:
             return {base: arr}
         flat = arr.reshape(n, int(np.prod(arr.shape[1:-1])), arr.shape[-1])
         k = arr.shape[-1]
-        labels = self.labels if self.labels is not None and len(self.labels) == k else \
-            tuple(str(i) for i in range(k))
+        labels = (
+            self.labels
+            if self.labels is not None and len(self.labels) == k
+            else tuple(str(i) for i in range(k))
+        )
         out: dict[str, np.ndarray] = {}
         for j in range(flat.shape[1]):
             mid = "" if arr.ndim == 2 else str(j)
@@ -403,18 +436,26 @@ class TableSpec:
 #: measurement of an assignment its group (index into ``partition``, −1 background), per
 #: trial of the two-site joint ML its position.
 TABLES: dict[str, TableSpec] = {
-    "optmodels.plane.solution.PlaneSolution": TableSpec("point", (
-        Column("projected", "", ("x_m", "y_m", "z_m")),)),
-    "optmodels.biasfield.problem.FieldSolution": TableSpec("cell", (
-        Column("centers", "", ("x_m", "y_m")),
-        Column("field", "radar", ("range_bias_m", "azimuth_bias_rad")),
-        Column("active", "radar", ("range_active", "azimuth_active")))),
-    "optmodels.trajectories.solution.TrajectorySolution": TableSpec("object", (
-        Column("start"), Column("velocity"))),
-    "optmodels.assignment.data.AssignmentSolution": TableSpec("measurement", (
-        Column("assignment", "group"),)),
-    "optmodels.fusion.two_site_ml.JointMLSolution": TableSpec("trial", (
-        Column("estimate", "", ("x_m", "y_m")), Column("stationarity"))),
+    "optmodels.plane.solution.PlaneSolution": TableSpec(
+        "point", (Column("projected", "", ("x_m", "y_m", "z_m")),)
+    ),
+    "optmodels.biasfield.problem.FieldSolution": TableSpec(
+        "cell",
+        (
+            Column("centers", "", ("x_m", "y_m")),
+            Column("field", "radar", ("range_bias_m", "azimuth_bias_rad")),
+            Column("active", "radar", ("range_active", "azimuth_active")),
+        ),
+    ),
+    "optmodels.trajectories.solution.TrajectorySolution": TableSpec(
+        "object", (Column("start"), Column("velocity"))
+    ),
+    "optmodels.assignment.data.AssignmentSolution": TableSpec(
+        "measurement", (Column("assignment", "group"),)
+    ),
+    "optmodels.fusion.two_site_ml.JointMLSolution": TableSpec(
+        "trial", (Column("estimate", "", ("x_m", "y_m")), Column("stationarity"))
+    ),
 }
 
 
@@ -473,16 +514,19 @@ def json_document(text: str, *, where: str) -> Any:
         out: dict[str, Any] = {}
         for key, value in items:
             if key in out:
-                raise ProblemError(f"{where}: the key {key!r} is given twice in one JSON "
-                                   f"object (which one is meant?)")
+                raise ProblemError(
+                    f"{where}: the key {key!r} is given twice in one JSON "
+                    f"object (which one is meant?)"
+                )
             out[key] = value
         return out
 
     try:
         return json.loads(text, parse_constant=constant, object_pairs_hook=pairs)
     except json.JSONDecodeError as exc:
-        raise ProblemError(f"{where}: not valid JSON (line {exc.lineno}, column {exc.colno}: "
-                           f"{exc.msg})") from None
+        raise ProblemError(
+            f"{where}: not valid JSON (line {exc.lineno}, column {exc.colno}: {exc.msg})"
+        ) from None
     except RecursionError:
         raise ProblemError(f"{where}: JSON nested too deeply") from None
 

@@ -43,8 +43,9 @@ def to_polar3d(offsets: Float) -> Float:
     (rad, up) of ENU ``offsets`` (N, 3) (point minus site, m; not at the site)."""
     d = np.asarray(offsets, dtype=float)
     r = np.linalg.norm(d, axis=1)
-    return np.column_stack([r, np.arctan2(d[:, 0], d[:, 1]),
-                            np.arcsin(np.clip(d[:, 2] / r, -1.0, 1.0))])
+    return np.column_stack(
+        [r, np.arctan2(d[:, 0], d[:, 1]), np.arcsin(np.clip(d[:, 2] / r, -1.0, 1.0))]
+    )
 
 
 def from_polar3d(polar: Float) -> Float:
@@ -53,8 +54,9 @@ def from_polar3d(polar: Float) -> Float:
     ``U = r sin ε``."""
     p = np.asarray(polar, dtype=float)
     r, az, el = p[:, 0], p[:, 1], p[:, 2]
-    return np.column_stack([r * np.cos(el) * np.sin(az), r * np.cos(el) * np.cos(az),
-                            r * np.sin(el)])
+    return np.column_stack(
+        [r * np.cos(el) * np.sin(az), r * np.cos(el) * np.cos(az), r * np.sin(el)]
+    )
 
 
 def to_polar2d(offsets: Float) -> Float:

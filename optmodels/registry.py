@@ -98,8 +98,12 @@ class Problem:
 def _read_card(path: Path) -> dict[str, Any]:
     tree = ast.parse(path.read_text(encoding="utf-8"), filename=str(path))
     for node in tree.body:
-        if (isinstance(node, ast.Assign) and len(node.targets) == 1
-                and isinstance(node.targets[0], ast.Name) and node.targets[0].id == "PROBLEM"):
+        if (
+            isinstance(node, ast.Assign)
+            and len(node.targets) == 1
+            and isinstance(node.targets[0], ast.Name)
+            and node.targets[0].id == "PROBLEM"
+        ):
             card = ast.literal_eval(node.value)
             if isinstance(card, dict):
                 return card
@@ -108,8 +112,10 @@ def _read_card(path: Path) -> dict[str, Any]:
 
 def _problem(pkg: str, card: dict[str, Any], path: Path) -> Problem:
     if set(card) != _KEYS or card["name"] != pkg or not isinstance(card["order"], int):
-        raise ValueError(f"{path}: a card has exactly the keys {sorted(_KEYS)}, and its "
-                         f"name is its package's ({pkg!r})")
+        raise ValueError(
+            f"{path}: a card has exactly the keys {sorted(_KEYS)}, and its "
+            f"name is its package's ({pkg!r})"
+        )
     if not isinstance(card["api"], dict) or set(card["api"]) != _API:
         raise ValueError(f"{path}: api has exactly the keys {sorted(_API)}")
     return Problem(**card)

@@ -81,14 +81,17 @@ def scan(q: int, seed: int = 0) -> dict[str, Any]:
     truth = pol[:, :1] * np.column_stack([np.cos(pol[:, 1]), np.sin(pol[:, 1])])
     ang = rng.uniform(0, math.pi, q)
     axes = rng.uniform(50.0, 200.0, (q, 2)) ** 2
-    rot = np.stack([np.column_stack([np.cos(ang), np.sin(ang)]),
-                    np.column_stack([-np.sin(ang), np.cos(ang)])], axis=2)  # (Q, 2, 2)
+    rot = np.stack(
+        [np.column_stack([np.cos(ang), np.sin(ang)]), np.column_stack([-np.sin(ang), np.cos(ang)])],
+        axis=2,
+    )  # (Q, 2, 2)
     covs = np.einsum("qij,qj,qkj->qik", rot, axes, rot)
     chol = np.linalg.cholesky(covs)
     means = truth + np.einsum("qij,qj->qi", chol, rng.standard_normal((q, 2)))
     # unresolved pairs of true positions merge (the cell on the true polar difference)
-    true_pol = np.column_stack([np.hypot(truth[:, 0], truth[:, 1]),
-                                np.arctan2(truth[:, 1], truth[:, 0])])
+    true_pol = np.column_stack(
+        [np.hypot(truth[:, 0], truth[:, 1]), np.arctan2(truth[:, 1], truth[:, 0])]
+    )
     from scipy.spatial import cKDTree
 
     near = cKDTree(truth).query_pairs(CELL_RANGE + R_OUT * CELL_AZ, output_type="ndarray")
@@ -119,17 +122,21 @@ def scan(q: int, seed: int = 0) -> dict[str, Any]:
     clutter = rc[:, None] * np.column_stack([np.cos(ac), np.sin(ac)])
     exact = np.vstack([np.array(returns).reshape(-1, 2), clutter])
     origin += [()] * n_clutter
-    pr = np.column_stack([np.hypot(exact[:, 0], exact[:, 1]),
-                          np.arctan2(exact[:, 1], exact[:, 0])])
+    pr = np.column_stack([np.hypot(exact[:, 0], exact[:, 1]), np.arctan2(exact[:, 1], exact[:, 0])])
     pr += rng.standard_normal(pr.shape) * np.array([SIGMA_R, SIGMA_AZ])
     meas = pr[:, :1] * np.column_stack([np.cos(pr[:, 1]), np.sin(pr[:, 1])])
     order = rng.permutation(len(meas))
     meas = meas[order]
     area = math.pi * (R_OUT**2 - R_IN**2)
-    return {"means": means, "covs": covs, "measurements": meas,
-            "meas_cov": polar_measurement_covs(meas, SITE, SIGMA_R, SIGMA_AZ),
-            "volume": area / max(n_clutter, 1), "pd": PD,
-            "origin": [origin[k] for k in order]}
+    return {
+        "means": means,
+        "covs": covs,
+        "measurements": meas,
+        "meas_cov": polar_measurement_covs(meas, SITE, SIGMA_R, SIGMA_AZ),
+        "volume": area / max(n_clutter, 1),
+        "pd": PD,
+        "origin": [origin[k] for k in order],
+    }
 
 
 def resolution() -> Any:
@@ -142,8 +149,15 @@ def run_map(sc: dict[str, Any]) -> Any:
     """The exact MAP with the resolution model and the package's defaults."""
     from optmodels import assignment as asg
 
-    data = asg.AssignmentData(sc["means"], sc["covs"], sc["measurements"], sc["meas_cov"],
-                              volume=sc["volume"], pd=sc["pd"], sensor=resolution())
+    data = asg.AssignmentData(
+        sc["means"],
+        sc["covs"],
+        sc["measurements"],
+        sc["meas_cov"],
+        volume=sc["volume"],
+        pd=sc["pd"],
+        sensor=resolution(),
+    )
     return asg.solve(data)
 
 
@@ -153,12 +167,15 @@ def run_gnn(sc: dict[str, Any], chunk: int = 256) -> np.ndarray:
     n, q = len(z), len(m)
     cost = np.empty((n, q))
     for a in range(0, n, chunk):
-        s = k[None, :] + r[a:a + chunk, None]  # (c, Q, 2, 2)
+        s = k[None, :] + r[a : a + chunk, None]  # (c, Q, 2, 2)
         det = s[..., 0, 0] * s[..., 1, 1] - s[..., 0, 1] ** 2
-        dx = z[a:a + chunk, None, :] - m[None]
-        d2 = (s[..., 1, 1] * dx[..., 0] ** 2 - 2 * s[..., 0, 1] * dx[..., 0] * dx[..., 1]
-              + s[..., 0, 0] * dx[..., 1] ** 2) / det
-        cost[a:a + chunk] = np.where(d2 <= 25.0, d2, 1e9)
+        dx = z[a : a + chunk, None, :] - m[None]
+        d2 = (
+            s[..., 1, 1] * dx[..., 0] ** 2
+            - 2 * s[..., 0, 1] * dx[..., 0] * dx[..., 1]
+            + s[..., 0, 0] * dx[..., 1] ** 2
+        ) / det
+        cost[a : a + chunk] = np.where(d2 <= 25.0, d2, 1e9)
     rows, cols = linear_sum_assignment(cost)
     out = np.full(n, -1)
     ok = cost[rows, cols] <= 25.0
@@ -185,11 +202,18 @@ def _stonesoup_scene(sc: dict[str, Any]) -> tuple[list[Any], list[Any], Any, Any
     t0 = datetime(2026, 1, 1)
     trans = CombinedLinearGaussianTransitionModel([RandomWalk(1e-6), RandomWalk(1e-6)])
     base = LinearGaussian(ndim_state=2, mapping=(0, 1), noise_covar=np.eye(2))
-    tracks = [Track([GaussianState(m.reshape(2, 1), c, timestamp=t0)])
-              for m, c in zip(sc["means"], sc["covs"], strict=True)]
-    dets = [Detection(z.reshape(2, 1), timestamp=t0, measurement_model=LinearGaussian(
-        ndim_state=2, mapping=(0, 1), noise_covar=r))
-        for z, r in zip(sc["measurements"], sc["meas_cov"], strict=True)]
+    tracks = [
+        Track([GaussianState(m.reshape(2, 1), c, timestamp=t0)])
+        for m, c in zip(sc["means"], sc["covs"], strict=True)
+    ]
+    dets = [
+        Detection(
+            z.reshape(2, 1),
+            timestamp=t0,
+            measurement_model=LinearGaussian(ndim_state=2, mapping=(0, 1), noise_covar=r),
+        )
+        for z, r in zip(sc["measurements"], sc["meas_cov"], strict=True)
+    ]
     return tracks, dets, KalmanPredictor(trans), KalmanUpdater(base)
 
 
@@ -203,12 +227,19 @@ def run_stonesoup(sc: dict[str, Any], kind: str) -> Any:
     tracks, dets, pred, upd = _stonesoup_scene(sc)
     t = tracks[0].timestamp
     if kind == "SS-GNN":
-        assoc = GNNWith2DAssignment(DistanceHypothesiser(pred, upd, Mahalanobis(),
-                                                         missed_distance=5.0))
+        assoc = GNNWith2DAssignment(
+            DistanceHypothesiser(pred, upd, Mahalanobis(), missed_distance=5.0)
+        )
     else:
-        assoc = JPDAwithEHM2(PDAHypothesiser(pred, upd, clutter_spatial_density=1.0
-                                             / sc["volume"], prob_detect=sc["pd"],
-                                             prob_gate=0.99999))
+        assoc = JPDAwithEHM2(
+            PDAHypothesiser(
+                pred,
+                upd,
+                clutter_spatial_density=1.0 / sc["volume"],
+                prob_detect=sc["pd"],
+                prob_gate=0.99999,
+            )
+        )
     return assoc.associate(set(tracks), set(dets), t)
 
 
@@ -229,23 +260,27 @@ def _peak(fn: Any, *args: Any) -> float:
         tracemalloc.stop()
 
 
-def measure(q: int, rounds: int, stonesoup_max: int, seed: int = 0,
-            ss_rounds: int = 3) -> dict[str, Any]:
+def measure(
+    q: int, rounds: int, stonesoup_max: int, seed: int = 0, ss_rounds: int = 3
+) -> dict[str, Any]:
     """Medians over interleaved rounds of each contender on one scan: ``rounds`` rounds
     (at least 51 below Q = 300, where a call takes milliseconds), Stone Soup's in the
     first ``ss_rounds`` of them (seconds per call)."""
     rounds = max(rounds, 51) if q < 300 else rounds
     sc = scan(q, seed)
     names = ["MAP", "GNN"] + (["SS-GNN", "SS-JPDA"] if q <= stonesoup_max else [])
-    calls = {"MAP": lambda: run_map(sc), "GNN": lambda: run_gnn(sc),
-             "SS-GNN": lambda: run_stonesoup(sc, "SS-GNN"),
-             "SS-JPDA": lambda: run_stonesoup(sc, "SS-JPDA")}
+    calls = {
+        "MAP": lambda: run_map(sc),
+        "GNN": lambda: run_gnn(sc),
+        "SS-GNN": lambda: run_stonesoup(sc, "SS-GNN"),
+        "SS-JPDA": lambda: run_stonesoup(sc, "SS-JPDA"),
+    }
     sol = run_map(sc)  # warm-up and the answer's check
     run_gnn(sc)
     times: dict[str, list[float]] = {k: [] for k in names}
     cpu: dict[str, list[float]] = {k: [] for k in names}
     for r in range(rounds):
-        for k in (names if r % 2 == 0 else names[::-1]):
+        for k in names if r % 2 == 0 else names[::-1]:
             if k.startswith("SS-") and r >= ss_rounds:
                 continue
             wall, used = _timed(calls[k])
@@ -255,26 +290,35 @@ def measure(q: int, rounds: int, stonesoup_max: int, seed: int = 0,
     low = {k: min(v) for k, v in times.items()}
     med_cpu = {k: statistics.median(v) for k, v in cpu.items()}
     peak = {k: _peak(calls[k]) for k in names}
-    return {"q": q, "n": len(sc["measurements"]), "status": sol.status.value,
-            "components": sol.info.get("components"),
-            "contended": sol.info.get("contended_components"),
-            "largest": sol.info.get("largest_component"),
-            "merged_blocks": sum(1 for b in sol.partition if len(b) > 1),
-            "time": med, "peak_mib": peak,
-            "ratio_map_gnn": med["MAP"] / med["GNN"], "time_min": low,
-            "ratio_min": low["MAP"] / low["GNN"], "cpu": med_cpu,
-            "ratio_cpu": med_cpu["MAP"] / max(med_cpu["GNN"], 1e-9),
-            "rounds": {k: len(v) for k, v in times.items()}, "load": os.getloadavg()}
+    return {
+        "q": q,
+        "n": len(sc["measurements"]),
+        "status": sol.status.value,
+        "components": sol.info.get("components"),
+        "contended": sol.info.get("contended_components"),
+        "largest": sol.info.get("largest_component"),
+        "merged_blocks": sum(1 for b in sol.partition if len(b) > 1),
+        "time": med,
+        "peak_mib": peak,
+        "ratio_map_gnn": med["MAP"] / med["GNN"],
+        "time_min": low,
+        "ratio_min": low["MAP"] / low["GNN"],
+        "cpu": med_cpu,
+        "ratio_cpu": med_cpu["MAP"] / max(med_cpu["GNN"], 1e-9),
+        "rounds": {k: len(v) for k, v in times.items()},
+        "load": os.getloadavg(),
+    }
 
 
 def measure_limited(q: int, rounds: int, stonesoup_max: int) -> dict[str, Any]:
     """:func:`measure` in a child process under an 8 GiB address-space limit."""
-    code = ("import json, resource, sys\n"
-            f"resource.setrlimit(resource.RLIMIT_AS, ({LIMIT_BYTES}, {LIMIT_BYTES}))\n"
-            "from solvers_cmp.assignment_scale import measure\n"
-            f"print(json.dumps(measure({q}, {rounds}, {stonesoup_max})))\n")
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                         check=False)
+    code = (
+        "import json, resource, sys\n"
+        f"resource.setrlimit(resource.RLIMIT_AS, ({LIMIT_BYTES}, {LIMIT_BYTES}))\n"
+        "from solvers_cmp.assignment_scale import measure\n"
+        f"print(json.dumps(measure({q}, {rounds}, {stonesoup_max})))\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=False)
     if out.returncode != 0:
         return {"q": q, "error": out.stderr.strip().splitlines()[-1:] or ["failed"]}
     res = json.loads(out.stdout.strip().splitlines()[-1])
@@ -283,8 +327,10 @@ def measure_limited(q: int, rounds: int, stonesoup_max: int) -> dict[str, Any]:
 
 
 def table(rows: list[dict[str, Any]]) -> str:
-    head = ("| Q | N | MAP s | GNN s | MAP/GNN | min-round ratio | CPU ratio | SS-GNN s | "
-            "SS-JPDA s | MAP MiB | GNN MiB | components (contended, largest) | merged | load |")
+    head = (
+        "| Q | N | MAP s | GNN s | MAP/GNN | min-round ratio | CPU ratio | SS-GNN s | "
+        "SS-JPDA s | MAP MiB | GNN MiB | components (contended, largest) | merged | load |"
+    )
     lines = [head, "|" + "---|" * 14]
     for r in rows:
         if "error" in r:
@@ -296,13 +342,15 @@ def table(rows: list[dict[str, Any]]) -> str:
             return f"{t[k]:.4g}" if k in t else "—"
 
         lim = " (8 GiB AS)" if "address_space_limit_gib" in r else ""
-        lines.append(f"| {r['q']}{lim} | {r['n']} | {f('MAP')} | {f('GNN')} | "
-                     f"{r['ratio_map_gnn']:.2f} | {r['ratio_min']:.2f} | "
-                     f"{r['ratio_cpu']:.2f} | {f('SS-GNN')} | "
-                     f"{f('SS-JPDA')} | "
-                     f"{p['MAP']:.1f} | {p['GNN']:.1f} | {r['components']} "
-                     f"({r['contended']}, {r['largest']}) | {r['merged_blocks']} | "
-                     f"{r['load'][0]:.2f} |")
+        lines.append(
+            f"| {r['q']}{lim} | {r['n']} | {f('MAP')} | {f('GNN')} | "
+            f"{r['ratio_map_gnn']:.2f} | {r['ratio_min']:.2f} | "
+            f"{r['ratio_cpu']:.2f} | {f('SS-GNN')} | "
+            f"{f('SS-JPDA')} | "
+            f"{p['MAP']:.1f} | {p['GNN']:.1f} | {r['components']} "
+            f"({r['contended']}, {r['largest']}) | {r['merged_blocks']} | "
+            f"{r['load'][0]:.2f} |"
+        )
     return "\n".join(lines)
 
 
@@ -316,8 +364,11 @@ def main(argv: list[str] | None = None) -> int:
     a = ap.parse_args(argv)
     rows = []
     for q in a.q:
-        rows.append(measure_limited(q, a.rounds, a.stonesoup_max) if q >= a.limit_from
-                    else measure(q, a.rounds, a.stonesoup_max))
+        rows.append(
+            measure_limited(q, a.rounds, a.stonesoup_max)
+            if q >= a.limit_from
+            else measure(q, a.rounds, a.stonesoup_max)
+        )
         print(table(rows[-1:]).splitlines()[-1], flush=True)
     print(table(rows))
     if a.json:

@@ -80,8 +80,11 @@ def resolution_model(sensor: RadarCell) -> Any:
         from optmodels.assignment.sensor import Resolution  # type: ignore[import-not-found]
     except ImportError:
         return None
-    return Resolution(range=sensor.range_res, azimuth=sensor.azimuth_res,
-                      site=np.asarray(sensor.site, dtype=float))
+    return Resolution(
+        range=sensor.range_res,
+        azimuth=sensor.azimuth_res,
+        site=np.asarray(sensor.site, dtype=float),
+    )
 
 
 def _components(accel: float) -> dict[str, Any]:
@@ -93,16 +96,27 @@ def _components(accel: float) -> dict[str, Any]:
     from stonesoup.predictor.kalman import KalmanPredictor
     from stonesoup.updater.kalman import KalmanUpdater
 
-    trans = CombinedLinearGaussianTransitionModel([ConstantVelocity(accel),
-                                                   ConstantVelocity(accel)])
+    trans = CombinedLinearGaussianTransitionModel(
+        [ConstantVelocity(accel), ConstantVelocity(accel)]
+    )
     default = LinearGaussian(ndim_state=4, mapping=(0, 2), noise_covar=np.eye(2) * 100.0)
-    return {"predictor": KalmanPredictor(trans), "updater": KalmanUpdater(default),
-            "LinearGaussian": LinearGaussian}
+    return {
+        "predictor": KalmanPredictor(trans),
+        "updater": KalmanUpdater(default),
+        "LinearGaussian": LinearGaussian,
+    }
 
 
-def associator(method: str, enc: Encounter, comps: dict[str, Any], *, gate: float = 5.0,
-               rho: float = 0.3, use_resolution: bool = True,
-               cell_information: bool = True) -> Any:
+def associator(
+    method: str,
+    enc: Encounter,
+    comps: dict[str, Any],
+    *,
+    gate: float = 5.0,
+    rho: float = 0.3,
+    use_resolution: bool = True,
+    cell_information: bool = True,
+) -> Any:
     """The Stone Soup associator of ``method`` for the encounter's sensor."""
     from stonesoup.dataassociator.neighbour import GNNWith2DAssignment
     from stonesoup.dataassociator.probability import JPDA
@@ -115,38 +129,63 @@ def associator(method: str, enc: Encounter, comps: dict[str, Any], *, gate: floa
     pred, upd = comps["predictor"], comps["updater"]
     lam, pd = enc.sensor.clutter_density, enc.sensor.pd
     if method == "GNN":
-        return GNNWith2DAssignment(DistanceHypothesiser(pred, upd, measure=Mahalanobis(),
-                                                        missed_distance=gate))
+        return GNNWith2DAssignment(
+            DistanceHypothesiser(pred, upd, measure=Mahalanobis(), missed_distance=gate)
+        )
     pda = PDAHypothesiser(pred, upd, clutter_spatial_density=lam, prob_detect=pd)
     if method == "JPDA":
         return JPDA(pda)
     if method == "JPDA5":  # Stone Soup's JPDA with GNN's 5σ gate (the soft one's)
         from scipy.stats import chi2
 
-        return JPDA(PDAHypothesiser(pred, upd, clutter_spatial_density=lam, prob_detect=pd,
-                                    prob_gate=float(chi2.cdf(gate**2, 2))))
+        return JPDA(
+            PDAHypothesiser(
+                pred,
+                upd,
+                clutter_spatial_density=lam,
+                prob_detect=pd,
+                prob_gate=float(chi2.cdf(gate**2, 2)),
+            )
+        )
     if method == "soft":
         from scipy.stats import chi2
 
         from optmodels.assignment.stonesoup_soft import SoftMergedAssociator
 
-        wide = PDAHypothesiser(pred, upd, clutter_spatial_density=lam, prob_detect=pd,
-                               prob_gate=float(chi2.cdf(gate**2, 2)))
+        wide = PDAHypothesiser(
+            pred,
+            upd,
+            clutter_spatial_density=lam,
+            prob_detect=pd,
+            prob_gate=float(chi2.cdf(gate**2, 2)),
+        )
         res = resolution_model(enc.sensor) if use_resolution else None
-        return SoftMergedAssociator(wide, resolution=res, rho=rho,
-                                    cell_information=cell_information)
+        return SoftMergedAssociator(
+            wide, resolution=res, rho=rho, cell_information=cell_information
+        )
     if method in ("MAP+merges", "resolved"):
         res = resolution_model(enc.sensor) if use_resolution else None
-        return MergedMeasurementAssociator(pda, merges=method == "MAP+merges",
-                                           resolution=res if method == "MAP+merges"
-                                           else None, rho=rho,
-                                           cell_information=cell_information)
+        return MergedMeasurementAssociator(
+            pda,
+            merges=method == "MAP+merges",
+            resolution=res if method == "MAP+merges" else None,
+            rho=rho,
+            cell_information=cell_information,
+        )
     raise ValueError(f"method: expected one of {ALL_METHODS}, got {method!r}")
 
 
-def run_tracking(enc: Encounter, method: str, *, accel: float = 1.0, gate: float = 5.0,
-                 rho: float = 0.3, use_resolution: bool = True,
-                 cell_information: bool = True, log: list[Any] | None = None) -> list[Any]:
+def run_tracking(
+    enc: Encounter,
+    method: str,
+    *,
+    accel: float = 1.0,
+    gate: float = 5.0,
+    rho: float = 0.3,
+    use_resolution: bool = True,
+    cell_information: bool = True,
+    log: list[Any] | None = None,
+) -> list[Any]:
     """One tracking run: Stone Soup tracks (one per object, started at ``enc.initial``)
     updated scan by scan with ``method``'s associator. The loop is Stone Soup's
     ``MultiTargetTracker`` step without initiation/deletion (the number of objects is
@@ -161,16 +200,37 @@ def run_tracking(enc: Encounter, method: str, *, accel: float = 1.0, gate: float
 
     comps = _components(accel)
     upd, lg = comps["updater"], comps["LinearGaussian"]
-    assoc = associator(method, enc, comps, gate=gate, rho=rho, use_resolution=use_resolution,
-                       cell_information=cell_information)
-    tracks = [Track([GaussianState(enc.initial[j].reshape(-1, 1), enc.initial_covar,
-                                   timestamp=T0 + timedelta(seconds=float(enc.times[0])))])
-              for j in range(enc.q)]
+    assoc = associator(
+        method,
+        enc,
+        comps,
+        gate=gate,
+        rho=rho,
+        use_resolution=use_resolution,
+        cell_information=cell_information,
+    )
+    tracks = [
+        Track(
+            [
+                GaussianState(
+                    enc.initial[j].reshape(-1, 1),
+                    enc.initial_covar,
+                    timestamp=T0 + timedelta(seconds=float(enc.times[0])),
+                )
+            ]
+        )
+        for j in range(enc.q)
+    ]
     for s in enc.scans:
         when = T0 + timedelta(seconds=s.time)
-        dets = [Detection(z.reshape(-1, 1), timestamp=when,
-                          measurement_model=lg(ndim_state=4, mapping=(0, 2), noise_covar=r))
-                for z, r in zip(s.measurements, s.covs, strict=True)]
+        dets = [
+            Detection(
+                z.reshape(-1, 1),
+                timestamp=when,
+                measurement_model=lg(ndim_state=4, mapping=(0, 2), noise_covar=r),
+            )
+            for z, r in zip(s.measurements, s.covs, strict=True)
+        ]
         hyps = assoc.associate(set(tracks), set(dets), when)
         if log is not None and method not in MIXTURE:
             index = {id(d): i for i, d in enumerate(dets)}
@@ -187,9 +247,11 @@ def run_tracking(enc: Encounter, method: str, *, accel: float = 1.0, gate: float
                 continue
             states = [upd.update(hh) if hh else hh.prediction for hh in h]
             weights = np.array([float(hh.probability) for hh in h])
-            mean, cov = gm_reduce_single(StateVectors([st.state_vector for st in states]),
-                                         np.stack([st.covar for st in states], axis=2),
-                                         weights)
+            mean, cov = gm_reduce_single(
+                StateVectors([st.state_vector for st in states]),
+                np.stack([st.covar for st in states], axis=2),
+                weights,
+            )
             tr.append(GaussianStateUpdate(mean, cov, h, when))
     return tracks
 
@@ -197,38 +259,50 @@ def run_tracking(enc: Encounter, method: str, *, accel: float = 1.0, gate: float
 def _truth_paths(enc: Encounter) -> list[Any]:
     from stonesoup.types.groundtruth import GroundTruthPath, GroundTruthState
 
-    return [GroundTruthPath([GroundTruthState(enc.truth[k, t].reshape(-1, 1),
-                                              timestamp=T0 + timedelta(seconds=float(tt)))
-                             for t, tt in enumerate(enc.times)]) for k in range(enc.q)]
+    return [
+        GroundTruthPath(
+            [
+                GroundTruthState(
+                    enc.truth[k, t].reshape(-1, 1), timestamp=T0 + timedelta(seconds=float(tt))
+                )
+                for t, tt in enumerate(enc.times)
+            ]
+        )
+        for k in range(enc.q)
+    ]
 
 
-def mean_gospa(enc: Encounter, tracks: list[Any], *, c: float = 500.0, p: float = 2.0
-               ) -> float:
+def mean_gospa(enc: Encounter, tracks: list[Any], *, c: float = 500.0, p: float = 2.0) -> float:
     """Mean over the scans of Stone Soup's GOSPA distance (positions, m)."""
     return float(np.mean(gospa_per_scan(enc, tracks, c=c, p=p)))
 
 
-def gospa_per_scan(enc: Encounter, tracks: list[Any], *, c: float = 500.0, p: float = 2.0
-                   ) -> list[float]:
+def gospa_per_scan(
+    enc: Encounter, tracks: list[Any], *, c: float = 500.0, p: float = 2.0
+) -> list[float]:
     """Stone Soup's GOSPA distance (positions, m) at each scan."""
     from stonesoup.measures import Euclidean
     from stonesoup.metricgenerator.ospametric import GOSPAMetric
 
     gen = GOSPAMetric(c=c, p=p, measure=Euclidean(mapping=(0, 2)))
-    m = gen.compute_over_time(*gen.extract_states(tracks, True),
-                              *gen.extract_states(_truth_paths(enc), True))
+    m = gen.compute_over_time(
+        *gen.extract_states(tracks, True), *gen.extract_states(_truth_paths(enc), True)
+    )
     values = m.value if isinstance(m.value, list) else [m]
     return [float(v.value["distance"]) for v in values]
 
 
-def track_labels(enc: Encounter, tracks: list[Any], *, c: float = 500.0
-                 ) -> list[list[int | None]]:
+def track_labels(enc: Encounter, tracks: list[Any], *, c: float = 500.0) -> list[list[int | None]]:
     """Per scan, the object each track is assigned to by the optimal assignment of the
     GOSPA cost (position distance, cutoff ``c``; None: unassigned)."""
     out = []
     for t in range(len(enc.times)):
-        est = np.array([np.asarray(tr.states[t + 1].state_vector, dtype=float).ravel()[[0, 2]]
-                        for tr in tracks])
+        est = np.array(
+            [
+                np.asarray(tr.states[t + 1].state_vector, dtype=float).ravel()[[0, 2]]
+                for tr in tracks
+            ]
+        )
         tru = enc.truth[:, t][:, [0, 2]]
         cost = np.minimum(np.linalg.norm(est[:, None] - tru[None], axis=2), c)
         rows, cols = linear_sum_assignment(cost)
@@ -240,8 +314,7 @@ def track_labels(enc: Encounter, tracks: list[Any], *, c: float = 500.0
     return out
 
 
-def swaps_and_breaks(enc: Encounter, tracks: list[Any], *, c: float = 500.0
-                     ) -> tuple[int, int]:
+def swaps_and_breaks(enc: Encounter, tracks: list[Any], *, c: float = 500.0) -> tuple[int, int]:
     """Track swaps and breaks of a run (module docstring): swaps = tracks whose label at
     the last scan is another object than the one they started on (track j on object j);
     breaks = transitions of a track's label from an object to none (first scan included:
@@ -268,11 +341,21 @@ class RunResult:
     seconds: float
 
 
-def study(*, ratios: tuple[float, ...] = RATIOS, runs: int = 20, q: int = 2,
-          kind: str = "crossing", seed: int = 2026, methods: tuple[str, ...] = METHODS,
-          sensor: RadarCell | None = None, c: float = 500.0,
-          use_resolution: bool = True, scans: int = 24, half_angle_deg: float = 5.0,
-          cell_information: bool = True) -> list[RunResult]:
+def study(
+    *,
+    ratios: tuple[float, ...] = RATIOS,
+    runs: int = 20,
+    q: int = 2,
+    kind: str = "crossing",
+    seed: int = 2026,
+    methods: tuple[str, ...] = METHODS,
+    sensor: RadarCell | None = None,
+    c: float = 500.0,
+    use_resolution: bool = True,
+    scans: int = 24,
+    half_angle_deg: float = 5.0,
+    cell_information: bool = True,
+) -> list[RunResult]:
     """Every method on the same seeded encounters: ``runs`` per ratio separation/range_res,
     encounter r of ratio x from ``default_rng([seed, round(1000 x), r])`` (``scans``
     scans 5 s apart, crossing half-angle ``half_angle_deg``; the rest
@@ -281,16 +364,33 @@ def study(*, ratios: tuple[float, ...] = RATIOS, runs: int = 20, q: int = 2,
     out: list[RunResult] = []
     for x in ratios:
         for r in range(runs):
-            enc = encounter(np.random.default_rng([seed, round(1000 * x), r]), kind=kind,
-                            q=q, separation=x * sensor.range_res, sensor=sensor,
-                            scans=scans, half_angle_deg=half_angle_deg)
+            enc = encounter(
+                np.random.default_rng([seed, round(1000 * x), r]),
+                kind=kind,
+                q=q,
+                separation=x * sensor.range_res,
+                sensor=sensor,
+                scans=scans,
+                half_angle_deg=half_angle_deg,
+            )
             for m in methods:
                 t0 = time.perf_counter()
-                tracks = run_tracking(enc, m, use_resolution=use_resolution,
-                                      cell_information=cell_information)
+                tracks = run_tracking(
+                    enc, m, use_resolution=use_resolution, cell_information=cell_information
+                )
                 sw, br = swaps_and_breaks(enc, tracks, c=c)
-                out.append(RunResult(m, x, r, mean_gospa(enc, tracks, c=c), sw, br,
-                                     enc.merged_scans, time.perf_counter() - t0))
+                out.append(
+                    RunResult(
+                        m,
+                        x,
+                        r,
+                        mean_gospa(enc, tracks, c=c),
+                        sw,
+                        br,
+                        enc.merged_scans,
+                        time.perf_counter() - t0,
+                    )
+                )
     return out
 
 
@@ -302,14 +402,21 @@ def summarise(results: list[RunResult]) -> list[dict[str, Any]]:
         for m in dict.fromkeys(r.method for r in results):
             sel = [r for r in results if r.ratio == x and r.method == m]
             g = np.array([r.gospa for r in sel])
-            rows.append({"ratio": x, "method": m, "runs": len(sel),
-                         "gospa": float(g.mean()),
-                         "gospa_se": float(g.std(ddof=1) / np.sqrt(len(g))) if len(g) > 1
-                         else float("nan"),
-                         "swaps": int(sum(r.swaps for r in sel)),
-                         "breaks": int(sum(r.breaks for r in sel)),
-                         "merged_scans": float(np.mean([r.merged_scans for r in sel])),
-                         "s_per_run": float(np.median([r.seconds for r in sel]))})
+            rows.append(
+                {
+                    "ratio": x,
+                    "method": m,
+                    "runs": len(sel),
+                    "gospa": float(g.mean()),
+                    "gospa_se": float(g.std(ddof=1) / np.sqrt(len(g)))
+                    if len(g) > 1
+                    else float("nan"),
+                    "swaps": int(sum(r.swaps for r in sel)),
+                    "breaks": int(sum(r.breaks for r in sel)),
+                    "merged_scans": float(np.mean([r.merged_scans for r in sel])),
+                    "s_per_run": float(np.median([r.seconds for r in sel])),
+                }
+            )
     return rows
 
 
@@ -325,9 +432,13 @@ def done_when(rows: list[dict[str, Any]]) -> dict[str, Any]:
             continue
         others = [by[(x, m)] for m in METHODS[1:] if (x, m) in by]
         if x < 1:
-            below.append({"ratio": x, "lowest_gospa": all(mp["gospa"] < o["gospa"]
-                                                          for o in others),
-                          "no_more_swaps": all(mp["swaps"] <= o["swaps"] for o in others)})
+            below.append(
+                {
+                    "ratio": x,
+                    "lowest_gospa": all(mp["gospa"] < o["gospa"] for o in others),
+                    "no_more_swaps": all(mp["swaps"] <= o["swaps"] for o in others),
+                }
+            )
         if x >= 2 and (x, "GNN") in by:
             g = by[(x, "GNN")]["gospa"]
             above.append({"ratio": x, "rel_diff_vs_gnn": (mp["gospa"] - g) / g})
@@ -348,19 +459,27 @@ class TrafficResult:
     seconds: float
 
 
-def traffic_encounters(kinds: tuple[str, ...] = TRAFFIC_KINDS, runs: int = 8,
-                       seed: int = 2029) -> list[Encounter]:
+def traffic_encounters(
+    kinds: tuple[str, ...] = TRAFFIC_KINDS, runs: int = 8, seed: int = 2029
+) -> list[Encounter]:
     """The encounter set: ``runs`` per kind, encounter r of kind k from
     ``default_rng([seed, k, r])`` (:func:`~optmodels.scenarios.encounters.
     traffic_encounter`, 49 scans 5 s apart)."""
-    return [traffic_encounter(np.random.default_rng([seed, TRAFFIC_KINDS.index(k), r]), k)
-            for k in kinds for r in range(runs)]
+    return [
+        traffic_encounter(np.random.default_rng([seed, TRAFFIC_KINDS.index(k), r]), k)
+        for k in kinds
+        for r in range(runs)
+    ]
 
 
-def traffic_study(*, kinds: tuple[str, ...] = TRAFFIC_KINDS, runs: int = 8,
-                  seed: int = 2029, methods: tuple[str, ...] = ("MAP+merges", "GNN",
-                                                                "JPDA", "JPDA5", "soft"),
-                  c: float = 500.0) -> list[TrafficResult]:
+def traffic_study(
+    *,
+    kinds: tuple[str, ...] = TRAFFIC_KINDS,
+    runs: int = 8,
+    seed: int = 2029,
+    methods: tuple[str, ...] = ("MAP+merges", "GNN", "JPDA", "JPDA5", "soft"),
+    c: float = 500.0,
+) -> list[TrafficResult]:
     """Every method on the same traffic encounters (:func:`traffic_encounters`): mean
     GOSPA over all scans and over the scans with a merged return, swaps, breaks."""
     out = []
@@ -371,9 +490,19 @@ def traffic_study(*, kinds: tuple[str, ...] = TRAFFIC_KINDS, runs: int = 8,
             tracks = run_tracking(enc, m)
             per = gospa_per_scan(enc, tracks, c=c)
             sw, br = swaps_and_breaks(enc, tracks, c=c)
-            out.append(TrafficResult(m, enc.kind, idx % runs, float(
-                np.mean(per)), float(np.mean([per[t] for t in merged])) if merged else
-                float("nan"), sw, br, enc.merged_scans, time.perf_counter() - t0))
+            out.append(
+                TrafficResult(
+                    m,
+                    enc.kind,
+                    idx % runs,
+                    float(np.mean(per)),
+                    float(np.mean([per[t] for t in merged])) if merged else float("nan"),
+                    sw,
+                    br,
+                    enc.merged_scans,
+                    time.perf_counter() - t0,
+                )
+            )
     return out
 
 
@@ -386,15 +515,22 @@ def summarise_traffic(results: list[TrafficResult]) -> list[dict[str, Any]]:
             sel = [r for r in results if r.method == m and kind in (r.kind, "all")]
             g = np.array([r.gospa for r in sel])
             gm = np.array([r.gospa_merged for r in sel if np.isfinite(r.gospa_merged)])
-            rows.append({"kind": kind, "method": m, "runs": len(sel),
-                         "gospa": float(g.mean()),
-                         "gospa_se": float(g.std(ddof=1) / np.sqrt(len(g))) if len(g) > 1
-                         else float("nan"),
-                         "gospa_merged": float(gm.mean()) if len(gm) else float("nan"),
-                         "swaps": int(sum(r.swaps for r in sel)),
-                         "breaks": int(sum(r.breaks for r in sel)),
-                         "merged_scans": float(np.mean([r.merged_scans for r in sel])),
-                         "s_per_run": float(np.median([r.seconds for r in sel]))})
+            rows.append(
+                {
+                    "kind": kind,
+                    "method": m,
+                    "runs": len(sel),
+                    "gospa": float(g.mean()),
+                    "gospa_se": float(g.std(ddof=1) / np.sqrt(len(g)))
+                    if len(g) > 1
+                    else float("nan"),
+                    "gospa_merged": float(gm.mean()) if len(gm) else float("nan"),
+                    "swaps": int(sum(r.swaps for r in sel)),
+                    "breaks": int(sum(r.breaks for r in sel)),
+                    "merged_scans": float(np.mean([r.merged_scans for r in sel])),
+                    "s_per_run": float(np.median([r.seconds for r in sel])),
+                }
+            )
     return rows
 
 
@@ -405,14 +541,19 @@ def done_when_traffic(rows: list[dict[str, Any]]) -> dict[str, Any]:
     out: dict[str, Any] = {}
     if ("fast_crossing", "soft") in by and ("fast_crossing", "JPDA") in by:
         s, j = by[("fast_crossing", "soft")], by[("fast_crossing", "JPDA")]
-        out["fast_crossing"] = {"ratio_vs_jpda": s["gospa"] / j["gospa"],
-                                "target": 0.95, "ok": s["gospa"] <= 0.95 * j["gospa"]
-                                and s["swaps"] <= j["swaps"],
-                                "swaps": (s["swaps"], j["swaps"])}
+        out["fast_crossing"] = {
+            "ratio_vs_jpda": s["gospa"] / j["gospa"],
+            "target": 0.95,
+            "ok": s["gospa"] <= 0.95 * j["gospa"] and s["swaps"] <= j["swaps"],
+            "swaps": (s["swaps"], j["swaps"]),
+        }
     if ("long_merge", "soft") in by and ("long_merge", "MAP+merges") in by:
         s, mp = by[("long_merge", "soft")], by[("long_merge", "MAP+merges")]
-        out["long_merge"] = {"ratio_vs_map": s["gospa"] / mp["gospa"], "target": 1.05,
-                             "ok": s["gospa"] <= 1.05 * mp["gospa"]}
+        out["long_merge"] = {
+            "ratio_vs_map": s["gospa"] / mp["gospa"],
+            "target": 1.05,
+            "ok": s["gospa"] <= 1.05 * mp["gospa"],
+        }
     return out
 
 
@@ -434,17 +575,24 @@ def benchmark(encs: list[Encounter], *, rounds: int = 3) -> dict[str, Any]:
         comps = _components(1.0)
         upd, lg = comps["updater"], comps["LinearGaussian"]
         soft, jpda = associator("soft", enc, comps), associator("JPDA", enc, comps)
-        tracks = [Track([GaussianState(enc.initial[j].reshape(-1, 1), enc.initial_covar,
-                                       timestamp=T0)]) for j in range(enc.q)]
+        tracks = [
+            Track([GaussianState(enc.initial[j].reshape(-1, 1), enc.initial_covar, timestamp=T0)])
+            for j in range(enc.q)
+        ]
         for s in enc.scans:
             when = T0 + timedelta(seconds=s.time)
-            dets = {Detection(z.reshape(-1, 1), timestamp=when, measurement_model=lg(
-                ndim_state=4, mapping=(0, 2), noise_covar=r))
-                for z, r in zip(s.measurements, s.covs, strict=True)}
+            dets = {
+                Detection(
+                    z.reshape(-1, 1),
+                    timestamp=when,
+                    measurement_model=lg(ndim_state=4, mapping=(0, 2), noise_covar=r),
+                )
+                for z, r in zip(s.measurements, s.covs, strict=True)
+            }
             a, b = [], []
             hyps = None
             for k in range(rounds):
-                for which in ((0, 1) if k % 2 == 0 else (1, 0)):
+                for which in (0, 1) if k % 2 == 0 else (1, 0):
                     t0 = time.perf_counter()
                     if which == 0:
                         hyps = soft.associate(set(tracks), dets, when)
@@ -459,15 +607,22 @@ def benchmark(encs: list[Encounter], *, rounds: int = 3) -> dict[str, Any]:
                 h = hyps[tr]
                 states = [upd.update(hh) if hh else hh.prediction for hh in h]
                 w = np.array([float(hh.probability) for hh in h])
-                mean, cov = gm_reduce_single(StateVectors([x.state_vector for x in states]),
-                                             np.stack([x.covar for x in states], axis=2), w)
+                mean, cov = gm_reduce_single(
+                    StateVectors([x.state_vector for x in states]),
+                    np.stack([x.covar for x in states], axis=2),
+                    w,
+                )
                 tr.append(GaussianStateUpdate(mean, cov, h, when))
     ratio = np.array(t_soft) / np.array(t_jpda)
-    return {"scans": len(t_soft), "soft_s": float(np.median(t_soft)),
-            "jpda_s": float(np.median(t_jpda)),
-            "ratio_of_medians": float(np.median(t_soft) / np.median(t_jpda)),
-            "median_ratio": float(np.median(ratio)),
-            "p90_ratio": float(np.percentile(ratio, 90)), "rounds": rounds}
+    return {
+        "scans": len(t_soft),
+        "soft_s": float(np.median(t_soft)),
+        "jpda_s": float(np.median(t_jpda)),
+        "ratio_of_medians": float(np.median(t_soft) / np.median(t_jpda)),
+        "median_ratio": float(np.median(ratio)),
+        "p90_ratio": float(np.percentile(ratio, 90)),
+        "rounds": rounds,
+    }
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -475,60 +630,103 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--runs", type=int, default=20)
     ap.add_argument("--q", type=int, default=2)
     ap.add_argument("--kind", default="crossing", choices=("crossing", "parallel"))
-    ap.add_argument("--seed", type=int, default=None,
-                    help="default 2026 (crossing study), 2029 (--traffic, --bench)")
+    ap.add_argument(
+        "--seed",
+        type=int,
+        default=None,
+        help="default 2026 (crossing study), 2029 (--traffic, --bench)",
+    )
     ap.add_argument("--ratios", type=float, nargs="*", default=list(RATIOS))
     ap.add_argument("--scans", type=int, default=24)
     ap.add_argument("--half-angle", type=float, default=5.0, help="crossing half-angle, deg")
-    ap.add_argument("--no-resolution", action="store_true",
-                    help="MAP+merges with the constant ρ even if a sensor model exists")
-    ap.add_argument("--no-cell", action="store_true",
-                    help="MAP+merges without the one-cell constraint on merged members")
+    ap.add_argument(
+        "--no-resolution",
+        action="store_true",
+        help="MAP+merges with the constant ρ even if a sensor model exists",
+    )
+    ap.add_argument(
+        "--no-cell",
+        action="store_true",
+        help="MAP+merges without the one-cell constraint on merged members",
+    )
     ap.add_argument("--methods", nargs="*", default=list(METHODS), choices=METHODS)
     ap.add_argument("--json", action="store_true")
-    ap.add_argument("--traffic", action="store_true",
-                    help="issue 29: the traffic encounters (--runs per kind), five methods")
+    ap.add_argument(
+        "--traffic",
+        action="store_true",
+        help="issue 29: the traffic encounters (--runs per kind), five methods",
+    )
     ap.add_argument("--kinds", nargs="*", default=list(TRAFFIC_KINDS), choices=TRAFFIC_KINDS)
-    ap.add_argument("--bench", type=int, default=0, metavar="RUNS",
-                    help="issue 29: per-scan cost soft vs JPDA on RUNS encounters per kind")
+    ap.add_argument(
+        "--bench",
+        type=int,
+        default=0,
+        metavar="RUNS",
+        help="issue 29: per-scan cost soft vs JPDA on RUNS encounters per kind",
+    )
     a = ap.parse_args(argv)
     t0 = time.perf_counter()
     if a.seed is None:
         a.seed = 2029 if (a.traffic or a.bench) else 2026
     if a.bench:
-        print(json.dumps(benchmark(traffic_encounters(tuple(a.kinds), a.bench, a.seed)),
-                         indent=1))
+        print(json.dumps(benchmark(traffic_encounters(tuple(a.kinds), a.bench, a.seed)), indent=1))
         return
     if a.traffic:
-        trows = summarise_traffic(traffic_study(kinds=tuple(a.kinds), runs=a.runs,
-                                                seed=a.seed))
+        trows = summarise_traffic(traffic_study(kinds=tuple(a.kinds), runs=a.runs, seed=a.seed))
         if a.json:
-            print(json.dumps({"rows": trows, "done_when": done_when_traffic(trows),
-                              "wall_s": time.perf_counter() - t0}, indent=1))
+            print(
+                json.dumps(
+                    {
+                        "rows": trows,
+                        "done_when": done_when_traffic(trows),
+                        "wall_s": time.perf_counter() - t0,
+                    },
+                    indent=1,
+                )
+            )
             return
-        print(f"{'kind':>13} {'method':>10} {'GOSPA':>7} {'se':>5} {'merged':>7} "
-              f"{'swaps':>5} {'breaks':>6}")
+        print(
+            f"{'kind':>13} {'method':>10} {'GOSPA':>7} {'se':>5} {'merged':>7} "
+            f"{'swaps':>5} {'breaks':>6}"
+        )
         for r in trows:
-            print(f"{r['kind']:>13} {r['method']:>10} {r['gospa']:7.1f} {r['gospa_se']:5.1f} "
-                  f"{r['gospa_merged']:7.1f} {r['swaps']:5d} {r['breaks']:6d}")
+            print(
+                f"{r['kind']:>13} {r['method']:>10} {r['gospa']:7.1f} {r['gospa_se']:5.1f} "
+                f"{r['gospa_merged']:7.1f} {r['swaps']:5d} {r['breaks']:6d}"
+            )
         print(json.dumps(done_when_traffic(trows)))
         return
-    res = study(ratios=tuple(a.ratios), runs=a.runs, q=a.q, kind=a.kind, seed=a.seed,
-                use_resolution=not a.no_resolution, scans=a.scans,
-                half_angle_deg=a.half_angle, cell_information=not a.no_cell,
-                methods=tuple(a.methods))
+    res = study(
+        ratios=tuple(a.ratios),
+        runs=a.runs,
+        q=a.q,
+        kind=a.kind,
+        seed=a.seed,
+        use_resolution=not a.no_resolution,
+        scans=a.scans,
+        half_angle_deg=a.half_angle,
+        cell_information=not a.no_cell,
+        methods=tuple(a.methods),
+    )
     rows = summarise(res)
     verdict = done_when(rows)
     if a.json:
-        print(json.dumps({"rows": rows, "done_when": verdict,
-                          "wall_s": time.perf_counter() - t0}, indent=1))
+        print(
+            json.dumps(
+                {"rows": rows, "done_when": verdict, "wall_s": time.perf_counter() - t0}, indent=1
+            )
+        )
         return
-    print(f"{'ratio':>6} {'method':>11} {'GOSPA':>8} {'se':>6} {'swaps':>5} {'breaks':>6} "
-          f"{'merged':>6} {'s/run':>6}")
+    print(
+        f"{'ratio':>6} {'method':>11} {'GOSPA':>8} {'se':>6} {'swaps':>5} {'breaks':>6} "
+        f"{'merged':>6} {'s/run':>6}"
+    )
     for r in rows:
-        print(f"{r['ratio']:6.2f} {r['method']:>11} {r['gospa']:8.1f} {r['gospa_se']:6.1f} "
-              f"{r['swaps']:5d} {r['breaks']:6d} {r['merged_scans']:6.1f} "
-              f"{r['s_per_run']:6.2f}")
+        print(
+            f"{r['ratio']:6.2f} {r['method']:>11} {r['gospa']:8.1f} {r['gospa_se']:6.1f} "
+            f"{r['swaps']:5d} {r['breaks']:6d} {r['merged_scans']:6.1f} "
+            f"{r['s_per_run']:6.2f}"
+        )
     print(json.dumps(verdict))
     print(f"wall {time.perf_counter() - t0:.0f} s")
 

@@ -70,18 +70,33 @@ print("@@" + json.dumps(out))
 """
 
 
-def run_case(q: int, side_factor: float, gate: float | None, mgs: int | None, prune: bool,
-             *, cap_bytes: int, pythonpath: str | None, timeout: float) -> dict[str, Any]:
+def run_case(
+    q: int,
+    side_factor: float,
+    gate: float | None,
+    mgs: int | None,
+    prune: bool,
+    *,
+    cap_bytes: int,
+    pythonpath: str | None,
+    timeout: float,
+) -> dict[str, Any]:
     """One child run; its JSON report (or a timeout / crash record)."""
     env = dict(os.environ)
     if pythonpath:
         env["PYTHONPATH"] = pythonpath + os.pathsep + env.get("PYTHONPATH", "")
-    args = [sys.executable, "-c", CHILD, json.dumps([q, side_factor, gate, mgs, prune]),
-            str(cap_bytes)]
+    args = [
+        sys.executable,
+        "-c",
+        CHILD,
+        json.dumps([q, side_factor, gate, mgs, prune]),
+        str(cap_bytes),
+    ]
     try:
         # cwd: with -c the current directory comes first on sys.path
-        proc = subprocess.run(args, capture_output=True, text=True, timeout=timeout, env=env,
-                              cwd=pythonpath)
+        proc = subprocess.run(
+            args, capture_output=True, text=True, timeout=timeout, env=env, cwd=pythonpath
+        )
     except subprocess.TimeoutExpired:
         return {"outcome": f"timeout > {timeout:g} s"}
     for line in proc.stdout.splitlines():
@@ -104,14 +119,28 @@ def main(argv: list[str] | None = None) -> None:
     for label, q, sf, gate, mgs, prune in CASES:
         if args.only and args.only not in label:
             continue
-        runs = [run_case(q, sf, gate, mgs, prune, cap_bytes=cap, pythonpath=args.pythonpath,
-                         timeout=args.timeout) for _ in range(args.repeats)]
+        runs = [
+            run_case(
+                q,
+                sf,
+                gate,
+                mgs,
+                prune,
+                cap_bytes=cap,
+                pythonpath=args.pythonpath,
+                timeout=args.timeout,
+            )
+            for _ in range(args.repeats)
+        ]
         last = runs[-1]
         rss = np.median([r.get("maxrss_mib", np.nan) for r in runs])
         wall = np.median([r.get("wall_s", np.nan) for r in runs])
         outcome = last["outcome"] + (f": {last['message']}" if "message" in last else "")
-        print(f"| {label} | {outcome} | {last.get('groups', '')} | {last.get('pairs', '')} "
-              f"| {rss:.0f} | {wall:.2f} |", flush=True)
+        print(
+            f"| {label} | {outcome} | {last.get('groups', '')} | {last.get('pairs', '')} "
+            f"| {rss:.0f} | {wall:.2f} |",
+            flush=True,
+        )
 
 
 if __name__ == "__main__":

@@ -83,23 +83,39 @@ def make_file(path: Path, records: int, distinct: int) -> int:
     half = distinct // 2
     recs = []
     for i in range(half):
-        recs.append(c48.cv_record.create({
-            "010": (("SAC", 1), ("SIC", 2)), "140": (36000.0 + 0.01 * i, "s"),
-            "020": ((5, 0, 0, 0, 0, 0),),
-            "040": (("RHO", (float(rng.uniform(1, 250)), "NM")),
-                    ("THETA", (float(rng.uniform(0, 359)), "°"))),
-            "070": (0, 0, 0, 0, ("MODE3A", "1234")),
-            "090": (0, 0, ("FL", (float(rng.uniform(0, 450)), "FL"))),
-            "130": {"SRL": 3, "SAM": 200}, "220": int(rng.integers(0, 2**24)), "240": 0,
-            "250": [0x1122334455667740] * int(rng.integers(1, 4)), "161": i % 4096,
-            "200": 0, "170": ((0, 0, 0, 0, 0, 0),)}))
-    b48 = b"".join(c48.create(recs[k:k + 20]).unparse().to_bytes()
-                   for k in range(0, half, 20))
-    b21 = encode_cat021(36000.0 + 0.01 * np.arange(half), 3, 4,
-                        rng.uniform(40, 50, half), rng.uniform(10, 20, half),
-                        height=rng.uniform(0, 12000, half),
-                        flight_level=rng.uniform(0, 450, half),
-                        address=rng.integers(0, 2**24, half))
+        recs.append(
+            c48.cv_record.create(
+                {
+                    "010": (("SAC", 1), ("SIC", 2)),
+                    "140": (36000.0 + 0.01 * i, "s"),
+                    "020": ((5, 0, 0, 0, 0, 0),),
+                    "040": (
+                        ("RHO", (float(rng.uniform(1, 250)), "NM")),
+                        ("THETA", (float(rng.uniform(0, 359)), "°")),
+                    ),
+                    "070": (0, 0, 0, 0, ("MODE3A", "1234")),
+                    "090": (0, 0, ("FL", (float(rng.uniform(0, 450)), "FL"))),
+                    "130": {"SRL": 3, "SAM": 200},
+                    "220": int(rng.integers(0, 2**24)),
+                    "240": 0,
+                    "250": [0x1122334455667740] * int(rng.integers(1, 4)),
+                    "161": i % 4096,
+                    "200": 0,
+                    "170": ((0, 0, 0, 0, 0, 0),),
+                }
+            )
+        )
+    b48 = b"".join(c48.create(recs[k : k + 20]).unparse().to_bytes() for k in range(0, half, 20))
+    b21 = encode_cat021(
+        36000.0 + 0.01 * np.arange(half),
+        3,
+        4,
+        rng.uniform(40, 50, half),
+        rng.uniform(10, 20, half),
+        height=rng.uniform(0, 12000, half),
+        flight_level=rng.uniform(0, 450, half),
+        address=rng.integers(0, 2**24, half),
+    )
     unit = b48 + b21
     tiles = max(1, records // (2 * half))
     path.write_bytes(unit * tiles)
@@ -134,19 +150,20 @@ def libasterix_normal(data: bytes) -> int:
         for r in recs:
             if db.get_category() == 48:
                 i040 = r.get_item("040")
-                out.append(i040.variation.get_item("RHO").variation.content
-                           .as_quantity("NM") * 1852.0)
+                out.append(
+                    i040.variation.get_item("RHO").variation.content.as_quantity("NM") * 1852.0
+                )
                 out.append(r.get_item("140").variation.content.as_quantity("s"))
             else:
                 i131 = r.get_item("131")
-                out.append(i131.variation.get_item("LAT").variation.content
-                           .as_quantity("°"))
+                out.append(i131.variation.get_item("LAT").variation.content.as_quantity("°"))
             n += 1
     return n
 
 
-def benchmark(records: int = 200_000, repeats: int = 5, distinct: int = 4000,
-              astd_python: str | None = None) -> dict[str, Any]:
+def benchmark(
+    records: int = 200_000, repeats: int = 5, distinct: int = 4000, astd_python: str | None = None
+) -> dict[str, Any]:
     """Records/s of each route (see the module docstring)."""
     from optmodels.io.asterix import read_asterix
 
@@ -155,26 +172,34 @@ def benchmark(records: int = 200_000, repeats: int = 5, distinct: int = 4000,
         n = make_file(path, records, distinct)
         small = Path(tmp) / "small.ast"
         make_file(small, distinct, distinct)
-        out: dict[str, Any] = {"records": n, "bytes": path.stat().st_size,
-                               "repeats": repeats}
+        out: dict[str, Any] = {"records": n, "bytes": path.stat().st_size, "repeats": repeats}
         d = read_asterix(path)
         assert len(d.cat048) + len(d.cat021) == n
         out["optmodels read_asterix"] = _median_rate(lambda: read_asterix(path), n, repeats)
         from optmodels.biasfield.recording import read_recording
 
         sites = Path(tmp) / "sites.csv"
-        sites.write_text("name,sac,sic,lat,lon,alt,sigma_range,sigma_azimuth,max_range\n"
-                         "A,1,2,45,15,100,30,0.05,500000\nB,1,3,46,16,100,30,0.05,500000\n")
+        sites.write_text(
+            "name,sac,sic,lat,lon,alt,sigma_range,sigma_azimuth,max_range\n"
+            "A,1,2,45,15,100,30,0.05,500000\nB,1,3,46,16,100,30,0.05,500000\n"
+        )
         out["optmodels read_recording (plots + ADS-B heights)"] = _median_rate(
-            lambda: read_recording(path, sites), n, repeats)
+            lambda: read_recording(path, sites), n, repeats
+        )
         out["optmodels read_asterix check='all'"] = _median_rate(
-            lambda: read_asterix(small, check="all"), distinct, max(1, repeats // 2))
+            lambda: read_asterix(small, check="all"), distinct, max(1, repeats // 2)
+        )
         data = small.read_bytes()
-        out["libasterix Uap.parse"] = _median_rate(lambda: libasterix_normal(data), distinct,
-                                                   max(1, repeats // 2))
+        out["libasterix Uap.parse"] = _median_rate(
+            lambda: libasterix_normal(data), distinct, max(1, repeats // 2)
+        )
         if astd_python:
-            res = subprocess.run([astd_python, "-c", _ASTD, str(small), str(repeats)],
-                                 capture_output=True, text=True, check=False)
+            res = subprocess.run(
+                [astd_python, "-c", _ASTD, str(small), str(repeats)],
+                capture_output=True,
+                text=True,
+                check=False,
+            )
             if res.returncode == 0:
                 rates = json.loads(res.stdout)
                 out["asterix-decoder parse"] = rates["verbose"]
@@ -184,8 +209,9 @@ def benchmark(records: int = 200_000, repeats: int = 5, distinct: int = 4000,
     return out
 
 
-def encode_benchmark(records: int = 200_000, old_records: int = 6000,
-                     repeats: int = 5) -> dict[str, Any]:
+def encode_benchmark(
+    records: int = 200_000, old_records: int = 6000, repeats: int = 5
+) -> dict[str, Any]:
     """Records/s of the vectorised encoders and of the libasterix ones (interleaved
     rounds, medians), with the byte-for-byte check; the load average before and after."""
     import os
@@ -196,23 +222,35 @@ def encode_benchmark(records: int = 200_000, old_records: int = 6000,
     n = records
     tod = 36000.0 + 0.01 * np.arange(n)
     a48 = (tod, 1, 2, rng.uniform(1e3, 4.5e5, n), rng.uniform(0, 2 * np.pi, n))
-    k48 = {"flight_level": rng.uniform(0, 450, n), "address": rng.integers(0, 2**24, n),
-           "mode3a": rng.integers(0, 4096, n)}
+    k48 = {
+        "flight_level": rng.uniform(0, 450, n),
+        "address": rng.integers(0, 2**24, n),
+        "mode3a": rng.integers(0, 4096, n),
+    }
     a21 = (tod, 3, 4, rng.uniform(40, 50, n), rng.uniform(10, 20, n))
-    k21 = {"height": rng.uniform(0, 12000, n), "flight_level": rng.uniform(0, 450, n),
-           "address": rng.integers(0, 2**24, n)}
+    k21 = {
+        "height": rng.uniform(0, 12000, n),
+        "flight_level": rng.uniform(0, 450, n),
+        "address": rng.integers(0, 2**24, n),
+    }
     m = min(old_records, n)
 
     def head(args: tuple, kw: dict) -> tuple[tuple, dict]:
-        return (tuple(a[:m] if isinstance(a, np.ndarray) else a for a in args),
-                {k: v[:m] for k, v in kw.items()})
+        return (
+            tuple(a[:m] if isinstance(a, np.ndarray) else a for a in args),
+            {k: v[:m] for k, v in kw.items()},
+        )
 
-    out: dict[str, Any] = {"records (new)": n, "records (old)": m, "repeats": repeats,
-                           "load before": os.getloadavg()}
-    for cat, new, old, args, kw in (("CAT048", encode_cat048, libencode.encode_cat048,
-                                     a48, k48),
-                                    ("CAT021", encode_cat021, libencode.encode_cat021,
-                                     a21, k21)):
+    out: dict[str, Any] = {
+        "records (new)": n,
+        "records (old)": m,
+        "repeats": repeats,
+        "load before": os.getloadavg(),
+    }
+    for cat, new, old, args, kw in (
+        ("CAT048", encode_cat048, libencode.encode_cat048, a48, k48),
+        ("CAT021", encode_cat021, libencode.encode_cat021, a21, k21),
+    ):
         oa, ok = head(args, kw)
         assert new(*oa, **ok) == old(*oa, **ok), f"{cat}: bytes differ"
         t_new, t_old = [], []
@@ -225,8 +263,9 @@ def encode_benchmark(records: int = 200_000, old_records: int = 6000,
             t_old.append(time.perf_counter() - t)
         out[f"{cat} new records/s"] = n / statistics.median(t_new)
         out[f"{cat} old (libasterix) records/s"] = m / statistics.median(t_old)
-        out[f"{cat} speed-up"] = out[f"{cat} new records/s"] / \
-            out[f"{cat} old (libasterix) records/s"]
+        out[f"{cat} speed-up"] = (
+            out[f"{cat} new records/s"] / out[f"{cat} old (libasterix) records/s"]
+        )
     out["bytes identical"] = "yes (CAT048 and CAT021, the old run's records)"
     out["load after"] = os.getloadavg()
     return out
@@ -237,12 +276,20 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--records", type=int, default=200_000)
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--distinct", type=int, default=4000)
-    ap.add_argument("--astd-python", default=None,
-                    help="an interpreter with asterix-decoder installed")
-    ap.add_argument("--encode", action="store_true",
-                    help="benchmark the encoders (vectorised against libasterix)")
-    ap.add_argument("--old-records", type=int, default=6000,
-                    help="records given to the libasterix encoders (--encode)")
+    ap.add_argument(
+        "--astd-python", default=None, help="an interpreter with asterix-decoder installed"
+    )
+    ap.add_argument(
+        "--encode",
+        action="store_true",
+        help="benchmark the encoders (vectorised against libasterix)",
+    )
+    ap.add_argument(
+        "--old-records",
+        type=int,
+        default=6000,
+        help="records given to the libasterix encoders (--encode)",
+    )
     a = ap.parse_args(argv)
     if a.encode:
         res = encode_benchmark(a.records, a.old_records, a.repeats)

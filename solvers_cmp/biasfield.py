@@ -53,9 +53,15 @@ def _error(a: np.ndarray, b: np.ndarray) -> float:
     return float(np.max(np.abs(a - b).max(axis=(0, 1)) / np.abs(b).max(axis=(0, 1))))
 
 
-def rows(cells: tuple[int, ...] = CELLS, *, seed: int = 0, repeats: int = 3,
-         solvers: tuple[str, ...] | None = None, progress: bool = False,
-         formulations: tuple[str, ...] = FORMULATIONS) -> list[dict[str, Any]]:
+def rows(
+    cells: tuple[int, ...] = CELLS,
+    *,
+    seed: int = 0,
+    repeats: int = 3,
+    solvers: tuple[str, ...] | None = None,
+    progress: bool = False,
+    formulations: tuple[str, ...] = FORMULATIONS,
+) -> list[dict[str, Any]]:
     """Every K × (no box, binding box) × (closed form, formulation × solver)."""
     installed = set(available_solvers())
     use = [s for s in (solvers or QP_SOLVERS) if s in installed]
@@ -73,32 +79,53 @@ def rows(cells: tuple[int, ...] = CELLS, *, seed: int = 0, repeats: int = 3,
             runs.append(("closed_form", "numpy", cf, 0.0, cf_rep.median))
         for form in formulations:
             for s in use:
-                sols = repeat(lambda d=data, s=s, f=form, b=box: bf.solve(
-                    d, box=b, solver=s, formulation=f), repeats).results
-                runs.append((form, s, sols[-1], float(np.median([x.build_time for x in sols])),
-                             float(np.median([x.solve_time for x in sols]))))
+                sols = repeat(
+                    lambda d=data, s=s, f=form, b=box: bf.solve(d, box=b, solver=s, formulation=f),
+                    repeats,
+                ).results
+                runs.append(
+                    (
+                        form,
+                        s,
+                        sols[-1],
+                        float(np.median([x.build_time for x in sols])),
+                        float(np.median([x.solve_time for x in sols])),
+                    )
+                )
         ok = [r[2] for r in runs if r[2].status.ok]
         ref = cf if not with_box else min(ok, key=lambda x: x.objective) if ok else None
         for form, solver, sol, build, solve in runs:
             good = sol.status.ok and ref is not None
-            out.append({
-                "problem": "biasfield", "case": "box (8) binding" if with_box else "no box",
-                "size": k, "radars": data.m, "seed": seed, "formulation": form,
-                "solver": solver, "settings": "default", "status": sol.status.value,
-                "objective": sol.objective,
-                "objective_gap": (sol.objective - ref.objective) / ref.objective if good
-                else float("nan"),
-                "solution_error": _error(sol.field, ref.field) if good else float("nan"),
-                "max_violation": sol.max_residual,
-                "active_bounds": int(np.sum(sol.active != 0)) if sol.status.ok else 0,
-                "build_time": build, "solve_time": solve, "total_time": build + solve,
-                "iterations": sol.iterations,
-            })
+            out.append(
+                {
+                    "problem": "biasfield",
+                    "case": "box (8) binding" if with_box else "no box",
+                    "size": k,
+                    "radars": data.m,
+                    "seed": seed,
+                    "formulation": form,
+                    "solver": solver,
+                    "settings": "default",
+                    "status": sol.status.value,
+                    "objective": sol.objective,
+                    "objective_gap": (sol.objective - ref.objective) / ref.objective
+                    if good
+                    else float("nan"),
+                    "solution_error": _error(sol.field, ref.field) if good else float("nan"),
+                    "max_violation": sol.max_residual,
+                    "active_bounds": int(np.sum(sol.active != 0)) if sol.status.ok else 0,
+                    "build_time": build,
+                    "solve_time": solve,
+                    "total_time": build + solve,
+                    "iterations": sol.iterations,
+                }
+            )
     return out
 
 
-def benchmark(cells: int = 10_000, *, repeats: int = 3, seed: int = 0,
-              dense: bool = True) -> list[dict[str, Any]]:
+def benchmark(
+    cells: int = 10_000, *, repeats: int = 3, seed: int = 0, dense: bool = True
+) -> list[dict[str, Any]]:
     """The issue's targets at K cells, m = 4: sparse closed form (≤ 1 s, ≥ 20× a dense
     solve of the same 2K × 2K system) and the QP with a binding box (≤ 30 s with the best
     solver): wall seconds, median and best of ``repeats``."""
@@ -112,13 +139,20 @@ def benchmark(cells: int = 10_000, *, repeats: int = 3, seed: int = 0,
         a = (phi1.T @ r @ phi1).toarray()
         return -np.linalg.solve(a, phi1.T @ (r @ phi0))
 
-    cases: list[tuple[str, Any, int]] = [("sparse closed form (11)",
-                                          lambda: bf.closed_form(data), repeats)]
+    cases: list[tuple[str, Any, int]] = [
+        ("sparse closed form (11)", lambda: bf.closed_form(data), repeats)
+    ]
     if dense:
         cases.append(("dense solve of the same system", dense_solve, 1))
-    cases += [(f"QP + box, reduced, {s}", lambda s=s: bf.solve(data, box=box, solver=s,
-                                                               formulation="reduced"), repeats)
-              for s in ("CLARABEL", "OSQP") if s in available_solvers()]
+    cases += [
+        (
+            f"QP + box, reduced, {s}",
+            lambda s=s: bf.solve(data, box=box, solver=s, formulation="reduced"),
+            repeats,
+        )
+        for s in ("CLARABEL", "OSQP")
+        if s in available_solvers()
+    ]
     res = []
     for name, fn, n in cases:
         rep = repeat(fn, n)
@@ -126,9 +160,14 @@ def benchmark(cells: int = 10_000, *, repeats: int = 3, seed: int = 0,
     return res
 
 
-def lipschitz_benchmark(cells: tuple[int, ...] = (1000, 5000), *, repeats: int = 3,
-                        seed: int = 0, formulations: tuple[str, ...] = ("reduced",),
-                        solver: str = "CLARABEL") -> list[dict[str, Any]]:
+def lipschitz_benchmark(
+    cells: tuple[int, ...] = (1000, 5000),
+    *,
+    repeats: int = 3,
+    seed: int = 0,
+    formulations: tuple[str, ...] = ("reduced",),
+    solver: str = "CLARABEL",
+) -> list[dict[str, Any]]:
     """The Lipschitz SOCP (:func:`optmodels.biasfield.solve_lipschitz`) at K cells, m = 4:
     wall seconds (median and best of ``repeats``), build and solve time, iterations, L and
     the largest re-check residual, per formulation. ``"constrained"`` (φ, η and the 2mK
@@ -138,14 +177,24 @@ def lipschitz_benchmark(cells: tuple[int, ...] = (1000, 5000), *, repeats: int =
     for k in cells:
         data, _ = bf.synthetic_field_data(seed, cells=k)
         for form in formulations:
-            rep = repeat(lambda d=data, f=form: bf.solve_lipschitz(d, solver=solver,
-                                                                   formulation=f), repeats)
+            rep = repeat(
+                lambda d=data, f=form: bf.solve_lipschitz(d, solver=solver, formulation=f), repeats
+            )
             sol = rep.last
-            out.append({"case": f"Lipschitz SOCP, {form}, {solver}", "cells": k,
-                        "median_s": rep.median, "min_s": rep.best,
-                        "build_s": sol.build_time, "solve_s": sol.solve_time,
-                        "iterations": sol.iterations, "status": sol.status.value,
-                        "lipschitz": sol.lipschitz, "max_residual": sol.max_residual})
+            out.append(
+                {
+                    "case": f"Lipschitz SOCP, {form}, {solver}",
+                    "cells": k,
+                    "median_s": rep.median,
+                    "min_s": rep.best,
+                    "build_s": sol.build_time,
+                    "solve_s": sol.solve_time,
+                    "iterations": sol.iterations,
+                    "status": sol.status.value,
+                    "lipschitz": sol.lipschitz,
+                    "max_residual": sol.max_residual,
+                }
+            )
     return out
 
 
@@ -182,8 +231,13 @@ class Adapter(cases.Adapter):
         if instance == "no-box":
             sol = bf.closed_form(data["data"])
         else:
-            sol = bf.solve(data["data"], box=data["box"], solver="CLARABEL",
-                           formulation="reduced", **HIGH_OPTIONS["CLARABEL"])
+            sol = bf.solve(
+                data["data"],
+                box=data["box"],
+                solver="CLARABEL",
+                formulation="reduced",
+                **HIGH_OPTIONS["CLARABEL"],
+            )
         return cases._from_solution(sol, sol.field)
 
     def runs(self, instance: str) -> list[Run]:
@@ -196,8 +250,13 @@ class Adapter(cases.Adapter):
         if run.formulation == "closed_form":
             sol = bf.closed_form(data["data"])
         else:
-            sol = bf.solve(data["data"], box=data["box"], solver=run.solver,
-                           formulation=run.formulation, **options)  # type: ignore[arg-type]
+            sol = bf.solve(
+                data["data"],
+                box=data["box"],
+                solver=run.solver,
+                formulation=run.formulation,
+                **options,
+            )  # type: ignore[arg-type]
         return cases._from_solution(sol, sol.field)
 
     def error(self, x: Any, ref: Any) -> float:
@@ -206,29 +265,55 @@ class Adapter(cases.Adapter):
 
 
 # ------------------------------------------------------ compare --details report
-def write_report(out: Path, rows: list[dict[str, Any]],
-                 bench: list[dict[str, Any]] | None = None) -> str:
+def write_report(
+    out: Path, rows: list[dict[str, Any]], bench: list[dict[str, Any]] | None = None
+) -> str:
     """Write ``biasfield_results.csv`` (and ``biasfield_benchmark.csv``) and return the
     Markdown section."""
     report._results_csv(out, "biasfield", rows)
-    cols = ["case", "size", "formulation", "solver", "status", "solution_error",
-            "objective_gap", "max_violation", "active_bounds", "build_time", "solve_time",
-            "iterations"]
-    fmt = {"solution_error": ".1e", "objective_gap": ".1e", "max_violation": ".1e",
-           "build_time": ".3f", "solve_time": ".3f"}
-    md = ("## Smoothest radar bias field (paper 001, section 4)\n\n"
-          "Synthetic uncertainty sets (4 radars, smooth fields), size = K cells. The sparse "
-          "closed form (11) (sign corrected) against CVXPY on the original problem (φ, η and "
-          "φ = Φ⁰ + Φ¹η: 'constrained') and with φ eliminated ('reduced'), without a box "
-          "and with the box (8) at 99-99.9 % of the unconstrained field's largest |f| (binding "
-          "in a few cells). Error: per component (range, azimuth) relative to its largest "
-          "value, against the closed form (no box) or the lowest-J solve (box):\n\n"
-          + markdown_table(rows, cols, fmt))
-    md += ("\nSCS cannot take the reduced problem without any constraint row (reported as "
-           "an error, never as a field). OSQP needs many iterations once the box binds; "
-           "Clarabel on the reduced form is the fastest generic route at every size.\n")
-    md += report._benchmark(out, "biasfield", bench,
-                            "Benchmark (wall seconds; targets at K = 10⁴, m = 4: closed form ≤ 1 s "
-                            "and ≥ 20× a dense solve, QP with box ≤ 30 s):",
-                            ["case", "cells", "median_s", "min_s"], ".3f")
+    cols = [
+        "case",
+        "size",
+        "formulation",
+        "solver",
+        "status",
+        "solution_error",
+        "objective_gap",
+        "max_violation",
+        "active_bounds",
+        "build_time",
+        "solve_time",
+        "iterations",
+    ]
+    fmt = {
+        "solution_error": ".1e",
+        "objective_gap": ".1e",
+        "max_violation": ".1e",
+        "build_time": ".3f",
+        "solve_time": ".3f",
+    }
+    md = (
+        "## Smoothest radar bias field (paper 001, section 4)\n\n"
+        "Synthetic uncertainty sets (4 radars, smooth fields), size = K cells. The sparse "
+        "closed form (11) (sign corrected) against CVXPY on the original problem (φ, η and "
+        "φ = Φ⁰ + Φ¹η: 'constrained') and with φ eliminated ('reduced'), without a box "
+        "and with the box (8) at 99-99.9 % of the unconstrained field's largest |f| (binding "
+        "in a few cells). Error: per component (range, azimuth) relative to its largest "
+        "value, against the closed form (no box) or the lowest-J solve (box):\n\n"
+        + markdown_table(rows, cols, fmt)
+    )
+    md += (
+        "\nSCS cannot take the reduced problem without any constraint row (reported as "
+        "an error, never as a field). OSQP needs many iterations once the box binds; "
+        "Clarabel on the reduced form is the fastest generic route at every size.\n"
+    )
+    md += report._benchmark(
+        out,
+        "biasfield",
+        bench,
+        "Benchmark (wall seconds; targets at K = 10⁴, m = 4: closed form ≤ 1 s "
+        "and ≥ 20× a dense solve, QP with box ≤ 30 s):",
+        ["case", "cells", "median_s", "min_s"],
+        ".3f",
+    )
     return md + "\n"

@@ -117,13 +117,27 @@ def network(seed: int, m: int) -> tuple[RadarSet, list[BiasField]]:
         if all(np.hypot(*(c - s)) > 40e3 for s in sites):
             sites.append(c)
     radars = RadarSet(np.array(sites), 50.0, np.deg2rad(0.08), MAX_RANGE)
-    fields = [BiasField.smooth(rng, center=np.zeros(2), scale=REGION, range_amplitude=150.0,
-                               azimuth_amplitude=np.deg2rad(0.3)) for _ in range(m)]
+    fields = [
+        BiasField.smooth(
+            rng,
+            center=np.zeros(2),
+            scale=REGION,
+            range_amplitude=150.0,
+            azimuth_amplitude=np.deg2rad(0.3),
+        )
+        for _ in range(m)
+    ]
     return radars, fields
 
 
-def traffic(seed: int, radars: RadarSet, fields: list[BiasField], aircraft: int,
-            hours: float, region: float = REGION) -> PlotTable:
+def traffic(
+    seed: int,
+    radars: RadarSet,
+    fields: list[BiasField],
+    aircraft: int,
+    hours: float,
+    region: float = REGION,
+) -> PlotTable:
     """Straight legs across the ±``region`` (m) square, entering uniformly over ``hours``;
     the plots of every radar, vectorised per radar (module docstring)."""
     REGION = region  # the module default, overridden for the country network
@@ -132,19 +146,26 @@ def traffic(seed: int, radars: RadarSet, fields: list[BiasField], aircraft: int,
     # entry on the boundary of the ±REGION square, heading towards a random interior point
     side = rng.integers(0, 4, aircraft)
     u = rng.uniform(-REGION, REGION, aircraft)
-    p0 = np.where(side[:, None] == 0, np.column_stack([u, np.full(aircraft, -REGION)]),
-                  np.where(side[:, None] == 1, np.column_stack([u, np.full(aircraft, REGION)]),
-                           np.where(side[:, None] == 2,
-                                    np.column_stack([np.full(aircraft, -REGION), u]),
-                                    np.column_stack([np.full(aircraft, REGION), u]))))
+    p0 = np.where(
+        side[:, None] == 0,
+        np.column_stack([u, np.full(aircraft, -REGION)]),
+        np.where(
+            side[:, None] == 1,
+            np.column_stack([u, np.full(aircraft, REGION)]),
+            np.where(
+                side[:, None] == 2,
+                np.column_stack([np.full(aircraft, -REGION), u]),
+                np.column_stack([np.full(aircraft, REGION), u]),
+            ),
+        ),
+    )
     aim = rng.uniform(-0.5 * REGION, 0.5 * REGION, (aircraft, 2))
     speed = rng.uniform(150.0, 250.0, aircraft)
     d = aim - p0
     vel = speed[:, None] * d / np.linalg.norm(d, axis=1)[:, None]
     # time to leave the square
     with np.errstate(divide="ignore", invalid="ignore"):
-        tx = np.where(vel > 0, (REGION - p0) / vel, np.where(vel < 0, (-REGION - p0) / vel,
-                                                             np.inf))
+        tx = np.where(vel > 0, (REGION - p0) / vel, np.where(vel < 0, (-REGION - p0) / vel, np.inf))
     t_in = np.nanmin(np.where(tx > 1.0, tx, np.inf), axis=1)
     t0 = rng.uniform(0.0, day, aircraft)
     t1 = t0 + t_in
@@ -160,11 +181,17 @@ def traffic(seed: int, radars: RadarSet, fields: list[BiasField], aircraft: int,
         t = phase[obj] + (first[obj] + k) * period
         x = p0[obj] + vel[obj] * (t - t0[obj])[:, None]
         pol = to_polar(x, radars.sites[i])
-        meas = pol + fields[i](x) + rng.normal(size=pol.shape) * [radars.sigma_range[i],
-                                                                  radars.sigma_azimuth[i]]
+        meas = (
+            pol
+            + fields[i](x)
+            + rng.normal(size=pol.shape) * [radars.sigma_range[i], radars.sigma_azimuth[i]]
+        )
         seen = (meas[:, 0] <= radars.max_range[i]) & (pol[:, 0] > 1e3)
-        for c, v in zip(cols, (t, np.full(t.size, i), np.abs(meas[:, 0]),
-                               wrap_angle(meas[:, 1]), obj), strict=True):
+        for c, v in zip(
+            cols,
+            (t, np.full(t.size, i), np.abs(meas[:, 0]), wrap_angle(meas[:, 1]), obj),
+            strict=True,
+        ):
             c.append(v[seen])
     out = [np.concatenate(c) for c in cols]
     cols.clear()
@@ -177,8 +204,7 @@ def _generate(path: str, seed: int, m: int, aircraft: int, hours: float) -> None
     out of the pipeline's peak)."""
     radars, fields = network(seed, m)
     p = traffic(seed, radars, fields, aircraft, hours)
-    np.savez(path, time=p.time, radar=p.radar, range=p.range, azimuth=p.azimuth,
-             object=p.object)
+    np.savez(path, time=p.time, radar=p.radar, range=p.range, azimuth=p.azimuth, object=p.object)
 
 
 # ----------------------------------------------------------------------------- country
@@ -202,11 +228,19 @@ def country_network(seed: int, m: int) -> tuple[RadarSet, list[BiasField]]:
         if all(np.hypot(*(c - q)) > 110e3 for q in sites):
             sites.append(c)
     rngs = rng.uniform(*COUNTRY_RANGE, m)
-    radars = RadarSet(np.array(sites), 50.0, np.deg2rad(0.08), rngs,
-                      names=tuple(f"R{i + 1}" for i in range(m)))
-    fields = [BiasField.smooth(rng, center=np.array(sites[i]), scale=250e3,
-                               range_amplitude=150.0, azimuth_amplitude=np.deg2rad(0.3))
-              for i in range(m)]
+    radars = RadarSet(
+        np.array(sites), 50.0, np.deg2rad(0.08), rngs, names=tuple(f"R{i + 1}" for i in range(m))
+    )
+    fields = [
+        BiasField.smooth(
+            rng,
+            center=np.array(sites[i]),
+            scale=250e3,
+            range_amplitude=150.0,
+            azimuth_amplitude=np.deg2rad(0.3),
+        )
+        for i in range(m)
+    ]
     return radars, fields
 
 
@@ -220,21 +254,30 @@ def _generate_hours(folder: str, seed: int, m: int, aircraft: int, hours: float)
     hour = np.floor(p.time / 3600.0).astype(np.int64)
     for h in np.unique(hour):
         sel = hour == h
-        np.savez(os.path.join(folder, f"hour{int(h):03d}.npz"), time=p.time[sel],
-                 radar=p.radar[sel], range=p.range[sel], azimuth=p.azimuth[sel],
-                 object=p.object[sel])
+        np.savez(
+            os.path.join(folder, f"hour{int(h):03d}.npz"),
+            time=p.time[sel],
+            radar=p.radar[sel],
+            range=p.range[sel],
+            azimuth=p.azimuth[sel],
+            object=p.object[sel],
+        )
 
 
 def _bar(items: Any, progress: bool, desc: str) -> Any:
     """tqdm on stderr, off without ``progress`` or when stderr is not a terminal."""
     from tqdm import tqdm
 
-    return tqdm(items, desc=desc, file=sys.stderr, leave=False,
-                disable=not (progress and sys.stderr.isatty()))
+    return tqdm(
+        items,
+        desc=desc,
+        file=sys.stderr,
+        leave=False,
+        disable=not (progress and sys.stderr.isatty()),
+    )
 
 
-def read_hours(seed: int, m: int, aircraft: int, hours: float, progress: bool
-               ) -> PlotTable:
+def read_hours(seed: int, m: int, aircraft: int, hours: float, progress: bool) -> PlotTable:
     """Simulate in a spawned child (its memory stays out of the peak), then read the
     recording hour by hour and join the hours into one plot table."""
     import multiprocessing as mp
@@ -242,8 +285,9 @@ def read_hours(seed: int, m: int, aircraft: int, hours: float, progress: bool
     import tempfile
 
     with tempfile.TemporaryDirectory() as tmp:
-        proc = mp.get_context("spawn").Process(target=_generate_hours,
-                                               args=(tmp, seed, m, aircraft, hours))
+        proc = mp.get_context("spawn").Process(
+            target=_generate_hours, args=(tmp, seed, m, aircraft, hours)
+        )
         proc.start()
         try:
             proc.join()
@@ -256,16 +300,17 @@ def read_hours(seed: int, m: int, aircraft: int, hours: float, progress: bool
         parts: list[list[np.ndarray]] = [[] for _ in range(5)]
         for name in _bar(sorted(os.listdir(tmp)), progress, "reading hours"):
             with np.load(os.path.join(tmp, name)) as z:
-                for c, key in zip(parts, ("time", "radar", "range", "azimuth", "object"),
-                                  strict=True):
+                for c, key in zip(
+                    parts, ("time", "radar", "range", "azimuth", "object"), strict=True
+                ):
                     c.append(z[key])
     cols = [np.concatenate(c) for c in parts]
-    return PlotTable(cols[0], cols[1].astype(np.int64), cols[2], cols[3],
-                     cols[4].astype(np.int64))
+    return PlotTable(cols[0], cols[1].astype(np.int64), cols[2], cols[3], cols[4].astype(np.int64))
 
 
-def _chain(plots: PlotTable, radars: RadarSet, cells: int, scheduler: Any, progress: bool,
-           seed: int) -> tuple[Any, Any, Any, dict[str, float]]:
+def _chain(
+    plots: PlotTable, radars: RadarSet, cells: int, scheduler: Any, progress: bool, seed: int
+) -> tuple[Any, Any, Any, dict[str, float]]:
     """FieldData (the pipeline, union coverage), closed form (11), corrected plots;
     seconds per step."""
     from optmodels.biasfield.closedform import closed_form
@@ -274,12 +319,21 @@ def _chain(plots: PlotTable, radars: RadarSet, cells: int, scheduler: Any, progr
 
     sec: dict[str, float] = {}
     t = time.perf_counter()
-    build = field_data_from_plots(plots, radars, cells=cells, coverage="union", clean=True,
-                                  scheduler=scheduler, progress=progress, seed=seed)
+    build = field_data_from_plots(
+        plots,
+        radars,
+        cells=cells,
+        coverage="union",
+        clean=True,
+        scheduler=scheduler,
+        progress=progress,
+        seed=seed,
+    )
     sec["field_data_s"] = time.perf_counter() - t
     sec.update({f"field_data.{k}_s": round(v, 2) for k, v in build.timings.items()})
-    sec.update({f"field_data.build.{k}_s": round(v, 2)
-                for k, v in build.diagnostics.timings.items()})
+    sec.update(
+        {f"field_data.build.{k}_s": round(v, 2) for k, v in build.diagnostics.timings.items()}
+    )
     t = time.perf_counter()
     sol = closed_form(build.data)
     sec["solve_s"] = time.perf_counter() - t
@@ -289,10 +343,17 @@ def _chain(plots: PlotTable, radars: RadarSet, cells: int, scheduler: Any, progr
     return build, sol, cor, sec
 
 
-def run_country(*, small: bool = True, aircraft: int | None = None,
-                hours: float | None = None, cells: int | None = None, seed: int = 0,
-                workers: int = 2, dask: bool = False, progress: bool = True
-                ) -> dict[str, Any]:
+def run_country(
+    *,
+    small: bool = True,
+    aircraft: int | None = None,
+    hours: float | None = None,
+    cells: int | None = None,
+    seed: int = 0,
+    workers: int = 2,
+    dask: bool = False,
+    progress: bool = True,
+) -> dict[str, Any]:
     """Issue 24's country-scale chain: read hour by hour, FieldData over the union of
     coverage, solve, correct; locally (``processes`` scheduler, ``workers``) and, with
     ``dask``, again on a ``distributed.LocalCluster`` of ``workers`` single-threaded
@@ -307,34 +368,43 @@ def run_country(*, small: bool = True, aircraft: int | None = None,
     trace = RssTrace()
     t0 = time.perf_counter()
     radars, _ = country_network(seed, int(cfg["radars"]))
-    plots = read_hours(seed, int(cfg["radars"]), int(cfg["aircraft"]), float(cfg["hours"]),
-                       progress)
+    plots = read_hours(
+        seed, int(cfg["radars"]), int(cfg["aircraft"]), float(cfg["hours"]), progress
+    )
     res["plots"] = len(plots)
     res["read_s"] = time.perf_counter() - t0
-    build, sol, cor, sec = _chain(plots, radars, int(cfg["cells"]), "processes", progress,
-                                  seed)
+    build, sol, cor, sec = _chain(plots, radars, int(cfg["cells"]), "processes", progress, seed)
     res.update(sec)
     fd = build.data
     seen = fd.subsets
     res["cells"] = fd.k
-    res["radars_per_cell"] = {str(c): int(v) for c, v in
-                              enumerate(np.bincount(seen.sum(axis=1))) if v}
+    res["radars_per_cell"] = {
+        str(c): int(v) for c, v in enumerate(np.bincount(seen.sum(axis=1))) if v
+    }
     res["status"] = sol.status.value
     res["components"] = sol.info.get("components")
     if cor is not None:
         two = seen_by_others(build.plots)
         res["corrected_share_of_multi_radar_plots"] = float(cor.covered[two].mean())
-        res["reasons"] = {str(r): int(n) for r, n in zip(*np.unique(cor.reason,
-                                                                     return_counts=True),
-                                                         strict=True)}
+        res["reasons"] = {
+            str(r): int(n) for r, n in zip(*np.unique(cor.reason, return_counts=True), strict=True)
+        }
         t = time.perf_counter()
         sub = build.plots.object % 10 == 0  # registration on a tenth of the aircraft
-        wide = RadarSet(radars.sites, radars.sigma_range, radars.sigma_azimuth,
-                        radars.max_range + 5e3, radars.names)
+        wide = RadarSet(
+            radars.sites,
+            radars.sigma_range,
+            radars.sigma_azimuth,
+            radars.max_range + 5e3,
+            radars.names,
+        )
         before = registration_error(build.plots.subset(sub), wide)
         after = registration_error(cor.plots.subset(sub), wide)
-        res["registration_m"] = {"before": before.overall, "after": after.overall,
-                                 "noise": after.noise}
+        res["registration_m"] = {
+            "before": before.overall,
+            "after": after.overall,
+            "noise": after.noise,
+        }
         res["registration_s"] = time.perf_counter() - t
     res["total_local_s"] = time.perf_counter() - t0
     res["peak_rss_mb"], res["peak_rss_children_mb"] = _rss_mb()
@@ -343,18 +413,23 @@ def run_country(*, small: bool = True, aircraft: int | None = None,
         from distributed import Client, LocalCluster
 
         t = time.perf_counter()
-        with LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                          dashboard_address=None) as cluster, Client(cluster) as client:
+        with (
+            LocalCluster(
+                n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None
+            ) as cluster,
+            Client(cluster) as client,
+        ):
             res["dask_start_s"] = time.perf_counter() - t
-            b2, s2, _, sec2 = _chain(plots, radars, int(cfg["cells"]), client, progress,
-                                     seed)
+            b2, s2, _, sec2 = _chain(plots, radars, int(cfg["cells"]), client, progress, seed)
         res["dask"] = sec2
         res["dask_total_s"] = time.perf_counter() - t
         res["dask_equal"] = {
             "cells": b2.data.k == fd.k,
             "max_abs_xi_diff_m": float(np.max(np.abs(b2.data.xi - fd.xi))),
-            "max_abs_field_diff": [float(np.max(np.abs(s2.field[..., c] - sol.field[..., c])))
-                                   for c in (0, 1)]}
+            "max_abs_field_diff": [
+                float(np.max(np.abs(s2.field[..., c] - sol.field[..., c]))) for c in (0, 1)
+            ],
+        }
     return res
 
 
@@ -366,8 +441,9 @@ def simulate_in_child(seed: int, m: int, aircraft: int, hours: float) -> PlotTab
 
     with tempfile.TemporaryDirectory() as tmp:
         path = os.path.join(tmp, "plots.npz")
-        proc = mp.get_context("spawn").Process(target=_generate,
-                                               args=(path, seed, m, aircraft, hours))
+        proc = mp.get_context("spawn").Process(
+            target=_generate, args=(path, seed, m, aircraft, hours)
+        )
         proc.start()
         try:
             proc.join()
@@ -391,8 +467,9 @@ def kmeans_tree(points: np.ndarray, count: int, seed: int, iters: int = 20) -> n
     cent = p[rng.choice(p.shape[0], count, replace=False)]
     for _ in range(iters):
         lab = cKDTree(cent).query(p)[1]
-        sums = np.column_stack([np.bincount(lab, p[:, j], minlength=count)
-                                for j in range(p.shape[1])])
+        sums = np.column_stack(
+            [np.bincount(lab, p[:, j], minlength=count) for j in range(p.shape[1])]
+        )
         n = np.bincount(lab, minlength=count)
         moved = n > 0
         cent[moved] = sums[moved] / n[moved, None]
@@ -414,21 +491,29 @@ def plot_cost_3d(n: int = 20_000, seed: int = 0) -> dict[str, float]:
             sel = plots.radar == i
             sc.radars.cartesian_cov(i, z[sel], height=plots.height[sel])  # type: ignore
         times.append(time.perf_counter() - t0)
-    return {"plots": len(plots), "s_per_1e6_plots_3d": float(np.median(times)) / len(plots)
-            * 1e6}
+    return {"plots": len(plots), "s_per_1e6_plots_3d": float(np.median(times)) / len(plots) * 1e6}
 
 
 def _stage(res: dict[str, Any], key: str, t0: float) -> None:
     """Record a stage's seconds and say so on stderr (a long run shows its progress)."""
     res[key] = time.perf_counter() - t0
-    print(f"{key}: {res[key]:.1f} (peak RSS {_rss_mb()[0]:.0f} MB)", file=sys.stderr,
-          flush=True)
+    print(f"{key}: {res[key]:.1f} (peak RSS {_rss_mb()[0]:.0f} MB)", file=sys.stderr, flush=True)
 
 
-def run(*, small: bool = False, scheduler: str = "serial", workers: int | None = None,
-        aircraft: int | None = None, hours: float | None = None, cells: int | None = None,
-        seed: int = 0, fast_centers: bool = False, clean: bool = True,
-        separate_fit: bool = False, child_generator: bool = True) -> dict[str, Any]:
+def run(
+    *,
+    small: bool = False,
+    scheduler: str = "serial",
+    workers: int | None = None,
+    aircraft: int | None = None,
+    hours: float | None = None,
+    cells: int | None = None,
+    seed: int = 0,
+    fast_centers: bool = False,
+    clean: bool = True,
+    separate_fit: bool = False,
+    child_generator: bool = True,
+) -> dict[str, Any]:
     """The chain, stage by stage: simulate (in a child process unless
     ``child_generator=False``, so that ``peak_rss_mb`` is the pipeline's own), clean,
     FieldData (its own fits with ``scheduler``; centres by
@@ -450,8 +535,9 @@ def run(*, small: bool = False, scheduler: str = "serial", workers: int | None =
     t = time.perf_counter()
     radars, fields = network(seed, int(cfg["radars"]))
     if child_generator:
-        plots = simulate_in_child(seed, int(cfg["radars"]), int(cfg["aircraft"]),
-                                  float(cfg["hours"]))
+        plots = simulate_in_child(
+            seed, int(cfg["radars"]), int(cfg["aircraft"]), float(cfg["hours"])
+        )
     else:
         plots = traffic(seed, radars, fields, int(cfg["aircraft"]), float(cfg["hours"]))
     res["plots"] = len(plots)
@@ -468,8 +554,7 @@ def run(*, small: bool = False, scheduler: str = "serial", workers: int | None =
         _stage(res, "t_positions_s", t)
     if separate_fit:
         t = time.perf_counter()
-        fits, dropped = fit_tracks(plots, radars, scheduler=scheduler, workers=workers,
-                                   positions=z)
+        fits, dropped = fit_tracks(plots, radars, scheduler=scheduler, workers=workers, positions=z)
         _stage(res, "t_fit_s", t)
         res["fits"] = len(fits)
         res["fit_dropped"] = dropped.counts
@@ -478,16 +563,14 @@ def run(*, small: bool = False, scheduler: str = "serial", workers: int | None =
     centres: Any = int(cfg["cells"])
     if fast_centers:
         t = time.perf_counter()
-        sample = np.random.default_rng(seed).choice(len(z), min(len(z), 2_000_000),
-                                                     replace=False)
+        sample = np.random.default_rng(seed).choice(len(z), min(len(z), 2_000_000), replace=False)
         centres = kmeans_tree(z[sample], int(cfg["cells"]), seed)  # type: ignore[index]
         del sample
         _stage(res, "t_centres_tree_s", t)
     t = time.perf_counter()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        fd, diag = build_field_data(plots, radars, cells=centres, scheduler=scheduler,
-                                    positions=z)
+        fd, diag = build_field_data(plots, radars, cells=centres, scheduler=scheduler, positions=z)
     _stage(res, "t_field_data_s", t)  # includes its own track fits
     res["field_data_stages_s"] = {k: round(v, 2) for k, v in diag.timings.items()}
     res["fits_in_field_data"] = len(diag.fits)
@@ -518,35 +601,66 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     ap.add_argument("--aircraft", type=int)
     ap.add_argument("--hours", type=float)
     ap.add_argument("--cells", type=int)
-    ap.add_argument("--tree-centres", action="store_true",
-                    help="centres by this module's kmeans_tree on 2·10⁶ plot positions "
-                         "(default: build_field_data's place_centers on its samples)")
+    ap.add_argument(
+        "--tree-centres",
+        action="store_true",
+        help="centres by this module's kmeans_tree on 2·10⁶ plot positions "
+        "(default: build_field_data's place_centers on its samples)",
+    )
     ap.add_argument("--no-clean", action="store_true")
-    ap.add_argument("--generate-here", action="store_true",
-                    help="simulate in this process (its memory then counts in the peak)")
-    ap.add_argument("--separate-fit", action="store_true",
-                    help="a separate pass of the fits, to time the scheduler alone")
-    ap.add_argument("--country", action="store_true",
-                    help="issue 24: 40 radars over 1000 × 1000 km, ranges 200-250 km, the "
-                         "field over the union of coverage, solve and correct (with "
-                         "--small: 600 aircraft, 2 h)")
-    ap.add_argument("--dask", action="store_true",
-                    help="with --country: the same chain again on a Dask LocalCluster")
-    ap.add_argument("--json", action="store_true",
-                    help="only the JSON document on stdout (no progress bars)")
+    ap.add_argument(
+        "--generate-here",
+        action="store_true",
+        help="simulate in this process (its memory then counts in the peak)",
+    )
+    ap.add_argument(
+        "--separate-fit",
+        action="store_true",
+        help="a separate pass of the fits, to time the scheduler alone",
+    )
+    ap.add_argument(
+        "--country",
+        action="store_true",
+        help="issue 24: 40 radars over 1000 × 1000 km, ranges 200-250 km, the "
+        "field over the union of coverage, solve and correct (with "
+        "--small: 600 aircraft, 2 h)",
+    )
+    ap.add_argument(
+        "--dask",
+        action="store_true",
+        help="with --country: the same chain again on a Dask LocalCluster",
+    )
+    ap.add_argument(
+        "--json", action="store_true", help="only the JSON document on stdout (no progress bars)"
+    )
     a = ap.parse_args(argv)
     if a.country:
-        res = run_country(small=a.small, aircraft=a.aircraft, hours=a.hours, cells=a.cells,
-                          workers=a.workers or 2, dask=a.dask, progress=not a.json)
+        res = run_country(
+            small=a.small,
+            aircraft=a.aircraft,
+            hours=a.hours,
+            cells=a.cells,
+            workers=a.workers or 2,
+            dask=a.dask,
+            progress=not a.json,
+        )
         if not a.json:
             for k, v in res.items():
                 print(f"{k}: {v}", file=sys.stderr)
         print(json.dumps(res))
         return res
-    res = run(small=a.small, scheduler=a.scheduler, workers=a.workers, aircraft=a.aircraft,
-              hours=a.hours, cells=a.cells, fast_centers=a.tree_centres,
-              clean=not a.no_clean, separate_fit=a.separate_fit,
-              child_generator=not a.generate_here)
+    res = run(
+        small=a.small,
+        scheduler=a.scheduler,
+        workers=a.workers,
+        aircraft=a.aircraft,
+        hours=a.hours,
+        cells=a.cells,
+        fast_centers=a.tree_centres,
+        clean=not a.no_clean,
+        separate_fit=a.separate_fit,
+        child_generator=not a.generate_here,
+    )
     for k, v in res.items():
         print(f"{k}: {v}", file=sys.stderr)
     print(json.dumps(res))

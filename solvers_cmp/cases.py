@@ -95,12 +95,16 @@ def _rel_max(a: np.ndarray, b: np.ndarray) -> float:
 
 def _from_solution(sol: Any, x: Any, objective: float | None = None) -> Outcome:
     return Outcome(
-        ok=bool(sol.status.ok), status=sol.status.value,
+        ok=bool(sol.status.ok),
+        status=sol.status.value,
         objective=float(sol.objective if objective is None else objective),
         x=x if sol.status.ok else None,
         max_violation=float(sol.max_residual),
-        build_time=float(sol.build_time or 0.0), solve_time=float(sol.solve_time or 0.0),
-        iterations=sol.iterations, message=str(sol.message or "")[:300])
+        build_time=float(sol.build_time or 0.0),
+        solve_time=float(sol.solve_time or 0.0),
+        iterations=sol.iterations,
+        message=str(sol.message or "")[:300],
+    )
 
 
 # ---------------------------------------------------------------------------- adapters
@@ -158,7 +162,8 @@ class Adapter:
 #: High-accuracy options per solver (the ``high`` profile): the back-end's table
 #: :data:`optmodels.backends.profiles.HIGH_OPTIONS` (the same object). Keys are the solvers' own.
 HIGH_OPTIONS: dict[str, dict[str, Any]] = importlib.import_module(
-    "optmodels.backends.profiles").HIGH_OPTIONS
+    "optmodels.backends.profiles"
+).HIGH_OPTIONS
 
 
 def _adapter_path(problem: str) -> str | None:
@@ -196,8 +201,9 @@ def adapter(name: str, path: str | None = None) -> Adapter:
 
     spec = path or REGISTRY.get(name)
     if spec is None:
-        raise ProblemError(f"compare problems: unknown problem {name!r} "
-                           f"(known: {sorted(REGISTRY)})")
+        raise ProblemError(
+            f"compare problems: unknown problem {name!r} (known: {sorted(REGISTRY)})"
+        )
     mod, _, cls = spec.partition(":")
     found = getattr(importlib.import_module(mod), cls, None)
     if found is None:

@@ -33,8 +33,9 @@ class Repeated:
         return float(np.min(self.walls))
 
 
-def repeat(fn: Callable[[], Any], repeats: int,
-           setup: Callable[[], None] | None = None) -> Repeated:
+def repeat(
+    fn: Callable[[], Any], repeats: int, setup: Callable[[], None] | None = None
+) -> Repeated:
     """Call ``fn`` ``repeats`` times, timing each call (``setup``, if given, runs before
     each call, outside the timed region: e.g. clearing a build cache for cold timings)."""
     results, walls = [], []

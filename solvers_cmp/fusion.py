@@ -43,46 +43,71 @@ def instance(m: int, seed: int, correlated: bool) -> dict[str, np.ndarray]:
     rank = 2 * m - 1 if correlated else 2 * m
     a = rng.normal(size=(2 * m, rank))
     joint = a @ a.T + (0.0 if correlated else 0.1) * np.eye(2 * m)
-    out = {"a1": rng.normal(size=m), "a2": rng.normal(size=m), "s1": joint[:m, :m],
-           "s2": joint[m:, m:]}
+    out = {
+        "a1": rng.normal(size=m),
+        "a2": rng.normal(size=m),
+        "s1": joint[:m, :m],
+        "s2": joint[m:, m:],
+    }
     if correlated:
         out["s12"] = joint[:m, m:]
     return out
 
 
-def _fusion_rows(dimensions: tuple[int, ...], use: list[str], seed: int, repeats: int,
-                 progress: bool) -> list[dict[str, Any]]:
+def _fusion_rows(
+    dimensions: tuple[int, ...], use: list[str], seed: int, repeats: int, progress: bool
+) -> list[dict[str, Any]]:
     out: list[dict[str, Any]] = []
     cases = [(c, m) for c in (False, True) for m in dimensions]
     for corr, m in tqdm(cases, desc="fusion comparison", disable=not progress):
         d = instance(m, seed, corr)
         kw = {"s12": d["s12"]} if corr else {}
-        cf = repeat(lambda d=d, kw=kw: fu.fuse(d["a1"], d["s1"], d["a2"], d["s2"], **kw),
-                    repeats)
+        cf = repeat(lambda d=d, kw=kw: fu.fuse(d["a1"], d["s1"], d["a2"], d["s2"], **kw), repeats)
         ref = cf.last
         scale = float(np.max(np.abs(ref.estimate)))
         runs = [("closed_form", "numpy", ref, 0.0, cf.median)]
         for s in use:
-            sols = repeat(lambda d=d, kw=kw, s=s: fu.fuse(
-                d["a1"], d["s1"], d["a2"], d["s2"], method="cvxpy", solver=s, **kw),
-                repeats).results
-            runs.append(("min-trace W" if corr else "weighted LSQ", s, sols[-1],
-                         float(np.median([x.build_time for x in sols])),
-                         float(np.median([x.solve_time for x in sols]))))
+            sols = repeat(
+                lambda d=d, kw=kw, s=s: fu.fuse(
+                    d["a1"], d["s1"], d["a2"], d["s2"], method="cvxpy", solver=s, **kw
+                ),
+                repeats,
+            ).results
+            runs.append(
+                (
+                    "min-trace W" if corr else "weighted LSQ",
+                    s,
+                    sols[-1],
+                    float(np.median([x.build_time for x in sols])),
+                    float(np.median([x.solve_time for x in sols])),
+                )
+            )
         for form, solver, sol, build, solve in runs:
             ok = sol.status.ok
-            out.append({
-                "problem": "fusion", "case": "correlated" if corr else "independent",
-                "size": m, "seed": seed, "formulation": form, "solver": solver,
-                "settings": "default", "status": sol.status.value,
-                "objective": sol.objective,
-                "objective_gap": (sol.objective - ref.objective) / abs(ref.objective)
-                if ok else float("nan"),
-                "solution_error": float(np.max(np.abs(sol.estimate - ref.estimate))) / scale
-                if ok else float("nan"),
-                "max_violation": sol.max_residual, "build_time": build, "solve_time": solve,
-                "total_time": build + solve, "iterations": sol.iterations,
-            })
+            out.append(
+                {
+                    "problem": "fusion",
+                    "case": "correlated" if corr else "independent",
+                    "size": m,
+                    "seed": seed,
+                    "formulation": form,
+                    "solver": solver,
+                    "settings": "default",
+                    "status": sol.status.value,
+                    "objective": sol.objective,
+                    "objective_gap": (sol.objective - ref.objective) / abs(ref.objective)
+                    if ok
+                    else float("nan"),
+                    "solution_error": float(np.max(np.abs(sol.estimate - ref.estimate))) / scale
+                    if ok
+                    else float("nan"),
+                    "max_violation": sol.max_residual,
+                    "build_time": build,
+                    "solve_time": solve,
+                    "total_time": build + solve,
+                    "iterations": sol.iterations,
+                }
+            )
     return out
 
 
@@ -97,34 +122,52 @@ def _ml_rows(ml_rows: tuple[int, ...], seed: int, repeats: int) -> list[dict[str
         ref = gn.last
         fu.clear_joint_cache()  # the first IPOPT run pays the CasADi build (reported)
         ip = repeat(lambda z=z: system.joint_ml(z), repeats)
-        for name, rep, build in (("gauss_newton", gn, 0.0),
-                                 ("casadi:ipopt", ip, ip.results[0].build_time)):
+        for name, rep, build in (
+            ("gauss_newton", gn, 0.0),
+            ("casadi:ipopt", ip, ip.results[0].build_time),
+        ):
             sol = rep.last
             solve = float(np.median([r.solve_time for r in rep.results]))
-            out.append({
-                "problem": "fusion", "case": "two-site joint ML", "size": t, "seed": seed,
-                "formulation": "ML (all 3 measurements)", "solver": name,
-                "settings": "default", "status": sol.status.value,
-                "objective": sol.objective,
-                "objective_gap": (sol.objective - ref.objective) / ref.objective,
-                "solution_error": float(np.max(np.linalg.norm(
-                    sol.estimate - ref.estimate, axis=1))) / crb,
-                "max_violation": sol.max_residual, "build_time": build,
-                "solve_time": solve, "total_time": build + solve,
-                "iterations": sol.iterations,
-            })
+            out.append(
+                {
+                    "problem": "fusion",
+                    "case": "two-site joint ML",
+                    "size": t,
+                    "seed": seed,
+                    "formulation": "ML (all 3 measurements)",
+                    "solver": name,
+                    "settings": "default",
+                    "status": sol.status.value,
+                    "objective": sol.objective,
+                    "objective_gap": (sol.objective - ref.objective) / ref.objective,
+                    "solution_error": float(
+                        np.max(np.linalg.norm(sol.estimate - ref.estimate, axis=1))
+                    )
+                    / crb,
+                    "max_violation": sol.max_residual,
+                    "build_time": build,
+                    "solve_time": solve,
+                    "total_time": build + solve,
+                    "iterations": sol.iterations,
+                }
+            )
     return out
 
 
-def rows(dimensions: tuple[int, ...] = DIMENSIONS, ml_rows: tuple[int, ...] = ROWS_ML, *,
-         seed: int = 0, repeats: int = 3, solvers: tuple[str, ...] | None = None,
-         progress: bool = False) -> list[dict[str, Any]]:
+def rows(
+    dimensions: tuple[int, ...] = DIMENSIONS,
+    ml_rows: tuple[int, ...] = ROWS_ML,
+    *,
+    seed: int = 0,
+    repeats: int = 3,
+    solvers: tuple[str, ...] | None = None,
+    progress: bool = False,
+) -> list[dict[str, Any]]:
     """Every (independent | correlated, m) × (closed form, CVXPY solver), and the two-site
     joint ML for T rows by Gauss-Newton and IPOPT."""
     installed = set(available_solvers())
     use = [s for s in (solvers or QP_SOLVERS) if s in installed]
-    return (_fusion_rows(dimensions, use, seed, repeats, progress)
-            + _ml_rows(ml_rows, seed, repeats))
+    return _fusion_rows(dimensions, use, seed, repeats, progress) + _ml_rows(ml_rows, seed, repeats)
 
 
 def benchmark(*, repeats: int = 5, seed: int = 0) -> list[dict[str, Any]]:
@@ -133,11 +176,12 @@ def benchmark(*, repeats: int = 5, seed: int = 0) -> list[dict[str, Any]]:
     s1 = np.diag([1.0, 2.0, 3.0])
     s2 = np.array([[2.0, 0.5, 0.0], [0.5, 1.0, 0.2], [0.0, 0.2, 1.5]])
     cases = [
-        ("monte_carlo_weight, 10⁵ trials, m = 3",
-         lambda: fu.monte_carlo_weight(s1, s2, 30, 30, trials=100_000, seed=seed)),
+        (
+            "monte_carlo_weight, 10⁵ trials, m = 3",
+            lambda: fu.monte_carlo_weight(s1, s2, 30, 30, trials=100_000, seed=seed),
+        ),
         ("weight_covariance (10), m = 3", lambda: fu.weight_covariance(s1, s2, 30, 30)),
-        ("weight_jacobians, CasADi AD, m = 3",
-         lambda: fu.weight_jacobians(s1, s2, method="ad")),
+        ("weight_jacobians, CasADi AD, m = 3", lambda: fu.weight_jacobians(s1, s2, method="ad")),
     ]
     res = []
     for name, fn in cases:
@@ -168,8 +212,12 @@ class Adapter(cases.Adapter):
             system = fu.TwoSiteSystem.on_baseline()
             x = np.array([8_000.0, 30_000.0])
             z = system.sample(x, size, np.random.default_rng([seed, size]))
-            return {"system": system, "z": z, "truth": x,
-                    "crb": float(np.sqrt(np.trace(system.crb(x))))}
+            return {
+                "system": system,
+                "z": z,
+                "truth": x,
+                "crb": float(np.sqrt(np.trace(system.crb(x)))),
+            }
         return gen(size, seed, instance == "correlated")
 
     def truth(self, instance: str, size: int, seed: int, data: Any) -> tuple[Any, float] | None:
@@ -229,28 +277,54 @@ class Adapter(cases.Adapter):
 
 
 # ------------------------------------------------------ compare --details report
-def write_report(out: Path, rows: list[dict[str, Any]],
-                 bench: list[dict[str, Any]] | None = None) -> str:
+def write_report(
+    out: Path, rows: list[dict[str, Any]], bench: list[dict[str, Any]] | None = None
+) -> str:
     """Write ``fusion_results.csv`` (and ``fusion_benchmark.csv``) and return the Markdown
     section."""
     report._results_csv(out, "fusion", rows)
-    cols = ["case", "size", "formulation", "solver", "status", "solution_error",
-            "objective_gap", "max_violation", "build_time", "solve_time", "iterations"]
-    fmt = {"solution_error": ".1e", "objective_gap": ".1e", "max_violation": ".1e",
-           "build_time": ".4f", "solve_time": ".4f"}
-    md = ("## Fusion of two estimates (paper 003)\n\n"
-          "Closed forms ((1)-(2) for independent estimates, (S1 − S12)D⁺ for correlated "
-          "ones) against CVXPY on the generic problems (weighted least squares in α; "
-          "minimum trace of the fused covariance in W), size = m; and the two-site joint "
-          "ML (size = number of independent problems T, solved as one block-separable NLP) "
-          "by IPOPT against a NumPy Gauss-Newton, solution error in units of the CRB "
-          "RMS:\n\n" + markdown_table(rows, cols, fmt))
-    md += ("\nEvery problem here is an unconstrained least-squares problem: Clarabel and "
-           "OSQP land on the closed form to round-off, SCS (first-order) near 1e-8. CVXPY's "
-           "canonicalisation (~6 ms) dominates their times; the closed forms take well "
-           "under a millisecond.\n")
-    md += report._benchmark(out, "fusion", bench,
-                            "Benchmark (wall seconds, median and best of the repeats; "
-                            "target: Monte Carlo of Ŵ with 10⁵ trials at m = 3 in ≤ 2 s):",
-                            ["case", "median_s", "min_s"], ".4f")
+    cols = [
+        "case",
+        "size",
+        "formulation",
+        "solver",
+        "status",
+        "solution_error",
+        "objective_gap",
+        "max_violation",
+        "build_time",
+        "solve_time",
+        "iterations",
+    ]
+    fmt = {
+        "solution_error": ".1e",
+        "objective_gap": ".1e",
+        "max_violation": ".1e",
+        "build_time": ".4f",
+        "solve_time": ".4f",
+    }
+    md = (
+        "## Fusion of two estimates (paper 003)\n\n"
+        "Closed forms ((1)-(2) for independent estimates, (S1 − S12)D⁺ for correlated "
+        "ones) against CVXPY on the generic problems (weighted least squares in α; "
+        "minimum trace of the fused covariance in W), size = m; and the two-site joint "
+        "ML (size = number of independent problems T, solved as one block-separable NLP) "
+        "by IPOPT against a NumPy Gauss-Newton, solution error in units of the CRB "
+        "RMS:\n\n" + markdown_table(rows, cols, fmt)
+    )
+    md += (
+        "\nEvery problem here is an unconstrained least-squares problem: Clarabel and "
+        "OSQP land on the closed form to round-off, SCS (first-order) near 1e-8. CVXPY's "
+        "canonicalisation (~6 ms) dominates their times; the closed forms take well "
+        "under a millisecond.\n"
+    )
+    md += report._benchmark(
+        out,
+        "fusion",
+        bench,
+        "Benchmark (wall seconds, median and best of the repeats; "
+        "target: Monte Carlo of Ŵ with 10⁵ trials at m = 3 in ≤ 2 s):",
+        ["case", "median_s", "min_s"],
+        ".4f",
+    )
     return md + "\n"

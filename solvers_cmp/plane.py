@@ -70,8 +70,9 @@ def _ml(data: plane.PlaneData) -> plane.PlaneSolution:
     return plane.closed_form(data) if data.proportional else plane.solve(data, "reduced")
 
 
-def timing_rows(sizes: list[int], *, seed: int = 0, repeats: int = 5,
-                progress: bool = False) -> list[dict[str, Any]]:
+def timing_rows(
+    sizes: list[int], *, seed: int = 0, repeats: int = 5, progress: bool = False
+) -> list[dict[str, Any]]:
     """One instance per (setting, N); every method timed ``repeats`` times."""
     sizes = _sizes("solvers_cmp.plane.timing_rows", sizes)
     seed = as_count("solvers_cmp.plane.timing_rows seed", seed)
@@ -87,19 +88,26 @@ def timing_rows(sizes: list[int], *, seed: int = 0, repeats: int = 5,
             plane.clear_nlp_cache()  # the first run measures a cold build
             sols = [_run_method(method, data) for _ in range(repeats)]
             sol = sols[-1]
-            rows.append({
-                "problem": "plane", "setting": setting, "size": n, "seed": seed,
-                "formulation": method,
-                "solver": "ipopt" if method in ("full", "reduced") else "numpy",
-                "settings": "default", "status": sol.status.value,
-                "objective": sol.objective, "_normal": sol.normal,
-                "max_violation": sol.max_residual,
-                "cold_build_time": sols[0].build_time,
-                "build_time": float(np.median([s.build_time for s in sols[1:] or sols])),
-                "solve_time": float(np.median([s.solve_time for s in sols])),
-                "iterations": sol.iterations,
-                "starts": sol.info.get("starts", ""),
-            })
+            rows.append(
+                {
+                    "problem": "plane",
+                    "setting": setting,
+                    "size": n,
+                    "seed": seed,
+                    "formulation": method,
+                    "solver": "ipopt" if method in ("full", "reduced") else "numpy",
+                    "settings": "default",
+                    "status": sol.status.value,
+                    "objective": sol.objective,
+                    "_normal": sol.normal,
+                    "max_violation": sol.max_residual,
+                    "cold_build_time": sols[0].build_time,
+                    "build_time": float(np.median([s.build_time for s in sols[1:] or sols])),
+                    "solve_time": float(np.median([s.solve_time for s in sols])),
+                    "iterations": sol.iterations,
+                    "starts": sol.info.get("starts", ""),
+                }
+            )
     # reference per case: the best objective among the ML methods (closed form first)
     for setting, n in cases:
         case = [r for r in rows if r["setting"] == setting and r["size"] == n]
@@ -120,8 +128,9 @@ def timing_rows(sizes: list[int], *, seed: int = 0, repeats: int = 5,
     return rows
 
 
-def accuracy_rows(sizes: list[int], *, runs: int = 200, seed: int = 0,
-                  progress: bool = False) -> list[dict[str, Any]]:
+def accuracy_rows(
+    sizes: list[int], *, runs: int = 200, seed: int = 0, progress: bool = False
+) -> list[dict[str, Any]]:
     """Monte Carlo angle RMSE of the ML and SVD planes, per (setting, N)."""
     sizes = _sizes("solvers_cmp.plane.accuracy_rows", sizes)
     runs = as_count("solvers_cmp.plane.accuracy_rows runs", runs, minimum=2)
@@ -143,18 +152,24 @@ def accuracy_rows(sizes: list[int], *, runs: int = 200, seed: int = 0,
             err[k, 0] = plane.angle_error(ml.normal, sc.normal)
             err[k, 1] = plane.angle_error(plane.svd_fit(data).normal, sc.normal)
             if crb is None:
-                crb = plane.cramer_rao_bound(plane.PlaneData(sc.truth, sc.cov, sc.alpha2),
-                                             sc.normal, sc.offset)
+                crb = plane.cramer_rao_bound(
+                    plane.PlaneData(sc.truth, sc.cov, sc.alpha2), sc.normal, sc.offset
+                )
         rmse = np.sqrt(np.mean(err**2, axis=0))
         assert crb is not None
-        rows.append({
-            "setting": setting, "size": n, "runs": runs,
-            "ml_method": "closed_form" if data.proportional else "reduced NLP",
-            "rmse_ml_mrad": rmse[0] * 1e3, "rmse_svd_mrad": rmse[1] * 1e3,
-            "ratio_ml_over_svd": rmse[0] / rmse[1],
-            "crb_first_instance_mrad": crb.angle_rms * 1e3,
-            "ml_time_median_s": float(np.median(t_ml)),
-        })
+        rows.append(
+            {
+                "setting": setting,
+                "size": n,
+                "runs": runs,
+                "ml_method": "closed_form" if data.proportional else "reduced NLP",
+                "rmse_ml_mrad": rmse[0] * 1e3,
+                "rmse_svd_mrad": rmse[1] * 1e3,
+                "ratio_ml_over_svd": rmse[0] / rmse[1],
+                "crb_first_instance_mrad": crb.angle_rms * 1e3,
+                "ml_time_median_s": float(np.median(t_ml)),
+            }
+        )
     return rows
 
 
@@ -174,37 +189,60 @@ def benchmark(n: int = 10_000, repeats: int = 5, seed: int = 0) -> list[dict[str
     ex = scenarios.paper_plane_example(rng)
     rows = []
     for name, fn in (
-        ("full NLP, general D_i, 3 starts via the reduced NLP (default; cold)",
-         lambda: plane.solve(general, "full")),
-        ("full NLP, general D_i, 3 starts from the axes, via_reduced=False (cold)",
-         lambda: plane.solve(general, "full", via_reduced=False)),
-        ("full NLP, general D_i, 1 start (cold build + solve)",
-         lambda: plane.solve(general, "full", starts=1)),
-        ("reduced NLP, general D_i, 3 starts (cold build + solve)",
-         lambda: plane.solve(general, "reduced")),
+        (
+            "full NLP, general D_i, 3 starts via the reduced NLP (default; cold)",
+            lambda: plane.solve(general, "full"),
+        ),
+        (
+            "full NLP, general D_i, 3 starts from the axes, via_reduced=False (cold)",
+            lambda: plane.solve(general, "full", via_reduced=False),
+        ),
+        (
+            "full NLP, general D_i, 1 start (cold build + solve)",
+            lambda: plane.solve(general, "full", starts=1),
+        ),
+        (
+            "reduced NLP, general D_i, 3 starts (cold build + solve)",
+            lambda: plane.solve(general, "reduced"),
+        ),
     ):
         rep = repeat(fn, repeats, setup=plane.clear_nlp_cache)
         sol = [s.require_ok() for s in rep.results][-1]
-        rows.append({"case": name, "size": n, "median_s": rep.median,
-                     "min_s": rep.best, "starts": sol.info.get("starts")})
+        rows.append(
+            {
+                "case": name,
+                "size": n,
+                "median_s": rep.median,
+                "min_s": rep.best,
+                "starts": sol.info.get("starts"),
+            }
+        )
     for name, fn in (
         ("closed form, D_i = alpha_i^2 D", lambda: plane.closed_form(prop)),
-        ("sequential closed form, 801 steps (paper example)",
-         lambda: plane.identify_sequence(ex.times, ex.points, ex.cov, start=2.0)),
+        (
+            "sequential closed form, 801 steps (paper example)",
+            lambda: plane.identify_sequence(ex.times, ex.points, ex.cov, start=2.0),
+        ),
     ):
         rep = repeat(fn, repeats)
         size = n if "sequential" not in name else len(ex.times)
-        rows.append({"case": name, "size": size, "median_s": rep.median,
-                     "min_s": rep.best, "starts": ""})
+        rows.append(
+            {"case": name, "size": size, "median_s": rep.median, "min_s": rep.best, "starts": ""}
+        )
     return rows
 
 
 SCALING_SIZES = (1_000, 10_000, 20_000, 40_000, 100_000)
 
 
-def full_nlp_scaling(sizes: Any = SCALING_SIZES, starts: int = 3, repeats: int = 3,
-                     seed: int = 0, via_reduced: bool = True,
-                     progress: bool = False) -> list[dict[str, Any]]:
+def full_nlp_scaling(
+    sizes: Any = SCALING_SIZES,
+    starts: int = 3,
+    repeats: int = 3,
+    seed: int = 0,
+    via_reduced: bool = True,
+    progress: bool = False,
+) -> list[dict[str, Any]]:
     """Cold build + solve of the full NLP (1.2)-(1.3) against N: general D_i (radar,
     broadside), ``starts`` starts, the NLP cache cleared before each of ``repeats`` runs.
 
@@ -223,8 +261,7 @@ def full_nlp_scaling(sizes: Any = SCALING_SIZES, starts: int = 3, repeats: int =
     N, 2 = linear), and whether every start reached the same objective of (1.2).
     """
     sizes = _sizes("solvers_cmp.plane.full_nlp_scaling", sizes)
-    starts = as_count("solvers_cmp.plane.full_nlp_scaling starts", starts, minimum=1,
-                      maximum=3)
+    starts = as_count("solvers_cmp.plane.full_nlp_scaling starts", starts, minimum=1, maximum=3)
     repeats = as_count("solvers_cmp.plane.full_nlp_scaling repeats", repeats, minimum=1)
     seed = as_count("solvers_cmp.plane.full_nlp_scaling seed", seed)
     via_reduced = as_flag("solvers_cmp.plane.full_nlp_scaling via_reduced", via_reduced)
@@ -232,8 +269,9 @@ def full_nlp_scaling(sizes: Any = SCALING_SIZES, starts: int = 3, repeats: int =
 
     rows: list[dict[str, Any]] = []
     for n in tqdm(sizes, desc="plane full NLP scaling", disable=not progress):
-        data = _data(scenarios.radar_plane(n, np.random.default_rng([seed, n]),
-                                           geometry="broadside"))
+        data = _data(
+            scenarios.radar_plane(n, np.random.default_rng([seed, n]), geometry="broadside")
+        )
         cpu: list[float] = []
 
         def run(d: plane.PlaneData = data, cpu: list[float] = cpu) -> plane.PlaneSolution:
@@ -249,19 +287,26 @@ def full_nlp_scaling(sizes: Any = SCALING_SIZES, starts: int = 3, repeats: int =
         solve = float(np.median([s.solve_time for s in sols]))
         red = float(np.median([s.info["reduced_solve_time"] for s in sols]))
         objs = sols[-1].info["start_objectives"]
-        row = {"size": n, "starts": starts, "via_reduced": via_reduced, "repeats": repeats,
-               "median_s": rep.median, "min_s": rep.best,
-               "cpu_median_s": float(np.median(cpu)),
-               "build_s": float(np.median([s.build_time for s in sols])),
-               "solve_s": solve, "reduced_solve_s": red,
-               "reduced_iterations": float(np.median([s.info["reduced_iterations"]
-                                                      for s in sols])),
-               "iterations": iters,
-               "s_per_iteration": (solve - red) / iters if iters else float("nan"),
-               "jac_g_nnz": solver.get_function("nlp_jac_g").sparsity_out(1).nnz(),
-               "hess_lag_nnz": solver.get_function("nlp_hess_l").sparsity_out(0).nnz(),
-               "starts_agree": bool(np.ptp(objs) <= 1e-9 * abs(min(objs))),
-               "growth_vs_linear": float("nan"), "growth_per_doubling": float("nan")}
+        row = {
+            "size": n,
+            "starts": starts,
+            "via_reduced": via_reduced,
+            "repeats": repeats,
+            "median_s": rep.median,
+            "min_s": rep.best,
+            "cpu_median_s": float(np.median(cpu)),
+            "build_s": float(np.median([s.build_time for s in sols])),
+            "solve_s": solve,
+            "reduced_solve_s": red,
+            "reduced_iterations": float(np.median([s.info["reduced_iterations"] for s in sols])),
+            "iterations": iters,
+            "s_per_iteration": (solve - red) / iters if iters else float("nan"),
+            "jac_g_nnz": solver.get_function("nlp_jac_g").sparsity_out(1).nnz(),
+            "hess_lag_nnz": solver.get_function("nlp_hess_l").sparsity_out(0).nnz(),
+            "starts_agree": bool(np.ptp(objs) <= 1e-9 * abs(min(objs))),
+            "growth_vs_linear": float("nan"),
+            "growth_per_doubling": float("nan"),
+        }
         if rows:
             prev = rows[-1]
             ratio = rep.median / prev["median_s"]
@@ -296,8 +341,11 @@ class Adapter(cases.Adapter):
         from optmodels import scenarios
 
         rng = np.random.default_rng([seed, size, self.instances.index(instance)])
-        return (scenarios.two_source_plane(size, rng) if instance == "two-source"
-                else scenarios.radar_plane(size, rng, geometry="broadside"))
+        return (
+            scenarios.two_source_plane(size, rng)
+            if instance == "two-source"
+            else scenarios.radar_plane(size, rng, geometry="broadside")
+        )
 
     def truth(self, instance: str, size: int, seed: int, data: Any) -> tuple[Any, float]:
         """The true normal of the draw and the Cramér–Rao bound of the angle, rad²
@@ -306,8 +354,9 @@ class Adapter(cases.Adapter):
         from optmodels import plane
 
         sc = self._scenario(instance, size, seed)
-        crb = plane.cramer_rao_bound(plane.PlaneData(sc.truth, sc.cov, sc.alpha2),
-                                     sc.normal, sc.offset)
+        crb = plane.cramer_rao_bound(
+            plane.PlaneData(sc.truth, sc.cov, sc.alpha2), sc.normal, sc.offset
+        )
         return np.asarray(sc.normal, float), float(crb.angle_rms) ** 2
 
     def sq_error(self, x: Any, truth: Any) -> float:
@@ -321,8 +370,9 @@ class Adapter(cases.Adapter):
         if instance == "two-source":
             sol = plane.closed_form(data)
         else:
-            sol = plane.solve(data, "reduced", starts=3,
-                              ipopt_options={"tol": 1e-12, "constr_viol_tol": 1e-12})
+            sol = plane.solve(
+                data, "reduced", starts=3, ipopt_options={"tol": 1e-12, "constr_viol_tol": 1e-12}
+            )
         return cases._from_solution(sol, sol.normal)
 
     def runs(self, instance: str) -> list[Run]:
@@ -337,8 +387,12 @@ class Adapter(cases.Adapter):
         elif run.solver == "ipopt":
             sol = plane.solve(data, run.formulation, ipopt_options=options or None)  # type: ignore[arg-type]
         else:
-            sol = plane.solve(data, run.formulation, plugin=run.solver,  # type: ignore[arg-type]
-                              plugin_options=options or None)
+            sol = plane.solve(
+                data,
+                run.formulation,
+                plugin=run.solver,  # type: ignore[arg-type]
+                plugin_options=options or None,
+            )
         return cases._from_solution(sol, sol.normal)
 
     def error(self, x: Any, ref: Any) -> float:
@@ -348,9 +402,22 @@ class Adapter(cases.Adapter):
 
 
 # ------------------------------------------------------ compare --details report
-_SCALING_COLS = ["size", "starts", "via_reduced", "median_s", "min_s", "cpu_median_s",
-                 "build_s", "solve_s", "reduced_solve_s", "reduced_iterations", "iterations",
-                 "jac_g_nnz", "hess_lag_nnz", "growth_per_doubling"]
+_SCALING_COLS = [
+    "size",
+    "starts",
+    "via_reduced",
+    "median_s",
+    "min_s",
+    "cpu_median_s",
+    "build_s",
+    "solve_s",
+    "reduced_solve_s",
+    "reduced_iterations",
+    "iterations",
+    "jac_g_nnz",
+    "hess_lag_nnz",
+    "growth_per_doubling",
+]
 
 
 def _scaling_section(out: Path, scaling: list[dict[str, Any]] | None) -> str:
@@ -359,35 +426,75 @@ def _scaling_section(out: Path, scaling: list[dict[str, Any]] | None) -> str:
     if not scaling:
         return ""
     write_csv(out / "plane_full_nlp_scaling.csv", scaling)
-    fmt = {k: ".3f" for k in ("median_s", "min_s", "cpu_median_s", "build_s", "solve_s",
-                              "reduced_solve_s")}
-    fmt.update({"growth_per_doubling": ".2f", "reduced_iterations": ".0f",
-                "iterations": ".0f"})
-    return ("\nFull NLP (1.2)-(1.3) against N (general D_i, cold build + solve, seconds; "
-            "`growth_per_doubling` 2 = linear):\n\n"
-            + markdown_table(scaling, _SCALING_COLS, fmt))
+    fmt = {
+        k: ".3f"
+        for k in ("median_s", "min_s", "cpu_median_s", "build_s", "solve_s", "reduced_solve_s")
+    }
+    fmt.update({"growth_per_doubling": ".2f", "reduced_iterations": ".0f", "iterations": ".0f"})
+    return (
+        "\nFull NLP (1.2)-(1.3) against N (general D_i, cold build + solve, seconds; "
+        "`growth_per_doubling` 2 = linear):\n\n" + markdown_table(scaling, _SCALING_COLS, fmt)
+    )
 
 
-def write_report(out: Path, timing: list[dict[str, Any]], accuracy: list[dict[str, Any]],
-                 bench: list[dict[str, Any]] | None = None,
-                 scaling: list[dict[str, Any]] | None = None) -> str:
+def write_report(
+    out: Path,
+    timing: list[dict[str, Any]],
+    accuracy: list[dict[str, Any]],
+    bench: list[dict[str, Any]] | None = None,
+    scaling: list[dict[str, Any]] | None = None,
+) -> str:
     """Write ``plane_timing.csv``, ``plane_accuracy.csv`` (and ``plane_benchmark.csv``,
     ``plane_full_nlp_scaling.csv`` from :func:`full_nlp_scaling`'s rows) and return the
     Markdown section."""
     out.mkdir(parents=True, exist_ok=True)
     write_csv(out / "plane_timing.csv", timing)
     write_csv(out / "plane_accuracy.csv", accuracy)
-    bench_md = report._benchmark(out, "plane", bench,
-                                 "Benchmark (median and best of the repeats, seconds):",
-                                 ["case", "size", "median_s", "min_s", "starts"], ".4f")
-    tcols = ["setting", "size", "formulation", "status", "objective_gap", "solution_error",
-             "max_violation", "cold_build_time", "build_time", "solve_time", "iterations"]
-    acols = ["setting", "size", "runs", "ml_method", "rmse_ml_mrad", "rmse_svd_mrad",
-             "ratio_ml_over_svd", "crb_first_instance_mrad", "ml_time_median_s"]
-    fmt = {"objective_gap": ".1e", "solution_error": ".1e", "max_violation": ".1e",
-           "cold_build_time": ".4f", "build_time": ".4f", "solve_time": ".4f",
-           "rmse_ml_mrad": ".3f", "rmse_svd_mrad": ".3f", "ratio_ml_over_svd": ".3f",
-           "crb_first_instance_mrad": ".3f", "ml_time_median_s": ".4f"}
+    bench_md = report._benchmark(
+        out,
+        "plane",
+        bench,
+        "Benchmark (median and best of the repeats, seconds):",
+        ["case", "size", "median_s", "min_s", "starts"],
+        ".4f",
+    )
+    tcols = [
+        "setting",
+        "size",
+        "formulation",
+        "status",
+        "objective_gap",
+        "solution_error",
+        "max_violation",
+        "cold_build_time",
+        "build_time",
+        "solve_time",
+        "iterations",
+    ]
+    acols = [
+        "setting",
+        "size",
+        "runs",
+        "ml_method",
+        "rmse_ml_mrad",
+        "rmse_svd_mrad",
+        "ratio_ml_over_svd",
+        "crb_first_instance_mrad",
+        "ml_time_median_s",
+    ]
+    fmt = {
+        "objective_gap": ".1e",
+        "solution_error": ".1e",
+        "max_violation": ".1e",
+        "cold_build_time": ".4f",
+        "build_time": ".4f",
+        "solve_time": ".4f",
+        "rmse_ml_mrad": ".3f",
+        "rmse_svd_mrad": ".3f",
+        "ratio_ml_over_svd": ".3f",
+        "crb_first_instance_mrad": ".3f",
+        "ml_time_median_s": ".4f",
+    }
     return (
         "## Plane of maneuver (paper 000)\n\n"
         "Formulations against the reference (closed form under (1.4), else the best "

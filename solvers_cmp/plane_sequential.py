@@ -24,13 +24,19 @@ from optmodels.scenarios.maneuver import climb_turn_track
 
 def _windows(window: int, rate_hz: float, seed: int) -> tuple[np.ndarray, np.ndarray, int]:
     dur = max(150.0, 1.5 * window / rate_hz)
-    tr = climb_turn_track(seed, rate_hz=rate_hz,
-                          durations=(dur * 0.4, dur * 0.2, dur * 0.4))
+    tr = climb_turn_track(seed, rate_hz=rate_hz, durations=(dur * 0.4, dur * 0.2, dur * 0.4))
     return tr.points, tr.cov, len(tr.points) - window + 1
 
 
-def benchmark(window: int = 100, runs: int = 3, seed: int = 0, *, rate_hz: float = 2.0,
-              nlp_steps: int = 20, progress: bool = False) -> dict[str, Any]:
+def benchmark(
+    window: int = 100,
+    runs: int = 3,
+    seed: int = 0,
+    *,
+    rate_hz: float = 2.0,
+    nlp_steps: int = 20,
+    progress: bool = False,
+) -> dict[str, Any]:
     """Per-step wall times (ms) of :func:`fit_general` in sliding windows of ``window``
     points, cold and warm, and of the warm reduced NLP on ``nlp_steps`` of the steps.
 
@@ -42,8 +48,9 @@ def benchmark(window: int = 100, runs: int = 3, seed: int = 0, *, rate_hz: float
     warm fit and the reduced NLP (tight tolerances) over the compared steps;
     ``all_ok``: every warm step's status OK.
     """
-    window = as_count("solvers_cmp.plane_sequential.benchmark window", window, minimum=10,
-                      maximum=100_000)
+    window = as_count(
+        "solvers_cmp.plane_sequential.benchmark window", window, minimum=10, maximum=100_000
+    )
     runs = as_count("solvers_cmp.plane_sequential.benchmark runs", runs, minimum=1)
     seed = as_count("solvers_cmp.plane_sequential.benchmark seed", seed)
     nlp_steps = as_count("solvers_cmp.plane_sequential.benchmark nlp_steps", nlp_steps)
@@ -77,8 +84,9 @@ def benchmark(window: int = 100, runs: int = 3, seed: int = 0, *, rate_hz: float
             if k in check:
                 data = plane.PlaneData(pts[sl], cov[sl])
                 t0 = time.perf_counter()
-                sol = plane.solve(data, "reduced", starts=1, initial_normal=prev,
-                                  ipopt_options=opts)
+                sol = plane.solve(
+                    data, "reduced", starts=1, initial_normal=prev, ipopt_options=opts
+                )
                 nlp_t.append(time.perf_counter() - t0)
                 if sol.ok:
                     worst = max(worst, float(plane.angle_error(fit.normal, sol.normal)))
@@ -90,24 +98,33 @@ def benchmark(window: int = 100, runs: int = 3, seed: int = 0, *, rate_hz: float
         return float(np.percentile(v, p)) * ms if v else float("nan")
 
     return {
-        "window": window, "steps": steps, "runs": runs, "rate_hz": rate_hz,
-        "warm_ms": q(warm_t, 50), "warm_p90_ms": q(warm_t, 90),
+        "window": window,
+        "steps": steps,
+        "runs": runs,
+        "rate_hz": rate_hz,
+        "warm_ms": q(warm_t, 50),
+        "warm_p90_ms": q(warm_t, 90),
         "warm_cpu_ms": q(warm_cpu, 50),
-        "cold_ms": q(cold_t, 50), "cold_p90_ms": q(cold_t, 90),
-        "nlp_ms": q(nlp_t, 50), "nlp_p90_ms": q(nlp_t, 90),
+        "cold_ms": q(cold_t, 50),
+        "cold_p90_ms": q(cold_t, 90),
+        "nlp_ms": q(nlp_t, 50),
+        "nlp_p90_ms": q(nlp_t, 90),
         "warm_iterations": float(np.median(iters)) if iters else float("nan"),
-        "max_angle_vs_nlp": worst, "all_ok": bool(all_ok),
+        "max_angle_vs_nlp": worst,
+        "all_ok": bool(all_ok),
     }
 
 
 def main() -> None:
     for window in (40, 100, 400):
         res = benchmark(window)
-        print(f"window {window:4d}: warm {res['warm_ms']:.3f} ms (p90 {res['warm_p90_ms']:.3f},"
-              f" CPU {res['warm_cpu_ms']:.3f}),"
-              f" cold {res['cold_ms']:.3f} ms, reduced NLP warm {res['nlp_ms']:.2f} ms; "
-              f"{res['warm_iterations']:.0f} Newton it./step; max angle vs NLP "
-              f"{res['max_angle_vs_nlp']:.1e} rad; all OK {res['all_ok']}")
+        print(
+            f"window {window:4d}: warm {res['warm_ms']:.3f} ms (p90 {res['warm_p90_ms']:.3f},"
+            f" CPU {res['warm_cpu_ms']:.3f}),"
+            f" cold {res['cold_ms']:.3f} ms, reduced NLP warm {res['nlp_ms']:.2f} ms; "
+            f"{res['warm_iterations']:.0f} Newton it./step; max angle vs NLP "
+            f"{res['max_angle_vs_nlp']:.1e} rad; all OK {res['all_ok']}"
+        )
 
 
 if __name__ == "__main__":

@@ -28,15 +28,20 @@ def false_alarms(hours: float = 30.0, seed: int = 11) -> list[dict[str, Any]]:
         r = false_alarm_runs(hours, seed, window=window)
         rows.append({"window": window, **r})
     for window in ("40s", None):
-        r = false_alarm_runs(hours / 10, seed + 1, window=window,
-                             false_alarm_rate_per_h=60.0, run_hours=0.5)
+        r = false_alarm_runs(
+            hours / 10, seed + 1, window=window, false_alarm_rate_per_h=60.0, run_hours=0.5
+        )
         rows.append({"window": window, **r})
     return rows
 
 
-def delays(runs: int = 50, seed: int = 1, tilts: tuple[float, ...] = (5, 10, 20, 30, 45, 90),
-           sigmas: tuple[float, ...] = (30.0, 50.0),
-           windows: tuple[Any, ...] = ("40s", None)) -> list[dict[str, Any]]:
+def delays(
+    runs: int = 50,
+    seed: int = 1,
+    tilts: tuple[float, ...] = (5, 10, 20, 30, 45, 90),
+    sigmas: tuple[float, ...] = (30.0, 50.0),
+    windows: tuple[Any, ...] = ("40s", None),
+) -> list[dict[str, Any]]:
     """Detection delay (s) after a level turn → climbing turn transition (plane tilted by
     ``tilt`` about the velocity; 200 m/s, 7 km radii, 1 Hz) by tilt, σ and window."""
     rows = []
@@ -44,24 +49,41 @@ def delays(runs: int = 50, seed: int = 1, tilts: tuple[float, ...] = (5, 10, 20,
         for sigma in sigmas:
             for tilt in tilts:
                 r = detection_runs(runs, seed, tilt_deg=tilt, sigma=sigma, window=window)
-                rows.append({"window": window, "sigma": sigma, "tilt": tilt,
-                             "detected": r["detected"], "median": r["median"],
-                             "p90": r["p90"], "early": int(r["early"].sum()),
-                             "detectable_tilt_deg": r["detectable_tilt_deg"]})
+                rows.append(
+                    {
+                        "window": window,
+                        "sigma": sigma,
+                        "tilt": tilt,
+                        "detected": r["detected"],
+                        "median": r["median"],
+                        "p90": r["p90"],
+                        "early": int(r["early"].sum()),
+                        "detectable_tilt_deg": r["detectable_tilt_deg"],
+                    }
+                )
     return rows
 
 
-def radar_delays(runs: int = 20, seed: int = 2, tilts: tuple[float, ...] = (10, 30, 90)
-                 ) -> list[dict[str, Any]]:
+def radar_delays(
+    runs: int = 20, seed: int = 2, tilts: tuple[float, ...] = (10, 30, 90)
+) -> list[dict[str, Any]]:
     """The same with one radar's covariances (general D_i: fit_general per window)."""
     rows = []
     for tilt in tilts:
         r = detection_runs(runs, seed, tilt_deg=tilt, errors="radar", window="40s")
-        rows.append({"window": "40s", "errors": "radar", "tilt": tilt,
-                     "detected": r["detected"], "median": r["median"], "p90": r["p90"],
-                     "early": int(r["early"].sum()),
-                     "detectable_tilt_deg": r["detectable_tilt_deg"],
-                     "seconds_per_run": r["seconds"] / runs})
+        rows.append(
+            {
+                "window": "40s",
+                "errors": "radar",
+                "tilt": tilt,
+                "detected": r["detected"],
+                "median": r["median"],
+                "p90": r["p90"],
+                "early": int(r["early"].sum()),
+                "detectable_tilt_deg": r["detectable_tilt_deg"],
+                "seconds_per_run": r["seconds"] / runs,
+            }
+        )
     return rows
 
 
@@ -89,12 +111,19 @@ def before(runs: int = 20, tilts: tuple[float, ...] = (10, 30, 90)) -> list[dict
             tr = track(sc.times, sc.points, sc.cov, window_seconds=40.0)
             at = tr.change_times[tr.change_times >= sc.change_time]
             d_tr.append(at[0] - sc.change_time if at.size else np.inf)
+
         def summary(d: list[float]) -> str:
             a = np.asarray(d)
             return f"{np.mean(np.isfinite(a)):.0%}, median {np.median(a):g} s"
-        rows.append({"tilt": tilt, "identify_sequence (growing, 0.003/step)": summary(d_seq),
-                     "40 s windows + planarity_test": summary(d_win),
-                     "track (40 s, 1/h)": summary(d_tr)})
+
+        rows.append(
+            {
+                "tilt": tilt,
+                "identify_sequence (growing, 0.003/step)": summary(d_seq),
+                "40 s windows + planarity_test": summary(d_win),
+                "track (40 s, 1/h)": summary(d_tr),
+            }
+        )
     return rows
 
 
@@ -109,16 +138,27 @@ def per_step_cost(n: int = 100_000, repeats: int = 3) -> list[dict[str, Any]]:
             t0 = time.perf_counter()
             tr = track(sc.times, sc.points, sc.cov, window=window)
             ts.append(time.perf_counter() - t0)
-        rows.append({"what": f"track window={window}", "n": n,
-                     "us_per_step": 1e6 * float(np.median(ts)) / n,
-                     "alarms": int(tr.change.sum())})
+        rows.append(
+            {
+                "what": f"track window={window}",
+                "n": n,
+                "us_per_step": 1e6 * float(np.median(ts)) / n,
+                "alarms": int(tr.change.sum()),
+            }
+        )
     ts = []
     for _ in range(repeats):
         t0 = time.perf_counter()
         plane.identify_sequence(sc.times, sc.points, sc.cov)
         ts.append(time.perf_counter() - t0)
-    rows.append({"what": "identify_sequence", "n": n,
-                 "us_per_step": 1e6 * float(np.median(ts)) / n, "alarms": 0})
+    rows.append(
+        {
+            "what": "identify_sequence",
+            "n": n,
+            "us_per_step": 1e6 * float(np.median(ts)) / n,
+            "alarms": 0,
+        }
+    )
     return rows
 
 
@@ -130,8 +170,11 @@ def _print(title: str, rows: list[dict[str, Any]]) -> None:
     print("| " + " | ".join(keys) + " |")
     print("|" + "---|" * len(keys))
     for r in rows:
-        print("| " + " | ".join(f"{v:.3g}" if isinstance(v, float) else str(v)
-                                for v in r.values()) + " |")
+        print(
+            "| "
+            + " | ".join(f"{v:.3g}" if isinstance(v, float) else str(v) for v in r.values())
+            + " |"
+        )
 
 
 def main(quick: bool = False) -> None:

@@ -52,14 +52,23 @@ def draw(family: str, q: int, n: int, seed: int) -> tuple[tr.TrajectoryData, np.
     else:
         start, vel = rng.uniform(-1e3, 1e3, q), np.full(q, 2.0)
     vals = [start[j] + vel[j] * t + rng.normal(0, 1, n) for j, t in enumerate(times)]
-    theta = (np.concatenate([[start[0]], vel]) if family == "diverging"
-             else np.concatenate([start, [vel[0]]]))
+    theta = (
+        np.concatenate([[start[0]], vel])
+        if family == "diverging"
+        else np.concatenate([start, [vel[0]]])
+    )
     return tr.TrajectoryData(times, vals, 1.0), theta
 
 
-def rows(objects: tuple[int, ...] = OBJECTS, points: tuple[int, ...] = POINTS, *,
-         seed: int = 0, repeats: int = 3, solvers: tuple[str, ...] | None = None,
-         progress: bool = False) -> list[dict[str, Any]]:
+def rows(
+    objects: tuple[int, ...] = OBJECTS,
+    points: tuple[int, ...] = POINTS,
+    *,
+    seed: int = 0,
+    repeats: int = 3,
+    solvers: tuple[str, ...] | None = None,
+    progress: bool = False,
+) -> list[dict[str, Any]]:
     """Run every (family, Q, N) × (closed form, formulation × solver)."""
     installed = set(available_solvers())
     use = [s for s in (solvers or QP_SOLVERS) if s in installed]
@@ -72,48 +81,86 @@ def rows(objects: tuple[int, ...] = OBJECTS, points: tuple[int, ...] = POINTS, *
         scale = float(np.max(np.abs(ref.theta)))
         # (formulation, solver, solution, build time, solve time): closed form first
         runs: list[tuple[str, str, tr.TrajectorySolution, float, float]] = [
-            ("closed_form", "numpy", ref, 0.0, cf.median)]
+            ("closed_form", "numpy", ref, 0.0, cf.median)
+        ]
         for form in FORMULATIONS:
             for s in use:
-                sols = repeat(lambda d=data, f=family, fo=form, so=s:
-                              tr.solve(d, f, formulation=fo, solver=so), repeats).results
-                runs.append((form, s, sols[-1],
-                             float(np.median([x.build_time for x in sols])),
-                             float(np.median([x.solve_time for x in sols]))))
+                sols = repeat(
+                    lambda d=data, f=family, fo=form, so=s: tr.solve(
+                        d, f, formulation=fo, solver=so
+                    ),
+                    repeats,
+                ).results
+                runs.append(
+                    (
+                        form,
+                        s,
+                        sols[-1],
+                        float(np.median([x.build_time for x in sols])),
+                        float(np.median([x.solve_time for x in sols])),
+                    )
+                )
         for form, solver, sol, build, solve in runs:
             ok = sol.status.ok
-            out.append({
-                "problem": "trajectories", "family": family, "objects": q, "points": n,
-                "size": q * n, "seed": seed, "formulation": form, "solver": solver,
-                "settings": "default", "status": sol.status.value,
-                "objective": sol.objective,
-                "objective_gap": (sol.objective - ref.objective) / ref.objective if ok
-                else float("nan"),
-                "solution_error": float(np.max(np.abs(sol.theta - ref.theta))) / scale if ok
-                else float("nan"),
-                "max_violation": sol.max_residual, "build_time": build, "solve_time": solve,
-                "total_time": build + solve, "iterations": sol.iterations,
-            })
+            out.append(
+                {
+                    "problem": "trajectories",
+                    "family": family,
+                    "objects": q,
+                    "points": n,
+                    "size": q * n,
+                    "seed": seed,
+                    "formulation": form,
+                    "solver": solver,
+                    "settings": "default",
+                    "status": sol.status.value,
+                    "objective": sol.objective,
+                    "objective_gap": (sol.objective - ref.objective) / ref.objective
+                    if ok
+                    else float("nan"),
+                    "solution_error": float(np.max(np.abs(sol.theta - ref.theta))) / scale
+                    if ok
+                    else float("nan"),
+                    "max_violation": sol.max_residual,
+                    "build_time": build,
+                    "solve_time": solve,
+                    "total_time": build + solve,
+                    "iterations": sol.iterations,
+                }
+            )
     return out
 
 
-def benchmark(q: int = 100, n: int = 1000, *, repeats: int = 5, seed: int = 0
-              ) -> list[dict[str, Any]]:
+def benchmark(
+    q: int = 100, n: int = 1000, *, repeats: int = 5, seed: int = 0
+) -> list[dict[str, Any]]:
     """The issue's benchmark: Q objects × N points, wall time of the closed form and of the
     constrained CVXPY solve (build + solve), median and best of ``repeats``."""
     res = []
     for family in FAMILIES:
         data = instance(family, q, n, seed)
         cases = [("closed form", lambda d=data, f=family: tr.closed_form(d, f))]
-        cases += [(f"CVXPY {s} constrained (build + solve)",
-                   lambda d=data, f=family, so=s: tr.solve(d, f, solver=so))
-                  for s in ("CLARABEL", "OSQP") if s in available_solvers()]
+        cases += [
+            (
+                f"CVXPY {s} constrained (build + solve)",
+                lambda d=data, f=family, so=s: tr.solve(d, f, solver=so),
+            )
+            for s in ("CLARABEL", "OSQP")
+            if s in available_solvers()
+        ]
         for name, fn in cases:
             rep = repeat(fn, repeats)
             for sol in rep.results:
                 sol.require_ok()
-            res.append({"case": f"{family}: {name}", "objects": q, "points": n,
-                        "median_s": rep.median, "min_s": rep.best})
+            res.append(
+                {
+                    "case": f"{family}: {name}",
+                    "objects": q,
+                    "points": n,
+                    "median_s": rep.median,
+                    "min_s": rep.best,
+                }
+            )
     return res
 
 
@@ -153,7 +200,8 @@ class Adapter(cases.Adapter):
 
     def runs(self, instance: str) -> list[Run]:
         return [Run("closed_form", "numpy")] + [
-            Run(f, s) for f in ("constrained", "reduced") for s in cvxpy_qp_solvers()]
+            Run(f, s) for f in ("constrained", "reduced") for s in cvxpy_qp_solvers()
+        ]
 
     def solve(self, instance: str, data: Any, run: Run, options: dict[str, Any]) -> Outcome:
         from optmodels import trajectories as tr
@@ -161,38 +209,69 @@ class Adapter(cases.Adapter):
         if run.formulation == "closed_form":
             sol = tr.closed_form(data, instance)  # type: ignore[arg-type]
         else:
-            sol = tr.solve(data, instance, formulation=run.formulation,  # type: ignore[arg-type]
-                           solver=run.solver, **options)
+            sol = tr.solve(
+                data,
+                instance,
+                formulation=run.formulation,  # type: ignore[arg-type]
+                solver=run.solver,
+                **options,
+            )
         return cases._from_solution(sol, sol.theta)
 
 
 # ------------------------------------------------------ compare --details report
-def write_report(out: Path, rows: list[dict[str, Any]],
-                 bench: list[dict[str, Any]] | None = None) -> str:
+def write_report(
+    out: Path, rows: list[dict[str, Any]], bench: list[dict[str, Any]] | None = None
+) -> str:
     """Write ``trajectories_results.csv`` (and ``trajectories_benchmark.csv``) and return
     the Markdown section."""
     report._results_csv(out, "trajectories", rows)
-    cols = ["family", "objects", "points", "formulation", "solver", "status",
-            "solution_error", "objective_gap", "max_violation", "build_time", "solve_time",
-            "iterations"]
-    fmt = {"solution_error": ".1e", "objective_gap": ".1e", "max_violation": ".1e",
-           "build_time": ".4f", "solve_time": ".4f"}
+    cols = [
+        "family",
+        "objects",
+        "points",
+        "formulation",
+        "solver",
+        "status",
+        "solution_error",
+        "objective_gap",
+        "max_violation",
+        "build_time",
+        "solve_time",
+        "iterations",
+    ]
+    fmt = {
+        "solution_error": ".1e",
+        "objective_gap": ".1e",
+        "max_violation": ".1e",
+        "build_time": ".4f",
+        "solve_time": ".4f",
+    }
     big = max(r["size"] for r in rows)
-    md = ("## Dependent linear trajectories (paper 002)\n\n"
-          "Closed form against CVXPY solvers on the original constrained problem (Q lines + "
-          "the family's equalities) and on the reduced problem in θ. Full grid in "
-          "`trajectories_results.csv`; largest instance:\n\n"
-          + markdown_table([r for r in rows if r["size"] == big], cols, fmt))
+    md = (
+        "## Dependent linear trajectories (paper 002)\n\n"
+        "Closed form against CVXPY solvers on the original constrained problem (Q lines + "
+        "the family's equalities) and on the reduced problem in θ. Full grid in "
+        "`trajectories_results.csv`; largest instance:\n\n"
+        + markdown_table([r for r in rows if r["size"] == big], cols, fmt)
+    )
     worst = max((r["solution_error"] for r in rows if r["status"] == "optimal"), default=0.0)
-    md += (f"\nLargest solution error of any optimal generic solve against the closed form "
-           f"over the grid: {worst:.1e} (relative to max |θ|). The QP has equality "
-           "constraints only: Clarabel (one KKT factorisation) and OSQP (its polishing step "
-           "solves the KKT system) land on the closed form to 1e-11 or better; SCS, first-"
-           "order with eps = 1e-9 on the rescaled problem, stops near 3e-8 from N = 100 "
-           "points on. CVXPY's canonicalisation (build) is half of the generic time or "
-           "more; SCS's build of the reduced form is the slowest step of the grid.\n")
-    md += report._benchmark(out, "trajectories", bench,
-                            "Benchmark (wall seconds, median and best of the repeats; targets: "
-                            "closed form ≤ 0.01 s, CVXPY ≤ 2 s):",
-                            ["case", "objects", "points", "median_s", "min_s"], ".4f")
+    md += (
+        f"\nLargest solution error of any optimal generic solve against the closed form "
+        f"over the grid: {worst:.1e} (relative to max |θ|). The QP has equality "
+        "constraints only: Clarabel (one KKT factorisation) and OSQP (its polishing step "
+        "solves the KKT system) land on the closed form to 1e-11 or better; SCS, first-"
+        "order with eps = 1e-9 on the rescaled problem, stops near 3e-8 from N = 100 "
+        "points on. CVXPY's canonicalisation (build) is half of the generic time or "
+        "more; SCS's build of the reduced form is the slowest step of the grid.\n"
+    )
+    md += report._benchmark(
+        out,
+        "trajectories",
+        bench,
+        "Benchmark (wall seconds, median and best of the repeats; targets: "
+        "closed form ≤ 0.01 s, CVXPY ≤ 2 s):",
+        ["case", "objects", "points", "median_s", "min_s"],
+        ".4f",
+    )
     return md + "\n"

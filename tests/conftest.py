@@ -68,9 +68,13 @@ def _estimate_values(value: Any) -> np.ndarray | None:
     return arr if arr.size else None
 
 
-def assert_verified(solution: Any, data: Any = None, *, estimate: str | None = None,
-                    residuals: Mapping[str, float] | Callable[[Any, Any], Mapping[str, float]]
-                    | None = None) -> None:
+def assert_verified(
+    solution: Any,
+    data: Any = None,
+    *,
+    estimate: str | None = None,
+    residuals: Mapping[str, float] | Callable[[Any, Any], Mapping[str, float]] | None = None,
+) -> None:
     """The contract of every solution of every problem (``data`` is the problem's data).
 
     OK status: a finite objective, the solution's own NumPy residuals (``solution.residuals``,
@@ -83,8 +87,7 @@ def assert_verified(solution: Any, data: Any = None, *, estimate: str | None = N
 
     assert isinstance(solution, Solution), type(solution)
     assert isinstance(solution.residuals, dict), solution.residuals
-    assert all(isinstance(v, float | int) for v in solution.residuals.values()), \
-        solution.residuals
+    assert all(isinstance(v, float | int) for v in solution.residuals.values()), solution.residuals
     est = _estimate_values(getattr(solution, estimate, None)) if estimate else None
     if solution.status.ok:
         limit = VERIFY_TOL if solution.status == Status.OPTIMAL else REJECT_TOL

@@ -61,8 +61,14 @@ class Trouble(Adapter):
         return Outcome(True, "optimal", 0.0, data, 0.0, 0.0, 0.0)
 
     def runs(self, instance: str) -> list[Run]:
-        return [Run("closed_form", "numpy"), Run("f", "crash"), Run("f", "ok"),
-                Run("f", "sleep"), Run("f", "raise"), Run("f", "sloppy")]
+        return [
+            Run("closed_form", "numpy"),
+            Run("f", "crash"),
+            Run("f", "ok"),
+            Run("f", "sleep"),
+            Run("f", "raise"),
+            Run("f", "sloppy"),
+        ]
 
     def solve(self, instance: str, data: Any, run: Run, options: dict[str, Any]) -> Outcome:
         if run.solver == "crash":

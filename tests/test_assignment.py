@@ -19,8 +19,16 @@ from optmodels.core import REJECT_TOL, VERIFY_TOL, SolveError, Status
 from solvers_cmp.assignment import instance
 
 
-def case(rng: np.random.Generator, q: int, n: int, *, spread: float = 3.0,
-         rho: float = 0.3, pd: float = 0.9, **kw) -> asg.AssignmentData:
+def case(
+    rng: np.random.Generator,
+    q: int,
+    n: int,
+    *,
+    spread: float = 3.0,
+    rho: float = 0.3,
+    pd: float = 0.9,
+    **kw,
+) -> asg.AssignmentData:
     """Q predictions in a square, the first min(N, Q) measurements near objects (so merges
     and misses both happen when the square is small), the rest clutter."""
     means = rng.uniform(0, spread, (q, 2))
@@ -31,12 +39,14 @@ def case(rng: np.random.Generator, q: int, n: int, *, spread: float = 3.0,
     return asg.AssignmentData(means, covs, meas, 0.25 * np.eye(2), spread**2, pd, rho, **kw)
 
 
-def dense_scene(q: int, side_factor: float, *, gate: float | None = 3.0,
-                max_group_size: int | None = None) -> asg.AssignmentData:
+def dense_scene(
+    q: int, side_factor: float, *, gate: float | None = 3.0, max_group_size: int | None = None
+) -> asg.AssignmentData:
     """The comparison's scene (solvers_cmp.assignment.instance) with a chosen density:
     Q objects in a square of side ``side_factor``·√Q, N = Q + Q//8 + 1."""
-    return instance(q, q + q // 8 + 1, 0, gate, side_factor=side_factor,
-                    max_group_size=max_group_size)
+    return instance(
+        q, q + q // 8 + 1, 0, gate, side_factor=side_factor, max_group_size=max_group_size
+    )
 
 
 def test_counts() -> None:
@@ -113,8 +123,7 @@ def test_score_by_hand() -> None:
     d = asg.AssignmentData([[0.0, 0.0]], [np.eye(2)], [[1.0, 0.0]], np.eye(2), 50.0, 0.8, 0.5)
     expect = math.log(0.8) - math.log(2 * math.pi * 2.0) - 0.5 * 1.0 / 2.0
     assert asg.score(d, [(0,)], [0]) == pytest.approx(expect, rel=1e-12)
-    assert asg.score(d, [(0,)], [-1]) == pytest.approx(math.log(0.2) - math.log(50.0),
-                                                       rel=1e-12)
+    assert asg.score(d, [(0,)], [-1]) == pytest.approx(math.log(0.2) - math.log(50.0), rel=1e-12)
 
 
 def test_far_measurement_does_not_underflow() -> None:
@@ -144,12 +153,23 @@ def test_time_limit_is_not_optimal() -> None:
 
 
 def test_bad_input() -> None:
-    ok = dict(means=[[0.0, 0.0]], covs=[np.eye(2)], measurements=[[0.0, 0.0]],
-              meas_cov=np.eye(2), volume=1.0, pd=0.9, rho=0.1)
-    for key, bad, match in (("pd", 1.0, "pd"), ("rho", 0.0, "rho"), ("volume", -1.0, "volume"),
-                            ("covs", [-np.eye(2)], "covs"),
-                            ("measurements", [[0.0, 0.0, 0.0]], "measurements"),
-                            ("meas_cov", [[1.0, 2.0], [2.0, 1.0]], "meas_cov")):
+    ok = dict(
+        means=[[0.0, 0.0]],
+        covs=[np.eye(2)],
+        measurements=[[0.0, 0.0]],
+        meas_cov=np.eye(2),
+        volume=1.0,
+        pd=0.9,
+        rho=0.1,
+    )
+    for key, bad, match in (
+        ("pd", 1.0, "pd"),
+        ("rho", 0.0, "rho"),
+        ("volume", -1.0, "volume"),
+        ("covs", [-np.eye(2)], "covs"),
+        ("measurements", [[0.0, 0.0, 0.0]], "measurements"),
+        ("meas_cov", [[1.0, 2.0], [2.0, 1.0]], "meas_cov"),
+    ):
         with pytest.raises(ProblemError, match=match):
             asg.AssignmentData(**{**ok, key: bad})
     d = asg.AssignmentData(**ok)
@@ -162,11 +182,13 @@ def test_k_best_and_marginals() -> None:
     are within the stated bound of the exact ones (all hypotheses):
     |β_exact − β_k| ≤ ε/(1 + ε), ε the reported neglected mass."""
     d = case(np.random.default_rng(3), 3, 2, spread=3.0)
-    every = sorted(((asg.score(d, p, a), p, a) for p, a in asg.enumerate_hypotheses(d)),
-                   key=lambda x: -x[0])
+    every = sorted(
+        ((asg.score(d, p, a), p, a) for p, a in asg.enumerate_hypotheses(d)), key=lambda x: -x[0]
+    )
     kb = asg.k_best(d, 8)
-    np.testing.assert_allclose([h.log_score for h in kb.hypotheses],
-                               [x[0] for x in every[:8]], atol=1e-9)
+    np.testing.assert_allclose(
+        [h.log_score for h in kb.hypotheses], [x[0] for x in every[:8]], atol=1e-9
+    )
     w = np.exp(np.array([x[0] for x in every]) - every[0][0])
     w /= w.sum()
     for i in range(d.n):
@@ -192,10 +214,19 @@ def test_k_best_equals_enumeration_on_random_cases(seed: int) -> None:
     rng = np.random.default_rng(100 + seed)
     q, n = int(rng.integers(3, 5)), int(rng.integers(2, 5))
     kw = {} if seed % 3 else {"max_group_size": 2, "group_gate": 4.0}
-    d = case(rng, q, n, spread=float(rng.uniform(1.0, 2.5)), rho=float(rng.uniform(0.2, 0.9)),
-             pd=float(rng.uniform(0.6, 0.95)), **kw)
-    every = sorted(((asg.score(d, p, a), p, tuple(a)) for p, a in asg.enumerate_hypotheses(d)),
-                   key=lambda x: -x[0])
+    d = case(
+        rng,
+        q,
+        n,
+        spread=float(rng.uniform(1.0, 2.5)),
+        rho=float(rng.uniform(0.2, 0.9)),
+        pd=float(rng.uniform(0.6, 0.95)),
+        **kw,
+    )
+    every = sorted(
+        ((asg.score(d, p, a), p, tuple(a)) for p, a in asg.enumerate_hypotheses(d)),
+        key=lambda x: -x[0],
+    )
     k = min(int(rng.integers(5, 25)), len(every))
     kb = asg.k_best(d, k)
     got = [h.log_score for h in kb.hypotheses]
@@ -239,23 +270,47 @@ def test_user_supplied_model() -> None:
         def prior(g: tuple[int, ...], detected: bool, d=d) -> float:
             return asg.block_log_prior(d, g, detected)
 
-        u = asg.AssignmentData(d.means, d.covs, d.measurements, d.meas_cov, d.volume, d.pd,
-                               d.rho, log_likelihood=ll, block_log_prior=prior)
+        u = asg.AssignmentData(
+            d.means,
+            d.covs,
+            d.measurements,
+            d.meas_cov,
+            d.volume,
+            d.pd,
+            d.rho,
+            log_likelihood=ll,
+            block_log_prior=prior,
+        )
         a, b = asg.solve(d), asg.solve(u)
         assert a.partition == b.partition and list(a.assignment) == list(b.assignment)
         assert b.log_score == pytest.approx(a.log_score, abs=1e-9)
         no_merge = asg.AssignmentData(
-            d.means, d.covs, d.measurements, d.meas_cov, d.volume, d.pd, d.rho,
-            block_log_prior=lambda g, det, d=d: asg.block_log_prior(d, g, det) - 1e3 * (len(g) - 1))
+            d.means,
+            d.covs,
+            d.measurements,
+            d.meas_cov,
+            d.volume,
+            d.pd,
+            d.rho,
+            block_log_prior=lambda g, det, d=d: asg.block_log_prior(d, g, det) - 1e3 * (len(g) - 1),
+        )
         la = asg.linear_assignment(d)
         nm = asg.solve(no_merge)
         assert list(nm.assignment) == list(la.assignment) and nm.partition == la.partition
     # measurement 0 may not come from object 0
     d = case(np.random.default_rng(1), 2, 1, rho=0.05)
     forbid = asg.AssignmentData(
-        d.means, d.covs, d.measurements, d.meas_cov, d.volume, d.pd, d.rho,
-        log_likelihood=lambda data, g: np.where(np.array([0 in g]), -np.inf,
-                                                asg.log_likelihoods(d, [g])[:, 0]))
+        d.means,
+        d.covs,
+        d.measurements,
+        d.meas_cov,
+        d.volume,
+        d.pd,
+        d.rho,
+        log_likelihood=lambda data, g: np.where(
+            np.array([0 in g]), -np.inf, asg.log_likelihoods(d, [g])[:, 0]
+        ),
+    )
     s = asg.solve(forbid)
     assert s.assignment[0] == -1 or 0 not in s.partition[s.assignment[0]]
 
@@ -273,8 +328,7 @@ def test_size_guards_refuse_before_allocating(monkeypatch: pytest.MonkeyPatch) -
     dense = dense_scene(100, 0.7)
     with pytest.raises(ProblemError, match="candidate groups") as err:
         asg.solve(dense)  # at the default limit
-    assert "max_group_size" in str(err.value) and str(asg.MAX_CANDIDATE_GROUPS) in str(
-        err.value)
+    assert "max_group_size" in str(err.value) and str(asg.MAX_CANDIDATE_GROUPS) in str(err.value)
     monkeypatch.setattr(asg_data, "MAX_CANDIDATE_GROUPS", 2000)  # same path, quicker to trace
     for data in (dense, dense_scene(200, 3.0, gate=None)):
         tracemalloc.start()
@@ -336,21 +390,50 @@ def test_brute_force_size_guard() -> None:
             asg.brute_force(small, max_hypotheses=bad)
 
 
-OK_FIELDS = dict(means=[[0.0, 0.0], [1.0, 0.0]], covs=[np.eye(2), np.eye(2)],
-                 measurements=[[0.0, 0.1]], meas_cov=np.eye(2), volume=100.0, pd=0.9,
-                 rho=0.1)
+OK_FIELDS = dict(
+    means=[[0.0, 0.0], [1.0, 0.0]],
+    covs=[np.eye(2), np.eye(2)],
+    measurements=[[0.0, 0.1]],
+    meas_cov=np.eye(2),
+    volume=100.0,
+    pd=0.9,
+    rho=0.1,
+)
 
 
-@pytest.mark.parametrize(("key", "bad"), [
-    ("pd", None), ("pd", np.nan), ("pd", 0.0), ("pd", 1.0), ("pd", "0.9"), ("pd", True),
-    ("volume", None), ("volume", 0.0), ("volume", np.inf), ("volume", -1.0),
-    ("rho", 0.0), ("rho", -0.5), ("rho", 1.5), ("rho", np.inf), ("rho", np.nan),
-    ("rho", None),
-    ("group_gate", 0.0), ("group_gate", -1.0), ("group_gate", np.nan), ("group_gate", "3"),
-    ("max_group_size", 0), ("max_group_size", 2.5), ("max_group_size", np.nan),
-    ("max_group_size", True), ("means", [[0.0, np.nan], [1.0, 0.0]]),
-    ("measurements", [[1j, 0.0]]), ("measurements", "x"), ("log_likelihood", 3.0),
-])
+@pytest.mark.parametrize(
+    ("key", "bad"),
+    [
+        ("pd", None),
+        ("pd", np.nan),
+        ("pd", 0.0),
+        ("pd", 1.0),
+        ("pd", "0.9"),
+        ("pd", True),
+        ("volume", None),
+        ("volume", 0.0),
+        ("volume", np.inf),
+        ("volume", -1.0),
+        ("rho", 0.0),
+        ("rho", -0.5),
+        ("rho", 1.5),
+        ("rho", np.inf),
+        ("rho", np.nan),
+        ("rho", None),
+        ("group_gate", 0.0),
+        ("group_gate", -1.0),
+        ("group_gate", np.nan),
+        ("group_gate", "3"),
+        ("max_group_size", 0),
+        ("max_group_size", 2.5),
+        ("max_group_size", np.nan),
+        ("max_group_size", True),
+        ("means", [[0.0, np.nan], [1.0, 0.0]]),
+        ("measurements", [[1j, 0.0]]),
+        ("measurements", "x"),
+        ("log_likelihood", 3.0),
+    ],
+)
 def test_bad_scalars_in_data(key: str, bad: object) -> None:
     """Every field through the core checks: a ProblemError naming the argument."""
     with pytest.raises(ProblemError, match=f"AssignmentData {key}"):
@@ -394,8 +477,11 @@ def test_bad_arguments_of_entry_points() -> None:
     for call, match in bad_calls:
         with pytest.raises(ProblemError, match=match):
             call()
-    assert asg.count_hypotheses(3.0, 2.0) == asg.count_hypotheses(3, 2) == sum(
-        1 for _ in asg.enumerate_hypotheses(case(np.random.default_rng(0), 3, 2)))
+    assert (
+        asg.count_hypotheses(3.0, 2.0)
+        == asg.count_hypotheses(3, 2)
+        == sum(1 for _ in asg.enumerate_hypotheses(case(np.random.default_rng(0), 3, 2)))
+    )
     with pytest.raises(ProblemError, match="time_limit"):
         asg.solve(d, time_limit=np.inf)  # no limit is None
     with pytest.raises(ProblemError, match="k_best k"):
@@ -419,9 +505,13 @@ def test_non_milp_solver_is_refused_by_the_cli(tmp_path, capsys) -> None:
     assert "does not solve integer programs" in capsys.readouterr().err
 
 
-def _perturbed(monkeypatch: pytest.MonkeyPatch, *, objective: float = 0.0,
-               point: Callable[[np.ndarray], np.ndarray] | None = None,
-               gap: float | None = None) -> None:
+def _perturbed(
+    monkeypatch: pytest.MonkeyPatch,
+    *,
+    objective: float = 0.0,
+    point: Callable[[np.ndarray], np.ndarray] | None = None,
+    gap: float | None = None,
+) -> None:
     """Make the back-end return a perturbed objective or point (a faulty solver)."""
     real = asg_milp.solve_problem
 
@@ -436,9 +526,13 @@ def _perturbed(monkeypatch: pytest.MonkeyPatch, *, objective: float = 0.0,
     monkeypatch.setattr(asg_milp, "solve_problem", fake)
 
 
-def _perturbed_direct(monkeypatch: pytest.MonkeyPatch, *, objective: float = 0.0,
-                      point: Callable[[np.ndarray], np.ndarray] | None = None,
-                      gap: float | None = None) -> None:
+def _perturbed_direct(
+    monkeypatch: pytest.MonkeyPatch,
+    *,
+    objective: float = 0.0,
+    point: Callable[[np.ndarray], np.ndarray] | None = None,
+    gap: float | None = None,
+) -> None:
     """The same faults injected into the direct HiGHS call of the decomposed path."""
     from optmodels.assignment import decomposed
 
@@ -466,11 +560,17 @@ def test_milp_answer_is_rechecked(monkeypatch: pytest.MonkeyPatch, model: str) -
         monkeypatch.setattr(decomposed, "ENUMERATE_OBJECTS", 0)
     honest = asg.solve(d, model=model)
     perturb = _perturbed if model == "cvxpy" else _perturbed_direct
-    assert model == "cvxpy" or honest.info["contended_components"] == 1 == honest.info[
-        "components"]  # the whole scene is the one HiGHS model
+    assert (
+        model == "cvxpy" or honest.info["contended_components"] == 1 == honest.info["components"]
+    )  # the whole scene is the one HiGHS model
     assert honest.status is Status.OPTIMAL
-    assert set(honest.residuals) >= {"integrality", "exact_cover", "one_source",
-                                     "block_capacity", "objective"}
+    assert set(honest.residuals) >= {
+        "integrality",
+        "exact_cover",
+        "one_source",
+        "block_capacity",
+        "objective",
+    }
     assert honest.max_residual <= 1e-9
     rel = abs(honest.log_score)
     assert rel > 1.0  # so the relative objective residual is the perturbation itself
@@ -518,14 +618,17 @@ def test_highs_banner_does_not_reach_stdout() -> None:
     import subprocess
     import sys
 
-    code = ("from optmodels import assignment as asg\n"
-            "import numpy as np\n"
-            "d = asg.AssignmentData([[0.0, 0.0]], [np.eye(2)], [[0.1, 0.0]], np.eye(2),"
-            " 100.0, 0.9, 0.1)\n"
-            "s = asg.solve(d); s2 = asg.solve(d)\n"
-            "print('STATUS', s.status.value, s2.status.value)\n")
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                         timeout=120, check=True)
+    code = (
+        "from optmodels import assignment as asg\n"
+        "import numpy as np\n"
+        "d = asg.AssignmentData([[0.0, 0.0]], [np.eye(2)], [[0.1, 0.0]], np.eye(2),"
+        " 100.0, 0.9, 0.1)\n"
+        "s = asg.solve(d); s2 = asg.solve(d)\n"
+        "print('STATUS', s.status.value, s2.status.value)\n"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, timeout=120, check=True
+    )
     assert out.stdout.splitlines() == ["STATUS optimal optimal"], out.stdout
     assert "HiGHS" not in out.stdout
 
@@ -534,9 +637,18 @@ def test_space_objects_bad_arguments() -> None:
     """The scenario generator's scalars through the core checks."""
     from optmodels.scenarios.space_objects import space_objects
 
-    for kw in ({"q": 2.5}, {"q": 0}, {"sessions": np.nan}, {"separation": -1.0},
-               {"resolution": np.inf}, {"sigma": 0.0}, {"pd": 1.5}, {"clutter": -1.0},
-               {"dt": None}, {"window": "big"}):
+    for kw in (
+        {"q": 2.5},
+        {"q": 0},
+        {"sessions": np.nan},
+        {"separation": -1.0},
+        {"resolution": np.inf},
+        {"sigma": 0.0},
+        {"pd": 1.5},
+        {"clutter": -1.0},
+        {"dt": None},
+        {"window": "big"},
+    ):
         with pytest.raises(ProblemError, match=f"space_objects {next(iter(kw))}"):
             space_objects(0, **kw)
     with pytest.raises(ProblemError, match="seed"):

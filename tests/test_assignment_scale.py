@@ -20,10 +20,16 @@ from optmodels.core import ProblemError, Status
 from solvers_cmp.assignment_scale import resolution, scan
 
 
-def _polar_scene(rng: np.random.Generator, q: int, spread: float = 3e3,
-                 r0: float = 60e3, sd: tuple[float, float] = (20.0, 300.0)) -> tuple:
-    means = np.column_stack([rng.uniform(r0, r0 + spread, q),
-                             rng.uniform(-spread / 2, spread / 2, q)])
+def _polar_scene(
+    rng: np.random.Generator,
+    q: int,
+    spread: float = 3e3,
+    r0: float = 60e3,
+    sd: tuple[float, float] = (20.0, 300.0),
+) -> tuple:
+    means = np.column_stack(
+        [rng.uniform(r0, r0 + spread, q), rng.uniform(-spread / 2, spread / 2, q)]
+    )
     covs = np.stack([np.diag(rng.uniform(*sd, 2) ** 2) for _ in range(q)])
     return means, covs
 
@@ -57,12 +63,14 @@ def test_gated_pairs_equal_the_dense_table(seed: int) -> None:
     np.testing.assert_allclose(u, dense[ii, jj], rtol=1e-12, atol=0)
     bound = res.pair_bounds(means, covs, iu, ju)
     assert np.all(bound >= dense[iu, ju] - 1e-12)
-    data = asg.AssignmentData(means, covs, np.zeros((0, means.shape[1])),
-                              np.eye(means.shape[1]), 1e9, 0.9, sensor=res)
+    data = asg.AssignmentData(
+        means, covs, np.zeros((0, means.shape[1])), np.eye(means.shape[1]), 1e9, 0.9, sensor=res
+    )
     table = data.pair_unresolved()
     np.testing.assert_allclose(table[ii, jj], dense[ii, jj], rtol=1e-12)
     assert data.log_prior_constant == pytest.approx(
-        float(np.sum(np.log1p(-dense[iu, ju]))), abs=q * q * PAIR_NEGLECT)
+        float(np.sum(np.log1p(-dense[iu, ju]))), abs=q * q * PAIR_NEGLECT
+    )
 
 
 def test_candidate_groups_follow_the_sensor() -> None:
@@ -97,9 +105,15 @@ def test_candidate_groups_follow_the_sensor() -> None:
                 assert asg_sensor._log_max_tree(dense, g) <= math.log(PAIR_NEGLECT) + 1e-9
     assert got == want and any(len(g) >= 3 for g in got) and len(got) < 2**9 - 1
     big = scan(1000, 0)
-    data = asg.AssignmentData(big["means"], big["covs"], big["measurements"],
-                              big["meas_cov"], volume=big["volume"], pd=0.9,
-                              sensor=resolution())
+    data = asg.AssignmentData(
+        big["means"],
+        big["covs"],
+        big["measurements"],
+        big["meas_cov"],
+        volume=big["volume"],
+        pd=0.9,
+        sensor=resolution(),
+    )
     assert 1000 <= len(asg.candidate_groups(data)) < 1200
 
 
@@ -123,13 +137,15 @@ def _scene(rng: np.random.Generator, clusters: int, per: int, n_extra: int = 1) 
 
 
 @pytest.mark.parametrize("seed", range(6))
-def test_decomposed_equals_monolithic_and_brute_force(seed: int,
-                                                      monkeypatch: pytest.MonkeyPatch) -> None:
+def test_decomposed_equals_monolithic_and_brute_force(
+    seed: int, monkeypatch: pytest.MonkeyPatch
+) -> None:
     """The decomposed MAP (default: small contended components by their variants) equals
     the same with every contended component in the one HiGHS model, and the monolithic
     CVXPY MILP (the original form), in score, partition and assignment; on small scenes
     also the paper's enumeration (brute force); several components, ≥ 1 contended."""
     from optmodels.assignment import decomposed
+
     rng = np.random.default_rng(100 + seed)
     small = seed < 3
     m, k, z, r, res = _scene(rng, 1 if small else 4, 3 if small else 4)
@@ -166,8 +182,10 @@ def test_map_is_the_union_of_the_component_maps() -> None:
         objs = np.arange(3 * c, 3 * c + 3)
         centre = np.array([50e3 + 20e3 * c, 0.0])
         mine = np.linalg.norm(z - centre, axis=1) < 8e3
-        part = asg.solve(asg.AssignmentData(m[objs], k[objs], z[mine], r[mine], volume=1e8,
-                                            pd=0.9, sensor=res), model="cvxpy")
+        part = asg.solve(
+            asg.AssignmentData(m[objs], k[objs], z[mine], r[mine], volume=1e8, pd=0.9, sensor=res),
+            model="cvxpy",
+        )
         assert part.ok
         total += part.log_score
         blocks += [tuple(int(objs[j]) for j in b) for b in part.partition]
@@ -205,8 +223,9 @@ def test_memory_guards_refuse_before_allocating(monkeypatch: pytest.MonkeyPatch)
     monkeypatch.setattr(asg_sensor, "MAX_PAIR_TABLE_BYTES", 40 * 40 * 8 - 1)
     with pytest.raises(ProblemError, match="gated_pairs"):
         res.pair_probabilities(means, covs)
-    d = asg.AssignmentData(means, covs, means[:5], np.eye(2) * 100.0, 1e9, 0.9,
-                           sensor=res, max_group_size=2)
+    d = asg.AssignmentData(
+        means, covs, means[:5], np.eye(2) * 100.0, 1e9, 0.9, sensor=res, max_group_size=2
+    )
     monkeypatch.setattr(asg_data, "MAX_PAIR_TABLE_BYTES", 40 * 40 * 8 - 1)
     with pytest.raises(ProblemError, match="pair_table"):
         d.pair_unresolved()
@@ -222,14 +241,21 @@ def test_q3000_scene_is_exact_and_under_the_address_space_limit() -> None:
     solved OPTIMAL (re-checked), its score equal to the monolithic MILP on its contended
     part being optimal is what the re-check proves; here: the child succeeds and merges
     are found."""
-    code = ("import resource, json\n"
-            "resource.setrlimit(resource.RLIMIT_AS, (8 * 2**30, 8 * 2**30))\n"
-            "from solvers_cmp.assignment_scale import scan, run_map\n"
-            "s = run_map(scan(3000, 1))\n"
-            "print(json.dumps({'status': s.status.value, 'merged': sum(len(b) > 1 for b in "
-            "s.partition), 'res': s.max_residual}))\n")
-    out = subprocess.run([__import__("sys").executable, "-c", code], capture_output=True,
-                         text=True, check=True, timeout=600)
+    code = (
+        "import resource, json\n"
+        "resource.setrlimit(resource.RLIMIT_AS, (8 * 2**30, 8 * 2**30))\n"
+        "from solvers_cmp.assignment_scale import scan, run_map\n"
+        "s = run_map(scan(3000, 1))\n"
+        "print(json.dumps({'status': s.status.value, 'merged': sum(len(b) > 1 for b in "
+        "s.partition), 'res': s.max_residual}))\n"
+    )
+    out = subprocess.run(
+        [__import__("sys").executable, "-c", code],
+        capture_output=True,
+        text=True,
+        check=True,
+        timeout=600,
+    )
     res = json.loads(out.stdout.strip().splitlines()[-1])
     assert res["status"] == "optimal" and res["merged"] > 10 and res["res"] <= 1e-9
 
@@ -241,19 +267,36 @@ def test_cli_solves_more_than_1000_measurements(tmp_path) -> None:  # type: igno
     from tests.test_cli import OPTMODELS
 
     sc = scan(1100, 4)
-    case = {"means": sc["means"].tolist(), "covs": sc["covs"].tolist(),
-            "measurements": sc["measurements"].tolist(), "meas_cov": sc["meas_cov"].tolist(),
-            "volume": sc["volume"], "pd": 0.9,
-            "sensor": {"range": 150.0, "azimuth_deg": 1.0, "site": [0.0, 0.0]}}
+    case = {
+        "means": sc["means"].tolist(),
+        "covs": sc["covs"].tolist(),
+        "measurements": sc["measurements"].tolist(),
+        "meas_cov": sc["meas_cov"].tolist(),
+        "volume": sc["volume"],
+        "pd": 0.9,
+        "sensor": {"range": 150.0, "azimuth_deg": 1.0, "site": [0.0, 0.0]},
+    }
     assert len(case["measurements"]) > 1000
     path = tmp_path / "case.json"
     path.write_text(json.dumps(case))
-    out = subprocess.run([str(OPTMODELS), "assignment", "solve", str(path), "--json"],
-                         capture_output=True, text=True, timeout=600)
+    out = subprocess.run(
+        [str(OPTMODELS), "assignment", "solve", str(path), "--json"],
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
     assert out.returncode == 0, out.stderr
     res = json.loads(out.stdout)
     assert res["status"] == "optimal" and res["hypotheses_total"] is None
-    api = asg.solve(asg.AssignmentData(sc["means"], sc["covs"], sc["measurements"],
-                                       sc["meas_cov"], volume=sc["volume"], pd=0.9,
-                                       sensor=resolution()))
+    api = asg.solve(
+        asg.AssignmentData(
+            sc["means"],
+            sc["covs"],
+            sc["measurements"],
+            sc["meas_cov"],
+            volume=sc["volume"],
+            pd=0.9,
+            sensor=resolution(),
+        )
+    )
     assert res["log_score"] == pytest.approx(api.log_score, rel=1e-9)

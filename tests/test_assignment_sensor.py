@@ -92,8 +92,9 @@ def test_pair_probability_tails_and_limits() -> None:
     tiny = np.stack([np.eye(2) * 1e-6] * 2)
     inside = res.pair_probabilities(np.array([[10e3, 0.0], [10.05e3, 0.0]]), tiny)[0, 1]
     outside = res.pair_probabilities(np.array([[10e3, 0.0], [10.2e3, 0.0]]), tiny)[0, 1]
-    far = res.pair_probabilities(np.array([[10e3, 0.0], [30e3, 0.0]]),
-                                 np.stack([np.eye(2)] * 2))[0, 1]
+    far = res.pair_probabilities(np.array([[10e3, 0.0], [30e3, 0.0]]), np.stack([np.eye(2)] * 2))[
+        0, 1
+    ]
     assert inside == pytest.approx(1.0, abs=1e-9)
     assert outside == far == pytest.approx(1e-100, rel=1e-12)
     # box with independent coordinates: Δ ~ N(μ, diag(s²)) (an ellipse with E = I m², in
@@ -102,8 +103,9 @@ def test_pair_probability_tails_and_limits() -> None:
 
     mu, s = np.array([[30.0, -0.004]]), np.array([60.0, 0.006])
     got = _box_probability(mu, np.diag(s**2)[None], np.array([100.0, 0.01]))[0]
-    want = float(_interval_prob(-100.0, 100.0, mu[0, 0], s[0]) * _interval_prob(
-        -0.01, 0.01, mu[0, 1], s[1]))
+    want = float(
+        _interval_prob(-100.0, 100.0, mu[0, 0], s[0]) * _interval_prob(-0.01, 0.01, mu[0, 1], s[1])
+    )
     assert got == pytest.approx(want, rel=1e-10)
 
 
@@ -150,9 +152,13 @@ def test_group_probability_is_the_chain_probability(k: int) -> None:
     d = AssignmentData(m, cov, np.zeros((0, 2)), np.eye(2), 1e6, 0.9, sensor=res)
     s = asg.score(d, [tuple(range(k))], []) - math.log1p(-0.9)
     assert s + d.log_prior_constant == pytest.approx(math.log(conn), abs=1e-10)
-    total = sum(math.exp(d.log_prior_constant + sum(
-        asg.block_log_prior(d, b, False) - math.log1p(-0.9) for b in p))
-        for p in asg.set_partitions(range(k)))
+    total = sum(
+        math.exp(
+            d.log_prior_constant
+            + sum(asg.block_log_prior(d, b, False) - math.log1p(-0.9) for b in p)
+        )
+        for p in asg.set_partitions(range(k))
+    )
     assert total == pytest.approx(1.0, abs=1e-12)
 
 
@@ -161,8 +167,12 @@ def test_group_probability_without_cancellation() -> None:
     with weak links): P_conn to 1e-6 relative, by enumeration, where 1 − Σ (the
     recursion) alone would have lost its digits; and a triangle of certain pairs gives 1
     (where the spanning-tree bound alone would give ~0)."""
-    for vals in ([1e-9, 2e-9, 3e-9], [0.999, 1e-8, 2e-8], [1e-4, 1e-9, 0.3, 1e-7, 1e-8, 0.5],
-                 [1 - 1e-12] * 3):
+    for vals in (
+        [1e-9, 2e-9, 3e-9],
+        [0.999, 1e-8, 2e-8],
+        [1e-4, 1e-9, 0.3, 1e-7, 1e-8, 0.5],
+        [1 - 1e-12] * 3,
+    ):
         k = 3 if len(vals) == 3 else 4
         u = np.eye(k)
         u[np.triu_indices(k, 1)] = vals
@@ -201,8 +211,9 @@ class _ConstantPairs(Resolution):
         return out
 
 
-def _case(rng: np.random.Generator, q: int, n: int, *, spread: float = 2.0,
-          per_meas: bool = False) -> dict:
+def _case(
+    rng: np.random.Generator, q: int, n: int, *, spread: float = 2.0, per_meas: bool = False
+) -> dict:
     """A dense random scene (as tests/test_assignment.case) as AssignmentData keywords."""
     means = rng.uniform(0, spread, (q, 2))
     covs = np.stack([np.eye(2) * rng.uniform(0.1, 0.5) for _ in range(q)])
@@ -214,8 +225,7 @@ def _case(rng: np.random.Generator, q: int, n: int, *, spread: float = 2.0,
         r = a @ a.transpose(0, 2, 1) + 0.05 * np.eye(2)
     else:
         r = 0.25 * np.eye(2)
-    return dict(means=means, covs=covs, measurements=meas, meas_cov=r, volume=spread**2,
-                pd=0.9)
+    return dict(means=means, covs=covs, measurements=meas, meas_cov=r, volume=spread**2, pd=0.9)
 
 
 def test_constant_rho_is_the_special_case() -> None:
@@ -229,8 +239,9 @@ def test_constant_rho_is_the_special_case() -> None:
         u = rho / (1 + rho)
         old = AssignmentData(**kw, rho=rho, max_group_size=2)
         new = AssignmentData(**kw, sensor=_ConstantPairs(u), max_group_size=2)
-        stack = AssignmentData(**{**kw, "meas_cov": np.stack([kw["meas_cov"]] * 3)},
-                               rho=rho, max_group_size=2)
+        stack = AssignmentData(
+            **{**kw, "meas_cov": np.stack([kw["meas_cov"]] * 3)}, rho=rho, max_group_size=2
+        )
         count = 0
         for p, a in asg.enumerate_hypotheses(old):
             s = asg.score(old, p, a)
@@ -238,8 +249,10 @@ def test_constant_rho_is_the_special_case() -> None:
             assert asg.score(stack, p, a) == pytest.approx(s, abs=1e-12 * max(1, abs(s)))
             count += 1
         assert count == asg.count_hypotheses(4, 3) - sum(  # triples and more left out
-            1 for p, a in asg.enumerate_hypotheses(AssignmentData(**kw, rho=rho))
-            if max(map(len, p)) > 2)
+            1
+            for p, a in asg.enumerate_hypotheses(AssignmentData(**kw, rho=rho))
+            if max(map(len, p)) > 2
+        )
         a_old, a_new = asg.solve(old), asg.solve(new)
         assert a_old.partition == a_new.partition
         assert list(a_old.assignment) == list(a_new.assignment)
@@ -247,7 +260,8 @@ def test_constant_rho_is_the_special_case() -> None:
         full_new = AssignmentData(**kw, sensor=_ConstantPairs(u))
         p, a = [(0, 1, 2), (3,)], [0, -1, 1]
         assert asg.score(full_new, p, a) - asg.score(full_old, p, a) == pytest.approx(
-            math.log(3.0 + rho), abs=1e-12)
+            math.log(3.0 + rho), abs=1e-12
+        )
 
 
 # ----------------------------------------------------------------- likelihoods
@@ -262,8 +276,9 @@ def test_merged_likelihood_by_hand(per_meas: bool, monkeypatch: pytest.MonkeyPat
     rng = np.random.default_rng(5)
     kw = _case(rng, 3, 4, per_meas=per_meas)
     amps = np.array([1.0, 3.0, 0.5])
-    d = AssignmentData(**kw, sensor=Resolution(range=1.0, azimuth=0.5, site=[-5.0, -5.0],
-                                               weights=amps))
+    d = AssignmentData(
+        **kw, sensor=Resolution(range=1.0, azimuth=0.5, site=[-5.0, -5.0], weights=amps)
+    )
     groups = [(0,), (0, 1), (1, 2), (0, 1, 2), (2,)]
     ll = asg.log_likelihoods(d, groups)
     for c, g in enumerate(groups):
@@ -293,10 +308,17 @@ def _radar_case(seed: int) -> AssignmentData:
     if seed % 3 == 2:
         sensor = Resolution(ellipse=np.diag([150.0**2, 200.0**2]), weights=weights)
     else:
-        sensor = Resolution(range=150.0, azimuth=math.radians(1.5), site=SITE,
-                            weights=weights)
-    return AssignmentData(means, covs, meas, r, 500.0**2, float(rng.uniform(0.7, 0.95)),
-                          sensor=sensor, max_group_size=None if seed % 4 else 2)
+        sensor = Resolution(range=150.0, azimuth=math.radians(1.5), site=SITE, weights=weights)
+    return AssignmentData(
+        means,
+        covs,
+        meas,
+        r,
+        500.0**2,
+        float(rng.uniform(0.7, 0.95)),
+        sensor=sensor,
+        max_group_size=None if seed % 4 else 2,
+    )
 
 
 @pytest.mark.parametrize("seed", range(12))
@@ -317,8 +339,10 @@ def test_brute_force_equals_milp_per_measurement_covs(seed: int) -> None:
     """The existing random cases (constant ρ) with one random R_i per measurement."""
     rng = np.random.default_rng(400 + seed)
     q, n = int(rng.integers(2, 5)), int(rng.integers(1, 5))
-    d = AssignmentData(**_case(rng, q, n, spread=float(rng.uniform(1.0, 3.0)), per_meas=True),
-                       rho=float(rng.uniform(0.1, 0.9)))
+    d = AssignmentData(
+        **_case(rng, q, n, spread=float(rng.uniform(1.0, 3.0)), per_meas=True),
+        rho=float(rng.uniform(0.1, 0.9)),
+    )
     bf, milp = asg.brute_force(d), asg.solve(d)
     assert milp.partition == bf.partition and list(milp.assignment) == list(bf.assignment)
     assert milp.log_score == pytest.approx(bf.log_score, abs=1e-9 * max(1, abs(bf.log_score)))
@@ -329,12 +353,15 @@ def test_k_best_equals_enumeration_with_sensor(seed: int) -> None:
     """k_best with the resolution model = the top k of the enumeration (scores to 1e-9;
     each returned hypothesis enumerated with that score, none twice)."""
     d = _radar_case(seed + 1)
-    every = sorted(((asg.score(d, p, a), p, tuple(a)) for p, a in asg.enumerate_hypotheses(d)),
-                   key=lambda x: -x[0])
+    every = sorted(
+        ((asg.score(d, p, a), p, tuple(a)) for p, a in asg.enumerate_hypotheses(d)),
+        key=lambda x: -x[0],
+    )
     k = min(8, len(every))
     kb = asg.k_best(d, k)
-    np.testing.assert_allclose([h.log_score for h in kb.hypotheses],
-                               [x[0] for x in every[:k]], atol=1e-9)
+    np.testing.assert_allclose(
+        [h.log_score for h in kb.hypotheses], [x[0] for x in every[:k]], atol=1e-9
+    )
     keys = {(tuple(h.partition), tuple(int(x) for x in h.assignment)) for h in kb.hypotheses}
     assert len(keys) == k
     for h in kb.hypotheses:
@@ -347,8 +374,16 @@ def test_linear_assignment_equals_milp_with_sensor(seed: int) -> None:
     """Merges disallowed (max_group_size = 1) with R_i and a sensor: the linear assignment
     (scipy) = the MILP = brute force (hypothesis and score)."""
     d0 = _radar_case(seed)
-    d = AssignmentData(d0.means, d0.covs, d0.measurements, d0.meas_cov, d0.volume, d0.pd,
-                       sensor=d0.sensor, max_group_size=1)
+    d = AssignmentData(
+        d0.means,
+        d0.covs,
+        d0.measurements,
+        d0.meas_cov,
+        d0.volume,
+        d0.pd,
+        sensor=d0.sensor,
+        max_group_size=1,
+    )
     lin, milp, bf = asg.linear_assignment(d), asg.solve(d), asg.brute_force(d)
     assert lin.ok and milp.ok
     for s in (lin, milp):
@@ -388,24 +423,39 @@ def test_bad_input_is_one_problem_error() -> None:
     polar = Resolution(range=100.0, azimuth=0.02, site=[0.0, 0.0])
     not_spd = np.stack([np.eye(2), np.array([[1.0, 2.0], [2.0, 1.0]])])
     bad: list[tuple[object, str]] = [
-        (lambda: AssignmentData(**{**kw, "meas_cov": np.stack([np.eye(2)] * 3)}, rho=0.3),
-         r"meas_cov: expected \(2, 2\) or one per measurement \(2, 2, 2\)"),
+        (
+            lambda: AssignmentData(**{**kw, "meas_cov": np.stack([np.eye(2)] * 3)}, rho=0.3),
+            r"meas_cov: expected \(2, 2\) or one per measurement \(2, 2, 2\)",
+        ),
         (lambda: AssignmentData(**{**kw, "meas_cov": np.ones((2, 3))}, rho=0.3), "meas_cov"),
         (lambda: AssignmentData(**{**kw, "meas_cov": not_spd}, rho=0.3), r"meas_cov\[1\]"),
-        (lambda: AssignmentData(**{**kw, "meas_cov": [[1.0, np.nan], [0, 1]]}, rho=0.3),
-         "meas_cov"),
+        (
+            lambda: AssignmentData(**{**kw, "meas_cov": [[1.0, np.nan], [0, 1]]}, rho=0.3),
+            "meas_cov",
+        ),
         (lambda: AssignmentData(**kw), "rho: required without a sensor"),
         (lambda: AssignmentData(**kw, rho=0.3, sensor=polar), "rho: give rho"),
-        (lambda: AssignmentData(**kw, sensor=polar, block_log_prior=lambda s, d: 0.0),
-         "sensor: give sensor or your own block_log_prior"),
+        (
+            lambda: AssignmentData(**kw, sensor=polar, block_log_prior=lambda s, d: 0.0),
+            "sensor: give sensor or your own block_log_prior",
+        ),
         (lambda: AssignmentData(**kw, sensor="radar"), "sensor: expected a Resolution"),
-        (lambda: AssignmentData(**kw, sensor=Resolution(ellipse=np.eye(3))),
-         r"ellipse \(m²\) has shape \(3, 3\)"),
-        (lambda: AssignmentData(**kw, sensor=Resolution(range=1.0, azimuth=0.1,
-                                                        site=[0.0, 0.0, 0.0])), "site"),
-        (lambda: AssignmentData(**kw, sensor=Resolution(range=1.0, azimuth=0.1,
-                                                        weights=[1.0, 2.0])),
-         "weights has 2 amplitudes, expected one per object"),
+        (
+            lambda: AssignmentData(**kw, sensor=Resolution(ellipse=np.eye(3))),
+            r"ellipse \(m²\) has shape \(3, 3\)",
+        ),
+        (
+            lambda: AssignmentData(
+                **kw, sensor=Resolution(range=1.0, azimuth=0.1, site=[0.0, 0.0, 0.0])
+            ),
+            "site",
+        ),
+        (
+            lambda: AssignmentData(
+                **kw, sensor=Resolution(range=1.0, azimuth=0.1, weights=[1.0, 2.0])
+            ),
+            "weights has 2 amplitudes, expected one per object",
+        ),
         (lambda: Resolution(range=-5.0, azimuth=0.1), r"Resolution range \(m\)"),
         (lambda: Resolution(range=5.0, azimuth=0.0), r"Resolution azimuth \(rad\)"),
         (lambda: Resolution(range=5.0, azimuth=10.0), "degrees given as radians"),
@@ -416,16 +466,22 @@ def test_bad_input_is_one_problem_error() -> None:
         (lambda: Resolution(ellipse=[[1.0, 0.0], [0.0, -1.0]]), "ellipse"),
         (lambda: Resolution(range=5.0, azimuth=0.1, weights="amplitude"), "weights"),
         (lambda: Resolution(range=5.0, azimuth=0.1, weights=[1.0, -1.0]), "weights"),
-        (lambda: polar.unresolved_probability([[0.0, 0.0], [1.0, 1.0]], np.stack(
-            [np.eye(2)] * 2)), "at the sensor's site"),
+        (
+            lambda: polar.unresolved_probability(
+                [[0.0, 0.0], [1.0, 1.0]], np.stack([np.eye(2)] * 2)
+            ),
+            "at the sensor's site",
+        ),
         (lambda: polar.unresolved_probability([[1.0, 0.0]], np.eye(2)), "covs"),
         (lambda: polar_measurement_covs([[1.0, 2.0]], [0, 0], -1.0, 0.1), "sigma_range"),
         (lambda: polar_measurement_covs([[1.0, 2.0]], [0, 0], 1.0, 0.0), "sigma_azimuth"),
         (lambda: polar_measurement_covs([[1.0, 2.0]], [0, 0], 1.0, 10.0), "degrees given"),
         (lambda: polar_measurement_covs([[1.0, 2.0, 3.0]], [0, 0], 1.0, 0.1), "measurements"),
         (lambda: polar_measurement_covs([[0.0, 0.0]], [0, 0], 1.0, 0.1), "range 0"),
-        (lambda: polar_measurement_covs([[1.0, 0.0]], [0, 0], 1.0, 0.1, coordinates="geo"),
-         "coordinates"),
+        (
+            lambda: polar_measurement_covs([[1.0, 0.0]], [0, 0], 1.0, 0.1, coordinates="geo"),
+            "coordinates",
+        ),
     ]
     for call, match in bad:
         with pytest.raises(ProblemError, match=match):
@@ -447,19 +503,26 @@ def test_column_bounds_from_column_generation_are_valid(seed: int) -> None:
     keep = np.argwhere(np.isfinite(gain)).reshape(-1, 2)
     c, a_eq, a_ub, b_ub = milp._build_model(d, groups, gain, keep, (), False)
     n_g, n_k = len(groups), len(keep)
-    start = np.concatenate([np.ones(n_g, dtype=bool),
-                            gain[keep[:, 0], keep[:, 1]] > -math.log(d.volume),
-                            np.ones(d.n, dtype=bool)])
+    start = np.concatenate(
+        [
+            np.ones(n_g, dtype=bool),
+            gain[keep[:, 0], keep[:, 1]] > -math.log(d.volume),
+            np.ones(d.n, dtype=bool),
+        ]
+    )
     pair = {(int(i), int(k)): n_g + m for m, (i, k) in enumerate(keep)}
     index = {g: k for k, g in enumerate(groups)}
-    for bound in (kbest._column_bounds(c, a_eq, a_ub, b_ub, start),
-                  kbest._column_bounds(c, a_eq, a_ub, b_ub)):
+    for bound in (
+        kbest._column_bounds(c, a_eq, a_ub, b_ub, start),
+        kbest._column_bounds(c, a_eq, a_ub, b_ub),
+    ):
         assert bound is not None and np.all(np.isfinite(bound))
         best = asg.brute_force(d).log_score
         assert np.max(bound) >= best - 1e-9  # D ≥ the LP optimum ≥ the MAP
         assert np.min(bound) < best  # some columns are provably in no near-best hypothesis
         for p, a in asg.enumerate_hypotheses(d):
             s = asg.score(d, p, a)
-            cols = [index[b] for b in p] + [pair[(i, index[p[k]])] if k >= 0
-                                           else n_g + n_k + i for i, k in enumerate(a)]
+            cols = [index[b] for b in p] + [
+                pair[(i, index[p[k]])] if k >= 0 else n_g + n_k + i for i, k in enumerate(a)
+            ]
             assert np.all(s <= bound[cols] + 1e-9 * max(1.0, abs(s)))

@@ -42,28 +42,40 @@ def _spd(rng: np.random.Generator, n: int, scale: float) -> np.ndarray:
     return scale * (a @ a.T + n * np.eye(n))
 
 
-def _joint_update(xs: list[np.ndarray], ps: list[np.ndarray], h: np.ndarray,
-                  rows: np.ndarray, y: np.ndarray, noise: np.ndarray
-                  ) -> tuple[list[np.ndarray], list[np.ndarray]]:
+def _joint_update(
+    xs: list[np.ndarray],
+    ps: list[np.ndarray],
+    h: np.ndarray,
+    rows: np.ndarray,
+    y: np.ndarray,
+    noise: np.ndarray,
+) -> tuple[list[np.ndarray], list[np.ndarray]]:
     """The direct Kalman update of the stacked state [x_j] (block-diagonal prior) with
     y = (rows ⊗ H) X + v, v ~ N(0, noise); the members' blocks of mean and covariance."""
     k, n = len(xs), xs[0].shape[0]
     x = np.concatenate(xs)
     p = np.zeros((k * n, k * n))
     for j in range(k):
-        p[j * n:(j + 1) * n, j * n:(j + 1) * n] = ps[j]
+        p[j * n : (j + 1) * n, j * n : (j + 1) * n] = ps[j]
     hs = np.kron(rows, h)
     s = hs @ p @ hs.T + noise
     gain = p @ hs.T @ np.linalg.inv(s)
     xu = x + gain @ (y - hs @ x)
     pu = p - gain @ hs @ p
-    return ([xu[j * n:(j + 1) * n] for j in range(k)],
-            [pu[j * n:(j + 1) * n, j * n:(j + 1) * n] for j in range(k)])
+    return (
+        [xu[j * n : (j + 1) * n] for j in range(k)],
+        [pu[j * n : (j + 1) * n, j * n : (j + 1) * n] for j in range(k)],
+    )
 
 
-def _member_updates(xs: list[np.ndarray], ps: list[np.ndarray], model: LinearGaussian,
-                    z: np.ndarray, w: np.ndarray, cell: np.ndarray | None
-                    ) -> list[Any]:
+def _member_updates(
+    xs: list[np.ndarray],
+    ps: list[np.ndarray],
+    model: LinearGaussian,
+    z: np.ndarray,
+    w: np.ndarray,
+    cell: np.ndarray | None,
+) -> list[Any]:
     """Each member updated by Stone Soup's KalmanUpdater with its MergedDetection."""
     from stonesoup.updater.kalman import KalmanUpdater
 
@@ -77,18 +89,30 @@ def _member_updates(xs: list[np.ndarray], ps: list[np.ndarray], model: LinearGau
     det = Detection(z.reshape(-1, 1), timestamp=T0, measurement_model=model)
     out = []
     for j, (x, p) in enumerate(zip(xs, ps, strict=True)):
-        md = MergedDetection(zs[j].reshape(-1, 1), timestamp=T0,
-                             measurement_model=_inflated(model, rs[j]), merged_from=det)
+        md = MergedDetection(
+            zs[j].reshape(-1, 1),
+            timestamp=T0,
+            measurement_model=_inflated(model, rs[j]),
+            merged_from=det,
+        )
         pred = GaussianStatePrediction(x.reshape(-1, 1), p, timestamp=T0)
         out.append(upd.update(SingleHypothesis(pred, md)))
     return out
 
 
-@pytest.mark.parametrize("k, weights, with_cell", [
-    (2, None, False), (2, [0.7, 0.3], False), (3, None, False),
-    (2, None, True), (3, [0.5, 0.2, 0.3], True)])
-def test_merged_update_equals_joint_kalman_update(k: int, weights: list[float] | None,
-                                                  with_cell: bool) -> None:
+@pytest.mark.parametrize(
+    "k, weights, with_cell",
+    [
+        (2, None, False),
+        (2, [0.7, 0.3], False),
+        (3, None, False),
+        (2, None, True),
+        (3, [0.5, 0.2, 0.3], True),
+    ],
+)
+def test_merged_update_equals_joint_kalman_update(
+    k: int, weights: list[float] | None, with_cell: bool
+) -> None:
     """Each member's update by its pseudo-detection (z'_i, R'_i) through Stone Soup's own
     KalmanUpdater equals the member's block of the direct joint Kalman update of the
     stacked state, mean and covariance, to 1e-9 (relative)."""
@@ -105,7 +129,7 @@ def test_merged_update_equals_joint_kalman_update(k: int, weights: list[float] |
     noise[:2, :2] = model.covar()
     if with_cell:
         for r in range(1, k):
-            noise[2 * r:2 * r + 2, 2 * r:2 * r + 2] = cell
+            noise[2 * r : 2 * r + 2, 2 * r : 2 * r + 2] = cell
     jx, jp = _joint_update(xs, ps, model.matrix(), rows, y, noise)
     for j, st in enumerate(_member_updates(xs, ps, model, z, w, cell)):
         mean = np.asarray(st.state_vector, dtype=float).ravel()
@@ -135,8 +159,9 @@ def test_cell_covariance_against_monte_carlo() -> None:
     u *= (rng.random(n) ** 0.5 / np.linalg.norm(u, axis=1))[:, None]  # uniform in the disc
     pts = u @ np.linalg.cholesky(e).T
     res = Resolution(ellipse=e)
-    assert np.allclose(np.cov(pts.T), cell_covariance(res, np.array([5e4, 0.0])),
-                       rtol=0.02, atol=0.02 * e.max())
+    assert np.allclose(
+        np.cov(pts.T), cell_covariance(res, np.array([5e4, 0.0])), rtol=0.02, atol=0.02 * e.max()
+    )
     sensor = Resolution(range=150.0, azimuth=math.radians(1.0), site=np.array([0.0, 0.0]))
     centre = np.array([40_000.0, 30_000.0])
     r0, a0 = np.hypot(*centre), math.atan2(centre[1], centre[0])
@@ -153,8 +178,7 @@ def test_encounter_geometry_and_sensor() -> None:
     the merged groups follow the cell; per-measurement covariances equal A1's
     independent polar conversion; clutter density = mean / area."""
     sensor = RadarCell(clutter_mean=3.0)
-    enc = encounter(np.random.default_rng(1), q=3, separation=0.5 * sensor.range_res,
-                    sensor=sensor)
+    enc = encounter(np.random.default_rng(1), q=3, separation=0.5 * sensor.range_res, sensor=sensor)
     pos = enc.truth[:, :, [0, 2]]
     d01 = np.linalg.norm(pos[0] - pos[1], axis=1)
     mid = len(enc.times) // 2
@@ -167,8 +191,9 @@ def test_encounter_geometry_and_sensor() -> None:
             if len(g) > 1:  # adjacent members within one cell
                 assert np.all(np.abs(np.diff(pol[list(g), 0])) < sensor.range_res)
         if len(s.measurements):
-            ref = polar_measurement_covs(s.measurements, enc.sensor.site, sensor.sigma_range,
-                                         sensor.sigma_azimuth)
+            ref = polar_measurement_covs(
+                s.measurements, enc.sensor.site, sensor.sigma_range, sensor.sigma_azimuth
+            )
             assert np.allclose(s.covs, ref, rtol=1e-9)
     assert any(len(g) == 3 for g in enc.scans[mid].groups)
     assert enc.scans[0].groups == [(0,), (1,), (2,)]
@@ -188,8 +213,7 @@ class _KnownStart(Initiator):
         self._start = list(self.start)
         self.received: list[set[Any]] = []
 
-    def initiate(self, detections: set[Any], timestamp: datetime, **kwargs: Any
-                 ) -> set[Track]:
+    def initiate(self, detections: set[Any], timestamp: datetime, **kwargs: Any) -> set[Track]:
         self.received.append(set(detections))
         if self._start:
             out, self._start = set(self._start), []
@@ -207,27 +231,48 @@ def _tracker_run(enc: Any, associator_kind: str) -> dict[str, Any]:
     pred, upd = comps["predictor"], comps["updater"]
     if associator_kind == "map":
         assoc: Any = MergedMeasurementAssociator(
-            PDAHypothesiser(pred, upd, clutter_spatial_density=enc.sensor.clutter_density,
-                            prob_detect=enc.sensor.pd),
-            resolution=at.resolution_model(enc.sensor))
+            PDAHypothesiser(
+                pred,
+                upd,
+                clutter_spatial_density=enc.sensor.clutter_density,
+                prob_detect=enc.sensor.pd,
+            ),
+            resolution=at.resolution_model(enc.sensor),
+        )
     else:
         assoc = at.associator("GNN", enc, comps)
     t_first = T0 + timedelta(seconds=float(enc.times[0]))
-    tracks = [Track([GaussianState(enc.initial[j].reshape(-1, 1), enc.initial_covar,
-                                   timestamp=t_first)]) for j in range(enc.q)]
+    tracks = [
+        Track([GaussianState(enc.initial[j].reshape(-1, 1), enc.initial_covar, timestamp=t_first)])
+        for j in range(enc.q)
+    ]
     obj = {id(t): j for j, t in enumerate(tracks)}
     init = _KnownStart(start=tracks)
     scans = []
     for s in enc.scans:
         when = T0 + timedelta(seconds=s.time)
-        scans.append((when, {Detection(z.reshape(-1, 1), timestamp=when,
-                                       measurement_model=LinearGaussian(4, (0, 2), r),
-                                       metadata={"source": src})
-                             for z, r, src in zip(s.measurements, s.covs, s.sources,
-                                                  strict=True)}))
+        scans.append(
+            (
+                when,
+                {
+                    Detection(
+                        z.reshape(-1, 1),
+                        timestamp=when,
+                        measurement_model=LinearGaussian(4, (0, 2), r),
+                        metadata={"source": src},
+                    )
+                    for z, r, src in zip(s.measurements, s.covs, s.sources, strict=True)
+                },
+            )
+        )
     start = (t_first - timedelta(seconds=5), set())
-    tracker = MultiTargetTracker(initiator=init, deleter=UpdateTimeStepsDeleter(1000),
-                                 detector=[start, *scans], data_associator=assoc, updater=upd)
+    tracker = MultiTargetTracker(
+        initiator=init,
+        deleter=UpdateTimeStepsDeleter(1000),
+        detector=[start, *scans],
+        data_associator=assoc,
+        updater=upd,
+    )
     next(iter(tracker))  # the empty scan: the initiator starts the known tracks
     correct = total = merged_right = merged_total = 0
     leaked = 0
@@ -237,25 +282,46 @@ def _tracker_run(enc: Any, associator_kind: str) -> dict[str, Any]:
         for tr in tracker.tracks:
             j = obj[id(tr)]
             h = tr.states[-1].hypothesis if hasattr(tr.states[-1], "hypothesis") else None
-            got = None if h is None or not h else getattr(h.measurement, "merged_from",
-                                                          h.measurement).metadata["source"]
+            got = (
+                None
+                if h is None or not h
+                else getattr(h.measurement, "merged_from", h.measurement).metadata["source"]
+            )
             total += 1
             correct += int(got == truth_src.get(j))
             if truth_src.get(j) is not None and len(truth_src[j]) > 1:
                 merged_total += 1
                 merged_right += int(got == truth_src[j])
         # no merged detection that updated tracks reaches the initiator
-        used = {id(getattr(tr.states[-1].hypothesis.measurement, "merged_from",
-                           tr.states[-1].hypothesis.measurement))
-                for tr in tracker.tracks if hasattr(tr.states[-1], "hypothesis")
-                and tr.states[-1].hypothesis}
+        used = {
+            id(
+                getattr(
+                    tr.states[-1].hypothesis.measurement,
+                    "merged_from",
+                    tr.states[-1].hypothesis.measurement,
+                )
+            )
+            for tr in tracker.tracks
+            if hasattr(tr.states[-1], "hypothesis") and tr.states[-1].hypothesis
+        }
         leaked += sum(id(d) in used for d in init.received[k + 1])
-    final = np.array([np.asarray(tr.state_vector, dtype=float).ravel()
-                      for tr in sorted(tracker.tracks, key=lambda t: obj[id(t)])])
+    final = np.array(
+        [
+            np.asarray(tr.state_vector, dtype=float).ravel()
+            for tr in sorted(tracker.tracks, key=lambda t: obj[id(t)])
+        ]
+    )
     covs = [tr.covar for tr in sorted(tracker.tracks, key=lambda t: obj[id(t)])]
-    return {"correct": correct, "total": total, "merged_right": merged_right,
-            "merged_total": merged_total, "leaked": leaked, "n_tracks": len(tracker.tracks),
-            "final": final, "covs": covs}
+    return {
+        "correct": correct,
+        "total": total,
+        "merged_right": merged_right,
+        "merged_total": merged_total,
+        "leaked": leaked,
+        "n_tracks": len(tracker.tracks),
+        "final": final,
+        "covs": covs,
+    }
 
 
 def test_associator_in_multitargettracker() -> None:
@@ -266,8 +332,9 @@ def test_associator_in_multitargettracker() -> None:
     merged detection passed to the initiator, final positions within the 99.99 % χ²(2)
     gate of the track's own covariance."""
     sensor = RadarCell()
-    enc = encounter(np.random.default_rng([18, 500, 0]), separation=0.5 * sensor.range_res,
-                    sensor=sensor)
+    enc = encounter(
+        np.random.default_rng([18, 500, 0]), separation=0.5 * sensor.range_res, sensor=sensor
+    )
     assert enc.merged_scans == 8
     mp = _tracker_run(enc, "map")
     gnn = _tracker_run(enc, "gnn")
@@ -290,8 +357,12 @@ def test_far_apart_equals_resolved_and_gnn() -> None:
     """At three range resolutions no group is plausible: MAP+merges gives the resolved-only
     MAP's tracks (1e-9) and a mean GOSPA within 2 % of Stone Soup's GNN."""
     sensor = RadarCell()
-    enc = encounter(np.random.default_rng([18, 3000, 0]), separation=3 * sensor.range_res,
-                    sensor=sensor, scans=12)
+    enc = encounter(
+        np.random.default_rng([18, 3000, 0]),
+        separation=3 * sensor.range_res,
+        sensor=sensor,
+        scans=12,
+    )
     a = at.run_tracking(enc, "MAP+merges")
     b = at.run_tracking(enc, "resolved")
     for ta, tb in zip(a, b, strict=True):
@@ -342,24 +413,40 @@ def test_hypothesiser_kinds_and_empty_scans() -> None:
     (taken from it), the associator makes the same MAP association, which matches the
     scan's truth on a merged scan; no detections: every track missed; no tracks: {}."""
     sensor = RadarCell()
-    enc = encounter(np.random.default_rng([18, 250, 1]), separation=0.25 * sensor.range_res,
-                    sensor=sensor)
+    enc = encounter(
+        np.random.default_rng([18, 250, 1]), separation=0.25 * sensor.range_res, sensor=sensor
+    )
     mid = len(enc.times) // 2
     comps = at._components(1.0)
     pred, upd = comps["predictor"], comps["updater"]
     lam, res = enc.sensor.clutter_density, at.resolution_model(enc.sensor)
     when = T0 + timedelta(seconds=float(enc.times[mid]))
-    tracks = [Track([GaussianState(enc.truth[j, mid - 1].reshape(-1, 1), enc.initial_covar,
-                                   timestamp=when - timedelta(seconds=5.0))])
-              for j in range(enc.q)]
+    tracks = [
+        Track(
+            [
+                GaussianState(
+                    enc.truth[j, mid - 1].reshape(-1, 1),
+                    enc.initial_covar,
+                    timestamp=when - timedelta(seconds=5.0),
+                )
+            ]
+        )
+        for j in range(enc.q)
+    ]
     scan = enc.scans[mid]
-    dets = [Detection(z.reshape(-1, 1), timestamp=when,
-                      measurement_model=LinearGaussian(4, (0, 2), r))
-            for z, r in zip(scan.measurements, scan.covs, strict=True)]
-    a1 = MergedMeasurementAssociator(PDAHypothesiser(pred, upd, lam, prob_detect=0.9),
-                                     resolution=res)
-    a2 = MergedMeasurementAssociator(DistanceHypothesiser(pred, upd, Mahalanobis(), 5.0),
-                                     clutter_density=lam, prob_detect=0.9, resolution=res)
+    dets = [
+        Detection(z.reshape(-1, 1), timestamp=when, measurement_model=LinearGaussian(4, (0, 2), r))
+        for z, r in zip(scan.measurements, scan.covs, strict=True)
+    ]
+    a1 = MergedMeasurementAssociator(
+        PDAHypothesiser(pred, upd, lam, prob_detect=0.9), resolution=res
+    )
+    a2 = MergedMeasurementAssociator(
+        DistanceHypothesiser(pred, upd, Mahalanobis(), 5.0),
+        clutter_density=lam,
+        prob_detect=0.9,
+        resolution=res,
+    )
     got = []
     for a in (a1, a2):
         hyps = a.associate(set(tracks), set(dets), when)
@@ -393,4 +480,5 @@ def test_chain_order_joins_neighbours() -> None:
         comps = at._components(1.0)
         MergedMeasurementAssociator(
             PDAHypothesiser(comps["predictor"], comps["updater"], 1e-8, prob_detect=0.9),
-            information_split=1)
+            information_split=1,
+        )

@@ -30,8 +30,12 @@ LAM = 1e-9
 def _assoc(**kw: Any) -> MergedMeasurementAssociator:
     comps = at._components(1.0)
     return MergedMeasurementAssociator(
-        PDAHypothesiser(comps["predictor"], comps["updater"], clutter_spatial_density=LAM,
-                        prob_detect=0.9), resolution=CELL, **kw)
+        PDAHypothesiser(
+            comps["predictor"], comps["updater"], clutter_spatial_density=LAM, prob_detect=0.9
+        ),
+        resolution=CELL,
+        **kw,
+    )
 
 
 def _track(pos: np.ndarray, sd: float, when: datetime) -> Track:
@@ -48,8 +52,9 @@ def _merge_case() -> tuple[list[Track], list[Detection], datetime]:
     tracks = [_track(p, 20.0, T0) for p in pos]
     z = 0.5 * (pos[0] + pos[1])
     rz = polar_measurement_covs(z[None], np.zeros(2), 30.0, math.radians(0.15))[0]
-    det = Detection(z.reshape(-1, 1), timestamp=when,
-                    measurement_model=LinearGaussian(4, (0, 2), rz))
+    det = Detection(
+        z.reshape(-1, 1), timestamp=when, measurement_model=LinearGaussian(4, (0, 2), rz)
+    )
     return tracks, [det], when
 
 
@@ -71,15 +76,29 @@ def test_merge_below_the_beam_with_the_defaults() -> None:
     means = np.array([[t.state_vector[0, 0], t.state_vector[2, 0]] for t in order])
     # the same scan's AssignmentData, solved by the paper's enumeration
     _, m, k = a.predict_measurements(order, dets, when)
-    data = asg.AssignmentData(m, k, np.asarray(dets[0].state_vector, float).reshape(1, 2),
-                              dets[0].measurement_model.covar()[None], volume=1 / LAM,
-                              pd=0.9, sensor=CELL)
+    data = asg.AssignmentData(
+        m,
+        k,
+        np.asarray(dets[0].state_vector, float).reshape(1, 2),
+        dets[0].measurement_model.covar()[None],
+        volume=1 / LAM,
+        pd=0.9,
+        sensor=CELL,
+    )
     bf = asg.brute_force(data)
-    assert bf.partition == [(0, 1)] and sol.log_score == pytest.approx(bf.log_score,
-                                                                     rel=1e-9)
-    resolved = asg.brute_force(asg.AssignmentData(m, k, data.measurements, data.meas_cov,
-                                                  volume=1 / LAM, pd=0.9, sensor=CELL,
-                                                  max_group_size=1))
+    assert bf.partition == [(0, 1)] and sol.log_score == pytest.approx(bf.log_score, rel=1e-9)
+    resolved = asg.brute_force(
+        asg.AssignmentData(
+            m,
+            k,
+            data.measurements,
+            data.meas_cov,
+            volume=1 / LAM,
+            pd=0.9,
+            sensor=CELL,
+            max_group_size=1,
+        )
+    )
     assert bf.log_score > resolved.log_score + 5.0
     assert np.linalg.norm(means[0] - means[1]) > 400.0
     old = _assoc(group_gate=10.0)  # the former default: the merge is outside its gate
@@ -93,21 +112,26 @@ def test_associator_inputs_are_checked() -> None:
     one ProblemError naming the argument each."""
     tracks, dets, when = _merge_case()
     comps = at._components(1.0)
-    hyp = PDAHypothesiser(comps["predictor"], comps["updater"], clutter_spatial_density=LAM,
-                          prob_detect=0.9)
+    hyp = PDAHypothesiser(
+        comps["predictor"], comps["updater"], clutter_spatial_density=LAM, prob_detect=0.9
+    )
     with pytest.raises(ProblemError, match="prob_detect"):
         MergedMeasurementAssociator(hyp, prob_detect="high")
     with pytest.raises(ProblemError, match="clutter_density"):
         MergedMeasurementAssociator(hyp, clutter_density=[1e-9])
     a = _assoc()
-    three = Detection(np.array([[1.0], [2.0], [3.0]]), timestamp=when,
-                      measurement_model=LinearGaussian(4, (0, 1, 2), np.eye(3)))
+    three = Detection(
+        np.array([[1.0], [2.0], [3.0]]),
+        timestamp=when,
+        measurement_model=LinearGaussian(4, (0, 1, 2), np.eye(3)),
+    )
     with pytest.raises(ProblemError, match=r"detections\[1\].*mixed dimension"):
         a.associate(tracks, [dets[0], three], when)
     with pytest.raises(ProblemError, match="timestamp"):
         a.associate(set(tracks), set(dets), None)
-    bare = Detection(dets[0].state_vector, timestamp=None,
-                     measurement_model=dets[0].measurement_model)
+    bare = Detection(
+        dets[0].state_vector, timestamp=None, measurement_model=dets[0].measurement_model
+    )
     with pytest.raises(ProblemError, match=r"detections\[0\]: has no timestamp"):
         a.associate(tracks, [bare], when)
     with pytest.raises(ProblemError, match=r"detections\[0\]: expected a Stone Soup"):
@@ -133,7 +157,7 @@ def test_tracker_runs_300_aircraft_for_20_scans() -> None:
     side = np.column_stack([-np.sin(az[host]), np.cos(az[host])])
     p0 = np.vstack([p0, p0[host] + side * rng.uniform(100, 400, (pairs, 1))])
     vel = rng.normal(0, 150.0, (q, 2))
-    vel[q - pairs:] = vel[host]  # the partners fly with their hosts
+    vel[q - pairs :] = vel[host]  # the partners fly with their hosts
     comps = at._components(1.0)
     tracks = [_track(p0[j], 50.0, T0) for j in range(q)]
     for t, v in zip(tracks, vel, strict=True):
@@ -150,31 +174,44 @@ def test_tracker_runs_300_aircraft_for_20_scans() -> None:
                 pol = np.array([np.hypot(*truth[j]), math.atan2(truth[j, 1], truth[j, 0])])
                 pol += rng.normal(0, [30.0, math.radians(0.15)])
                 z = pol[0] * np.array([math.cos(pol[1]), math.sin(pol[1])])
-                rz = polar_measurement_covs(z[None], np.zeros(2), 30.0,
-                                            math.radians(0.15))[0]
-                dets.add(Detection(z.reshape(-1, 1), timestamp=when,
-                                   measurement_model=LinearGaussian(4, (0, 2), rz),
-                                   metadata={"source": j}))
+                rz = polar_measurement_covs(z[None], np.zeros(2), 30.0, math.radians(0.15))[0]
+                dets.add(
+                    Detection(
+                        z.reshape(-1, 1),
+                        timestamp=when,
+                        measurement_model=LinearGaussian(4, (0, 2), rz),
+                        metadata={"source": j},
+                    )
+                )
         scans.append((when, dets))
     assoc = MergedMeasurementAssociator(
-        PDAHypothesiser(comps["predictor"], comps["updater"], clutter_spatial_density=LAM,
-                        prob_detect=0.9), resolution=CELL)
-    tracker = MultiTargetTracker(initiator=_KnownStart(start=tracks),
-                                 deleter=UpdateTimeStepsDeleter(1000),
-                                 detector=[(T0, set()), *scans],  # the tracks start here
-                                 data_associator=assoc, updater=comps["updater"])
+        PDAHypothesiser(
+            comps["predictor"], comps["updater"], clutter_spatial_density=LAM, prob_detect=0.9
+        ),
+        resolution=CELL,
+    )
+    tracker = MultiTargetTracker(
+        initiator=_KnownStart(start=tracks),
+        deleter=UpdateTimeStepsDeleter(1000),
+        detector=[(T0, set()), *scans],  # the tracks start here
+        data_associator=assoc,
+        updater=comps["updater"],
+    )
     merged, done = 0, -1
     for _ in tracker:
         done += 1
         if done == 0:
             continue
-        assert assoc.last_solution is not None and assoc.last_solution.status.value == \
-            "optimal"
+        assert assoc.last_solution is not None and assoc.last_solution.status.value == "optimal"
         merged += len(assoc.last_groups)
     assert done == 20 and merged > 0
     final = p0 + vel * 20 * dt
-    err = np.array([np.linalg.norm(np.array([t.state_vector[0, 0], t.state_vector[2, 0]])
-                                   - final[j]) for j, t in enumerate(tracks)])
+    err = np.array(
+        [
+            np.linalg.norm(np.array([t.state_vector[0, 0], t.state_vector[2, 0]]) - final[j])
+            for j, t in enumerate(tracks)
+        ]
+    )
     # a single return's cross-range σ at the aircraft's range bounds the filtered error:
     # beyond 3 of them (P < 1 % per coordinate for a consistent filter) on ≤ 3 % of tracks
     sigma = np.maximum(30.0, np.linalg.norm(final, axis=1) * math.radians(0.15))

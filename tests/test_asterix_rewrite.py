@@ -20,14 +20,24 @@ def _recording(tmp_path, rng: np.random.Generator) -> list:
     for j in range(2):
         n = 300
         t = 1000.0 * j + np.arange(n)
-        blocks = [ax.encode_cat048(t, 1, s, rng.uniform(1e3, 4e5, n),
-                                   rng.uniform(0, 6.28, n),
-                                   flight_level=rng.uniform(0, 400, n),
-                                   address=np.where(rng.random(n) < 0.2, -1, 77 + s),
-                                   mode3a=rng.integers(0, 4096, n), per_block=9)
-                  for s in (1, 2)]
-        blocks.insert(1, ax.encode_cat021(t, 9, 1, rng.uniform(40, 50, n),
-                                          rng.uniform(10, 20, n), per_block=5))
+        blocks = [
+            ax.encode_cat048(
+                t,
+                1,
+                s,
+                rng.uniform(1e3, 4e5, n),
+                rng.uniform(0, 6.28, n),
+                flight_level=rng.uniform(0, 400, n),
+                address=np.where(rng.random(n) < 0.2, -1, 77 + s),
+                mode3a=rng.integers(0, 4096, n),
+                per_block=9,
+            )
+            for s in (1, 2)
+        ]
+        blocks.insert(
+            1,
+            ax.encode_cat021(t, 9, 1, rng.uniform(40, 50, n), rng.uniform(10, 20, n), per_block=5),
+        )
         p = tmp_path / f"r{j}.ast"
         p.write_bytes(b"".join(blocks))
         paths.append(p)
@@ -39,9 +49,9 @@ def test_rewrite_changes_only_i040(tmp_path) -> None:
     paths = _recording(tmp_path, rng)
     d = ax.read_asterix(paths)
     c = d.cat048
-    pick = rng.random(len(c)) < 0.7                   # a subset of the plots corrected
+    pick = rng.random(len(c)) < 0.7  # a subset of the plots corrected
     rng_new = np.clip(c.range[pick] + rng.normal(0, 300, pick.sum()), 0, 4.7e5)
-    az_new = c.azimuth[pick] + rng.normal(0, 0.01, pick.sum())   # some wrap below 0
+    az_new = c.azimuth[pick] + rng.normal(0, 0.01, pick.sum())  # some wrap below 0
     out = tmp_path / "out" / "corrected.ast"
     assert rewrite_cat048_positions(paths, out, c.record_id[pick], rng_new, az_new) == out
     src = b"".join(p.read_bytes() for p in paths)
@@ -68,7 +78,7 @@ def test_rewrite_changes_only_i040(tmp_path) -> None:
     # locate each picked record's I040 by its FSPEC and compare with the differing bytes
     starts = sizes[c.file[pick]] + c.offset[pick]
     fs_len = 1 + (np.frombuffer(src, np.uint8)[starts] & 1)
-    i040 = starts + fs_len + 2 + 3 + 1                # FSPEC, I010, I140, I020 (1 byte)
+    i040 = starts + fs_len + 2 + 3 + 1  # FSPEC, I010, I140, I020 (1 byte)
     allowed = np.concatenate([i040 + b for b in range(4)])
     assert np.isin(diff, allowed).all() and diff.size > 0.5 * allowed.size
 
@@ -81,11 +91,17 @@ def test_rewrite_refusals(tmp_path) -> None:
     out = tmp_path / "o.ast"
     with pytest.raises(ProblemError, match=r"rewrite_cat048_positions range_m: need 0 to"):
         rewrite_cat048_positions(paths, out, ids, [1e3, 1e3, 5e5], [0.0, 0.0, 0.0])
-    with pytest.raises(ProblemError, match=r"rewrite_cat048_positions azimuth_rad: "
-                                           r"expected 3 values"):
+    with pytest.raises(
+        ProblemError,
+        match=r"rewrite_cat048_positions azimuth_rad: "
+        r"expected 3 values",
+    ):
         rewrite_cat048_positions(paths, out, ids, [1e3] * 3, [0.0])
-    with pytest.raises(ProblemError, match=r"record_id: \d+ identifiers name no CAT048 "
-                                           r"record with I040 in .*r0\.ast"):
+    with pytest.raises(
+        ProblemError,
+        match=r"record_id: \d+ identifiers name no CAT048 "
+        r"record with I040 in .*r0\.ast",
+    ):
         rewrite_cat048_positions(paths, out, ids + 1, [1e3] * 3, [0.0] * 3)
     with pytest.raises(ProblemError, match=r"record_id: file index 1 but 1 file"):
         rewrite_cat048_positions(paths[:1], out, c.record_id[-1:], [1e3], [0.0])

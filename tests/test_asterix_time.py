@@ -11,14 +11,15 @@ import pytest
 from optmodels.core import ProblemError
 from optmodels.io import asterix as ax
 
-LSB = 1 / 128          # I048/140 (s)
+LSB = 1 / 128  # I048/140 (s)
 DAY = 86400.0
 
 
 def _plots(t: np.ndarray, sic: int, rng: np.random.Generator) -> bytes:
     """CAT048 of one radar (SAC 1) at true times ``t`` (any day: encoded modulo 86 400)."""
-    return ax.encode_cat048(t, 1, sic, rng.uniform(1e3, 4e5, t.size),
-                            rng.uniform(0, 2 * np.pi, t.size), per_block=17)
+    return ax.encode_cat048(
+        t, 1, sic, rng.uniform(1e3, 4e5, t.size), rng.uniform(0, 2 * np.pi, t.size), per_block=17
+    )
 
 
 def _scan(t0: float, t1: float, rng: np.random.Generator) -> np.ndarray:
@@ -61,7 +62,7 @@ def test_day_boundary_in_files(tmp_path) -> None:
     midnight lands on day 1."""
     rng = np.random.default_rng(2802)
     a1, a2 = _scan(82800.0, 86400.0, rng), _scan(86400.0, 90000.0, rng)
-    b2 = _scan(88200.0, 90000.0, rng)                 # radar 2 starts at 00:30
+    b2 = _scan(88200.0, 90000.0, rng)  # radar 2 starts at 00:30
     p1, p2 = tmp_path / "2300.ast", tmp_path / "0000.ast"
     p1.write_bytes(_plots(a1, 1, rng))
     p2.write_bytes(_plots(b2, 2, rng) + _plots(a2, 1, rng))
@@ -87,8 +88,7 @@ def test_radar_by_radar_in_one_file_and_in_files(tmp_path) -> None:
     nxt = {s: _scan(DAY + 10.0 * s, DAY + 3600.0, rng) for s in want}
     p = tmp_path / "next.ast"
     p.write_bytes(b"".join(_plots(t, s, rng) for s, t in nxt.items()))
-    _check(ax.read_asterix([*per, p]),
-           {s: np.concatenate([want[s], nxt[s]]) for s in want})
+    _check(ax.read_asterix([*per, p]), {s: np.concatenate([want[s], nxt[s]]) for s in want})
 
 
 def test_what_cannot_be_placed_is_refused_naming_the_file(tmp_path) -> None:
@@ -96,15 +96,20 @@ def test_what_cannot_be_placed_is_refused_naming_the_file(tmp_path) -> None:
     p1, p2 = tmp_path / "h12.ast", tmp_path / "h11.ast"
     p1.write_bytes(_plots(_scan(43200.0, 46800.0, rng), 1, rng))
     p2.write_bytes(_plots(_scan(39600.0, 43200.0, rng), 1, rng))
-    with pytest.raises(ProblemError, match=r"h11\.ast: cannot place.*SAC/SIC 1/1.*time "
-                                           r"order"):
-        ax.read_asterix([p1, p2])                     # hourly files out of order
+    with pytest.raises(
+        ProblemError,
+        match=r"h11\.ast: cannot place.*SAC/SIC 1/1.*time "
+        r"order",
+    ):
+        ax.read_asterix([p1, p2])  # hourly files out of order
     # radar 1 stops at 01:00, radar 2 runs to 23:00; a file at 23:30 with both
     q1 = tmp_path / "day.ast"
-    q1.write_bytes(_plots(_scan(0.0, 3600.0, rng), 1, rng)
-                   + _plots(_scan(0.0, 82800.0, rng), 2, rng))
+    q1.write_bytes(
+        _plots(_scan(0.0, 3600.0, rng), 1, rng) + _plots(_scan(0.0, 82800.0, rng), 2, rng)
+    )
     q2 = tmp_path / "late.ast"
-    q2.write_bytes(_plots(_scan(84600.0, 86000.0, rng), 2, rng)
-                   + _plots(_scan(84600.0, 86000.0, rng), 1, rng))
+    q2.write_bytes(
+        _plots(_scan(84600.0, 86000.0, rng), 2, rng) + _plots(_scan(84600.0, 86000.0, rng), 1, rng)
+    )
     with pytest.raises(ProblemError, match=r"late\.ast: cannot place.*SAC/SIC 1/1"):
         ax.read_asterix([q1, q2])

@@ -43,7 +43,9 @@ def test_tiny_milp_with_highs() -> None:
     assert res.status is Status.OPTIMAL
     best = max(
         (5 * a + 4 * b + 3 * c, (a, b, c))
-        for a in (0, 1) for b in (0, 1) for c in (0, 1)
+        for a in (0, 1)
+        for b in (0, 1)
+        for c in (0, 1)
         if 2 * a + 3 * b + c <= 5 and 4 * a + b + 2 * c <= 11 and 3 * a + 4 * b + 2 * c <= 8
     )
     np.testing.assert_allclose(z.value, best[1], atol=1e-9)
@@ -75,8 +77,14 @@ def test_missing_solver_names_install_hint() -> None:
 
 def test_status_tables_cover_all_codes() -> None:
     assert set(CVXPY_STATUS) >= {
-        cp.OPTIMAL, cp.OPTIMAL_INACCURATE, cp.INFEASIBLE, cp.UNBOUNDED, cp.USER_LIMIT,
-        cp.SOLVER_ERROR, cp.INFEASIBLE_INACCURATE, cp.UNBOUNDED_INACCURATE,
+        cp.OPTIMAL,
+        cp.OPTIMAL_INACCURATE,
+        cp.INFEASIBLE,
+        cp.UNBOUNDED,
+        cp.USER_LIMIT,
+        cp.SOLVER_ERROR,
+        cp.INFEASIBLE_INACCURATE,
+        cp.UNBOUNDED_INACCURATE,
     }
     assert IPOPT_STATUS["Solve_Succeeded"] is Status.OPTIMAL
     assert IPOPT_STATUS["Maximum_Iterations_Exceeded"] is Status.ITERATION_LIMIT
@@ -92,8 +100,9 @@ def test_casadi_nlp_on_circle() -> None:
     np.testing.assert_allclose(x, [-1.0, -1.0], atol=1e-9)
     assert res.objective == pytest.approx(-2.0, abs=1e-9)
     # An iteration cap is a status, not a solution.
-    capped = build_nlpsol({"x": v, "f": v[0] + v[1], "g": ca.dot(v, v) - p, "p": p},
-                          options={"max_iter": 1})
+    capped = build_nlpsol(
+        {"x": v, "f": v[0] + v[1], "g": ca.dot(v, v) - p, "p": p}, options={"max_iter": 1}
+    )
     res2, _ = run_nlpsol(capped, x0=np.array([3.0, 0.1]), p=np.array([2.0]))
     assert res2.status is Status.ITERATION_LIMIT
 
@@ -137,8 +146,10 @@ def test_unbounded_inaccurate_is_never_unbounded() -> None:
         rng = np.random.default_rng(seed)
         n, scale = 28, 2e-3
         x = cp.Variable(n)
-        prob = cp.Problem(cp.Minimize(rng.normal(size=n) @ x),
-                          [x >= 0, cp.sum(x) * scale == scale, x <= 1 / n + 0.05])
+        prob = cp.Problem(
+            cp.Minimize(rng.normal(size=n) @ x),
+            [x >= 0, cp.sum(x) * scale == scale, x <= 1 / n + 0.05],
+        )
         res = solve_problem(prob, "SCS", max_iters=3)
         assert res.status is not Status.UNBOUNDED
         if prob.status == cp.UNBOUNDED_INACCURATE:
@@ -150,8 +161,22 @@ def test_unbounded_inaccurate_is_never_unbounded() -> None:
 def _option_solvers() -> list[str]:
     from optmodels.backends.casadi_qp import casadi_qp_plugins
 
-    names = [s for s in ("CLARABEL", "OSQP", "SCS", "HIGHS", "SCIPY", "PIQP", "PROXQP",
-                         "QOCO", "DAQP", "ECOS") if s in cp.installed_solvers()]
+    names = [
+        s
+        for s in (
+            "CLARABEL",
+            "OSQP",
+            "SCS",
+            "HIGHS",
+            "SCIPY",
+            "PIQP",
+            "PROXQP",
+            "QOCO",
+            "DAQP",
+            "ECOS",
+        )
+        if s in cp.installed_solvers()
+    ]
     return names + [f"CASADI_{p.upper()}" for p in casadi_qp_plugins()[:2]]
 
 
@@ -186,11 +211,20 @@ _OLD_LSQ = {
     "SCS": {"eps_abs": 1e-9, "eps_rel": 1e-9, "max_iters": 200_000},
 }
 _OLD_QP = {
-    "OSQP": {"eps_abs": 1e-9, "eps_rel": 1e-9, "polishing": True, "polish_refine_iter": 50,
-             "max_iter": 200_000},
+    "OSQP": {
+        "eps_abs": 1e-9,
+        "eps_rel": 1e-9,
+        "polishing": True,
+        "polish_refine_iter": 50,
+        "max_iter": 200_000,
+    },
     "SCS": {"eps_abs": 1e-9, "eps_rel": 1e-9, "max_iters": 200_000},
-    "CLARABEL": {"tol_gap_abs": 1e-10, "tol_gap_rel": 1e-10, "tol_feas": 1e-10,
-                 "tol_ktratio": 1e-8},
+    "CLARABEL": {
+        "tol_gap_abs": 1e-10,
+        "tol_gap_rel": 1e-10,
+        "tol_feas": 1e-10,
+        "tol_ktratio": 1e-8,
+    },
 }
 _OLD_SOCP = {"SCS": {"eps_abs": 1e-9, "eps_rel": 1e-9, "max_iters": 200_000}}
 
@@ -235,11 +269,9 @@ def test_profile_tables_are_the_old_ones_and_the_problems_share_them() -> None:
     assert profiles.PROFILES["default"] == {}
     # merge order: class defaults < profile < caller; lower-case names are CVXPY's too
     got = profiles.solver_options("qp", "clarabel", {"tol_feas": 3e-9}, profile="high")
-    assert got == {**_OLD_QP["CLARABEL"], **profiles.HIGH_OPTIONS["CLARABEL"],
-                   "tol_feas": 3e-9}
+    assert got == {**_OLD_QP["CLARABEL"], **profiles.HIGH_OPTIONS["CLARABEL"], "tol_feas": 3e-9}
     assert profiles.solver_options("socp", "CLARABEL") == {}
-    assert profiles.profile_options("high", "ipopt") == {"tol": 1e-12,
-                                                         "constr_viol_tol": 1e-12}
+    assert profiles.profile_options("high", "ipopt") == {"tol": 1e-12, "constr_viol_tol": 1e-12}
     # callers get copies: mutating one never changes the table
     got["tol_gap_abs"] = 1.0
     nested = profiles.profile_options("high", "CASADI_OSQP")
@@ -264,8 +296,9 @@ def test_harness_profiles_use_the_backend_table() -> None:
 
 
 @pytest.mark.parametrize("solver", ["OSQP", "CLARABEL", "SCS"])
-def test_trajectories_options_reach_the_solver(monkeypatch: pytest.MonkeyPatch,
-                                               solver: str) -> None:
+def test_trajectories_options_reach_the_solver(
+    monkeypatch: pytest.MonkeyPatch, solver: str
+) -> None:
     from optmodels import trajectories as tr
 
     rng = np.random.default_rng(7)
@@ -296,7 +329,10 @@ def test_biasfield_options_reach_the_solver(monkeypatch: pytest.MonkeyPatch) -> 
     lip = bf.solve_lipschitz(fd, solver="SCS", max_iters=50_000)
     lip_c = bf.solve_lipschitz(fd, solver="CLARABEL")
     assert [_sent(c) for c in calls] == [
-        _OLD_QP["CLARABEL"], {**_OLD_SOCP["SCS"], "max_iters": 50_000}, {}]
+        _OLD_QP["CLARABEL"],
+        {**_OLD_SOCP["SCS"], "max_iters": 50_000},
+        {},
+    ]
     # the QP agrees with the closed form (11), an independent computation
     ref = bf.closed_form(fd)
     assert qp.status.ok and ref.status.ok
@@ -311,14 +347,24 @@ def test_milp_options_per_solver() -> None:
     from optmodels.backends.profiles import milp_options
 
     assert milp_options("HIGHS", 0.0, None) == {
-        "mip_rel_gap": 0.0, "mip_abs_gap": 1e-12, "output_flag": False, "presolve": "off"}
+        "mip_rel_gap": 0.0,
+        "mip_abs_gap": 1e-12,
+        "output_flag": False,
+        "presolve": "off",
+    }
     assert milp_options("HIGHS", 0.01, 5.0, verbose=True) == {
-        "mip_rel_gap": 0.01, "mip_abs_gap": 1e-6, "output_flag": True, "presolve": "off",
-        "time_limit": 5.0}
+        "mip_rel_gap": 0.01,
+        "mip_abs_gap": 1e-6,
+        "output_flag": True,
+        "presolve": "off",
+        "time_limit": 5.0,
+    }
     assert milp_options("SCIPY", 0.02, 3.0) == {
-        "scipy_options": {"mip_rel_gap": 0.02, "time_limit": 3.0}}
+        "scipy_options": {"mip_rel_gap": 0.02, "time_limit": 3.0}
+    }
     assert milp_options("SCIP", 0.0, 2.0) == {
-        "scip_params": {"limits/gap": 0.0, "limits/time": 2.0}}
+        "scip_params": {"limits/gap": 0.0, "limits/time": 2.0}
+    }
     assert milp_options("GLPK_MI", 0.0, None) == {}
     with pytest.raises(ProblemError, match=r"assignment\.solve solver: time_limit"):
         milp_options("GLPK_MI", 0.0, 1.0, where="assignment.solve")
@@ -330,13 +376,20 @@ def test_assignment_gap_and_time_limit_reach_highs(monkeypatch: pytest.MonkeyPat
     rng = np.random.default_rng(11)
     means = rng.uniform(0, 3, (3, 2))
     meas = means + rng.normal(0, 0.3, (3, 2))
-    data = asg.AssignmentData(means, np.stack([0.2 * np.eye(2)] * 3), meas, 0.25 * np.eye(2),
-                              9.0, 0.9, 0.3)
+    data = asg.AssignmentData(
+        means, np.stack([0.2 * np.eye(2)] * 3), meas, 0.25 * np.eye(2), 9.0, 0.9, 0.3
+    )
     calls = _record_solves(monkeypatch)
     sol = asg.solve(data, mip_gap=0.0, time_limit=30.0, model="cvxpy")
-    assert [_sent(c) for c in calls] == [{"mip_rel_gap": 0.0, "mip_abs_gap": 1e-12,
-                                          "output_flag": False, "presolve": "off",
-                                          "time_limit": 30.0}]
+    assert [_sent(c) for c in calls] == [
+        {
+            "mip_rel_gap": 0.0,
+            "mip_abs_gap": 1e-12,
+            "output_flag": False,
+            "presolve": "off",
+            "time_limit": 30.0,
+        }
+    ]
     assert sol.status.ok
     # the MAP hypothesis by enumeration (the paper's method, no solver)
     best = asg.brute_force(data)
@@ -357,14 +410,17 @@ def test_highs_banner_is_silenced_for_every_highs_solve() -> None:
     import subprocess
     import sys
 
-    script = ("import cvxpy as cp\n"
-              "from optmodels.backends.cvxpy_backend import solve_problem\n"
-              "x = cp.Variable(2)\n"
-              "p = cp.Problem(cp.Minimize(x[0] + 2 * x[1]), [x >= 1, x[0] + x[1] <= 5])\n"
-              "r = solve_problem(p, 'HIGHS')\n"
-              "print(r.status.value, round(float(p.value), 9))\n")
-    out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
-                         timeout=120, check=True)
+    script = (
+        "import cvxpy as cp\n"
+        "from optmodels.backends.cvxpy_backend import solve_problem\n"
+        "x = cp.Variable(2)\n"
+        "p = cp.Problem(cp.Minimize(x[0] + 2 * x[1]), [x >= 1, x[0] + x[1] <= 5])\n"
+        "r = solve_problem(p, 'HIGHS')\n"
+        "print(r.status.value, round(float(p.value), 9))\n"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", script], capture_output=True, text=True, timeout=120, check=True
+    )
     assert out.stdout.split() == ["optimal", "3.0"]
 
 
@@ -377,5 +433,4 @@ def test_conic_status_table_covers_every_unified_code() -> None:
     assert set(CONIC_STATUS) == set(UNIFIED_STATUS)
     # only a certified infeasibility carries a verdict; every other failure is an error
     assert CONIC_STATUS["SOLVER_RET_INFEASIBLE"] == s.INFEASIBLE
-    assert {v for k, v in CONIC_STATUS.items() if k != "SOLVER_RET_INFEASIBLE"} == {
-        s.SOLVER_ERROR}
+    assert {v for k, v in CONIC_STATUS.items() if k != "SOLVER_RET_INFEASIBLE"} == {s.SOLVER_ERROR}

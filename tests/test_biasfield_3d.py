@@ -117,15 +117,17 @@ def test_plane_and_jacobian_against_independent_chains() -> None:
     scale = np.stack([np.ones(50), pol[:, 0]], axis=-1)  # (r, α·r)
     prod = np.einsum("kab,kbc->kac", jac * scale[:, :, None], inv_fd / scale[:, None, :])
     np.testing.assert_allclose(prod, np.broadcast_to(np.eye(2), prod.shape), atol=1e-7)
-    np.testing.assert_allclose(g3.plane_jacobian(x, h, site, ORIGIN) / scale[:, None, :],
-                               inv_fd / scale[:, None, :], atol=1e-7)
+    np.testing.assert_allclose(
+        g3.plane_jacobian(x, h, site, ORIGIN) / scale[:, None, :],
+        inv_fd / scale[:, None, :],
+        atol=1e-7,
+    )
 
 
 def test_radar_set_and_plot_table_3d() -> None:
     """Geodetic sites: sites = pymap3d ENU (h = 0) of each site; ids; the errors."""
     geo = np.array([[55.3, 82.0, 200.0], [54.7, 84.1, 450.0]])
-    radars = RadarSet(None, 60.0, 1e-3, 3e5, geodetic=geo, origin=ORIGIN,
-                      ids=[(1, 2), (1, 3)])
+    radars = RadarSet(None, 60.0, 1e-3, 3e5, geodetic=geo, origin=ORIGIN, ids=[(1, 2), (1, 3)])
     e, n, _ = pymap3d.geodetic2enu(geo[:, 0], geo[:, 1], np.zeros(2), *ORIGIN)
     np.testing.assert_allclose(radars.sites, np.column_stack([e, n]), atol=1e-6)
     assert radars.is_3d and radars.index_of_id(1, 3) == 1
@@ -144,9 +146,14 @@ def test_radar_set_and_plot_table_3d() -> None:
     # a plot of each radar on a target at a known position
     lat_t, lon_t, h_t = 55.1, 83.3, 8000.0
     rr, aa = zip(*(g3.measure(geo[i], lat_t, lon_t, h_t) for i in range(2)), strict=True)
-    plots = PlotTable(np.array([0.0, 1.0, 2.0]), np.array([0, 1, 1]),
-                      np.array([rr[0], rr[1], 100.0]), np.array([aa[0], aa[1], 0.0]),
-                      np.array([0, 0, 0]), np.array([h_t, h_t, np.nan]))
+    plots = PlotTable(
+        np.array([0.0, 1.0, 2.0]),
+        np.array([0, 1, 1]),
+        np.array([rr[0], rr[1], 100.0]),
+        np.array([aa[0], aa[1], 0.0]),
+        np.array([0, 0, 0]),
+        np.array([h_t, h_t, np.nan]),
+    )
     np.testing.assert_array_equal(plots.locatable(radars), [True, True, False])
     with pytest.raises(ProblemError, match="height"):
         plots.cartesian(radars)
@@ -156,13 +163,20 @@ def test_radar_set_and_plot_table_3d() -> None:
     e_t, n_t, _ = pymap3d.geodetic2enu(lat_t, lon_t, 0.0, *ORIGIN)
     np.testing.assert_allclose(z, [[e_t, n_t]] * 2, atol=1e-3)
     with pytest.raises(ProblemError, match="height"):
-        PlotTable(np.zeros(1), np.zeros(1, int), np.ones(1), np.zeros(1), np.zeros(1, int),
-                  np.array([np.inf]))
+        PlotTable(
+            np.zeros(1),
+            np.zeros(1, int),
+            np.ones(1),
+            np.zeros(1),
+            np.zeros(1, int),
+            np.array([np.inf]),
+        )
     # the covariance is the sandwich of the exact Jacobian
     cov = radars.cartesian_cov(1, z[1], height=h_t)
     jac = g3.polar_jacobian3d(z[1], h_t, geo[1], ORIGIN)
-    np.testing.assert_allclose(jac @ cov @ jac.T, radars.polar_cov(1), rtol=1e-9,
-                               atol=1e-14)  # off-diagonal: 1e-12 of √(σ_r² σ_az²)
+    np.testing.assert_allclose(
+        jac @ cov @ jac.T, radars.polar_cov(1), rtol=1e-9, atol=1e-14
+    )  # off-diagonal: 1e-12 of √(σ_r² σ_az²)
 
 
 def test_aircraft_paths_per_aircraft() -> None:
@@ -178,16 +192,14 @@ def test_aircraft_paths_per_aircraft() -> None:
     t = np.concatenate([t_a, t_b])
     perm = rng.permutation(t.size)
     rows = np.concatenate([perm, perm[:1]])  # one report twice
-    paths = AircraftPaths.from_reports(obj[rows], t[rows], lat[rows], lon[rows], h[rows],
-                                       ORIGIN)
+    paths = AircraftPaths.from_reports(obj[rows], t[rows], lat[rows], lon[rows], h[rows], ORIGIN)
     assert paths.labels == ("3c6444", "4ca1f2") and paths.duplicates == 1 and len(paths) == 2
     assert paths.span(0) == (100.0, 129.0) and paths.span(1) == (0.0, 58.0)
     tt, en, geo = paths.track(1)
     np.testing.assert_array_equal(tt, t_a)
-    e, n, _ = pymap3d.geodetic2enu(lat[:t_a.size], lon[:t_a.size], np.zeros(t_a.size),
-                                   *ORIGIN)
+    e, n, _ = pymap3d.geodetic2enu(lat[: t_a.size], lon[: t_a.size], np.zeros(t_a.size), *ORIGIN)
     np.testing.assert_allclose(en, np.column_stack([e, n]), atol=1e-6)
-    assert geo is not None and np.allclose(geo[:, 2], h[:t_a.size])
+    assert geo is not None and np.allclose(geo[:, 2], h[: t_a.size])
     mid = paths.at(1, [3.0])[0]
     np.testing.assert_allclose(mid, 0.5 * (en[1] + en[2]), atol=1e-9)
     assert paths.height_at(0, [110.5])[0] == pytest.approx(4000.0 - 52.5)
@@ -204,8 +216,9 @@ def test_simulator_3d_measures_slant_range_and_own_azimuth() -> None:
     (plane_to_geodetic of the truth, checked with pymap3d's ENU); heights 3-12 km with
     levels, climbs and descents; the plots carry the true height; cartesian() of the plots
     is the truth plus the exact shift."""
-    sc = radar_network(4, n_aircraft=12, duration=900.0, geometry="3d",
-                       sigma_range=1e-6, sigma_azimuth=1e-12)
+    sc = radar_network(
+        4, n_aircraft=12, duration=900.0, geometry="3d", sigma_range=1e-6, sigma_azimuth=1e-12
+    )
     p, r = sc.plots, sc.radars
     assert r.is_3d and p.height is not None
     assert 3e3 <= p.height.min() and p.height.max() <= 12e3
@@ -234,13 +247,12 @@ def _set_residual(fd: FieldData, truth: np.ndarray) -> np.ndarray:
     true field to the sets (10): what remains after the unobservable common shift)."""
     phi0, phi1 = uncertainty_sets(fd)
     k, m = fd.k, fd.m
-    w = np.sqrt(np.diag(fd.P)) if fd.P.shape[0] == 2 * m else np.tile(np.sqrt(np.diag(fd.P)),
-                                                                      m)
+    w = np.sqrt(np.diag(fd.P)) if fd.P.shape[0] == 2 * m else np.tile(np.sqrt(np.diag(fd.P)), m)
     r = (truth.reshape(-1) - phi0).reshape(k, 2 * m)
     jac = phi1.toarray()
     out = np.empty((k, 2 * m))
     for kk in range(k):
-        a = jac[2 * m * kk:2 * m * (kk + 1), 2 * kk:2 * kk + 2] * w[:, None]
+        a = jac[2 * m * kk : 2 * m * (kk + 1), 2 * kk : 2 * kk + 2] * w[:, None]
         eta = np.linalg.lstsq(a, r[kk] * w, rcond=None)[0]
         out[kk] = r[kk] - (a @ eta) / w
     return out.reshape(k, m, 2)
@@ -253,9 +265,16 @@ def test_true_field_lies_in_the_exact_3d_sets(fields: str) -> None:
     cell. In metres on the plane (range residual; azimuth residual × range), against the
     largest shift |∇p_i⁻¹f|: in 90 % of the (cell, radar) pairs below 1 %, everywhere
     below 10 %, as in 2-D (measured: constant 0.06 % / 0.6 %, linear 0.37 % / 4.4 %)."""
-    sc = radar_network(2, n_aircraft=40, duration=1800.0, sigma_range=1e-3,
-                       sigma_azimuth=1e-8, fields=fields, turn_rate=(0.0, 0.0),
-                       geometry="3d")
+    sc = radar_network(
+        2,
+        n_aircraft=40,
+        duration=1800.0,
+        sigma_range=1e-3,
+        sigma_azimuth=1e-8,
+        fields=fields,
+        turn_rate=(0.0, 0.0),
+        geometry="3d",
+    )
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         fd, _ = build_field_data(sc.plots, sc.radars, cells=30)
@@ -271,16 +290,16 @@ def test_true_field_lies_in_the_exact_3d_sets(fields: str) -> None:
     assert np.all(metres.max(axis=(0, 1)) < 0.1 * big)
 
 
-def chain_errors(seed: int, *, n_aircraft: int, duration: float, cells: int
-                 ) -> tuple[np.ndarray, np.ndarray, FieldData]:
+def chain_errors(
+    seed: int, *, n_aircraft: int, duration: float, cells: int
+) -> tuple[np.ndarray, np.ndarray, FieldData]:
     """RMS [range (m), azimuth (rad)] distance of the true field to the sets (10) from the
     exact 3-D chain and from the 2-D chain (today's code fed the same slant ranges and
     own-north azimuths as ground ranges on the flat plane of the sites)."""
     sc = radar_network(seed, n_aircraft=n_aircraft, duration=duration, geometry="3d")
     r3 = sc.radars
     r2 = RadarSet(r3.sites, r3.sigma_range, r3.sigma_azimuth, r3.max_range)
-    p2 = PlotTable(sc.plots.time, sc.plots.radar, sc.plots.range, sc.plots.azimuth,
-                   sc.plots.object)
+    p2 = PlotTable(sc.plots.time, sc.plots.radar, sc.plots.range, sc.plots.azimuth, sc.plots.object)
     out = []
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # cells without all radars are dropped
@@ -314,8 +333,12 @@ def test_3d_chain_recovers_the_field_5x_better_than_2d() -> None:
 def test_3d_chain_ratio_over_seeds() -> None:
     """The figure of the note: median over seeds 0-4 (40 aircraft, 30 min, 30 cells) of
     the 2-D/3-D error ratio ≥ 5 in range and azimuth (measured ≈ 54 and 80)."""
-    ratios = np.array([np.divide(*chain_errors(s, n_aircraft=40, duration=1800.0,
-                                               cells=30)[1::-1]) for s in range(5)])
+    ratios = np.array(
+        [
+            np.divide(*chain_errors(s, n_aircraft=40, duration=1800.0, cells=30)[1::-1])
+            for s in range(5)
+        ]
+    )
     assert np.all(np.median(ratios, axis=0) >= 5)
 
 
@@ -340,15 +363,15 @@ def test_field_data_3d_saved_loaded_and_2d_files_still_load(tmp_path) -> None:
     # lies on them (φ = Φ0 + Φ1η to 1e-9 of |φ|)
     sol = closed_form(back)
     assert sol.status is Status.OPTIMAL
-    np.testing.assert_allclose(sol.phi, b0 + b1 @ sol.eta.reshape(-1),
-                               atol=1e-9 * np.abs(sol.phi).max())
+    np.testing.assert_allclose(
+        sol.phi, b0 + b1 @ sol.eta.reshape(-1), atol=1e-9 * np.abs(sol.phi).max()
+    )
     # the exact Jacobians are those of the 3-D map at (ξ̂_(k), h_k), not the 2-D ones
     mean = fd.xi.mean(axis=1)
     for i in range(fd.m):
         ref = g3.polar_jacobian3d(mean, fd.heights, fd.geodetic[i], fd.origin)
         np.testing.assert_allclose(fd.jacobians[:, i], ref, rtol=1e-9, atol=1e-15)
-    only_jac = FieldData(fd.radars, fd.centers, fd.xi, fd.adjacency, fd.P, fd.xi_cov,
-                         fd.jacobians)
+    only_jac = FieldData(fd.radars, fd.centers, fd.xi, fd.adjacency, fd.P, fd.xi_cov, fd.jacobians)
     lin0, _ = uncertainty_sets(only_jac)
     d = np.linalg.norm(fd.xi - mean[:, None, :], axis=2)  # (K, m)
     rng_ = np.linalg.norm(mean[:, None, :] - fd.radars[None], axis=2)
@@ -361,11 +384,22 @@ def test_field_data_3d_saved_loaded_and_2d_files_still_load(tmp_path) -> None:
     back2 = FieldData.load(tmp_path / "fd2.npz")
     assert not back2.is_3d and back2.jacobians is None and back2.heights is None
     with pytest.raises(ProblemError, match="heights"):
-        FieldData(fd.radars, fd.centers, fd.xi, fd.adjacency, fd.P, None, None, None,
-                  fd.geodetic, fd.origin)
+        FieldData(
+            fd.radars,
+            fd.centers,
+            fd.xi,
+            fd.adjacency,
+            fd.P,
+            None,
+            None,
+            None,
+            fd.geodetic,
+            fd.origin,
+        )
     with pytest.raises(ProblemError, match="jacobians"):
-        FieldData(fd.radars, fd.centers, fd.xi, fd.adjacency, fd.P, None,
-                  np.zeros((fd.k, fd.m, 2, 2)))
+        FieldData(
+            fd.radars, fd.centers, fd.xi, fd.adjacency, fd.P, None, np.zeros((fd.k, fd.m, 2, 2))
+        )
 
 
 def test_build_field_data_passes_the_scheduler_through() -> None:

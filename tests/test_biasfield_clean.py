@@ -63,15 +63,21 @@ def test_clean_plots_give_the_clean_field_data() -> None:
     ang = rng.uniform(-np.pi, np.pi, 6)
     zg = z + 10e3 * np.column_stack([np.sin(ang), np.cos(ang)])
     pol = np.array([to_polar(zg[j], radars.sites[ref.radar[k]]) for j, k in enumerate(pick)])
-    glitch = PlotTable(ref.time[pick] + 1.0, ref.radar[pick], pol[:, 0], pol[:, 1],
-                       ref.object[pick])
+    glitch = PlotTable(
+        ref.time[pick] + 1.0, ref.radar[pick], pol[:, 0], pol[:, 1], ref.object[pick]
+    )
     tt = np.arange(0.0, 901.0)
     heading = np.deg2rad(30.0) + np.where(tt > 450, np.deg2rad(90.0), 0.0)
     taxi_xy = np.cumsum(5.0 * np.column_stack([np.sin(heading), np.cos(heading)]), axis=0)
     taxi_paths = AircraftPaths(tt, taxi_xy[None], np.ones((1, tt.size), dtype=bool))
     taxi, _, _ = simulate_plots(np.random.default_rng(4), radars, taxi_paths, sc.fields)
-    taxi = PlotTable(taxi.time, taxi.radar, taxi.range, taxi.azimuth,
-                     np.full(len(taxi), int(plots.object.max()) + 1))
+    taxi = PlotTable(
+        taxi.time,
+        taxi.radar,
+        taxi.range,
+        taxi.azimuth,
+        np.full(len(taxi), int(plots.object.max()) + 1),
+    )
     dirty = _concat(ref, glitch, taxi)
     kept, rep = clean_plots(dirty, radars)
     n0, n1 = len(ref), len(ref) + len(glitch)
@@ -96,7 +102,7 @@ def test_clean_plots_track_jump_and_clean_input() -> None:
     assert rep.total == 0 and len(kept) == len(sc.plots)
     p = sc.plots
     rows = np.flatnonzero((p.radar == 0) & (p.object == 3))
-    late = rows[2 * rows.size // 3:]
+    late = rows[2 * rows.size // 3 :]
     z = p.cartesian(sc.radars)
     moved = to_polar(z[late] + [20e3, 0.0], sc.radars.sites[0])
     rng_, az = p.range.copy(), p.azimuth.copy()
@@ -108,8 +114,9 @@ def test_clean_plots_track_jump_and_clean_input() -> None:
 
 
 # --------------------------------------------------------------- ADS-B reports
-def _adsb(truth: AircraftPaths, gap: tuple[str, float, float] | None = None
-          ) -> list[tuple[str, float, float, float, float]]:
+def _adsb(
+    truth: AircraftPaths, gap: tuple[str, float, float] | None = None
+) -> list[tuple[str, float, float, float, float]]:
     rows = []
     for a in range(len(truth)):
         t, _, geo = truth.track(a)
@@ -123,8 +130,10 @@ def _adsb(truth: AircraftPaths, gap: tuple[str, float, float] | None = None
 
 
 def _write(path: Path, rows: list[tuple[str, float, float, float, float]]) -> Path:
-    path.write_text("object,time,lat,lon,alt\n" + "".join(
-        f"{o},{t!r},{la!r},{lo!r},{h!r}\n" for o, t, la, lo, h in rows))
+    path.write_text(
+        "object,time,lat,lon,alt\n"
+        + "".join(f"{o},{t!r},{la!r},{lo!r},{h!r}\n" for o, t, la, lo, h in rows)
+    )
     return path
 
 
@@ -144,22 +153,27 @@ def test_read_tracks_cleans_splits_and_gives_the_clean_field_data(tmp_path: Path
         o, t, la, lo, h = mine[len(mine) // 2]
         en = g3.common_plane(la, lo, ORG)
         ang = rng.uniform(-np.pi, np.pi)
-        gl_la, gl_lo = g3.plane_to_geodetic(en + 600.0 * np.array([np.sin(ang), np.cos(ang)]),
-                                            ORG)
+        gl_la, gl_lo = g3.plane_to_geodetic(en + 600.0 * np.array([np.sin(ang), np.cos(ang)]), ORG)
         glitches.append((o, t + 0.5, float(gl_la), float(gl_lo), h))
     tt = np.arange(0.0, 601.0)
     en_taxi = np.column_stack([8.0 * tt + 5e3, 2.0 * tt - 4e3])
     la_t, lo_t = g3.plane_to_geodetic(en_taxi, ORG)
-    taxi = [("TAXI", float(t), float(a), float(b), 150.0)
-            for t, a, b in zip(tt, la_t, lo_t, strict=True)]
+    taxi = [
+        ("TAXI", float(t), float(a), float(b), 150.0)
+        for t, a, b in zip(tt, la_t, lo_t, strict=True)
+    ]
     dirty_rows = ref_rows + glitches + taxi
     ref = read_tracks(_write(tmp_path / "ref.csv", ref_rows), ORG)
     got, rep = read_tracks(_write(tmp_path / "dirty.csv", dirty_rows), ORG, report=True)
     n0 = len(ref_rows)
     assert rep.counts["ground traffic"] == len(taxi)
     np.testing.assert_array_equal(rep.rows["ground traffic"], np.arange(n0 + 3, n0 + 3 + 601))
-    jumps = np.concatenate([rep.rows.get("impossible speed", np.zeros(0, int)),
-                            rep.rows.get("impossible acceleration", np.zeros(0, int))])
+    jumps = np.concatenate(
+        [
+            rep.rows.get("impossible speed", np.zeros(0, int)),
+            rep.rows.get("impossible acceleration", np.zeros(0, int)),
+        ]
+    )
     np.testing.assert_array_equal(np.sort(jumps), np.arange(n0, n0 + 3))
     assert rep.total == 3 + len(taxi)
     assert got.labels == ref.labels == ("F0", "F1#1", "F1#2", "F2", "F3", "F4", "F5")
@@ -173,12 +187,12 @@ def test_read_tracks_cleans_splits_and_gives_the_clean_field_data(tmp_path: Path
     np.testing.assert_allclose(en0, truth.at(0, t0), rtol=0, atol=1e-3)
     raw = read_tracks(tmp_path / "dirty.csv", ORG, clean=False)
     assert "TAXI" in raw.labels and len(raw) == len(got) + 1
-    sc = radar_network(0, n_aircraft=1, duration=60.0, geometry="3d", origin=ORG,
-                       fields="smooth")
+    sc = radar_network(0, n_aircraft=1, duration=60.0, geometry="3d", origin=ORG, fields="smooth")
     fds = []
     for paths in (ref, got):
-        plots, _, _ = simulate_plots(np.random.default_rng(5), sc.radars, paths, sc.fields,
-                                     periods=[5.0, 6.0, 7.0, 8.0])
+        plots, _, _ = simulate_plots(
+            np.random.default_rng(5), sc.radars, paths, sc.fields, periods=[5.0, 6.0, 7.0, 8.0]
+        )
         fds.append(_field(plots, sc.radars, cells=12))
     assert fds[0].k == fds[1].k
     np.testing.assert_allclose(fds[1].xi, fds[0].xi, rtol=0, atol=1e-9)
@@ -197,8 +211,7 @@ def test_clean_reports_finds_the_glitch_point() -> None:
     t2, x2 = np.append(t[keep], 60.0), np.vstack([x[keep], x[60] + 50.0])
     obj = np.zeros(t2.size, dtype=int)
     seg, rep = clean_reports(obj, t2, x2)
-    assert rep.counts == {"impossible acceleration": 1, "impossible speed": 1,
-                          "duplicate time": 1}
+    assert rep.counts == {"impossible acceleration": 1, "impossible speed": 1, "duplicate time": 1}
     assert rep.rows["impossible acceleration"].tolist() == [40]
     assert rep.rows["impossible speed"].tolist() == [80]
     assert rep.rows["duplicate time"].tolist() == [t2.size - 1]
@@ -224,9 +237,11 @@ def test_clean_reports_ground_ceiling_and_errors() -> None:
     lim = CleaningLimits(ground_ceiling=500.0)
     seg, rep = clean_reports(np.zeros(t.size), t, x, heights=h, limits=lim)
     np.testing.assert_array_equal(rep.rows["ground traffic"], np.arange(50))
-    for kw, text in (({"max_speed": -1.0}, "CleaningLimits max_speed"),
-                     ({"min_points": 0}, "CleaningLimits min_points"),
-                     ({"ground_ceiling": float("nan")}, "ground_ceiling")):
+    for kw, text in (
+        ({"max_speed": -1.0}, "CleaningLimits max_speed"),
+        ({"min_points": 0}, "CleaningLimits min_points"),
+        ({"ground_ceiling": float("nan")}, "ground_ceiling"),
+    ):
         with pytest.raises(ProblemError, match=text):
             CleaningLimits(**kw)  # type: ignore[arg-type]
     with pytest.raises(ProblemError, match="clean_reports positions"):
@@ -277,10 +292,13 @@ def test_fit_tracks_serial_processes_dask_agree() -> None:
 
     sc = radar_network(6, n_aircraft=8, duration=600.0, fields="smooth")
     ref, d_ref = fit_tracks(sc.plots, sc.radars, chunk=300)
-    proc, d_proc = fit_tracks(sc.plots, sc.radars, scheduler="processes", workers=2,
-                              chunk=300)
-    with LocalCluster(n_workers=1, threads_per_worker=2, processes=False,
-                      dashboard_address=None) as cluster, Client(cluster) as client:
+    proc, d_proc = fit_tracks(sc.plots, sc.radars, scheduler="processes", workers=2, chunk=300)
+    with (
+        LocalCluster(
+            n_workers=1, threads_per_worker=2, processes=False, dashboard_address=None
+        ) as cluster,
+        Client(cluster) as client,
+    ):
         dask, d_dask = fit_tracks(sc.plots, sc.radars, scheduler=client, chunk=300)
     assert len(ref) == len(proc) == len(dask) > 20
     assert d_ref.counts == d_proc.counts == d_dask.counts
@@ -289,8 +307,9 @@ def test_fit_tracks_serial_processes_dask_agree() -> None:
         for name in ("theta", "cov_diag", "cov_next", "whitened"):
             x = getattr(a, name)
             for other in (b, c):
-                np.testing.assert_allclose(getattr(other, name), x, rtol=1e-12,
-                                           atol=1e-12 * np.abs(x).max())
+                np.testing.assert_allclose(
+                    getattr(other, name), x, rtol=1e-12, atol=1e-12 * np.abs(x).max()
+                )
     with pytest.raises(ProblemError, match="fit_tracks scheduler"):
         fit_tracks(sc.plots, sc.radars, scheduler="threads")
     with pytest.raises(ProblemError, match=r"fit_tracks scheduler.*'dask'"):

@@ -28,14 +28,32 @@ def small(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     from optmodels.scenarios.recording import simulate_recording
 
     tmp = tmp_path_factory.mktemp("kill")
-    sim = simulate_recording(tmp / "sim", seed=5, aircraft=8, duration=600.0,
-                             adsb_interval=4)
-    run_cli("biasfield", "build", sim.recording, "--radars", sim.sites, "--cells", "25",
-            "--out", tmp / "fd.npz")
-    run_cli("biasfield", "solve", tmp / "fd.npz", "--method", "closed-form", "--out",
-            tmp / "solved")
-    run_cli("biasfield", "correct", sim.recording, "--radars", sim.sites, "--field",
-            tmp / "solved" / "field.npz", "--out", tmp / "corrected.csv")
+    sim = simulate_recording(tmp / "sim", seed=5, aircraft=8, duration=600.0, adsb_interval=4)
+    run_cli(
+        "biasfield",
+        "build",
+        sim.recording,
+        "--radars",
+        sim.sites,
+        "--cells",
+        "25",
+        "--out",
+        tmp / "fd.npz",
+    )
+    run_cli(
+        "biasfield", "solve", tmp / "fd.npz", "--method", "closed-form", "--out", tmp / "solved"
+    )
+    run_cli(
+        "biasfield",
+        "correct",
+        sim.recording,
+        "--radars",
+        sim.sites,
+        "--field",
+        tmp / "solved" / "field.npz",
+        "--out",
+        tmp / "corrected.csv",
+    )
     return {"tmp": tmp, "rec": sim.recording, "sites": sim.sites}
 
 
@@ -60,8 +78,9 @@ def _csv_rows(p: Path) -> int:
 
 def _timed(argv: list[str]) -> float:
     t = time.perf_counter()
-    proc = subprocess.run([str(OPTMODELS), *argv], capture_output=True, env=_env(),
-                          check=False, timeout=600)
+    proc = subprocess.run(
+        [str(OPTMODELS), *argv], capture_output=True, env=_env(), check=False, timeout=600
+    )
     assert proc.returncode == 0, proc.stderr
     return time.perf_counter() - t
 
@@ -76,8 +95,12 @@ def _kill_trials(argv: list[str], targets: dict[Path, object], seed: int) -> lis
     rng = np.random.default_rng(seed)
     codes = []
     for _ in range(TRIALS):
-        proc = subprocess.Popen([str(OPTMODELS), *argv], stdout=subprocess.DEVNULL,
-                                stderr=subprocess.DEVNULL, env=_env())
+        proc = subprocess.Popen(
+            [str(OPTMODELS), *argv],
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+            env=_env(),
+        )
         time.sleep(float(rng.uniform(0.3, 1.1)) * span)
         proc.send_signal(signal.SIGKILL)
         codes.append(proc.wait(timeout=60))
@@ -90,30 +113,64 @@ def _kill_trials(argv: list[str], targets: dict[Path, object], seed: int) -> lis
 @pytest.mark.slow
 def test_kill_build_leaves_the_previous_field_data(small: dict[str, Path]) -> None:
     tmp = small["tmp"]
-    _kill_trials(["biasfield", "build", str(small["rec"]), "--radars", str(small["sites"]),
-                  "--cells", "25", "--out", str(tmp / "fd.npz")], {tmp / "fd.npz": _npz_whole},
-                 seed=11)
+    _kill_trials(
+        [
+            "biasfield",
+            "build",
+            str(small["rec"]),
+            "--radars",
+            str(small["sites"]),
+            "--cells",
+            "25",
+            "--out",
+            str(tmp / "fd.npz"),
+        ],
+        {tmp / "fd.npz": _npz_whole},
+        seed=11,
+    )
 
 
 @pytest.mark.slow
 def test_kill_solve_leaves_the_previous_field(small: dict[str, Path]) -> None:
     tmp = small["tmp"]
     n = _csv_rows(tmp / "solved" / "field.csv")
-    _kill_trials(["biasfield", "solve", str(tmp / "fd.npz"), "--method", "closed-form",
-                  "--out", str(tmp / "solved")],
-                 {tmp / "solved" / "field.npz": _npz_whole,
-                  tmp / "solved" / "field.csv": lambda p: _csv_rows(p) == n or 1 / 0},
-                 seed=12)
+    _kill_trials(
+        [
+            "biasfield",
+            "solve",
+            str(tmp / "fd.npz"),
+            "--method",
+            "closed-form",
+            "--out",
+            str(tmp / "solved"),
+        ],
+        {
+            tmp / "solved" / "field.npz": _npz_whole,
+            tmp / "solved" / "field.csv": lambda p: _csv_rows(p) == n or 1 / 0,
+        },
+        seed=12,
+    )
 
 
 def test_kill_correct_leaves_the_previous_csv(small: dict[str, Path]) -> None:
     tmp = small["tmp"]
     n = _csv_rows(tmp / "corrected.csv")
     assert n > 500
-    _kill_trials(["biasfield", "correct", str(small["rec"]), "--radars", str(small["sites"]),
-                  "--field", str(tmp / "solved" / "field.npz"), "--out",
-                  str(tmp / "corrected.csv")],
-                 {tmp / "corrected.csv": lambda p: _csv_rows(p) == n or 1 / 0}, seed=13)
+    _kill_trials(
+        [
+            "biasfield",
+            "correct",
+            str(small["rec"]),
+            "--radars",
+            str(small["sites"]),
+            "--field",
+            str(tmp / "solved" / "field.npz"),
+            "--out",
+            str(tmp / "corrected.csv"),
+        ],
+        {tmp / "corrected.csv": lambda p: _csv_rows(p) == n or 1 / 0},
+        seed=13,
+    )
 
 
 def test_kill_fieldmap_save_in_a_loop(small: dict[str, Path], tmp_path: Path) -> None:
@@ -125,13 +182,20 @@ def test_kill_fieldmap_save_in_a_loop(small: dict[str, Path], tmp_path: Path) ->
     src = small["tmp"] / "solved" / "field.npz"
     target = tmp_path / "map.npz"
     FieldMap.load(src).save(target)
-    code = ("import sys\nfrom optmodels.biasfield.usage import FieldMap\n"
-            f"fm = FieldMap.load({str(src)!r})\nprint('ready', flush=True)\n"
-            f"while True:\n    fm.save({str(target)!r})\n")
+    code = (
+        "import sys\nfrom optmodels.biasfield.usage import FieldMap\n"
+        f"fm = FieldMap.load({str(src)!r})\nprint('ready', flush=True)\n"
+        f"while True:\n    fm.save({str(target)!r})\n"
+    )
     rng = np.random.default_rng(14)
     for _ in range(TRIALS + 2):
-        proc = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE,
-                                stderr=subprocess.DEVNULL, env=_env(), text=True)
+        proc = subprocess.Popen(
+            [sys.executable, "-c", code],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.DEVNULL,
+            env=_env(),
+            text=True,
+        )
         assert proc.stdout is not None and proc.stdout.readline().strip() == "ready"
         time.sleep(float(rng.uniform(0.05, 0.5)))
         proc.kill()
@@ -148,17 +212,40 @@ def test_ctrl_c_says_what_was_and_was_not_written(small: dict[str, Path], verb: 
     tmp = small["tmp"]
     if verb == "build":
         out = tmp / "fd.npz"
-        argv = ["biasfield", "build", str(small["rec"]), "--radars", str(small["sites"]),
-                "--cells", "25", "--out", str(out)]
+        argv = [
+            "biasfield",
+            "build",
+            str(small["rec"]),
+            "--radars",
+            str(small["sites"]),
+            "--cells",
+            "25",
+            "--out",
+            str(out),
+        ]
     else:
         out = tmp / "corrected.csv"
-        argv = ["biasfield", "correct", str(small["rec"]), "--radars", str(small["sites"]),
-                "--field", str(tmp / "solved" / "field.npz"), "--out", str(out)]
+        argv = [
+            "biasfield",
+            "correct",
+            str(small["rec"]),
+            "--radars",
+            str(small["sites"]),
+            "--field",
+            str(tmp / "solved" / "field.npz"),
+            "--out",
+            str(out),
+        ]
     before = _digest(out)
     span = _timed(argv)
     for frac in (0.7, 0.55, 0.85, 0.4, 0.95):  # past the interpreter's start into the work
-        proc = subprocess.Popen([str(OPTMODELS), *argv], stdout=subprocess.PIPE,
-                                stderr=subprocess.PIPE, env=_env(), text=True)
+        proc = subprocess.Popen(
+            [str(OPTMODELS), *argv],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            env=_env(),
+            text=True,
+        )
         time.sleep(frac * span)
         proc.send_signal(signal.SIGINT)
         _, err = proc.communicate(timeout=120)

@@ -25,10 +25,12 @@ def test_polar_round_trip_and_convention() -> None:
     assert np.all(pol[:, 1] > -np.pi) and np.all(pol[:, 1] <= np.pi)
     # azimuth clockwise from North: North 0, East +π/2, South π, West −π/2
     compass = SITE + np.array([[0, 1e3], [1e3, 0], [0, -1e3], [-1e3, 0]])
-    np.testing.assert_allclose(bf.to_polar(compass, SITE)[:, 1],
-                               [0, np.pi / 2, np.pi, -np.pi / 2], atol=1e-15)
-    np.testing.assert_allclose(bf.wrap_angle([np.pi, -np.pi, 3 * np.pi, 0.5]),
-                               [np.pi, np.pi, np.pi, 0.5])
+    np.testing.assert_allclose(
+        bf.to_polar(compass, SITE)[:, 1], [0, np.pi / 2, np.pi, -np.pi / 2], atol=1e-15
+    )
+    np.testing.assert_allclose(
+        bf.wrap_angle([np.pi, -np.pi, 3 * np.pi, 0.5]), [np.pi, np.pi, np.pi, 0.5]
+    )
 
 
 def test_polar_jacobian_vs_finite_differences() -> None:
@@ -65,8 +67,13 @@ def test_bias_fields() -> None:
     np.testing.assert_allclose(bf.BiasField.constant(5.0, 0.01)(x), [[5.0, 0.01]] * 2)
     lin = bf.BiasField.linear([1.0, 0.0], [[1e-3, 0.0], [0.0, 1e-8]], origin=[0.0, 0.0])
     np.testing.assert_allclose(lin(x), [[1.0, 0.0], [11.0, 2e-4]])
-    sm = bf.BiasField.smooth(np.random.default_rng(3), center=[0, 0], scale=1e5,
-                             range_amplitude=100.0, azimuth_amplitude=0.005)
+    sm = bf.BiasField.smooth(
+        np.random.default_rng(3),
+        center=[0, 0],
+        scale=1e5,
+        range_amplitude=100.0,
+        azimuth_amplitude=0.005,
+    )
     v = sm(np.random.default_rng(4).uniform(-2e5, 2e5, (1000, 2)))
     assert np.abs(v[:, 0]).max() < 400 and np.abs(v[:, 1]).max() < 0.02
     with pytest.raises(ProblemError, match="field"):
@@ -86,8 +93,12 @@ def test_simulated_plots_follow_the_model() -> None:
         sel = p.radar == i
         n = int(sel.sum())
         pol = bf.to_polar(sc.true_position[sel], sc.radars.sites[i])
-        d = np.column_stack([p.range[sel] - pol[:, 0] - sc.true_bias[sel, 0],
-                             bf.wrap_angle(p.azimuth[sel] - pol[:, 1] - sc.true_bias[sel, 1])])
+        d = np.column_stack(
+            [
+                p.range[sel] - pol[:, 0] - sc.true_bias[sel, 0],
+                bf.wrap_angle(p.azimuth[sel] - pol[:, 1] - sc.true_bias[sel, 1]),
+            ]
+        )
         sig = np.array([sc.radars.sigma_range[i], sc.radars.sigma_azimuth[i]])
         assert np.all(np.abs(d.mean(0)) < 4 * sig / np.sqrt(n))
         assert np.all(np.abs(d.std(0) / sig - 1) < 4 / np.sqrt(2 * n))
@@ -96,8 +107,9 @@ def test_simulated_plots_follow_the_model() -> None:
         gaps = np.diff(p.time[sel][obj == obj[0]])
         assert np.median(gaps) == pytest.approx(np.median(gaps[gaps < 2 * np.median(gaps)]))
     z = p.cartesian(sc.radars)
-    np.testing.assert_allclose(np.median(np.linalg.norm(
-        z - sc.true_position - sc.true_shift(), axis=1)), 120, rtol=0.8)
+    np.testing.assert_allclose(
+        np.median(np.linalg.norm(z - sc.true_position - sc.true_shift(), axis=1)), 120, rtol=0.8
+    )
 
 
 def test_radar_set_and_plot_table_bad_input() -> None:
@@ -108,17 +120,24 @@ def test_radar_set_and_plot_table_bad_input() -> None:
     radars = bf.RadarSet(np.array([[0.0, 0.0], [1e4, 0.0]]), 50.0, 1e-3, 1e5)
     with pytest.raises(ProblemError, match="unknown radar id"):
         radars.index("R9")
-    t = bf.PlotTable(np.array([0.0, 1.0]), np.array([0, 2]), np.array([1e3, 2e3]),
-                     np.zeros(2), np.zeros(2, dtype=int))
+    t = bf.PlotTable(
+        np.array([0.0, 1.0]),
+        np.array([0, 2]),
+        np.array([1e3, 2e3]),
+        np.zeros(2),
+        np.zeros(2, dtype=int),
+    )
     with pytest.raises(ProblemError, match="unknown radar index"):
         t.check(radars)
-    far = bf.PlotTable(np.array([0.0]), np.array([1]), np.array([2e5]), np.zeros(1),
-                       np.zeros(1, dtype=int))
+    far = bf.PlotTable(
+        np.array([0.0]), np.array([1]), np.array([2e5]), np.zeros(1), np.zeros(1, dtype=int)
+    )
     with pytest.raises(ProblemError, match="max_range"):
         far.check(radars)
     with pytest.raises(ProblemError, match="NaN"):
-        bf.PlotTable(np.array([np.nan]), np.array([0]), np.array([1.0]), np.zeros(1),
-                     np.zeros(1, dtype=int))
+        bf.PlotTable(
+            np.array([np.nan]), np.array([0]), np.array([1.0]), np.zeros(1), np.zeros(1, dtype=int)
+        )
 
 
 def test_track_fits_against_truth() -> None:
@@ -127,8 +146,7 @@ def test_track_fits_against_truth() -> None:
     average 2 (χ²₂) within 5 se (se = 2/√N); Σχ²/Σdof = 1 within 5/√(Σdof/2)."""
     from optmodels.biasfield.tracks import fit_tracks
 
-    sc = radar_network(1, n_aircraft=20, duration=1200.0, turn_rate=(0.0, 0.0),
-                       fields="constant")
+    sc = radar_network(1, n_aircraft=20, duration=1200.0, turn_rate=(0.0, 0.0), fields="constant")
     fits, dropped = fit_tracks(sc.plots, sc.radars)
     used = sum(f.rows.size for f in fits)
     # nothing silently lost: every plot is used or counted as dropped
@@ -163,8 +181,13 @@ def test_track_fit_drops_short_tracks() -> None:
 
     radars = bf.RadarSet(np.array([[0.0, 0.0], [1e4, 0.0]]), 50.0, 1e-3, 2e5)
     t = np.array([0.0, 5.0, 100.0, 104.0, 108.0, 112.0, 116.0, 120.0])
-    plots = bf.PlotTable(t, np.zeros(8, dtype=int), np.full(8, 5e4), np.linspace(0, 0.01, 8),
-                         np.array([0, 0, 1, 1, 1, 1, 1, -1]))
+    plots = bf.PlotTable(
+        t,
+        np.zeros(8, dtype=int),
+        np.full(8, 5e4),
+        np.linspace(0, 0.01, 8),
+        np.array([0, 0, 1, 1, 1, 1, 1, -1]),
+    )
     fits, dropped = fit_tracks(plots, radars, knot_spacing=20.0)
     assert dropped.counts == {"no object id": 1, "too few plots for the polyline": 2}
     assert len(fits) == 1 and fits[0].object == 1 and fits[0].rows.size == 5
@@ -184,16 +207,24 @@ def test_uncertainty_sets_contain_the_true_field(fields: str) -> None:
     """Near-zero noise, straight paths: the true f at each cell lies in its set up to the
     linearisation of p_i and the averaging of the shift over a cell of tens of km: in 90 %
     of the (cell, radar) pairs below 1 % of the largest bias, everywhere below 10 %."""
-    sc = radar_network(2, n_aircraft=40, duration=1800.0, sigma_range=1e-3,
-                       sigma_azimuth=1e-8, fields=fields, turn_rate=(0.0, 0.0))
+    sc = radar_network(
+        2,
+        n_aircraft=40,
+        duration=1800.0,
+        sigma_range=1e-3,
+        sigma_azimuth=1e-8,
+        fields=fields,
+        turn_rate=(0.0, 0.0),
+    )
     fd, diag = bf.build_field_data(sc.plots, sc.radars, cells=30)
     assert fd.xi.shape == (fd.k, 4, 2) and diag.objects_per_cell.min() >= 1
     # every kept cell rests on plots of all four radars (≥ one per radar)
     assert diag.plots_per_cell.min() >= 4 and diag.samples_per_cell.min() >= 1
     phi0, phi1 = bf.uncertainty_sets(fd)
     assert phi0.shape == (8 * fd.k,) and phi1.shape == (8 * fd.k, 2 * fd.k)
-    f = np.concatenate([np.concatenate([sc.fields[i](fd.xi[k].mean(0)) for i in range(fd.m)])
-                        for k in range(fd.k)])
+    f = np.concatenate(
+        [np.concatenate([sc.fields[i](fd.xi[k].mean(0)) for i in range(fd.m)]) for k in range(fd.k)]
+    )
     r = np.abs(_set_residual(fd, f))
     big = np.abs(f.reshape(fd.k, fd.m, 2)).max(axis=(0, 1))
     floor = np.array([1.0, 1e-6])  # metre / µrad floor for a component that is zero
@@ -209,8 +240,15 @@ def test_common_shift_in_a_cell_is_invisible() -> None:
     p_i(x + c) differ from f_i by ~|c|/r (rad), yet both lie in the cell's set (10), up to
     the same linearisation error as f (asserted: median < 2 %, 90th percentile < 5 % of
     |f' − f|)."""
-    sc = radar_network(2, n_aircraft=40, duration=1800.0, sigma_range=1e-3,
-                       sigma_azimuth=1e-8, fields="constant", turn_rate=(0.0, 0.0))
+    sc = radar_network(
+        2,
+        n_aircraft=40,
+        duration=1800.0,
+        sigma_range=1e-3,
+        sigma_azimuth=1e-8,
+        fields="constant",
+        turn_rate=(0.0, 0.0),
+    )
     fd, _ = bf.build_field_data(sc.plots, sc.radars, cells=30)
     c = np.array([800.0, -600.0])
     f, f_alt = [], []
@@ -229,9 +267,19 @@ def test_common_shift_in_a_cell_is_invisible() -> None:
     # in the shift space no linearisation is involved: both truths lie in S_ξ̂ up to the
     # variation of s_i over the cell (the paper's ε), asserted at 5 % of max |s| (90 %)
     s0, s1 = bf.uncertainty_sets(fd, space="cartesian")
-    s_true = np.concatenate([np.concatenate([bf.shift_from_bias(
-        fd.xi[k].mean(0), sc.radars.sites[i], sc.fields[i](fd.xi[k].mean(0)))
-        for i in range(fd.m)]) for k in range(fd.k)])
+    s_true = np.concatenate(
+        [
+            np.concatenate(
+                [
+                    bf.shift_from_bias(
+                        fd.xi[k].mean(0), sc.radars.sites[i], sc.fields[i](fd.xi[k].mean(0))
+                    )
+                    for i in range(fd.m)
+                ]
+            )
+            for k in range(fd.k)
+        ]
+    )
     for cand in (s_true, s_true - np.tile(c, fd.m * fd.k)):
         eta_s = np.linalg.lstsq(s1.toarray(), cand - s0, rcond=None)[0]
         assert np.quantile(np.abs(cand - s0 - s1 @ eta_s), 0.9) < 0.05 * np.abs(s_true).max()
@@ -252,8 +300,7 @@ def test_parametric_baseline_recovers_a_constant_azimuth_bias() -> None:
     """Model (2) is true (constant azimuth bias, no range bias), straight paths: each Δ̂ is
     within 4 standard errors of the truth (measured z ≤ 2.6: the linearised (4) neglects
     the radial ρΔ²/2 ≈ 1 m), and the χ² test does not reject (p > 0.001)."""
-    sc = radar_network(4, n_aircraft=30, duration=1800.0, turn_rate=(0.0, 0.0),
-                       fields="constant")
+    sc = radar_network(4, n_aircraft=30, duration=1800.0, turn_rate=(0.0, 0.0), fields="constant")
     res = bf.azimuth_bias_baseline(sc.plots, sc.radars)
     assert np.all(np.abs(res.estimate - _true_azimuth_biases(sc)) < 4 * res.std)
     assert res.p_value > 1e-3 and res.dropped == 0
@@ -264,8 +311,7 @@ def test_parametric_baseline_fails_for_a_non_constant_field() -> None:
     """A smooth, position-dependent field: χ²/dof far above 1 (rejected at p < 1e-6), and
     the estimates from two halves of the trajectories disagree by more than 4 standard
     errors (measured: up to 14.6) -- the paper's observation that motivated section 3."""
-    sc = radar_network(4, n_aircraft=30, duration=1800.0, turn_rate=(0.0, 0.0),
-                       fields="smooth")
+    sc = radar_network(4, n_aircraft=30, duration=1800.0, turn_rate=(0.0, 0.0), fields="smooth")
     res = bf.azimuth_bias_baseline(sc.plots, sc.radars)
     assert res.p_value < 1e-6 and res.chi2_per_dof > 1.5
     ids = np.unique(sc.plots.object)
@@ -283,13 +329,20 @@ ORIGIN = (55.0, 83.0, 150.0)  # lat, lon (deg), alt (m): a Novosibirsk-like orig
 def _write_radars(path, sc) -> None:
     import pymap3d
 
-    lat, lon, alt = pymap3d.enu2geodetic(sc.radars.sites[:, 0], sc.radars.sites[:, 1],
-                                         np.zeros(sc.radars.m), *ORIGIN)
+    lat, lon, alt = pymap3d.enu2geodetic(
+        sc.radars.sites[:, 0], sc.radars.sites[:, 1], np.zeros(sc.radars.m), *ORIGIN
+    )
     rows = ["name,lat,lon,alt,sigma_range,sigma_azimuth,max_range"]
     r = sc.radars
     for i in range(r.m):
-        vals = (lat[i], lon[i], alt[i], r.sigma_range[i], np.rad2deg(r.sigma_azimuth[i]),
-                r.max_range[i])
+        vals = (
+            lat[i],
+            lon[i],
+            alt[i],
+            r.sigma_range[i],
+            np.rad2deg(r.sigma_azimuth[i]),
+            r.max_range[i],
+        )
         rows.append(",".join([r.names[i], *(repr(float(v)) for v in vals)]))
     path.write_text("\n".join(rows) + "\n")
 
@@ -311,23 +364,33 @@ def test_read_radars_and_plots_round_trip(tmp_path, fmt: str) -> None:
         path = tmp_path / "plots.csv"
         lines = ["time,radar,range,azimuth,object"] + [
             f"{float(t)!r},{r},{float(g)!r},{float(np.rad2deg(a))!r},{o}"
-            for t, r, g, a, o in zip(p.time, names, p.range, p.azimuth, obj, strict=True)]
+            for t, r, g, a, o in zip(p.time, names, p.range, p.azimuth, obj, strict=True)
+        ]
         path.write_text("\n".join(lines) + "\n")
     else:
         import pyarrow as pa
         import pyarrow.parquet as pq
 
         path = tmp_path / "plots.parquet"
-        pq.write_table(pa.table({"time": p.time, "radar": names, "range": p.range,
-                                 "azimuth": np.rad2deg(p.azimuth), "object": obj}), path)
+        pq.write_table(
+            pa.table(
+                {
+                    "time": p.time,
+                    "radar": names,
+                    "range": p.range,
+                    "azimuth": np.rad2deg(p.azimuth),
+                    "object": obj,
+                }
+            ),
+            path,
+        )
     table, dropped = bf.read_plots(path, radars)
     assert dropped == {}
     np.testing.assert_array_equal(table.radar, p.radar)
     np.testing.assert_allclose(table.azimuth, p.azimuth, atol=1e-12)
     np.testing.assert_allclose(table.range, p.range, rtol=1e-15)
     # object ids are renumbered in order of appearance, but the grouping is the same
-    assert len(np.unique(np.stack([table.object, p.object], 1), axis=0)) == len(
-        np.unique(p.object))
+    assert len(np.unique(np.stack([table.object, p.object], 1), axis=0)) == len(np.unique(p.object))
 
 
 def test_read_plots_errors(tmp_path) -> None:
@@ -361,14 +424,16 @@ def test_read_tracks_to_enu_and_simulate(tmp_path) -> None:
     refs = []
     for a in range(3):
         on = paths.active[a]
-        lat, lon, alt = pymap3d.enu2geodetic(paths.positions[a, on, 0],
-                                             paths.positions[a, on, 1],
-                                             np.full(on.sum(), 9000.0), *ORIGIN)
+        lat, lon, alt = pymap3d.enu2geodetic(
+            paths.positions[a, on, 0], paths.positions[a, on, 1], np.full(on.sum(), 9000.0), *ORIGIN
+        )
         # the common plane is the East-North of the footprint (lat, lon, 0) (issue 16)
         e, n, _ = pymap3d.geodetic2enu(lat, lon, np.zeros(on.sum()), *ORIGIN)
         refs.append((paths.times[on], np.column_stack([e, n])))
-        lines += [f"F{a},{float(t)!r},{float(la)!r},{float(lo)!r},{float(al)!r}"
-                  for t, la, lo, al in zip(paths.times[on], lat, lon, alt, strict=True)]
+        lines += [
+            f"F{a},{float(t)!r},{float(la)!r},{float(lo)!r},{float(al)!r}"
+            for t, la, lo, al in zip(paths.times[on], lat, lon, alt, strict=True)
+        ]
     (tmp_path / "tracks.csv").write_text("\n".join(lines) + "\n")
     got = bf.read_tracks(tmp_path / "tracks.csv", ORIGIN)
     for a in range(3):
@@ -377,30 +442,43 @@ def test_read_tracks_to_enu_and_simulate(tmp_path) -> None:
         ref = np.stack([np.interp(got.times[on], t_ref, p_ref[:, j]) for j in range(2)], -1)
         np.testing.assert_allclose(got.positions[a, on], ref, atol=1e-3)
     sc = radar_network(0, n_aircraft=1, duration=60.0)
-    plots, _, _ = simulate_plots(np.random.default_rng(1), sc.radars, got,
-                                  [bf.BiasField.constant()] * sc.radars.m)
+    plots, _, _ = simulate_plots(
+        np.random.default_rng(1), sc.radars, got, [bf.BiasField.constant()] * sc.radars.m
+    )
     assert len(plots) > 10 and set(np.unique(plots.object)) <= {0, 1, 2}
 
 
-@pytest.mark.parametrize("module", [
-    "optmodels.scenarios.radar_network", "optmodels.biasfield.ingest",
-    "optmodels.biasfield.cells", "optmodels.biasfield.baseline", "optmodels.scenarios",
-    "optmodels.biasfield.fielddata", "optmodels.biasfield.averaging",
-    "optmodels.biasfield.polyline", "optmodels.biasfield.paths",
-    "optmodels.biasfield.closedform", "optmodels.biasfield.selection"])
+@pytest.mark.parametrize(
+    "module",
+    [
+        "optmodels.scenarios.radar_network",
+        "optmodels.biasfield.ingest",
+        "optmodels.biasfield.cells",
+        "optmodels.biasfield.baseline",
+        "optmodels.scenarios",
+        "optmodels.biasfield.fielddata",
+        "optmodels.biasfield.averaging",
+        "optmodels.biasfield.polyline",
+        "optmodels.biasfield.paths",
+        "optmodels.biasfield.closedform",
+        "optmodels.biasfield.selection",
+    ],
+)
 def test_modules_import_first(module: str) -> None:
     """Each module imports in a fresh interpreter as the first optmodels import (guards
     against import cycles between biasfield and scenarios)."""
     import subprocess
     import sys
 
-    res = subprocess.run([sys.executable, "-c", f"import {module}"], capture_output=True,
-                         text=True, check=False)
+    res = subprocess.run(
+        [sys.executable, "-c", f"import {module}"], capture_output=True, text=True, check=False
+    )
     assert res.returncode == 0, res.stderr
 
 
-def _old_averaging(plots, radars, fits, centers, *, cell_radius, sample_step=5.0,
-                   exclude_radius=20e3):
+def _old_averaging(
+    plots, radars, fits, centers, *, cell_radius, sample_step=5.0, exclude_radius=20e3
+):
     """The averaging loop of build_field_data as it was before the per-object cell sort
     (one ``mean_over`` per object × cell × radar × piece, boolean plot counts): an
     independent reference for the vectorised loop. Returns the per-cell sums."""
@@ -495,7 +573,8 @@ def test_vectorised_averaging_equals_the_per_cell_loop(geometry: str) -> None:
     assert len(diag.fits) >= len(tracks) + 20  # the silences split ≥ 20 tracks
     nn = np.sort(np.linalg.norm(centers[:, None] - centers[None], axis=2), axis=1)[:, 1]
     sx, sc_, sh, n_obj, n_smp, n_plt = _old_averaging(
-        plots, sc.radars, diag.fits, centers, cell_radius=1.5 * float(np.median(nn)))
+        plots, sc.radars, diag.fits, centers, cell_radius=1.5 * float(np.median(nn))
+    )
     keep = n_obj > 0
     assert keep.sum() == fd.k >= 10 and diag.dropped_cells == int((~keep).sum())
     np.testing.assert_allclose(fd.centers, centers[keep], rtol=0, atol=0)
@@ -525,7 +604,6 @@ def test_place_centers_equals_scipy_kmeans2() -> None:
         ours = bf.place_centers(pts, k, seed=7)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # scipy warns about empty clusters
-            ref, _ = kmeans2(pts / scale, k, iter=20, seed=np.random.default_rng(7),
-                             minit="points")
+            ref, _ = kmeans2(pts / scale, k, iter=20, seed=np.random.default_rng(7), minit="points")
         np.testing.assert_allclose(ours, ref * scale, rtol=0, atol=1e-9)
         assert np.unique(ours, axis=0).shape[0] >= 0.9 * k

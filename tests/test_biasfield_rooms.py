@@ -22,17 +22,38 @@ PACKAGE = Path(bf.__file__).parent
 #: The stage of every module of optmodels.biasfield (``__init__`` sees them all).
 STAGES: dict[str, int] = {
     # 0 inputs: the tables, their geometry, the files, the cleaning, the truth models
-    "about": 0, "geometry": 0, "geometry3d": 0, "fields": 0, "paths": 0, "data": 0,
-    "cleaning": 0, "ingest": 0, "recording": 0, "frames": 0,
+    "about": 0,
+    "geometry": 0,
+    "geometry3d": 0,
+    "fields": 0,
+    "paths": 0,
+    "data": 0,
+    "cleaning": 0,
+    "ingest": 0,
+    "recording": 0,
+    "frames": 0,
     # 1 tracks: the polyline fits (3) and the parametric baseline (2)-(4)
-    "polyline": 1, "tracks": 1, "baseline": 1,
+    "polyline": 1,
+    "tracks": 1,
+    "baseline": 1,
     # 2 field data: cells, averages (6)-(7), FieldData and its sets (10), the chain's owner
-    "fielddata": 2, "averaging": 2, "cells": 2, "pipeline": 2,
+    "fielddata": 2,
+    "averaging": 2,
+    "cells": 2,
+    "pipeline": 2,
     # 3 selection: the original problem (8)-(10), closed form (11), QP, Lipschitz, re-checks
-    "problem": 3, "verify": 3, "identifiability": 3, "closedform": 3, "lipschitz": 3,
+    "problem": 3,
+    "verify": 3,
+    "identifiability": 3,
+    "closedform": 3,
+    "lipschitz": 3,
     "selection": 3,
     # 4 use: the map, correcting plots, registration, ADS-B as the referee
-    "fieldmap": 4, "correction": 4, "registration": 4, "summary": 4, "usage": 4,
+    "fieldmap": 4,
+    "correction": 4,
+    "registration": 4,
+    "summary": 4,
+    "usage": 4,
     "referee": 4,
 }
 
@@ -69,7 +90,7 @@ def _imports(path: Path) -> list[tuple[str, list[str]]]:
 
 def test_every_module_has_a_stage() -> None:
     found = {p.stem for p in PACKAGE.glob("*.py")} - {"__init__"}
-    assert found == set(STAGES), (found ^ set(STAGES))
+    assert found == set(STAGES), found ^ set(STAGES)
 
 
 @pytest.mark.parametrize("module", sorted(STAGES))
@@ -79,7 +100,8 @@ def test_imports_follow_the_data(module: str) -> None:
             continue
         assert STAGES[target] <= STAGES[module], (
             f"{module} ({STAGE_NAMES[STAGES[module]]}) imports {target} "
-            f"({STAGE_NAMES[STAGES[target]]}), a later stage")
+            f"({STAGE_NAMES[STAGES[target]]}), a later stage"
+        )
 
 
 @pytest.mark.parametrize("module", [*sorted(STAGES), "__init__"])
@@ -88,7 +110,8 @@ def test_no_private_name_crosses_modules(module: str) -> None:
         for name in names:
             if name.startswith("_") and not name.startswith("__"):
                 assert (module, target, name) in PRIVATE_ALLOWED, (
-                    f"{module} imports the private {target}.{name}")
+                    f"{module} imports the private {target}.{name}"
+                )
 
 
 def test_allowed_exceptions_are_still_needed() -> None:
@@ -109,8 +132,8 @@ def _block_tridiagonal(rng: np.random.Generator, k: int) -> tuple[np.ndarray, ..
     a = rng.normal(size=(2 * k + 6, 2 * k))
     mask = np.abs(np.subtract.outer(np.arange(2 * k) // 2, np.arange(2 * k) // 2)) <= 1
     n = (a.T @ a + 2 * k * np.eye(2 * k)) * mask
-    diag = np.stack([n[2 * j:2 * j + 2, 2 * j:2 * j + 2] for j in range(k)])
-    upper = np.stack([n[2 * j:2 * j + 2, 2 * j + 2:2 * j + 4] for j in range(k - 1)])
+    diag = np.stack([n[2 * j : 2 * j + 2, 2 * j : 2 * j + 2] for j in range(k)])
+    upper = np.stack([n[2 * j : 2 * j + 2, 2 * j + 2 : 2 * j + 4] for j in range(k - 1)])
     rhs = rng.normal(size=(k, 2))
     return diag, upper, rhs, n
 
@@ -133,11 +156,13 @@ def test_band_solves_equal_the_dense_inverse() -> None:
             theta, cdiag, cnext = sol
             np.testing.assert_allclose(theta.reshape(-1), theta_ref, rtol=1e-10, atol=1e-12)
             for j in range(k):
-                np.testing.assert_allclose(cdiag[j], inv[2 * j:2 * j + 2, 2 * j:2 * j + 2],
-                                           rtol=1e-10, atol=1e-13)
+                np.testing.assert_allclose(
+                    cdiag[j], inv[2 * j : 2 * j + 2, 2 * j : 2 * j + 2], rtol=1e-10, atol=1e-13
+                )
             for j in range(k - 1):
-                np.testing.assert_allclose(cnext[j], inv[2 * j:2 * j + 2, 2 * j + 2:2 * j + 4],
-                                           rtol=1e-10, atol=1e-13)
+                np.testing.assert_allclose(
+                    cnext[j], inv[2 * j : 2 * j + 2, 2 * j + 2 : 2 * j + 4], rtol=1e-10, atol=1e-13
+                )
 
 
 def test_band_solve_refuses_a_singular_matrix() -> None:

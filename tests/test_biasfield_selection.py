@@ -43,7 +43,7 @@ def test_edge_factor_reproduces_r(data: bf.FieldData) -> None:
     for i in range(data.k):
         for j in range(data.k):
             if data.adjacency[i, j] != 0:
-                d = phi[m2 * i:m2 * (i + 1)] - phi[m2 * j:m2 * (j + 1)]
+                d = phi[m2 * i : m2 * (i + 1)] - phi[m2 * j : m2 * (j + 1)]
                 total += d @ p @ d / np.sum((data.centers[i] - data.centers[j]) ** 2)
     assert sel.objective(data, phi) == pytest.approx(phi @ (r @ phi), rel=1e-12)
     assert total == pytest.approx(2 * sel.objective(data, phi), rel=1e-12)
@@ -51,8 +51,9 @@ def test_edge_factor_reproduces_r(data: bf.FieldData) -> None:
 
 @pytest.mark.parametrize("formulation", ["constrained", "reduced"])
 @pytest.mark.parametrize("solver", QP_SOLVERS)
-def test_unconstrained_qp_equals_closed_form(data: bf.FieldData, solver: str,
-                                             formulation: str) -> None:
+def test_unconstrained_qp_equals_closed_form(
+    data: bf.FieldData, solver: str, formulation: str
+) -> None:
     """Every solver reporting OPTIMAL lands on the sparse closed form to 1e-8 (relative
     to max |φ|) with the package's high-accuracy defaults (OSQP: 50 polish refinements).
     SCS cannot take the reduced problem without a box (no constraint rows): reported as
@@ -79,8 +80,9 @@ def test_printed_11_sign(data: bf.FieldData) -> None:
     right = phi0 + phi1 @ -np.linalg.solve(a, b)
     j0 = phi0 @ r @ phi0
     assert printed @ r @ printed > j0 > right @ r @ right
-    np.testing.assert_allclose(right, sel.closed_form(data).phi, rtol=1e-9,
-                               atol=1e-9 * np.abs(right).max())
+    np.testing.assert_allclose(
+        right, sel.closed_form(data).phi, rtol=1e-9, atol=1e-9 * np.abs(right).max()
+    )
 
 
 def test_binding_box(data: bf.FieldData) -> None:
@@ -90,8 +92,11 @@ def test_binding_box(data: bf.FieldData) -> None:
     cf = sel.closed_form(data)
     box = (0.9 * np.abs(cf.field[..., 0]).max(), 0.9 * np.abs(cf.field[..., 1]).max())
     assert sel.box_feasibility(data, box).size == 0
-    sols = [sel.solve(data, box=box, solver=s, formulation=f)  # type: ignore[arg-type]
-            for s in QP_SOLVERS for f in ("constrained", "reduced")]
+    sols = [
+        sel.solve(data, box=box, solver=s, formulation=f)  # type: ignore[arg-type]
+        for s in QP_SOLVERS
+        for f in ("constrained", "reduced")
+    ]
     ref = sols[0]
     assert ref.status is Status.OPTIMAL and np.any(ref.active != 0)
     assert ref.objective > cf.objective * (1 + 1e-6)
@@ -133,8 +138,11 @@ def test_lipschitz_is_minimal(data: bf.FieldData) -> None:
     lt = np.linalg.cholesky(sel.p_full(data)).T
     i, j = np.nonzero(np.triu(data.adjacency.toarray()))
     m2 = 2 * data.m
-    jumps = [np.linalg.norm(lt @ (cf.phi[m2 * a:m2 * (a + 1)] - cf.phi[m2 * b:m2 * (b + 1)]))
-             / np.linalg.norm(data.centers[a] - data.centers[b]) for a, b in zip(i, j, strict=True)]
+    jumps = [
+        np.linalg.norm(lt @ (cf.phi[m2 * a : m2 * (a + 1)] - cf.phi[m2 * b : m2 * (b + 1)]))
+        / np.linalg.norm(data.centers[a] - data.centers[b])
+        for a, b in zip(i, j, strict=True)
+    ]
     assert max(jumps) >= lip.lipschitz * (1 - 1e-6)
     # and its J is no smaller than the quadratic optimum
     assert lip.objective >= cf.objective * (1 - 1e-9)
@@ -174,11 +182,16 @@ def test_box_feasibility_matches_per_cell_lps() -> None:
         slow = []
         for k in range(fd.k):
             sl = slice(m2 * k, m2 * (k + 1))
-            a = phi1[sl, 2 * k:2 * k + 2].toarray() / bound[sl, None]
+            a = phi1[sl, 2 * k : 2 * k + 2].toarray() / bound[sl, None]
             p0 = phi0[sl] / bound[sl]
             a = a / np.abs(a).max(axis=0)
-            r = linprog(np.zeros(2), A_ub=np.vstack([a, -a]), b_ub=np.concatenate([1 - p0, 1 + p0]),
-                        bounds=[(None, None)] * 2, method="highs")
+            r = linprog(
+                np.zeros(2),
+                A_ub=np.vstack([a, -a]),
+                b_ub=np.concatenate([1 - p0, 1 + p0]),
+                bounds=[(None, None)] * 2,
+                method="highs",
+            )
             if r.status == 2:
                 slow.append(k)
         np.testing.assert_array_equal(sel.box_feasibility(fd, box), slow)
@@ -192,7 +205,7 @@ def test_identifiability_report() -> None:
     h = (phi1.T @ sel.r_matrix(fd) @ phi1).toarray()
     assert idf.condition == pytest.approx(np.linalg.cond(h), rel=1e-6)
     hi = np.linalg.inv(h)
-    spread = np.sqrt([np.trace(hi[2 * k:2 * k + 2, 2 * k:2 * k + 2]) for k in range(fd.k)])
+    spread = np.sqrt([np.trace(hi[2 * k : 2 * k + 2, 2 * k : 2 * k + 2]) for k in range(fd.k)])
     np.testing.assert_allclose(idf.spread, spread, rtol=1e-8)
     # the worst-determined cells have fewer neighbours than the typical cell
     deg = np.asarray(fd.adjacency.sum(axis=1)).ravel()
@@ -210,11 +223,11 @@ def test_disconnected_graph_is_solved_per_component() -> None:
     both = sel.closed_form(split)
     assert both.info["components"] >= 2
     for part in (left, ~left):
-        sub = bf.FieldData(fd.radars, fd.centers[part], fd.xi[part], adj[np.ix_(part, part)],
-                           fd.P)
+        sub = bf.FieldData(fd.radars, fd.centers[part], fd.xi[part], adj[np.ix_(part, part)], fd.P)
         alone = sel.closed_form(sub)
-        np.testing.assert_allclose(both.field[part], alone.field, rtol=1e-8,
-                                   atol=1e-10 * np.abs(alone.field).max())
+        np.testing.assert_allclose(
+            both.field[part], alone.field, rtol=1e-8, atol=1e-10 * np.abs(alone.field).max()
+        )
 
 
 # ------------------------------------------------------------------ issue 14 (trust)
@@ -224,14 +237,17 @@ def _lipschitz_of(data: bf.FieldData, phi: np.ndarray) -> float:
     lt = np.linalg.cholesky(sel.p_full(data)).T
     i, j = np.nonzero(np.triu(data.adjacency.toarray()))
     m2 = 2 * data.m
-    return max(float(np.linalg.norm(lt @ (phi[m2 * a:m2 * (a + 1)] - phi[m2 * b:m2 * (b + 1)]))
-                     / np.linalg.norm(data.centers[a] - data.centers[b]))
-               for a, b in zip(i, j, strict=True))
+    return max(
+        float(
+            np.linalg.norm(lt @ (phi[m2 * a : m2 * (a + 1)] - phi[m2 * b : m2 * (b + 1)]))
+            / np.linalg.norm(data.centers[a] - data.centers[b])
+        )
+        for a, b in zip(i, j, strict=True)
+    )
 
 
 @pytest.mark.parametrize("iters", [1, 2, 3, 5, 50, None])
-def test_lipschitz_scs_few_iterations_is_not_trusted(data: bf.FieldData,
-                                                     iters: int | None) -> None:
+def test_lipschitz_scs_few_iterations_is_not_trusted(data: bf.FieldData, iters: int | None) -> None:
     """SCS stopped after a few iterations says ``optimal_inaccurate``; before the re-check
     that came back OK with fields 60-130 % off the sets and an L below the minimum. Now a
     solution is OK only if it passes the NumPy re-check, and then it is a field on the
@@ -307,10 +323,22 @@ def test_lipschitz_certificate_residuals(data: bf.FieldData) -> None:
 
 
 def test_box_must_be_a_pair_of_positive_numbers(data: bf.FieldData) -> None:
-    for bad in (5.0, "ab", (1.0,), (1.0, 2.0, 3.0), (1.0, np.nan), (1.0, -1e-3), (True, 1.0),
-                (0.0, 1e-3), (np.inf, 1e-3)):
-        for call in (lambda b: sel.solve(data, box=b), lambda b: sel.solve_lipschitz(data, box=b),
-                     lambda b: sel.box_feasibility(data, b)):
+    for bad in (
+        5.0,
+        "ab",
+        (1.0,),
+        (1.0, 2.0, 3.0),
+        (1.0, np.nan),
+        (1.0, -1e-3),
+        (True, 1.0),
+        (0.0, 1e-3),
+        (np.inf, 1e-3),
+    ):
+        for call in (
+            lambda b: sel.solve(data, box=b),
+            lambda b: sel.solve_lipschitz(data, box=b),
+            lambda b: sel.box_feasibility(data, b),
+        ):
             with pytest.raises(ProblemError, match="box"):
                 call(bad)
 
@@ -332,8 +360,16 @@ def test_scalar_arguments_are_checked(data: bf.FieldData) -> None:
         (lambda: bf.neighbours(data.centers, method="radius", radius=np.nan), "radius"),
         (lambda: bf.place_centers(data.centers, 3.5), "count"),
         (lambda: bf.BiasField.constant("a"), "range_bias"),
-        (lambda: bf.BiasField.smooth(np.random.default_rng(0), center=(0, 0), scale=-1.0,
-                                     range_amplitude=1.0, azimuth_amplitude=1e-3), "scale"),
+        (
+            lambda: bf.BiasField.smooth(
+                np.random.default_rng(0),
+                center=(0, 0),
+                scale=-1.0,
+                range_amplitude=1.0,
+                azimuth_amplitude=1e-3,
+            ),
+            "scale",
+        ),
     ]
     for call, name in cases:
         with pytest.raises(ProblemError, match=name):
@@ -358,9 +394,10 @@ def test_xi_cov_must_be_spd(data: bf.FieldData) -> None:
         bf.FieldData(data.radars, data.centers, data.xi, data.adjacency, data.P, asym)
 
 
-@pytest.mark.parametrize(("weight", "expect"), [(1.0, Status.OPTIMAL),
-                                                (1e-8, Status.OPTIMAL_INACCURATE),
-                                                (1e-12, Status.ERROR)])
+@pytest.mark.parametrize(
+    ("weight", "expect"),
+    [(1.0, Status.OPTIMAL), (1e-8, Status.OPTIMAL_INACCURATE), (1e-12, Status.ERROR)],
+)
 def test_closed_form_conditioning_check(weight: float, expect: Status) -> None:
     """Two radars with the azimuth weight of P scaled by ``weight``: the range terms alone
     leave η_k = Φ_r,k⁻¹c (a common range shift) free, so κ(Φ¹ᵀRΦ¹) grows as 1/weight. The
@@ -370,8 +407,9 @@ def test_closed_form_conditioning_check(weight: float, expect: Status) -> None:
     (Hager's estimator is a lower bound, within a factor 3 here), and the loss itself is
     shown by a dense LU solve disagreeing with the sparse one."""
     fd, _ = bf.synthetic_field_data(5, cells=30, sites=[[-90e3, -60e3], [100e3, -70e3]])
-    d = bf.FieldData(fd.radars, fd.centers, fd.xi, fd.adjacency,
-                     np.diag([1 / 50.0**2, weight / 1e-3**2]))
+    d = bf.FieldData(
+        fd.radars, fd.centers, fd.xi, fd.adjacency, np.diag([1 / 50.0**2, weight / 1e-3**2])
+    )
     phi0, phi1 = bf.uncertainty_sets(d)
     h = (phi1.T @ sel.r_matrix(d) @ phi1).toarray()
     kappa = np.linalg.cond(h, 1)
@@ -382,9 +420,7 @@ def test_closed_form_conditioning_check(weight: float, expect: Status) -> None:
         assert np.all(np.isnan(cf.phi)) and "conditioning" in cf.message
         eta_dense = -np.linalg.solve(h, phi1.T @ (sel.r_matrix(d) @ phi0))
         assert cf.residuals["stationarity"] < 1e-12
-        eta_sparse = -splinalg.splu(sparse.csc_matrix(h)).solve(
-            phi1.T @ (sel.r_matrix(d) @ phi0))
+        eta_sparse = -splinalg.splu(sparse.csc_matrix(h)).solve(phi1.T @ (sel.r_matrix(d) @ phi0))
         assert np.max(np.abs(eta_dense - eta_sparse)) > 1e-9 * np.max(np.abs(eta_dense))
     else:
-        assert cf.residuals["conditioning"] == pytest.approx(kappa * np.finfo(float).eps,
-                                                             rel=0.7)
+        assert cf.residuals["conditioning"] == pytest.approx(kappa * np.finfo(float).eps, rel=0.7)

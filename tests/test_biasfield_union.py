@@ -47,11 +47,11 @@ def _dense_reference(fd: bf.FieldData, seen: np.ndarray) -> np.ndarray:
         for i in range(m):
             if not seen[c, i]:
                 continue
-            d = to_polar(fd.xi[c, i][None], fd.radars[i])[0] - to_polar(mean[None],
-                                                                         fd.radars[i])[0]
+            d = to_polar(fd.xi[c, i][None], fd.radars[i])[0] - to_polar(mean[None], fd.radars[i])[0]
             phi0[c, i] = [d[0], wrap_angle(d[1])]
-            phi1[2 * m * c + 2 * i:2 * m * c + 2 * i + 2, 2 * c:2 * c + 2] = \
-                polar_jacobian(mean[None], fd.radars[i])[0]
+            phi1[2 * m * c + 2 * i : 2 * m * c + 2 * i + 2, 2 * c : 2 * c + 2] = polar_jacobian(
+                mean[None], fd.radars[i]
+            )[0]
     phi0 = phi0.reshape(-1)
     eta = -np.linalg.solve(phi1.T @ r @ phi1, phi1.T @ r @ phi0)
     return (phi0 + phi1 @ eta).reshape(k, m, 2)
@@ -72,8 +72,12 @@ def test_all_radar_subsets_give_the_papers_field_to_round_off(synth):
     np.testing.assert_allclose(new.field, old.field, rtol=0, atol=1e-9 * scale.max())
     assert np.max(np.abs(new.field - old.field)[..., 1]) <= 1e-9 * scale[1]
     assert new.objective == pytest.approx(old.objective, rel=1e-9)
-    np.testing.assert_allclose(old.field, _dense_reference(fd, np.ones((fd.k, fd.m), bool)),
-                               rtol=0, atol=1e-8 * scale.max())
+    np.testing.assert_allclose(
+        old.field,
+        _dense_reference(fd, np.ones((fd.k, fd.m), bool)),
+        rtol=0,
+        atol=1e-8 * scale.max(),
+    )
 
 
 def _half_plane_subsets(fd: bf.FieldData) -> np.ndarray:
@@ -158,14 +162,20 @@ def _check_network(sc, cells: int):
         assert not np.any(two & (c.reason == "one radar only"))
         before = registration_error(part, radars)
         after = registration_error(c.plots, radars)
-        out[name] = (float(c.covered[two].mean()), before.overall, after.overall,
-                     before.noise)
+        out[name] = (float(c.covered[two].mean()), before.overall, after.overall, before.noise)
     return out
 
 
 def test_ring_network_without_a_common_area_is_corrected_3d():
-    sc = radar_network(3, n_aircraft=200, duration=1800.0, geometry="3d",
-                       sites=ring_sites(6, 160e3), max_range=140e3, region=210e3)
+    sc = radar_network(
+        3,
+        n_aircraft=200,
+        duration=1800.0,
+        geometry="3d",
+        sites=ring_sites(6, 160e3),
+        max_range=140e3,
+        region=210e3,
+    )
     for name, (share, before, after, noise) in _check_network(sc, 150).items():
         assert share >= 0.95, (name, share)
         assert before > 5 * noise
@@ -173,8 +183,14 @@ def test_ring_network_without_a_common_area_is_corrected_3d():
 
 
 def test_line_network_with_pairwise_overlaps_is_corrected_2d():
-    sc = radar_network(4, n_aircraft=160, duration=1800.0, sites=line_sites(4, 150e3),
-                       max_range=120e3, region=220e3)
+    sc = radar_network(
+        4,
+        n_aircraft=160,
+        duration=1800.0,
+        sites=line_sites(4, 150e3),
+        max_range=120e3,
+        region=220e3,
+    )
     for name, (share, before, after, noise) in _check_network(sc, 120).items():
         assert share >= 0.95, (name, share)
         assert before > 5 * noise
@@ -184,13 +200,22 @@ def test_line_network_with_pairwise_overlaps_is_corrected_2d():
 def test_reasons_name_one_radar_only_and_outside_every_cell():
     sc = radar_network(2, n_aircraft=20, duration=900.0)
     pl = sc.plots
-    fm = bf.FieldMap(np.array([[0.0, 0.0], [1e3, 0.0], [0.0, 1e3]]), np.zeros((3, 4, 2)),
-                     max_distance=2e3)
+    fm = bf.FieldMap(
+        np.array([[0.0, 0.0], [1e3, 0.0], [0.0, 1e3]]), np.zeros((3, 4, 2)), max_distance=2e3
+    )
     c = correct_plots(pl, sc.radars, fm)
     two = seen_by_others(pl)
     # an independent count: another radar's plot of the same object within 60 s
-    want = np.array([np.any((pl.object == pl.object[n]) & (pl.radar != pl.radar[n])
-                            & (np.abs(pl.time - pl.time[n]) <= 60.0)) for n in range(len(pl))])
+    want = np.array(
+        [
+            np.any(
+                (pl.object == pl.object[n])
+                & (pl.radar != pl.radar[n])
+                & (np.abs(pl.time - pl.time[n]) <= 60.0)
+            )
+            for n in range(len(pl))
+        ]
+    )
     np.testing.assert_array_equal(two, want)
     far = ~c.covered
     assert np.all(c.reason[far & want] == "outside every cell")

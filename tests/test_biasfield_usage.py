@@ -52,8 +52,12 @@ def test_solution_at_is_the_field_map_of_its_cells(network):
     np.testing.assert_array_equal(sol.covered(q), field_map(sol, fd).covered(q))
     assert not sol.map().is_3d
     np.testing.assert_array_equal(sol.map().sites, sc.radars.sites)
-    moved = bf.RadarSet(np.add(sc.radars.sites, [5e3, 0.0]), sc.radars.sigma_range,
-                        sc.radars.sigma_azimuth, sc.radars.max_range)
+    moved = bf.RadarSet(
+        np.add(sc.radars.sites, [5e3, 0.0]),
+        sc.radars.sigma_range,
+        sc.radars.sigma_azimuth,
+        sc.radars.max_range,
+    )
     with pytest.raises(ProblemError, match="sites"):
         correct_plots(sc.plots, moved, sol.map())
 
@@ -66,8 +70,13 @@ def test_at_is_exact_on_a_linear_field_and_second_order_on_a_smooth_one():
         return np.stack([5.0 + x @ a[:, 0], 1e-3 + x @ a[:, 1]], axis=-1)
 
     def smooth(x):
-        return np.stack([100 * np.sin(x[..., 0] / 40e3) * np.cos(x[..., 1] / 30e3),
-                         2e-3 * np.cos(x[..., 0] / 35e3)], axis=-1)
+        return np.stack(
+            [
+                100 * np.sin(x[..., 0] / 40e3) * np.cos(x[..., 1] / 30e3),
+                2e-3 * np.cos(x[..., 0] / 35e3),
+            ],
+            axis=-1,
+        )
 
     q = rng.uniform(-45e3, 45e3, (400, 2))
     c = _grid_centers(8)
@@ -118,20 +127,30 @@ def test_correct_plots_with_the_true_field_removes_the_bias(network):
 
 def _shift_fields(sites: np.ndarray, shifts: np.ndarray) -> list[bf.BiasField]:
     """Polar bias fields that move every plot of radar i by the constant shift s_i (m)."""
-    return [bf.BiasField.from_callable(
-        lambda x, site=site, s=s: bias_from_shift(x, site, np.broadcast_to(s, x.shape)),
-        "constant shift") for site, s in zip(sites, shifts, strict=True)]
+    return [
+        bf.BiasField.from_callable(
+            lambda x, site=site, s=s: bias_from_shift(x, site, np.broadcast_to(s, x.shape)),
+            "constant shift",
+        )
+        for site, s in zip(sites, shifts, strict=True)
+    ]
 
 
-@pytest.mark.parametrize("shifts", [[[150.0, -80.0], [-60.0, 120.0]],
-                                    [[90.0, 40.0], [90.0, 40.0]]])
+@pytest.mark.parametrize("shifts", [[[150.0, -80.0], [-60.0, 120.0]], [[90.0, 40.0], [90.0, 40.0]]])
 def test_registration_error_matches_the_true_disagreement(shifts):
     # each radar's plots shifted by a constant s_i on the plane: the systematic
     # disagreement is |s_1 − s_2| everywhere, known exactly
     sites = np.array([[-60e3, 0.0], [60e3, 0.0]])
     s = np.array(shifts)
-    sc = radar_network(11, n_aircraft=40, duration=1800.0, sites=sites,
-                       fields=_shift_fields(sites, s), region=60e3, periods=[5.0, 6.0])
+    sc = radar_network(
+        11,
+        n_aircraft=40,
+        duration=1800.0,
+        sites=sites,
+        fields=_shift_fields(sites, s),
+        region=60e3,
+        periods=[5.0, 6.0],
+    )
     reg = registration_error(sc.plots, sc.radars, area=30e3)
     truth = float(np.linalg.norm(s[0] - s[1]))
     assert reg.pairs[("R1", "R2")] == pytest.approx(reg.overall, rel=1e-12)
@@ -146,8 +165,7 @@ def test_correcting_with_the_smoothest_field_cuts_registration_by_80_percent(net
     sc, fd, sol = network
     fm = field_map(sol, fd)
     before = registration_error(sc.plots, sc.radars, within=fm)
-    after = registration_error(correct_plots(sc.plots, sc.radars, fm).plots, sc.radars,
-                               within=fm)
+    after = registration_error(correct_plots(sc.plots, sc.radars, fm).plots, sc.radars, within=fm)
     assert after.overall <= 0.2 * before.overall
     for pair, v in before.pairs.items():
         assert after.pairs[pair] <= 0.2 * v, pair
@@ -173,14 +191,17 @@ def test_score_splits_a_common_shift_from_the_rest(network):
     assert s2.to_dict()["total"]["range_m"] == pytest.approx(s2.total[0])
 
 
-@pytest.mark.parametrize("call", [
-    lambda fd, sol: FieldMap(np.zeros((4, 2)), np.zeros((4, 2, 2))),
-    lambda fd, sol: FieldMap(fd.centers, np.zeros((fd.k + 1, fd.m, 2))),
-    lambda fd, sol: FieldMap(fd.centers, np.full((fd.k, fd.m, 2), np.nan)),
-    lambda fd, sol: field_map(sol, "not data"),
-    lambda fd, sol: score(sol.field[:-1], sol.field, fd),
-    lambda fd, sol: field_map(sol, fd).at(np.zeros((3, 3))),
-])
+@pytest.mark.parametrize(
+    "call",
+    [
+        lambda fd, sol: FieldMap(np.zeros((4, 2)), np.zeros((4, 2, 2))),
+        lambda fd, sol: FieldMap(fd.centers, np.zeros((fd.k + 1, fd.m, 2))),
+        lambda fd, sol: FieldMap(fd.centers, np.full((fd.k, fd.m, 2), np.nan)),
+        lambda fd, sol: field_map(sol, "not data"),
+        lambda fd, sol: score(sol.field[:-1], sol.field, fd),
+        lambda fd, sol: field_map(sol, fd).at(np.zeros((3, 3))),
+    ],
+)
 def test_bad_inputs_are_one_problem_error(network, call):
     _, fd, sol = network
     with pytest.raises(ProblemError):
@@ -195,8 +216,10 @@ def adsb(network):
     sc, fd, _ = network
     rng = np.random.default_rng(21)
     ref = sc.true_position + rng.normal(scale=10.0, size=sc.true_position.shape)
-    return ref, {model: adsb_field(fd, sc.plots, sc.radars, ref, model=model)
-                 for model in ("cells", "interpolant")}
+    return ref, {
+        model: adsb_field(fd, sc.plots, sc.radars, ref, model=model)
+        for model in ("cells", "interpolant")
+    }
 
 
 @pytest.mark.parametrize("model", ["cells", "interpolant"])
@@ -208,8 +231,9 @@ def test_adsb_field_cuts_the_absolute_error_by_80_percent(network, adsb, model):
     af = fields[model]
     assert af.status.ok and af.stationarity < 1e-9
     assert af.chi2 == pytest.approx(af.dof, rel=1e-2)  # on the discrepancy level
-    out = compare_fields(sc.plots, sc.radars, ref, {"smoothest": field_map(sol, fd),
-                                                     "adsb": af.map(fd.centers)})
+    out = compare_fields(
+        sc.plots, sc.radars, ref, {"smoothest": field_map(sol, fd), "adsb": af.map(fd.centers)}
+    )
     before = out["before"]["absolute"]["overall_m"]
     assert before > 100.0
     assert out["adsb"]["absolute"]["overall_m"] <= 0.2 * before

@@ -57,8 +57,12 @@ def test_solution_at_reproduces_the_cells_exactly_and_carries_the_3d_frame(net3d
 def _analytic_fields(m: int):
     """Known smooth fields with an analytic Hessian bound: range A sin(x/a) cos(y/b), azimuth
     B cos(x/c) sin(y/d); ‖∇²f‖₂ ≤ ‖∇²f‖_F ≤ A (1/a² + 1/b²) (and likewise for B)."""
-    pars = [(120.0, 80e3, 110e3, 4e-3, 120e3, 70e3), (-80.0, 100e3, 60e3, -3e-3, 90e3, 140e3),
-            (150.0, 70e3, 130e3, 5e-3, 76e3, 104e3), (60.0, 140e3, 80e3, 2e-3, 60e3, 88e3)]
+    pars = [
+        (120.0, 80e3, 110e3, 4e-3, 120e3, 70e3),
+        (-80.0, 100e3, 60e3, -3e-3, 90e3, 140e3),
+        (150.0, 70e3, 130e3, 5e-3, 76e3, 104e3),
+        (60.0, 140e3, 80e3, 2e-3, 60e3, 88e3),
+    ]
     pars = pars[:m]
 
     def value(x: np.ndarray) -> np.ndarray:
@@ -68,8 +72,12 @@ def _analytic_fields(m: int):
             out[..., i, 1] = az * np.cos(x[..., 0] / c) * np.sin(x[..., 1] / d)
         return out
 
-    bound = np.array([[abs(ra) * (1 / a**2 + 1 / b**2), abs(az) * (1 / c**2 + 1 / d**2)]
-                      for ra, a, b, az, c, d in pars])  # (m, 2)
+    bound = np.array(
+        [
+            [abs(ra) * (1 / a**2 + 1 / b**2), abs(az) * (1 / c**2 + 1 / d**2)]
+            for ra, a, b, az, c, d in pars
+        ]
+    )  # (m, 2)
     return value, bound
 
 
@@ -119,11 +127,22 @@ def test_field_map_frame_is_saved_and_checked(net3d, tmp_path):
     np.testing.assert_array_equal(back.origin, fm.origin)
     np.testing.assert_array_equal(back.at(fd.centers), sol.field)
     back.check_radars(sc.radars)  # its own network: accepted
-    flat = RadarSet(sc.radars.sites, sc.radars.sigma_range, sc.radars.sigma_azimuth,
-                    sc.radars.max_range, names=sc.radars.names)
-    moved = RadarSet(None, sc.radars.sigma_range, sc.radars.sigma_azimuth,
-                     sc.radars.max_range, names=sc.radars.names, geodetic=sc.radars.geodetic,
-                     origin=np.add(sc.radars.origin, [0.01, 0.0, 0.0]))
+    flat = RadarSet(
+        sc.radars.sites,
+        sc.radars.sigma_range,
+        sc.radars.sigma_azimuth,
+        sc.radars.max_range,
+        names=sc.radars.names,
+    )
+    moved = RadarSet(
+        None,
+        sc.radars.sigma_range,
+        sc.radars.sigma_azimuth,
+        sc.radars.max_range,
+        names=sc.radars.names,
+        geodetic=sc.radars.geodetic,
+        origin=np.add(sc.radars.origin, [0.01, 0.0, 0.0]),
+    )
     renamed = dataclasses.replace(sc.radars, names=("A", "B", "C", "D"))
     for other, what in ((flat, "3-D chain"), (moved, "origin"), (renamed, "estimated for")):
         with pytest.raises(ProblemError, match=what):
@@ -136,8 +155,14 @@ def test_a_field_file_without_its_frame_is_checked_on_the_sites_only(net3d, tmp_
     # accepted and the correction is the same as with the full frame; a field marked as
     # the 2-D chain's is refused on a 3-D set
     sc, fd, sol, _ = net3d
-    np.savez_compressed(tmp_path / "field.npz", field=sol.field, eta=sol.eta,
-                        centers=fd.centers, radars=fd.radars, active=sol.active)
+    np.savez_compressed(
+        tmp_path / "field.npz",
+        field=sol.field,
+        eta=sol.eta,
+        centers=fd.centers,
+        radars=fd.radars,
+        active=sol.active,
+    )
     bare = FieldMap.load(tmp_path / "field.npz")
     assert bare.chain == "" and not bare.is_3d
     a = correct_plots(sc.plots, sc.radars, bare)
@@ -165,9 +190,14 @@ def test_correct_plots_with_the_true_field_removes_the_bias_3d(net3d):
     sc, _, _, _ = net3d
     g = np.linspace(-300e3, 300e3, 81)  # dense map of the true field (7.5 km spacing)
     c = np.array([[x, y] for x in g for y in g])
-    fm = FieldMap(c, np.stack([f(c) for f in sc.fields], axis=1), names=sc.radars.names,
-                  sites=sc.radars.sites, geodetic=sc.radars.geodetic,
-                  origin=sc.radars.origin)
+    fm = FieldMap(
+        c,
+        np.stack([f(c) for f in sc.fields], axis=1),
+        names=sc.radars.names,
+        sites=sc.radars.sites,
+        geodetic=sc.radars.geodetic,
+        origin=sc.radars.origin,
+    )
     out = correct_plots(sc.plots, sc.radars, fm)
     sel = out.covered
     # interpolation error of the dense map plus the bias's change between the measured and
@@ -190,8 +220,9 @@ def test_registration_error_uses_the_exact_3d_geometry():
     reg = registration_error(sc.plots, sc.radars)
     assert reg.overall <= reg.noise, (reg.overall, reg.noise)
     assert reg.raw_overall > 2 * reg.noise  # the per-plot noise is far larger
-    flat = RadarSet(sc.radars.sites, sc.radars.sigma_range, sc.radars.sigma_azimuth,
-                    sc.radars.max_range)
+    flat = RadarSet(
+        sc.radars.sites, sc.radars.sigma_range, sc.radars.sigma_azimuth, sc.radars.max_range
+    )
     assert registration_error(sc.plots, flat).overall > 1000.0
     ab = absolute_error(sc.plots, sc.radars, sc.adsb_positions(5, sigma=SIGMA_ADSB))
     assert ab.overall <= ab.noise
@@ -211,8 +242,14 @@ def test_registration_and_absolute_error_read_a_known_site_offset_3d():
     geo = np.array(sc.radars.geodetic, dtype=float)
     lat, lon = g3.plane_to_geodetic(sc.radars.sites[:1] + delta, sc.radars.origin)
     geo[0, :2] = [lat[0], lon[0]]
-    told = RadarSet(None, sc.radars.sigma_range, sc.radars.sigma_azimuth, sc.radars.max_range,
-                    geodetic=geo, origin=sc.radars.origin)
+    told = RadarSet(
+        None,
+        sc.radars.sigma_range,
+        sc.radars.sigma_azimuth,
+        sc.radars.max_range,
+        geodetic=geo,
+        origin=sc.radars.origin,
+    )
     reg = registration_error(sc.plots, told)
     size = float(np.linalg.norm(delta))
     for (a, b), v in reg.pairs.items():
@@ -228,8 +265,7 @@ def test_correcting_with_the_smoothest_field_cuts_registration_by_80_percent_3d(
     sc, _, sol, _ = net3d
     fm = sol.map()
     before = registration_error(sc.plots, sc.radars, within=fm)
-    after = registration_error(correct_plots(sc.plots, sc.radars, fm).plots, sc.radars,
-                               within=fm)
+    after = registration_error(correct_plots(sc.plots, sc.radars, fm).plots, sc.radars, within=fm)
     assert before.overall > 5 * before.noise  # a disagreement well above the noise floor
     assert after.overall <= 0.2 * before.overall
     assert set(after.pairs) == set(before.pairs) and len(before.pairs) == 6
@@ -242,8 +278,7 @@ def test_correcting_with_the_smoothest_field_cuts_registration_by_80_percent_3d(
 def referee(net3d):
     sc, fd, sol, ref = net3d
     af = adsb_field(fd, sc.plots, sc.radars, ref, sigma_reference=SIGMA_ADSB)
-    out = compare_fields(sc.plots, sc.radars, ref, {"smoothest": sol.map(),
-                                                     "adsb": af.map(fd)})
+    out = compare_fields(sc.plots, sc.radars, ref, {"smoothest": sol.map(), "adsb": af.map(fd)})
     return af, out
 
 
@@ -303,12 +338,20 @@ def test_adsb_reference_interpolates_the_reports_at_the_plot_times(net3d):
             mid = t[t.size // 2]
             keep = np.abs(t - mid) > 30.0
             t, geo = t[keep], geo[keep]
-        for key, v in zip(cols, (t, np.full(t.size, a), geo[:, 0], geo[:, 1], geo[:, 2]),
-                          strict=True):
+        for key, v in zip(
+            cols, (t, np.full(t.size, a), geo[:, 0], geo[:, 1], geo[:, 2]), strict=True
+        ):
             cols[key].append(v)
     c = {k: np.concatenate(v) for k, v in cols.items()}
-    reports = AdsbReports(c["t"], c["o"], np.full(c["t"].size, -1), c["lat"], c["lon"],
-                          c["h"], np.full(c["t"].size, np.nan))
+    reports = AdsbReports(
+        c["t"],
+        c["o"],
+        np.full(c["t"].size, -1),
+        c["lat"],
+        c["lon"],
+        c["h"],
+        np.full(c["t"].size, np.nan),
+    )
     ref = adsb_reference(sc.plots, reports, sc.radars.origin, max_gap=10.0)
     has = np.all(np.isfinite(ref), axis=1)
     t3, _, _ = sc.paths.track(3)
@@ -323,8 +366,15 @@ def test_adsb_reference_interpolates_the_reports_at_the_plot_times(net3d):
 
 # ----------------------------------------------------------------------------- baseline 3-D
 def test_parametric_baseline_recovers_constant_azimuth_biases_3d():
-    sc = radar_network(10, n_aircraft=30, duration=1800.0, turn_rate=(0.0, 0.0),
-                       fields="constant", geometry="3d", holding=0.0)
+    sc = radar_network(
+        10,
+        n_aircraft=30,
+        duration=1800.0,
+        turn_rate=(0.0, 0.0),
+        fields="constant",
+        geometry="3d",
+        holding=0.0,
+    )
     res = bf.azimuth_bias_baseline(sc.plots, sc.radars)
     true = np.array([f(np.zeros((1, 2)))[0, 1] for f in sc.fields])
     z = (res.estimate - true) / res.std

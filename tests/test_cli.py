@@ -40,29 +40,40 @@ class CliRun:
     def json(self) -> Any:
         """stdout as exactly one strict JSON document (``json.loads`` refuses trailing
         text -- a solver banner before or after it -- and we refuse NaN/Infinity)."""
+
         def no_constant(name: str) -> Any:
             raise AssertionError(f"non-standard JSON constant {name} in {self.argv}")
 
         try:
             return json.loads(self.out, parse_constant=no_constant)
         except json.JSONDecodeError as exc:
-            raise AssertionError(f"stdout of {self.argv} is not one JSON document ({exc}):\n"
-                                 f"{self.out[:2000]}\nstderr:\n{self.err[-2000:]}") from None
+            raise AssertionError(
+                f"stdout of {self.argv} is not one JSON document ({exc}):\n"
+                f"{self.out[:2000]}\nstderr:\n{self.err[-2000:]}"
+            ) from None
 
     @property
     def err_lines(self) -> list[str]:
         return [line for line in self.err.splitlines() if line.strip()]
 
 
-def run_cli(*args: Any, expect: int | None = 0, cwd: Path | None = None,
-            timeout: float = 600) -> CliRun:
+def run_cli(
+    *args: Any, expect: int | None = 0, cwd: Path | None = None, timeout: float = 600
+) -> CliRun:
     """Run ``optmodels ARGS``; assert no traceback and (unless ``expect`` is None) the
     exit status."""
     assert OPTMODELS.is_file(), f"console script not installed at {OPTMODELS}"
     argv = [str(a) for a in args]
     env = {**os.environ, "MPLBACKEND": "Agg", "PYTHONWARNINGS": "ignore"}
-    proc = subprocess.run([str(OPTMODELS), *argv], capture_output=True, text=True,
-                          cwd=cwd, timeout=timeout, env=env, check=False)
+    proc = subprocess.run(
+        [str(OPTMODELS), *argv],
+        capture_output=True,
+        text=True,
+        cwd=cwd,
+        timeout=timeout,
+        env=env,
+        check=False,
+    )
     run = CliRun(argv, proc.returncode, proc.stdout, proc.stderr)
     assert "Traceback" not in run.err, f"{argv}:\n{run.err[-3000:]}"
     if expect is not None:
@@ -99,9 +110,15 @@ def assert_error(run: CliRun, code: int, *fragments: str) -> str:
     return line
 
 
-@pytest.mark.parametrize("flags", [("--formulation", "full"), ("--formulation", "reduced"),
-                                   ("--method", "closed-form"),
-                                   ("--formulation", "closed-form")])  # the former spelling
+@pytest.mark.parametrize(
+    "flags",
+    [
+        ("--formulation", "full"),
+        ("--formulation", "reduced"),
+        ("--method", "closed-form"),
+        ("--formulation", "closed-form"),
+    ],
+)  # the former spelling
 def test_plane_fit_round_trip(tmp_path: Path, flags: tuple[str, str]) -> None:
     sc = scenarios.paper_plane_example(1, duration=3.0)
     path = tmp_path / "track.csv"
@@ -121,8 +138,16 @@ def test_plane_fit_per_point_covariance_and_alpha2(tmp_path: Path) -> None:
     sc = scenarios.radar_plane(60, 4, geometry="broadside")
     c = sc.cov
     path = tmp_path / "radar.csv"
-    write_plane_csv(path, sc.points, cxx=c[:, 0, 0], cxy=c[:, 0, 1], cxz=c[:, 0, 2],
-                    cyy=c[:, 1, 1], cyz=c[:, 1, 2], czz=c[:, 2, 2])
+    write_plane_csv(
+        path,
+        sc.points,
+        cxx=c[:, 0, 0],
+        cxy=c[:, 0, 1],
+        cxz=c[:, 0, 2],
+        cyy=c[:, 1, 1],
+        cyz=c[:, 1, 2],
+        czz=c[:, 2, 2],
+    )
     res = run_json("plane", "fit", path, "--formulation", "reduced")
     ref = plane.solve(plane.PlaneData(sc.points, sc.cov), "reduced")
     assert plane.angle_error(res["normal"], ref.normal) <= 1e-7
@@ -130,8 +155,7 @@ def test_plane_fit_per_point_covariance_and_alpha2(tmp_path: Path) -> None:
     sc2 = scenarios.two_source_plane(80, 5)
     path2 = tmp_path / "two.csv"
     write_plane_csv(path2, sc2.points, alpha2=sc2.alpha2)
-    res2 = run_json("plane", "fit", path2, "--cov", "100,0,0,100,0,100",
-                    "--method", "closed-form")
+    res2 = run_json("plane", "fit", path2, "--cov", "100,0,0,100,0,100", "--method", "closed-form")
     ref2 = plane.closed_form(plane.PlaneData(sc2.points, 100 * np.eye(3), sc2.alpha2))
     assert plane.angle_error(res2["normal"], ref2.normal) <= 1e-12
 
@@ -141,11 +165,14 @@ def test_plane_fit_errors_are_reported(tmp_path: Path) -> None:
     bad.write_text("x,y\n1,2\n")
     ok = tmp_path / "ok.csv"
     write_plane_csv(ok, np.random.default_rng(0).normal(size=(10, 3)))
-    r_bad, r_nocov, r_none = run_many([
-        ["plane", "fit", bad, "--sigma2", "1"],
-        ["plane", "fit", ok],
-        ["plane", "fit", tmp_path / "none.csv", "--sigma2", "1", "--json"],
-    ], expect=None)
+    r_bad, r_nocov, r_none = run_many(
+        [
+            ["plane", "fit", bad, "--sigma2", "1"],
+            ["plane", "fit", ok],
+            ["plane", "fit", tmp_path / "none.csv", "--sigma2", "1", "--json"],
+        ],
+        expect=None,
+    )
     assert_error(r_bad, 2, "missing column(s) z")
     assert_error(r_nocov, 2, "--sigma2")
     assert_error(r_none, 2, "no such file")
@@ -168,8 +195,15 @@ def test_plane_fit_text_output(tmp_path: Path) -> None:
 def test_demo_plane_writes_report(tmp_path: Path) -> None:
     res = run_json("demo", "plane", "--out", tmp_path, "--runs", "20")
     assert res["failed"] == {}
-    for f in ("fig1_trajectory.png", "fig2_statistic.png", "fig3_angle_error.png",
-              "fig4_offset_error.png", "radius_bound.png", "report.md", "summary.json"):
+    for f in (
+        "fig1_trajectory.png",
+        "fig2_statistic.png",
+        "fig3_angle_error.png",
+        "fig4_offset_error.png",
+        "radius_bound.png",
+        "report.md",
+        "summary.json",
+    ):
         assert (tmp_path / "plane" / f).is_file()
     assert (tmp_path / "index.md").is_file()
     summ = res["problems"]["plane"]
@@ -178,8 +212,9 @@ def test_demo_plane_writes_report(tmp_path: Path) -> None:
     assert summ["sequence_generic_vs_closed_form_max_angle_rad"] <= 1e-7
 
 
-def _write_traj_csv(path: Path, sc: scenarios.TrajectoryScenario, *, labels: list[str],
-                    sigma2: bool = False) -> None:
+def _write_traj_csv(
+    path: Path, sc: scenarios.TrajectoryScenario, *, labels: list[str], sigma2: bool = False
+) -> None:
     with path.open("w") as fh:
         fh.write("object,t,y" + (",sigma2" if sigma2 else "") + "\n")
         for lab, t, y in zip(labels, sc.times, sc.values, strict=True):
@@ -203,23 +238,35 @@ def test_trajectories_fit_round_trip(tmp_path: Path, method: str) -> None:
     assert res["velocity"]["C"] == pytest.approx(ref.velocity[2], rel=1e-9)
     t = res["family_test"]
     assert t["dof"] == 3 and t["p_value"] == pytest.approx(
-        trajectories.family_test(sc.data(), "diverging").p_value, rel=1e-9)
+        trajectories.family_test(sc.data(), "diverging").p_value, rel=1e-9
+    )
 
 
 def test_trajectories_fit_custom_family_and_vector_values(tmp_path: Path) -> None:
     rng = np.random.default_rng(7)
     times = [np.sort(rng.uniform(0, 50, k)) for k in (8, 12, 10)]
     vel = rng.normal(size=(3, 2))
-    vals = [np.array([1.0, -2.0]) + np.outer(t, vel[j]) + rng.normal(0, 0.1, (t.size, 2))
-            for j, t in enumerate(times)]
+    vals = [
+        np.array([1.0, -2.0]) + np.outer(t, vel[j]) + rng.normal(0, 0.1, (t.size, 2))
+        for j, t in enumerate(times)
+    ]
     path = tmp_path / "xy.csv"
     with path.open("w") as fh:
         fh.write("object,t,x,y\n")
         for j, (t, v) in enumerate(zip(times, vals, strict=True)):
             for a, (x, y) in zip(t, v, strict=True):
                 fh.write(f"o{j},{float(a)!r},{float(x)!r},{float(y)!r}\n")
-    res = run_json("trajectories", "fit", path, "--family", "custom",
-                   "--shared-start", "o0,o2", "--sigma2", "0.01")
+    res = run_json(
+        "trajectories",
+        "fit",
+        path,
+        "--family",
+        "custom",
+        "--shared-start",
+        "o0,o2",
+        "--sigma2",
+        "0.01",
+    )
     fam = trajectories.Family.custom(3, shared_start=[[0, 2]])
     ref = trajectories.closed_form(trajectories.TrajectoryData(times, vals, 0.01), fam)
     assert res["start_groups"] == [["o0", "o2"], ["o1"]]
@@ -234,11 +281,14 @@ def test_trajectories_fit_errors(tmp_path: Path) -> None:
     nocol.write_text("id,t,y\na,0,1\n")
     ok = tmp_path / "ok.csv"
     ok.write_text("object,t,y\na,0,1\na,1,2\nb,0,1\nb,1,2\n")
-    r_bad, r_nocol, r_unknown = run_many([
-        ["trajectories", "fit", bad],
-        ["trajectories", "fit", nocol, "--json"],
-        ["trajectories", "fit", ok, "--family", "custom", "--shared-start", "a,z"],
-    ], expect=None)
+    r_bad, r_nocol, r_unknown = run_many(
+        [
+            ["trajectories", "fit", bad],
+            ["trajectories", "fit", nocol, "--json"],
+            ["trajectories", "fit", ok, "--family", "custom", "--shared-start", "a,z"],
+        ],
+        expect=None,
+    )
     assert_error(r_bad, 2, "fewer than 2 distinct times")
     assert_error(r_nocol, 2, "missing column 'object'")
     assert_error(r_unknown, 2, "unknown object")
@@ -248,15 +298,15 @@ def test_trajectories_fit_text_output(tmp_path: Path) -> None:
     sc = scenarios.launcher_release(4, family="parallel")
     path = tmp_path / "p.csv"
     _write_traj_csv(path, sc, labels=["1", "2", "3", "4"])
-    out = run_cli("trajectories", "fit", path, "--family", "parallel",
-                  "--sigma2", repr(sc.sigma2)).out
+    out = run_cli(
+        "trajectories", "fit", path, "--family", "parallel", "--sigma2", repr(sc.sigma2)
+    ).out
     assert "velocity" in out and "vs independent lines" in out
 
 
 def test_demo_trajectories_writes_report(tmp_path: Path) -> None:
     res = run_json("demo", "trajectories", "--out", tmp_path, "--trajectory-runs", "400")
-    for f in ("diverging_fits.png", "parallel_fits.png", "eta.png", "report.md",
-              "summary.json"):
+    for f in ("diverging_fits.png", "parallel_fits.png", "eta.png", "report.md", "summary.json"):
         assert (tmp_path / "trajectories" / f).is_file()
     summ = res["problems"]["trajectories"]
     for fam in ("diverging", "parallel"):
@@ -275,24 +325,50 @@ def test_fusion_weights_round_trip(tmp_path: Path) -> None:
     s2 = [[2.0, -0.3], [-0.3, 1.0]]
     np.save(tmp_path / "s1.npy", np.array(s1))
     (tmp_path / "s2.json").write_text(json.dumps(s2))
-    r_inline, r_files, r_text = run_many([
-        ["fusion", "weights", "--s1", json.dumps(s1), "--s2", json.dumps(s2), "--n", "30",
-         "--json"],
-        ["fusion", "weights", "--s1", tmp_path / "s1.npy", "--s2", tmp_path / "s2.json",
-         "--n1", "10", "--n2", "50", "--mean", "known", "--json"],
-        ["fusion", "weights", "--s1", json.dumps(s1), "--s2", json.dumps(s2), "--n", "30"],
-    ])
+    r_inline, r_files, r_text = run_many(
+        [
+            [
+                "fusion",
+                "weights",
+                "--s1",
+                json.dumps(s1),
+                "--s2",
+                json.dumps(s2),
+                "--n",
+                "30",
+                "--json",
+            ],
+            [
+                "fusion",
+                "weights",
+                "--s1",
+                tmp_path / "s1.npy",
+                "--s2",
+                tmp_path / "s2.json",
+                "--n1",
+                "10",
+                "--n2",
+                "50",
+                "--mean",
+                "known",
+                "--json",
+            ],
+            ["fusion", "weights", "--s1", json.dumps(s1), "--s2", json.dumps(s2), "--n", "30"],
+        ]
+    )
     res = r_inline.json()
     np.testing.assert_allclose(res["W"], fusion.weight_matrix(s1, s2), rtol=1e-15)
     p1, p2 = fusion.weight_jacobians(s1, s2)
     np.testing.assert_allclose(res["P1"], p1, rtol=1e-15)
     np.testing.assert_allclose(res["P2"], p2, rtol=1e-15)
-    np.testing.assert_allclose(res["cov_vec_W"],
-                               fusion.weight_covariance(s1, s2, 30, 30, mean="sample"))
+    np.testing.assert_allclose(
+        res["cov_vec_W"], fusion.weight_covariance(s1, s2, 30, 30, mean="sample")
+    )
     # files (.npy and .json), separate sizes and the known-mean estimator
     res = r_files.json()
-    np.testing.assert_allclose(res["cov_vec_W"],
-                               fusion.weight_covariance(s1, s2, 10, 50, mean="known"))
+    np.testing.assert_allclose(
+        res["cov_vec_W"], fusion.weight_covariance(s1, s2, 10, 50, mean="known")
+    )
     assert "std_W" in r_text.out
 
 
@@ -308,15 +384,15 @@ FUSION_ERRORS = [
 
 def test_fusion_weights_errors() -> None:
     """Each bad input names the flag the user typed (grouped: one subprocess each)."""
-    runs = run_many([["fusion", "weights", *args] for args, _ in FUSION_ERRORS],
-                    expect=None)
+    runs = run_many([["fusion", "weights", *args] for args, _ in FUSION_ERRORS], expect=None)
     for run, (_, flag) in zip(runs, FUSION_ERRORS, strict=True):
         assert f"{flag}" in assert_error(run, 2), run.argv
 
 
 def test_demo_fusion_writes_report(tmp_path: Path) -> None:
-    res = run_json("demo", "fusion", "--out", tmp_path, "--fusion-trials", "4000",
-                   "--fusion-positions", "3")
+    res = run_json(
+        "demo", "fusion", "--out", tmp_path, "--fusion-trials", "4000", "--fusion-positions", "3"
+    )
     for f in ("maps.png", "positions.png", "vs_n.png", "report.md", "summary.json"):
         assert (tmp_path / "fusion" / f).is_file()
     summ = res["problems"]["fusion"]
@@ -337,16 +413,41 @@ def test_demo_fusion_writes_report(tmp_path: Path) -> None:
 
 def test_fusion_weights_shared_snapshots() -> None:
     s1, s2, s12 = [[2.0, 0.3], [0.3, 1.0]], [[1.5, 0.0], [0.0, 2.0]], [[0.8, 0.1], [0.0, 0.6]]
-    r_ok, r_bad = run_many([
-        ["fusion", "weights", "--s1", json.dumps(s1), "--s2", json.dumps(s2), "--s12",
-         json.dumps(s12), "--n", "40", "--json"],
-        ["fusion", "weights", "--s1", json.dumps(s1), "--s2", json.dumps(s2),
-         "--s12", "[[5,0],[0,5]]", "--n", "40"],
-    ], expect=None)
+    r_ok, r_bad = run_many(
+        [
+            [
+                "fusion",
+                "weights",
+                "--s1",
+                json.dumps(s1),
+                "--s2",
+                json.dumps(s2),
+                "--s12",
+                json.dumps(s12),
+                "--n",
+                "40",
+                "--json",
+            ],
+            [
+                "fusion",
+                "weights",
+                "--s1",
+                json.dumps(s1),
+                "--s2",
+                json.dumps(s2),
+                "--s12",
+                "[[5,0],[0,5]]",
+                "--n",
+                "40",
+            ],
+        ],
+        expect=None,
+    )
     assert r_ok.code == 0
     res = r_ok.json()
-    np.testing.assert_allclose(res["cov_vec_W"], fusion.weight_covariance(
-        s1, s2, 40, 40, mean="sample", s12=s12))
+    np.testing.assert_allclose(
+        res["cov_vec_W"], fusion.weight_covariance(s1, s2, 40, 40, mean="sample", s12=s12)
+    )
     assert res["shared_snapshots"] is True
     assert_error(r_bad, 2, "--s12:")
 
@@ -361,18 +462,42 @@ def test_biasfield_build_and_solve(tmp_path: Path) -> None:
     sc = radar_network(3, n_aircraft=30, duration=1200.0, fields="smooth")
     r = sc.radars
     rows = ["name,x,y,sigma_range,sigma_azimuth,max_range"] + [
-        ",".join([r.names[i], *(repr(float(v)) for v in (
-            r.sites[i, 0], r.sites[i, 1], r.sigma_range[i], np.rad2deg(r.sigma_azimuth[i]),
-            r.max_range[i]))]) for i in range(r.m)]
+        ",".join(
+            [
+                r.names[i],
+                *(
+                    repr(float(v))
+                    for v in (
+                        r.sites[i, 0],
+                        r.sites[i, 1],
+                        r.sigma_range[i],
+                        np.rad2deg(r.sigma_azimuth[i]),
+                        r.max_range[i],
+                    )
+                ),
+            ]
+        )
+        for i in range(r.m)
+    ]
     (tmp_path / "radars.csv").write_text("\n".join(rows) + "\n")
     p = sc.plots
     lines = ["time,radar,range,azimuth,object"] + [
         f"{float(t)!r},{r.names[k]},{float(g)!r},{float(np.rad2deg(a))!r},{o}"
-        for t, k, g, a, o in zip(p.time, p.radar, p.range, p.azimuth, p.object, strict=True)]
+        for t, k, g, a, o in zip(p.time, p.radar, p.range, p.azimuth, p.object, strict=True)
+    ]
     (tmp_path / "plots.csv").write_text("\n".join(lines) + "\n")
     npz = tmp_path / "fd.npz"
-    res = run_json("biasfield", "build", tmp_path / "plots.csv", "--radars",
-                   tmp_path / "radars.csv", "--cells", "40", "--out", npz)
+    res = run_json(
+        "biasfield",
+        "build",
+        tmp_path / "plots.csv",
+        "--radars",
+        tmp_path / "radars.csv",
+        "--cells",
+        "40",
+        "--out",
+        npz,
+    )
     radars, _ = bf.read_radars(tmp_path / "radars.csv")
     plots, _ = bf.read_plots(tmp_path / "plots.csv", radars)
     with warnings.catch_warnings():
@@ -388,19 +513,31 @@ def test_biasfield_build_and_solve(tmp_path: Path) -> None:
     out = tmp_path / "out"
     cf = bf.closed_form(fd)
     big = np.abs(cf.field).max(axis=(0, 1))
-    r_qp, r_box, r_lip, r_badbox, r_missing = run_many([
-        ["biasfield", "solve", npz, "--out", out, "--json"],
-        ["biasfield", "solve", npz, "--out", tmp_path / "box", "--json", "--box-deg",
-         f"{1e-3 * big[0]},{np.rad2deg(1e-3 * big[1])}"],
-        ["biasfield", "solve", npz, "--out", tmp_path / "lip", "--lipschitz", "--json"],
-        ["biasfield", "solve", npz, "--box-deg", "1", "--out", tmp_path / "x"],
-        ["biasfield", "solve", tmp_path / "missing.npz", "--out", tmp_path / "y"],
-    ], expect=None)
+    r_qp, r_box, r_lip, r_badbox, r_missing = run_many(
+        [
+            ["biasfield", "solve", npz, "--out", out, "--json"],
+            [
+                "biasfield",
+                "solve",
+                npz,
+                "--out",
+                tmp_path / "box",
+                "--json",
+                "--box-deg",
+                f"{1e-3 * big[0]},{np.rad2deg(1e-3 * big[1])}",
+            ],
+            ["biasfield", "solve", npz, "--out", tmp_path / "lip", "--lipschitz", "--json"],
+            ["biasfield", "solve", npz, "--box-deg", "1", "--out", tmp_path / "x"],
+            ["biasfield", "solve", tmp_path / "missing.npz", "--out", tmp_path / "y"],
+        ],
+        expect=None,
+    )
     assert r_qp.code == 0 and r_qp.json()["status"] == "optimal"
     got = np.load(out / "field.npz")["field"]
     # Clarabel (tightened) vs the closed form: 1e-8 relative per component
-    assert np.all(np.abs(got - cf.field).max(axis=(0, 1))
-                  < 1e-8 * np.abs(cf.field).max(axis=(0, 1)))
+    assert np.all(
+        np.abs(got - cf.field).max(axis=(0, 1)) < 1e-8 * np.abs(cf.field).max(axis=(0, 1))
+    )
     assert (out / "azimuth_map.png").is_file() and (out / "field.csv").is_file()
     # an infeasible box is a finished solve that is not OK: exit 1, the result on stdout
     assert r_box.code == 1
@@ -435,21 +572,30 @@ def test_assignment_cli(tmp_path: Path) -> None:
     rng = np.random.default_rng(4)
     means = rng.uniform(0, 3, (3, 2))
     meas = means + rng.normal(0, 0.5, (3, 2))
-    case = {"means": means.tolist(), "covs": [np.eye(2).tolist()] * 3,
-            "measurements": meas.tolist(), "meas_cov": (0.25 * np.eye(2)).tolist(),
-            "volume": 9.0, "pd": 0.9, "rho": 0.3}
+    case = {
+        "means": means.tolist(),
+        "covs": [np.eye(2).tolist()] * 3,
+        "measurements": meas.tolist(),
+        "meas_cov": (0.25 * np.eye(2)).tolist(),
+        "volume": 9.0,
+        "pd": 0.9,
+        "rho": 0.3,
+    }
     path = tmp_path / "case.json"
     path.write_text(json.dumps(case))
     bad_pd, bad_field = tmp_path / "bad_pd.json", tmp_path / "bad_field.json"
     bad_pd.write_text(json.dumps({**case, "pd": 1.5}))
     bad_field.write_text(json.dumps({**case, "speed": 1}))
-    r_milp, r_bf, r_count, r_pd, r_field = run_many([
-        ["assignment", "solve", path, "--k", "3", "--json"],
-        ["assignment", "solve", path, "--method", "brute-force", "--json"],
-        ["assignment", "count", "3", "3", "--json"],
-        ["assignment", "solve", bad_pd],
-        ["assignment", "solve", bad_field, "--json"],
-    ], expect=None)
+    r_milp, r_bf, r_count, r_pd, r_field = run_many(
+        [
+            ["assignment", "solve", path, "--k", "3", "--json"],
+            ["assignment", "solve", path, "--method", "brute-force", "--json"],
+            ["assignment", "count", "3", "3", "--json"],
+            ["assignment", "solve", bad_pd],
+            ["assignment", "solve", bad_field, "--json"],
+        ],
+        expect=None,
+    )
     assert r_milp.code == 0
     res = r_milp.json()  # the HiGHS banner, if any, is not on stdout
     ref = asg.brute_force(asg.AssignmentData(**case))
@@ -468,8 +614,9 @@ def test_assignment_cli(tmp_path: Path) -> None:
     assert_error(r_field, 2, "unknown fields")
 
 
-def test_demo_assignment_writes_report(tmp_path: Path, capsys: pytest.CaptureFixture[str],
-                                       monkeypatch: pytest.MonkeyPatch) -> None:
+def test_demo_assignment_writes_report(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
     """In process (the separations are patched down to two): main() itself, its return
     status and its one JSON document."""
     from optmodels.demo import assignment as demo_as
@@ -485,8 +632,9 @@ def test_demo_assignment_writes_report(tmp_path: Path, capsys: pytest.CaptureFix
     # below the resolution (150 m) the MAP recognises merges: better than resolved-only by
     # more than 2 standard errors of the difference (8 runs); far apart they agree closely
     close = rows[40.0]
-    assert close["MAP correct"] - close["GNN correct"] > 2 * np.hypot(close["MAP se"],
-                                                                     close["GNN se"])
+    assert close["MAP correct"] - close["GNN correct"] > 2 * np.hypot(
+        close["MAP se"], close["GNN se"]
+    )
     far = rows[400.0]
     assert abs(far["MAP correct"] - far["GNN correct"]) < 0.05
     # the external peer (in the test extra): far apart, Stone Soup's GNN runs the same

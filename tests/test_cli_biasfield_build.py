@@ -19,11 +19,23 @@ ORG = (55.0, 83.0, 150.0)
 def write_sites(path: Path, r: bf.RadarSet) -> Path:
     """The sites CSV of a 3-D radar set, keyed by SAC/SIC (SAC 25, SIC 10 + i)."""
     assert r.geodetic is not None
-    path.write_text("name,sac,sic,lat,lon,alt,sigma_range,sigma_azimuth,max_range\n" + "".join(
-        f"{r.names[i]},25,{10 + i},"
-        + ",".join(repr(float(v)) for v in (*r.geodetic[i], r.sigma_range[i],
-                                            np.rad2deg(r.sigma_azimuth[i]), r.max_range[i]))
-        + "\n" for i in range(r.m)))
+    path.write_text(
+        "name,sac,sic,lat,lon,alt,sigma_range,sigma_azimuth,max_range\n"
+        + "".join(
+            f"{r.names[i]},25,{10 + i},"
+            + ",".join(
+                repr(float(v))
+                for v in (
+                    *r.geodetic[i],
+                    r.sigma_range[i],
+                    np.rad2deg(r.sigma_azimuth[i]),
+                    r.max_range[i],
+                )
+            )
+            + "\n"
+            for i in range(r.m)
+        )
+    )
     return path
 
 
@@ -34,16 +46,22 @@ def encode_scene(sc: object, tod0: float, addr: np.ndarray) -> tuple[bytes, byte
     from optmodels.io import asterix as ax
 
     r, p, paths = sc.radars, sc.plots, sc.paths  # type: ignore[attr-defined]
-    cat048 = b"".join(ax.encode_cat048(p.time[p.radar == i] + tod0, 25, 10 + i,
-                                       p.range[p.radar == i], p.azimuth[p.radar == i],
-                                       address=addr[p.object[p.radar == i]])
-                      for i in range(r.m))
+    cat048 = b"".join(
+        ax.encode_cat048(
+            p.time[p.radar == i] + tod0,
+            25,
+            10 + i,
+            p.range[p.radar == i],
+            p.azimuth[p.radar == i],
+            address=addr[p.object[p.radar == i]],
+        )
+        for i in range(r.m)
+    )
     parts = [paths.track(a) for a in range(len(paths))]
     t21 = np.concatenate([q[0] for q in parts]) + tod0
     geo = np.vstack([q[2] for q in parts if q[2] is not None])
     who = np.concatenate([np.full(q[0].size, addr[a]) for a, q in enumerate(parts)])
-    cat021 = ax.encode_cat021(t21, 25, 99, geo[:, 0], geo[:, 1], height=geo[:, 2],
-                              address=who)
+    cat021 = ax.encode_cat021(t21, 25, 99, geo[:, 0], geo[:, 1], height=geo[:, 2], address=who)
     return cat048, cat021, int(t21.size)
 
 
@@ -59,28 +77,40 @@ def _files(tmp_path: Path) -> tuple[Path, Path, Path, Path, int, int]:
     assert r.geodetic is not None
     sites = write_sites(tmp_path / "sites.csv", r)
     flat = tmp_path / "flat.csv"
-    flat.write_text("name,x,y,sigma_range,sigma_azimuth,max_range\n" + "".join(
-        f"{r.names[i]},{float(r.sites[i, 0])!r},{float(r.sites[i, 1])!r},50,0.08,250000\n"
-        for i in range(r.m)))
+    flat.write_text(
+        "name,x,y,sigma_range,sigma_azimuth,max_range\n"
+        + "".join(
+            f"{r.names[i]},{float(r.sites[i, 0])!r},{float(r.sites[i, 1])!r},50,0.08,250000\n"
+            for i in range(r.m)
+        )
+    )
     p = sc.plots
     assert p.height is not None
-    rows = [f"{float(t)!r},{r.names[k]},{float(g)!r},{float(np.rad2deg(a))!r},A{o},"
-            f"{float(h)!r}\n"
-            for t, k, g, a, o, h in zip(p.time, p.radar, p.range, p.azimuth, p.object,
-                                        p.height, strict=True)]
+    rows = [
+        f"{float(t)!r},{r.names[k]},{float(g)!r},{float(np.rad2deg(a))!r},A{o},{float(h)!r}\n"
+        for t, k, g, a, o, h in zip(
+            p.time, p.radar, p.range, p.azimuth, p.object, p.height, strict=True
+        )
+    ]
     pick = np.random.default_rng(2).choice(len(p), 4, replace=False)
-    rows += [f"{float(p.time[j]) + 1.0!r},{r.names[p.radar[j]]},{float(p.range[j]) + 8e3!r},"
-             f"{float(np.rad2deg(p.azimuth[j]))!r},A{p.object[j]},{float(p.height[j])!r}\n"
-             for j in pick]
+    rows += [
+        f"{float(p.time[j]) + 1.0!r},{r.names[p.radar[j]]},{float(p.range[j]) + 8e3!r},"
+        f"{float(np.rad2deg(p.azimuth[j]))!r},A{p.object[j]},{float(p.height[j])!r}\n"
+        for j in pick
+    ]
     plots = tmp_path / "plots.csv"
     plots.write_text("time,radar,range,azimuth,object,height\n" + "".join(rows))
     t, _, geo = sc.paths.track(0)
     assert geo is not None
-    lines = [f"A0,{float(tk)!r},{float(g[0])!r},{float(g[1])!r},{float(g[2])!r}\n"
-             for tk, g in zip(t, geo, strict=True)]
+    lines = [
+        f"A0,{float(tk)!r},{float(g[0])!r},{float(g[1])!r},{float(g[2])!r}\n"
+        for tk, g in zip(t, geo, strict=True)
+    ]
     k = t.size // 2
-    lines.append(f"A0,{float(t[k]) + 0.5!r},{float(geo[k, 0]) + 0.01!r},{float(geo[k, 1])!r},"
-                 f"{float(geo[k, 2])!r}\n")
+    lines.append(
+        f"A0,{float(t[k]) + 0.5!r},{float(geo[k, 0]) + 0.01!r},{float(geo[k, 1])!r},"
+        f"{float(geo[k, 2])!r}\n"
+    )
     adsb = tmp_path / "adsb.csv"
     adsb.write_text("object,time,lat,lon,alt\n" + "".join(lines))
     return sites, plots, adsb, flat, len(rows), 4
@@ -93,18 +123,69 @@ def test_build_from_csv_3d_with_adsb(tmp_path: Path) -> None:
     Bad flags exit 2 with one line naming them (old ``--box`` included)."""
     sites, plots, adsb, flat, n_rows, n_glitch = _files(tmp_path)
     npz = tmp_path / "fd.npz"
-    ok, bad_origin, three, flat3d, cells1 = run_many([
-        ["biasfield", "build", plots, adsb, "--radars", sites, "--cells", "15", "--out", npz,
-         "--json"],
-        ["biasfield", "build", plots, "--radars", sites, "--origin", "55,83", "--json",
-         "--out", tmp_path / "x.npz"],
-        ["biasfield", "build", plots, adsb, adsb, "--radars", sites, "--out",
-         tmp_path / "y.npz"],
-        ["biasfield", "build", plots, "--radars", flat, "--geometry", "3d", "--out",
-         tmp_path / "z.npz"],
-        ["biasfield", "build", plots, "--radars", sites, "--cells", "1", "--out",
-         tmp_path / "w.npz"],
-    ], expect=None)
+    ok, bad_origin, three, flat3d, cells1 = run_many(
+        [
+            [
+                "biasfield",
+                "build",
+                plots,
+                adsb,
+                "--radars",
+                sites,
+                "--cells",
+                "15",
+                "--out",
+                npz,
+                "--json",
+            ],
+            [
+                "biasfield",
+                "build",
+                plots,
+                "--radars",
+                sites,
+                "--origin",
+                "55,83",
+                "--json",
+                "--out",
+                tmp_path / "x.npz",
+            ],
+            [
+                "biasfield",
+                "build",
+                plots,
+                adsb,
+                adsb,
+                "--radars",
+                sites,
+                "--out",
+                tmp_path / "y.npz",
+            ],
+            [
+                "biasfield",
+                "build",
+                plots,
+                "--radars",
+                flat,
+                "--geometry",
+                "3d",
+                "--out",
+                tmp_path / "z.npz",
+            ],
+            [
+                "biasfield",
+                "build",
+                plots,
+                "--radars",
+                sites,
+                "--cells",
+                "1",
+                "--out",
+                tmp_path / "w.npz",
+            ],
+        ],
+        expect=None,
+    )
     assert ok.code == 0, ok.err
     res = ok.json()
     assert res["geometry"] == "3d" and res["source"] == "table"
@@ -143,10 +224,13 @@ def test_solve_box_unit_in_the_flag(tmp_path: Path) -> None:
     fd.save(npz)
     big = np.abs(bf.closed_form(fd).field).max(axis=(0, 1))
     box = f"{float(1e-3 * big[0])!r},{float(np.rad2deg(1e-3 * big[1]))!r}"
-    tight, old = run_many([
-        ["biasfield", "solve", npz, "--box-deg", box, "--out", tmp_path / "a", "--json"],
-        ["biasfield", "solve", npz, "--box", box, "--out", tmp_path / "b", "--json"],
-    ], expect=None)
+    tight, old = run_many(
+        [
+            ["biasfield", "solve", npz, "--box-deg", box, "--out", tmp_path / "a", "--json"],
+            ["biasfield", "solve", npz, "--box", box, "--out", tmp_path / "b", "--json"],
+        ],
+        expect=None,
+    )
     assert tight.code == 1 and tight.json()["status"] == "infeasible"
     lib = bf.solve(fd, box=(1e-3 * big[0], 1e-3 * big[1]))
     assert lib.status.value == "infeasible"
@@ -173,12 +257,36 @@ def test_build_from_asterix_one_or_two_files(tmp_path: Path) -> None:
     both.write_bytes(cat048 + cat021)
     f48.write_bytes(cat048)
     f21.write_bytes(cat021)
-    one, two = run_many([
-        ["biasfield", "build", both, "--radars", sites, "--cells", "12", "--out",
-         tmp_path / "one.npz", "--json"],
-        ["biasfield", "build", f48, f21, "--radars", sites, "--cells", "12", "--out",
-         tmp_path / "two.npz", "--json"],
-    ], expect=None)
+    one, two = run_many(
+        [
+            [
+                "biasfield",
+                "build",
+                both,
+                "--radars",
+                sites,
+                "--cells",
+                "12",
+                "--out",
+                tmp_path / "one.npz",
+                "--json",
+            ],
+            [
+                "biasfield",
+                "build",
+                f48,
+                f21,
+                "--radars",
+                sites,
+                "--cells",
+                "12",
+                "--out",
+                tmp_path / "two.npz",
+                "--json",
+            ],
+        ],
+        expect=None,
+    )
     assert one.code == 0, one.err
     assert two.code == 0, two.err
     res = one.json()

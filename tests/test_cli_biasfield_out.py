@@ -22,20 +22,72 @@ DATE = "2026-12-02"
 def walk(tmp_path_factory: pytest.TempPathFactory) -> dict[str, object]:
     """The README's walk-through on a small simulated network (12 aircraft, 15 min)."""
     tmp = tmp_path_factory.mktemp("walk")
-    sim = run_cli("biasfield", "simulate", "--out", tmp / "sim", "--aircraft", "12",
-                  "--duration", "900", "--adsb-interval", "2", "--adsb-spikes", "2",
-                  "--seed", "3", "--json")
+    sim = run_cli(
+        "biasfield",
+        "simulate",
+        "--out",
+        tmp / "sim",
+        "--aircraft",
+        "12",
+        "--duration",
+        "900",
+        "--adsb-interval",
+        "2",
+        "--adsb-spikes",
+        "2",
+        "--seed",
+        "3",
+        "--json",
+    )
     doc = sim.json()
     rec, sites = Path(doc["recording"]), Path(doc["sites"])
-    build = run_cli("biasfield", "build", rec, "--radars", sites, "--cells", "40",
-                    "--date", DATE, "--out", tmp / "fd.npz", "--json").json()
-    solve = run_cli("biasfield", "solve", tmp / "fd.npz", "--method", "closed-form",
-                    "--out", tmp / "solved", "--json").json()
-    cor = run_cli("biasfield", "correct", rec, "--radars", sites, "--field",
-                  tmp / "solved" / "field.npz", "--date", DATE, "--out",
-                  tmp / "corrected.csv", "--json").json()
-    return {"tmp": tmp, "sim": doc, "rec": rec, "sites": sites, "build": build,
-            "solve": solve, "correct": cor}
+    build = run_cli(
+        "biasfield",
+        "build",
+        rec,
+        "--radars",
+        sites,
+        "--cells",
+        "40",
+        "--date",
+        DATE,
+        "--out",
+        tmp / "fd.npz",
+        "--json",
+    ).json()
+    solve = run_cli(
+        "biasfield",
+        "solve",
+        tmp / "fd.npz",
+        "--method",
+        "closed-form",
+        "--out",
+        tmp / "solved",
+        "--json",
+    ).json()
+    cor = run_cli(
+        "biasfield",
+        "correct",
+        rec,
+        "--radars",
+        sites,
+        "--field",
+        tmp / "solved" / "field.npz",
+        "--date",
+        DATE,
+        "--out",
+        tmp / "corrected.csv",
+        "--json",
+    ).json()
+    return {
+        "tmp": tmp,
+        "sim": doc,
+        "rec": rec,
+        "sites": sites,
+        "build": build,
+        "solve": solve,
+        "correct": cor,
+    }
 
 
 def _rows(path: Path) -> list[dict[str, str]]:
@@ -53,8 +105,7 @@ def test_simulate_writes_what_it_says(walk: dict) -> None:
     assert len(data.cat048) == doc["cat048"] > 1000
     assert len(data.cat021) == doc["cat021"]
     sites = _rows(walk["sites"])
-    assert [(int(r["sac"]), int(r["sic"])) for r in sites] == [tuple(i) for i in
-                                                                doc["sac_sic"]]
+    assert [(int(r["sac"]), int(r["sic"])) for r in sites] == [tuple(i) for i in doc["sac_sic"]]
     got = set(zip(data.cat048.sac.tolist(), data.cat048.sic.tolist(), strict=True))
     assert got == {tuple(i) for i in doc["sac_sic"]}
     assert walk["build"]["adsb"]["adsb_heights_rejected"] == doc["spikes"] == 2
@@ -75,19 +126,21 @@ def test_corrected_rows_join_back_to_the_recording(walk: dict) -> None:
     c = read_asterix([walk["rec"]], date=DATE).cat048
     keys = {}
     for k in range(len(c)):
-        key = (int(c.sac[k]), int(c.sic[k]), f"{int(c.address[k]):06x}",
-               round(float(np.mod(c.time[k], 86400.0)) * 128))
+        key = (
+            int(c.sac[k]),
+            int(c.sic[k]),
+            f"{int(c.address[k]):06x}",
+            round(float(np.mod(c.time[k], 86400.0)) * 128),
+        )
         keys[key] = keys.get(key, 0) + 1
     names = {(r["sac"], r["sic"]): r["name"] for r in _rows(walk["sites"])}
     matched = 0
     for r in rows:
-        key = (int(r["sac"]), int(r["sic"]), r["address"],
-               round(float(r["time_of_day"]) * 128))
+        key = (int(r["sac"]), int(r["sic"]), r["address"], round(float(r["time_of_day"]) * 128))
         assert keys.get(key) == 1, r
         assert names[(r["sac"], r["sic"])] == r["radar"]
         utc = np.datetime64(r["utc"].rstrip("Z"))
-        want = np.datetime64(DATE) + np.timedelta64(round(float(r["time_of_day"]) * 1e3),
-                                                    "ms")
+        want = np.datetime64(DATE) + np.timedelta64(round(float(r["time_of_day"]) * 1e3), "ms")
         assert abs((utc - want) / np.timedelta64(1, "ms")) <= 1
         matched += 1
     assert matched == len(c) == len(rows)
@@ -99,8 +152,9 @@ def test_corrected_rows_join_back_to_the_recording(walk: dict) -> None:
     assert ok.all()
     ref = correct_plots(lib.plots, lib.radars, fm)
     # rows are in the recording's (time) order, as read_recording's plots
-    np.testing.assert_allclose([float(r["range"]) for r in rows], ref.plots.range, rtol=0,
-                               atol=5e-4 + 1e-9)                      # "%.3f" m
+    np.testing.assert_allclose(
+        [float(r["range"]) for r in rows], ref.plots.range, rtol=0, atol=5e-4 + 1e-9
+    )  # "%.3f" m
     d = np.deg2rad(az) - ref.plots.azimuth
     assert np.max(np.abs(np.angle(np.exp(1j * d)))) <= np.deg2rad(5e-10) + 1e-12  # "%.9f"°
     assert [r["address"] for r in rows] == [lib.icao24[o] for o in lib.plots.object]
@@ -145,12 +199,25 @@ def test_field_csv_and_solve_summary(walk: dict) -> None:
         assert s["azimuth_bias_deg"] == pytest.approx(fa.mean(), rel=1e-6, abs=1e-9)
         assert s["range_spread_m"] == pytest.approx(np.std(fr), rel=1e-6, abs=1e-6)
         resid = fr - (const + gain * rho)
-        want_se = np.sqrt(resid @ resid / (len(mine) - 2) * np.linalg.inv(
-            np.column_stack([np.ones_like(rho), rho]).T
-            @ np.column_stack([np.ones_like(rho), rho]))[0, 0])
+        want_se = np.sqrt(
+            resid
+            @ resid
+            / (len(mine) - 2)
+            * np.linalg.inv(
+                np.column_stack([np.ones_like(rho), rho]).T
+                @ np.column_stack([np.ones_like(rho), rho])
+            )[0, 0]
+        )
         assert s["range_bias_sigma_m"] == pytest.approx(want_se, rel=1e-5)
-    text = run_cli("biasfield", "solve", tmp / "fd.npz", "--method", "closed-form",
-                   "--out", tmp / "solved_text")
+    text = run_cli(
+        "biasfield",
+        "solve",
+        tmp / "fd.npz",
+        "--method",
+        "closed-form",
+        "--out",
+        tmp / "solved_text",
+    )
     assert "J =" not in text.out and "range bias m" in text.out
     for name in names:
         assert f"  {name} " in text.out
@@ -161,12 +228,31 @@ def test_registration_after_the_walk_through(walk: dict) -> None:
     cross-radar registration error is ≤ 20 % of the recording's, on the field's area."""
     tmp = walk["tmp"]
     field = tmp / "solved" / "field.npz"
-    before, after = run_many([
-        ["biasfield", "registration", walk["rec"], "--radars", walk["sites"], "--field",
-         field, "--json"],
-        ["biasfield", "registration", tmp / "corrected.csv", "--radars", walk["sites"],
-         "--field", field, "--drop-out-of-range", "--json"],
-    ])
+    before, after = run_many(
+        [
+            [
+                "biasfield",
+                "registration",
+                walk["rec"],
+                "--radars",
+                walk["sites"],
+                "--field",
+                field,
+                "--json",
+            ],
+            [
+                "biasfield",
+                "registration",
+                tmp / "corrected.csv",
+                "--radars",
+                walk["sites"],
+                "--field",
+                field,
+                "--drop-out-of-range",
+                "--json",
+            ],
+        ]
+    )
     b, a = before.json()["registration"], after.json()["registration"]
     assert b["overall_m"] > 100.0
     assert a["overall_m"] <= 0.2 * b["overall_m"]
@@ -175,8 +261,17 @@ def test_registration_after_the_walk_through(walk: dict) -> None:
 def test_build_text_is_a_summary(walk: dict) -> None:
     """``build`` prints lines a person reads (no Python dict)."""
     tmp = walk["tmp"]
-    run = run_cli("biasfield", "build", walk["rec"], "--radars", walk["sites"], "--cells",
-                  "30", "--out", tmp / "fd_text.npz")
+    run = run_cli(
+        "biasfield",
+        "build",
+        walk["rec"],
+        "--radars",
+        walk["sites"],
+        "--cells",
+        "30",
+        "--out",
+        tmp / "fd_text.npz",
+    )
     assert "{" not in run.out and "cells per radar" in run.out
     assert "height spikes rejected" in run.out
 
@@ -190,16 +285,37 @@ def test_output_paths_are_checked_before_any_work(walk: dict, tmp_path: Path) ->
     afile = tmp_path / "afile"
     afile.write_text("x")
     missing = tmp_path / "missing.ast"
-    runs = run_many([
-        ["biasfield", "build", missing, "--radars", walk["sites"], "--out", "/proc/x.npz"],
-        ["biasfield", "build", missing, "--radars", walk["sites"], "--out", folder],
-        ["biasfield", "correct", missing, "--radars", walk["sites"], "--field", missing,
-         "--out", "/proc/y.csv"],
-        ["biasfield", "correct", missing, "--radars", walk["sites"], "--field", missing,
-         "--out", folder],
-        ["biasfield", "solve", missing, "--out", afile],
-        ["biasfield", "simulate", "--out", afile],
-    ], expect=None)
+    runs = run_many(
+        [
+            ["biasfield", "build", missing, "--radars", walk["sites"], "--out", "/proc/x.npz"],
+            ["biasfield", "build", missing, "--radars", walk["sites"], "--out", folder],
+            [
+                "biasfield",
+                "correct",
+                missing,
+                "--radars",
+                walk["sites"],
+                "--field",
+                missing,
+                "--out",
+                "/proc/y.csv",
+            ],
+            [
+                "biasfield",
+                "correct",
+                missing,
+                "--radars",
+                walk["sites"],
+                "--field",
+                missing,
+                "--out",
+                folder,
+            ],
+            ["biasfield", "solve", missing, "--out", afile],
+            ["biasfield", "simulate", "--out", afile],
+        ],
+        expect=None,
+    )
     for run in runs:
         assert_error(run, 2, "--out")
         assert "missing" not in run.err_lines[0]
@@ -218,9 +334,11 @@ def _spike_recording(tmp_path: Path, spike: slice) -> tuple[Path, Path, dict]:
 
     site = (55.0, 83.0, 200.0)
     sites = tmp_path / "sites.csv"
-    sites.write_text("name,sac,sic,lat,lon,alt,sigma_range,sigma_azimuth,max_range\n"
-                     f"R1,7,11,{site[0]},{site[1]},{site[2]},50,0.08,250000\n"
-                     "R2,7,12,56.0,84.0,300,50,0.08,250000\n")  # (a set needs 2 radars)
+    sites.write_text(
+        "name,sac,sic,lat,lon,alt,sigma_range,sigma_azimuth,max_range\n"
+        f"R1,7,11,{site[0]},{site[1]},{site[2]},50,0.08,250000\n"
+        "R2,7,12,56.0,84.0,300,50,0.08,250000\n"
+    )  # (a set needs 2 radars)
     t = 40000.0 + np.arange(120.0)
     lat = 55.5 + 1e-4 * np.arange(120.0)
     lon = np.full(120, 83.2)
@@ -232,9 +350,10 @@ def _spike_recording(tmp_path: Path, spike: slice) -> tuple[Path, Path, dict]:
     az, _el, sr = pymap3d.geodetic2aer(la, np.full(tp.size, 83.2), 10_000.0, *site)
     fl = _flight_level(np.full(tp.size, 10_000.0))
     rec = tmp_path / "spike.ast"
-    rec.write_bytes(encode_cat021(t, 9, 1, lat, lon, height=bad, address=0xABC123)
-                    + encode_cat048(tp, 7, 11, sr, np.radians(az), flight_level=fl,
-                                    address=0xABC123))
+    rec.write_bytes(
+        encode_cat021(t, 9, 1, lat, lon, height=bad, address=0xABC123)
+        + encode_cat048(tp, 7, 11, sr, np.radians(az), flight_level=fl, address=0xABC123)
+    )
     near = (tp >= t[spike][0] - 1.0) & (tp <= t[spike][-1] + 1.0)
     return rec, sites, {"near": near, "fl": fl}
 
@@ -288,14 +407,17 @@ def test_simulate_refuses_bad_arguments(tmp_path: Path) -> None:
     from optmodels.core import ProblemError
     from optmodels.scenarios.recording import simulate_recording
 
-    for kw, name in (({"radars": 1}, "radars"), ({"start": 90000.0}, "start"),
-                     ({"biases": "wavy"}, "biases"), ({"aircraft": 0}, "aircraft"),
-                     ({"adsb_interval": 0.5}, "adsb_interval")):
+    for kw, name in (
+        ({"radars": 1}, "radars"),
+        ({"start": 90000.0}, "start"),
+        ({"biases": "wavy"}, "biases"),
+        ({"aircraft": 0}, "aircraft"),
+        ({"adsb_interval": 0.5}, "adsb_interval"),
+    ):
         with pytest.raises(ProblemError, match=name):
             simulate_recording(tmp_path / "x", **kw)
     assert not (tmp_path / "x" / "recording.ast").exists()
-    bad = run_cli("biasfield", "simulate", "--out", tmp_path / "y", "--start", "90000",
-                  expect=None)
+    bad = run_cli("biasfield", "simulate", "--out", tmp_path / "y", "--start", "90000", expect=None)
     assert_error(bad, 2, "start")
 
 
@@ -307,29 +429,55 @@ def test_correct_format_asterix_replaces_only_i040(walk: dict) -> None:
     from optmodels.io import read_asterix
 
     out = walk["tmp"] / "corrected.ast"
-    res = run_cli("biasfield", "correct", walk["rec"], "--radars", walk["sites"], "--field",
-                  walk["tmp"] / "solved" / "field.npz", "--date", DATE, "--format",
-                  "asterix", "--out", out, "--json").json()
+    res = run_cli(
+        "biasfield",
+        "correct",
+        walk["rec"],
+        "--radars",
+        walk["sites"],
+        "--field",
+        walk["tmp"] / "solved" / "field.npz",
+        "--date",
+        DATE,
+        "--format",
+        "asterix",
+        "--out",
+        out,
+        "--json",
+    ).json()
     assert res["format"] == "asterix" and res["corrected"] == walk["correct"]["corrected"]
     a = read_asterix([walk["rec"]], date=DATE)
     b = read_asterix([out], date=DATE)
     assert len(b.cat048) == len(a.cat048) and len(b.cat021) == len(a.cat021)
     for name in ("time", "sac", "sic", "address", "pressure_altitude"):
-        assert np.array_equal(getattr(a.cat048, name), getattr(b.cat048, name),
-                              equal_nan=True), name
+        assert np.array_equal(getattr(a.cat048, name), getattr(b.cat048, name), equal_nan=True), (
+            name
+        )
     rows = _rows(walk["tmp"] / "corrected.csv")
     cov = np.array([r["covered"] == "1" for r in rows])
     assert cov.sum() > 0  # (all of them on this small network)
     # the CSV's rows are one per plot read, in the order the plots were read: match the
     # records by (SAC/SIC, address, time of day) as the join-back test does
-    key_b = {(int(b.cat048.sac[k]), int(b.cat048.sic[k]), int(b.cat048.address[k]),
-              round(float(np.mod(b.cat048.time[k], 86400.0)) * 128)): k
-             for k in range(len(b.cat048))}
+    key_b = {
+        (
+            int(b.cat048.sac[k]),
+            int(b.cat048.sic[k]),
+            int(b.cat048.address[k]),
+            round(float(np.mod(b.cat048.time[k], 86400.0)) * 128),
+        ): k
+        for k in range(len(b.cat048))
+    }
     lsb_r, lsb_a = 1852.0 / 256.0, 360.0 / 2**16
     changed = 0
     for r, c in zip(rows, cov, strict=True):
-        k = key_b[(int(r["sac"]), int(r["sic"]), int(r["address"], 16),
-                   round(float(r["time_of_day"]) * 128))]
+        k = key_b[
+            (
+                int(r["sac"]),
+                int(r["sic"]),
+                int(r["address"], 16),
+                round(float(r["time_of_day"]) * 128),
+            )
+        ]
         if c:
             assert abs(b.cat048.range[k] - float(r["range"])) <= lsb_r
             d = (np.rad2deg(b.cat048.azimuth[k]) - float(r["azimuth"]) + 180.0) % 360.0 - 180.0
@@ -349,7 +497,19 @@ def test_correct_format_asterix_refuses_a_csv_recording(tmp_path: Path) -> None:
     sites.write_text("name,x,y\nR1,0,0\nR2,5000,0\n", encoding="utf-8")
     field = tmp_path / "field.npz"
     np.savez(field, x=np.zeros(1))
-    r = run_cli("biasfield", "correct", plots, "--radars", sites, "--field", field,
-                "--format", "asterix", "--out", tmp_path / "c.ast", expect=2)
+    r = run_cli(
+        "biasfield",
+        "correct",
+        plots,
+        "--radars",
+        sites,
+        "--field",
+        field,
+        "--format",
+        "asterix",
+        "--out",
+        tmp_path / "c.ast",
+        expect=2,
+    )
     assert len(r.err.strip().splitlines()) == 1
     assert "--format asterix" in r.err and "not an ASTERIX recording" in r.err

@@ -34,8 +34,14 @@ def recording(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     fd, out = tmp / "fd.npz", tmp / "solved"
     run_cli("biasfield", "build", rec, "--radars", sites, "--cells", "60", "--out", fd)
     run_cli("biasfield", "solve", fd, "--solver", "closed-form", "--out", out)
-    return {"tmp": tmp, "sites": sites, "recording": rec, "fd": fd,
-            "field": out / "field.npz", "adsb_only": tmp / "adsb_only.ast"}
+    return {
+        "tmp": tmp,
+        "sites": sites,
+        "recording": rec,
+        "fd": fd,
+        "field": out / "field.npz",
+        "adsb_only": tmp / "adsb_only.ast",
+    }
 
 
 def test_round_trip_build_solve_correct_registration(recording: dict[str, Path]) -> None:
@@ -49,8 +55,18 @@ def test_round_trip_build_solve_correct_registration(recording: dict[str, Path])
 
     tmp, sites, rec, field = (recording[k] for k in ("tmp", "sites", "recording", "field"))
     corrected = tmp / "corrected.csv"
-    cor = run_cli("biasfield", "correct", rec, "--radars", sites, "--field", field,
-                  "--out", corrected, "--json")
+    cor = run_cli(
+        "biasfield",
+        "correct",
+        rec,
+        "--radars",
+        sites,
+        "--field",
+        field,
+        "--out",
+        corrected,
+        "--json",
+    )
     assert cor.code == 0, cor.err
     doc = cor.json()
     lib = read_recording([rec], sites)
@@ -58,9 +74,21 @@ def test_round_trip_build_solve_correct_registration(recording: dict[str, Path])
     with corrected.open(encoding="utf-8") as fh:
         rows = list(csv.DictReader(fh))
     assert len(rows) == len(lib.plots)
-    assert list(rows[0]) == ["radar", "sac", "sic", "address", "time", "time_of_day", "utc",
-                             "range", "azimuth", "height", "height_source", "covered",
-                             "reason"]
+    assert list(rows[0]) == [
+        "radar",
+        "sac",
+        "sic",
+        "address",
+        "time",
+        "time_of_day",
+        "utc",
+        "range",
+        "azimuth",
+        "height",
+        "height_source",
+        "covered",
+        "reason",
+    ]
     fm = FieldMap.load(field)
     ok = lib.plots.locatable(lib.radars)
     ref = correct_plots(lib.plots.subset(ok), lib.radars, fm)
@@ -75,11 +103,22 @@ def test_round_trip_build_solve_correct_registration(recording: dict[str, Path])
     # the field exists where all four radars see the traffic: about a third of the plots
     assert doc["corrected"] == int(ref.covered.sum()) > 0.2 * len(rows)
 
-    before, after = run_many([
-        ["biasfield", "registration", rec, "--radars", sites, "--field", field, "--json"],
-        ["biasfield", "registration", corrected, "--radars", sites, "--field", field,
-         "--json", "--drop-out-of-range"],  # a corrected range may pass max_range
-    ])
+    before, after = run_many(
+        [
+            ["biasfield", "registration", rec, "--radars", sites, "--field", field, "--json"],
+            [
+                "biasfield",
+                "registration",
+                corrected,
+                "--radars",
+                sites,
+                "--field",
+                field,
+                "--json",
+                "--drop-out-of-range",
+            ],  # a corrected range may pass max_range
+        ]
+    )
     b, a = before.json(), after.json()
     assert b["registration"]["overall_m"] > 100.0
     assert a["registration"]["overall_m"] <= 0.2 * b["registration"]["overall_m"]
@@ -92,13 +131,13 @@ def test_round_trip_build_solve_correct_registration(recording: dict[str, Path])
     reg = registration_error(kept, lib.radars, within=fm)
     assert b["registration"]["overall_m"] == pytest.approx(reg.overall, rel=1e-9, abs=1e-9)
     assert b["absolute"] is not None and a["absolute"] is None  # CAT021 only in the recording
-    ab = absolute_error(kept, lib.radars, adsb_reference(kept, lib.adsb, lib.radars.origin),
-                        within=fm)
+    ab = absolute_error(
+        kept, lib.radars, adsb_reference(kept, lib.adsb, lib.radars.origin), within=fm
+    )
     assert b["absolute"]["overall_m"] == pytest.approx(ab.overall, rel=1e-9, abs=1e-9)
 
 
-def test_correct_and_registration_refuse_what_does_not_fit(recording: dict[str, Path]
-                                                           ) -> None:
+def test_correct_and_registration_refuse_what_does_not_fit(recording: dict[str, Path]) -> None:
     """A field of other radars, a missing field file, bad flags, a recording without
     CAT048, sites whose SAC/SIC no plot carries, 2-D asked of ASTERIX: exit 2, one line."""
     tmp, sites, rec, field = (recording[k] for k in ("tmp", "sites", "recording", "field"))
@@ -111,23 +150,67 @@ def test_correct_and_registration_refuse_what_does_not_fit(recording: dict[str, 
     first = lines[1].split(",")
     first[2] = "99"  # R1's SIC: no plot of the recording carries it
     wrong.write_text("\n".join([head, ",".join(first), *lines[2:]]) + "\n")
-    no_plots, silent, flat = run_many([
-        ["biasfield", "correct", recording["adsb_only"], "--radars", sites, "--field", field,
-         "--out", tmp / "z.csv", "--json"],
-        ["biasfield", "build", rec, "--radars", wrong, "--out", tmp / "w.npz"],
-        ["biasfield", "build", rec, "--radars", sites, "--geometry", "2d", "--out",
-         tmp / "v.npz"],
-    ], expect=None)
+    no_plots, silent, flat = run_many(
+        [
+            [
+                "biasfield",
+                "correct",
+                recording["adsb_only"],
+                "--radars",
+                sites,
+                "--field",
+                field,
+                "--out",
+                tmp / "z.csv",
+                "--json",
+            ],
+            ["biasfield", "build", rec, "--radars", wrong, "--out", tmp / "w.npz"],
+            [
+                "biasfield",
+                "build",
+                rec,
+                "--radars",
+                sites,
+                "--geometry",
+                "2d",
+                "--out",
+                tmp / "v.npz",
+            ],
+        ],
+        expect=None,
+    )
     assert_error(no_plots, 2, "no CAT048 plot")
     assert_error(silent, 2, "R1", "99", "[25, 10]")
     assert_error(flat, 2, "--geometry 2d", "ASTERIX")
-    other, missing, area = run_many([
-        ["biasfield", "correct", rec, "--radars", moved, "--field", field, "--out",
-         tmp / "x.csv", "--json"],
-        ["biasfield", "correct", rec, "--radars", sites, "--field", tmp / "none.npz",
-         "--out", tmp / "y.csv"],
-        ["biasfield", "registration", rec, "--radars", sites, "--area", "-5"],
-    ], expect=None)
+    other, missing, area = run_many(
+        [
+            [
+                "biasfield",
+                "correct",
+                rec,
+                "--radars",
+                moved,
+                "--field",
+                field,
+                "--out",
+                tmp / "x.csv",
+                "--json",
+            ],
+            [
+                "biasfield",
+                "correct",
+                rec,
+                "--radars",
+                sites,
+                "--field",
+                tmp / "none.npz",
+                "--out",
+                tmp / "y.csv",
+            ],
+            ["biasfield", "registration", rec, "--radars", sites, "--area", "-5"],
+        ],
+        expect=None,
+    )
     assert_error(other, 2, "--field", "differs")  # the moved site moves the mean origin too
     assert_error(missing, 2, "none.npz")
     assert_error(area, 2, "--area")

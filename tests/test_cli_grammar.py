@@ -54,8 +54,9 @@ def _options(p: argparse.ArgumentParser) -> dict[str, argparse.Action]:
 
 
 def _shown(action: argparse.Action) -> bool:
-    return (action.default not in (None, False, argparse.SUPPRESS)
-            and not isinstance(action, argparse._HelpAction | argparse._VersionAction))
+    return action.default not in (None, False, argparse.SUPPRESS) and not isinstance(
+        action, argparse._HelpAction | argparse._VersionAction
+    )
 
 
 def test_every_help_runs_and_shows_its_defaults() -> None:
@@ -73,8 +74,9 @@ def test_every_help_runs_and_shows_its_defaults() -> None:
         for opt, action in _options(LEAVES[tuple(run.argv[:-1])]).items():
             if _shown(action) and opt == action.option_strings[0]:
                 # the formatter's "(default: X)", or the help's own words for it
-                assert (f"(default: {action.default})" in text
-                        or "(default" in (action.help or "")), (run.argv, opt)
+                assert f"(default: {action.default})" in text or "(default" in (
+                    action.help or ""
+                ), (run.argv, opt)
 
 
 def test_shared_flags_mean_the_same() -> None:
@@ -89,8 +91,18 @@ def test_shared_flags_mean_the_same() -> None:
     for opt in ("--json", "--debug"):
         assert len(by_flag[opt]) == len(LEAVES)
         assert len({a.help for _, a in by_flag[opt]}) == 1, opt
-    for opt in ("--seed", "--level", "--sigma2", "--time-limit", "--start", "--end",
-                "--runs", "--sizes", "--power", "--scheduler"):
+    for opt in (
+        "--seed",
+        "--level",
+        "--sigma2",
+        "--time-limit",
+        "--start",
+        "--end",
+        "--runs",
+        "--sizes",
+        "--power",
+        "--scheduler",
+    ):
         kinds = {getattr(a.type, "__name__", repr(a.type)) for _, a in by_flag.get(opt, [])}
         assert len(kinds) <= 1, (opt, kinds)
     for path, action in by_flag["--out"]:
@@ -111,26 +123,40 @@ def test_version_and_python_m() -> None:
     run = run_cli("--version")
     assert run.out.strip() == f"optmodels {metadata.version('optmodels')}"
     env = {**os.environ, "PYTHONWARNINGS": "ignore"}
-    proc = subprocess.run([sys.executable, "-m", "optmodels", "--help"], capture_output=True,
-                          text=True, env=env, timeout=120, check=False)
+    proc = subprocess.run(
+        [sys.executable, "-m", "optmodels", "--help"],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=120,
+        check=False,
+    )
     assert proc.returncode == 0 and proc.stdout == run_cli("--help").out
-    proc = subprocess.run([sys.executable, "-m", "optmodels", "assignment", "count", "2",
-                           "2", "--json"], capture_output=True, text=True, env=env,
-                          timeout=120, check=False)
+    proc = subprocess.run(
+        [sys.executable, "-m", "optmodels", "assignment", "count", "2", "2", "--json"],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=120,
+        check=False,
+    )
     assert proc.returncode == 0
     assert json.loads(proc.stdout) == run_cli("assignment", "count", "2", "2", "--json").json()
 
 
-@pytest.mark.parametrize("argv", [
-    ["bogus"],
-    ["plane"],
-    ["plane", "fit"],
-    ["plane", "fit", "x.csv", "--sigma2", "-1"],
-    ["plane", "fit", "x.csv", "--bogus"],
-    ["plane", "track", "x.csv", "--window", "40", "--sigma2", "1"],
-    ["montecarlo", "plane-angle", "--trials", "0"],
-    ["fusion", "weights", "--s1", "[[1]]", "--s2", "[[1]]", "--n", "2.5"],
-])
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["bogus"],
+        ["plane"],
+        ["plane", "fit"],
+        ["plane", "fit", "x.csv", "--sigma2", "-1"],
+        ["plane", "fit", "x.csv", "--bogus"],
+        ["plane", "track", "x.csv", "--window", "40", "--sigma2", "1"],
+        ["montecarlo", "plane-angle", "--trials", "0"],
+        ["fusion", "weights", "--s1", "[[1]]", "--s2", "[[1]]", "--n", "2.5"],
+    ],
+)
 def test_usage_errors_are_one_line_with_one_prefix(argv: list[str]) -> None:
     run = run_cli(*argv, expect=2)
     line = assert_error(run, 2)
@@ -141,10 +167,13 @@ def test_usage_errors_are_one_line_with_one_prefix(argv: list[str]) -> None:
 def test_root_help_imports_no_problem() -> None:
     """``optmodels --help`` builds every parser without importing a problem package (nor
     SciPy, CasADi, CVXPY): the problem CLI modules import them in their handlers."""
-    code = ("import json, sys\nfrom optmodels.cli import main\ntry:\n    main(['--help'])\n"
-            "except SystemExit:\n    pass\nprint(json.dumps(sorted(sys.modules)), file=sys.stderr)")
-    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                          timeout=120, check=False)
+    code = (
+        "import json, sys\nfrom optmodels.cli import main\ntry:\n    main(['--help'])\n"
+        "except SystemExit:\n    pass\nprint(json.dumps(sorted(sys.modules)), file=sys.stderr)"
+    )
+    proc = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, timeout=120, check=False
+    )
     mods = set(json.loads(proc.stderr.strip().splitlines()[-1]))
     heavy = {f"optmodels.{p}" for p in cli.PROBLEMS} | {"scipy", "casadi", "cvxpy"}
     assert not (mods & heavy), sorted(mods & heavy)
@@ -155,10 +184,27 @@ def test_plane_track_window_needs_its_unit(tmp_path: Path) -> None:
     tr = climb_turn_track(2)
     path = tmp_path / "trk.csv"
     write_plane_csv(path, tr.points, t=tr.times)
-    runs = run_many([["plane", "track", path, "--window", w, "--sigma2", "900", "--json"]
-                     for w in ("40", "40.0", "40s", "80pts")]
-                    + [["plane", "track", path, "--window", "40s", "--sigma2", "900",
-                        "--false-alarm-rate", "2", "--json"]], expect=None)
+    runs = run_many(
+        [
+            ["plane", "track", path, "--window", w, "--sigma2", "900", "--json"]
+            for w in ("40", "40.0", "40s", "80pts")
+        ]
+        + [
+            [
+                "plane",
+                "track",
+                path,
+                "--window",
+                "40s",
+                "--sigma2",
+                "900",
+                "--false-alarm-rate",
+                "2",
+                "--json",
+            ]
+        ],
+        expect=None,
+    )
     # the former flag name: the same unit (per hour), the same number
     assert runs[4].json()["false_alarm_rate_per_h"] == 2.0
     for run in runs[:2]:
@@ -166,15 +212,13 @@ def test_plane_track_window_needs_its_unit(tmp_path: Path) -> None:
     a, b = runs[2].json(), runs[3].json()
     assert a["window"] == "40s" and b["window"] == "80pts"
     # 2 Hz: 40 s hold 80 measurements, the last 80 points are 39.5 s
-    assert max(s["n_points"] for s in a["steps"]) == 80 == max(s["n_points"]
-                                                            for s in b["steps"])
+    assert max(s["n_points"] for s in a["steps"]) == 80 == max(s["n_points"] for s in b["steps"])
     assert a["false_alarm_rate_per_h"] == 1.0 and "false_alarm_rate" not in a
     assert all("detectable_tilt_deg" in s and "detectable_tilt" not in s for s in a["steps"])
 
 
 # ------------------------------------------------------------------ single-fit verdicts
-def _line_points(seed: int, n: int = 40, sigma: float = 5.0
-                 ) -> tuple[np.ndarray, np.ndarray]:
+def _line_points(seed: int, n: int = 40, sigma: float = 5.0) -> tuple[np.ndarray, np.ndarray]:
     """A straight 2 km leg with isotropic noise σ (m); its true direction."""
     rng = np.random.default_rng(seed)
     d = np.array([2.0, 1.0, 0.3]) / np.linalg.norm([2.0, 1.0, 0.3])
@@ -187,9 +231,12 @@ def test_collinear_single_fit_is_unresolved_not_optimal() -> None:
     data = plane.PlaneData(pts, 25.0 * np.eye(3))
     covs = np.array([np.diag([25.0, 30.0 + i, 20.0]) for i in range(len(pts))])
     general = plane.PlaneData(pts, covs)
-    fits = [plane.closed_form(data), plane.solve(data, "reduced"),
-            plane.solve(general, "reduced"),
-            plane.fit_general(pts, covs).to_solution(general)]
+    fits = [
+        plane.closed_form(data),
+        plane.solve(data, "reduced"),
+        plane.solve(general, "reduced"),
+        plane.fit_general(pts, covs).to_solution(general),
+    ]
     for sol in fits:
         assert sol.resolved is False and not sol.ok and sol.status.value == "error"
         assert sol.message.startswith("unresolved") and np.all(np.isnan(sol.normal))
@@ -199,8 +246,11 @@ def test_collinear_single_fit_is_unresolved_not_optimal() -> None:
     # an arc of the same length is resolved, and stays optimal
     t = np.linspace(0.0, 1.0, 40)
     arc = np.column_stack([2000 * np.cos(t), 2000 * np.sin(t), np.full(40, 3000.0)])
-    sol = plane.closed_form(plane.PlaneData(arc + np.random.default_rng(5).normal(
-        scale=5.0, size=arc.shape), 25.0 * np.eye(3)))
+    sol = plane.closed_form(
+        plane.PlaneData(
+            arc + np.random.default_rng(5).normal(scale=5.0, size=arc.shape), 25.0 * np.eye(3)
+        )
+    )
     assert sol.resolved is True and sol.ok
 
 
@@ -239,9 +289,15 @@ def test_plane_fit_resolves_a_real_climbing_turn(tmp_path: Path) -> None:
     exact statistic resolves it, as plane.track does, at the plane's true tilt (6°)."""
     from optmodels.plane.general import _line_lower_bound
 
-    tr = climb_turn_track(11, turn_rate_deg=2.5, durations=(20.0, 40.0, 20.0),
-                          start=(0.0, 60e3, 3000.0), sigma_range=30.0,
-                          sigma_azimuth=np.deg2rad(0.1), sigma_elevation=np.deg2rad(0.3))
+    tr = climb_turn_track(
+        11,
+        turn_rate_deg=2.5,
+        durations=(20.0, 40.0, 20.0),
+        start=(0.0, 60e3, 3000.0),
+        sigma_range=30.0,
+        sigma_azimuth=np.deg2rad(0.1),
+        sigma_elevation=np.deg2rad(0.3),
+    )
     m = (tr.times >= 20.0) & (tr.times <= 60.0)
     pts, c = tr.points[m], tr.cov[m]
     y = pts - pts.mean(axis=0)
@@ -249,8 +305,17 @@ def test_plane_fit_resolves_a_real_climbing_turn(tmp_path: Path) -> None:
     lower = _line_lower_bound(y / s, np.trace(c / s**2, axis1=1, axis2=2))[0]
     assert lower < stats.chi2.ppf(0.997, 2 * int(m.sum()) - 4)  # the old verdict: a line
     path = tmp_path / "turn.csv"
-    write_plane_csv(path, pts, t=tr.times[m], cxx=c[:, 0, 0], cxy=c[:, 0, 1],
-                    cxz=c[:, 0, 2], cyy=c[:, 1, 1], cyz=c[:, 1, 2], czz=c[:, 2, 2])
+    write_plane_csv(
+        path,
+        pts,
+        t=tr.times[m],
+        cxx=c[:, 0, 0],
+        cxy=c[:, 0, 1],
+        cxz=c[:, 0, 2],
+        cyy=c[:, 1, 1],
+        cyz=c[:, 1, 2],
+        czz=c[:, 2, 2],
+    )
     run = run_cli("plane", "fit", path, "--formulation", "reduced", "--json")
     res = run.json()
     assert res["status"] in ("optimal", "optimal_inaccurate") and res["resolved"] is True
@@ -261,8 +326,9 @@ def test_plane_fit_resolves_a_real_climbing_turn(tmp_path: Path) -> None:
     # the tilt's noise here (σ_el 0.3° at 60 km: ~300 m across the plane): the
     # Cramér–Rao bound of the normal's angle (about 6°), 4 sd; points about their mean
     c0 = pts.mean(axis=0)
-    crb = plane.cramer_rao_bound(plane.PlaneData(pts - c0, c), tr.normals[1],
-                                 tr.offsets[1] - float(tr.normals[1] @ c0))
+    crb = plane.cramer_rao_bound(
+        plane.PlaneData(pts - c0, c), tr.normals[1], tr.offsets[1] - float(tr.normals[1] @ c0)
+    )
     assert abs(res["tilt_deg"] - true_tilt) <= 4 * np.degrees(crb.angle_rms)
     text = run_cli("plane", "fit", path, "--formulation", "reduced").out
     assert f"tilt    = {res['tilt_deg']:.3f}°" in text

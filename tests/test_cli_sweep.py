@@ -40,8 +40,9 @@ HEAVY = {("demo",), ("compare",), ("montecarlo",)}
 VALUES = ["", "x", "nan", "-1", "0", "1e999", "inf", "[[1, 2], [3]]", "/proc/optmodels-x"]
 
 
-def walk(parser: argparse.ArgumentParser, path: tuple[str, ...] = ()
-         ) -> dict[tuple[str, ...], argparse.ArgumentParser]:
+def walk(
+    parser: argparse.ArgumentParser, path: tuple[str, ...] = ()
+) -> dict[tuple[str, ...], argparse.ArgumentParser]:
     """verb path -> its parser, for every leaf of the command tree."""
     subs = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]
     if not subs:
@@ -57,9 +58,13 @@ VERBS = walk(build_parser())
 
 
 def flags(verb: tuple[str, ...]) -> list[argparse.Action]:
-    return [a for a in VERBS[verb]._actions if a.option_strings
-            and not isinstance(a, argparse._HelpAction | argparse._VersionAction)
-            and a.dest not in ("json", "debug")]
+    return [
+        a
+        for a in VERBS[verb]._actions
+        if a.option_strings
+        and not isinstance(a, argparse._HelpAction | argparse._VersionAction)
+        and a.dest not in ("json", "debug")
+    ]
 
 
 def check_contract(run: CliRun) -> None:
@@ -72,8 +77,7 @@ def check_contract(run: CliRun) -> None:
             assert isinstance(doc, dict) and doc.get("exit_code") == 2, (run.argv, doc)
     if run.code == 2:
         lines = run.err_lines
-        assert len(lines) == 1 and lines[0].startswith("optmodels: error: "), (
-            run.argv, lines)
+        assert len(lines) == 1 and lines[0].startswith("optmodels: error: "), (run.argv, lines)
 
 
 # ------------------------------------------------------------------ inputs
@@ -82,19 +86,38 @@ def inputs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     d = tmp_path_factory.mktemp("cli_sweep")
     rng = np.random.default_rng(28)
     ang = np.linspace(0, 3, 40)
-    pts = np.c_[np.cos(ang), np.sin(ang), np.zeros(40)] * 5e3 + rng.normal(scale=5, size=(40,
-                                                                                          3))
-    (d / "plane.csv").write_text("t,x,y,z\n" + "".join(
-        f"{i},{a:.17g},{b:.17g},{c:.17g}\n" for i, (a, b, c) in enumerate(pts)))
-    (d / "traj.csv").write_text("object,t,y\n" + "".join(
-        f"{j},{t},{2.0 * t + j + rng.normal():.17g}\n" for j in range(2) for t in range(8)))
-    (d / "case.json").write_text(json.dumps({
-        "means": [[0, 0], [10, 0]], "covs": [np.eye(2).tolist()] * 2,
-        "measurements": [[0.1, -0.2], [9.8, 0.3], [5, 5]], "meas_cov": np.eye(2).tolist(),
-        "volume": 400.0, "pd": 0.9, "rho": 0.2}))
+    pts = np.c_[np.cos(ang), np.sin(ang), np.zeros(40)] * 5e3 + rng.normal(scale=5, size=(40, 3))
+    (d / "plane.csv").write_text(
+        "t,x,y,z\n"
+        + "".join(f"{i},{a:.17g},{b:.17g},{c:.17g}\n" for i, (a, b, c) in enumerate(pts))
+    )
+    (d / "traj.csv").write_text(
+        "object,t,y\n"
+        + "".join(
+            f"{j},{t},{2.0 * t + j + rng.normal():.17g}\n" for j in range(2) for t in range(8)
+        )
+    )
+    (d / "case.json").write_text(
+        json.dumps(
+            {
+                "means": [[0, 0], [10, 0]],
+                "covs": [np.eye(2).tolist()] * 2,
+                "measurements": [[0.1, -0.2], [9.8, 0.3], [5, 5]],
+                "meas_cov": np.eye(2).tolist(),
+                "volume": 400.0,
+                "pd": 0.9,
+                "rho": 0.2,
+            }
+        )
+    )
     (d / "damaged.bin").write_bytes(b"\x30\x00\x05garbage")
-    return {"plane": d / "plane.csv", "traj": d / "traj.csv", "case": d / "case.json",
-            "damaged": d / "damaged.bin", "dir": d}
+    return {
+        "plane": d / "plane.csv",
+        "traj": d / "traj.csv",
+        "case": d / "case.json",
+        "damaged": d / "damaged.bin",
+        "dir": d,
+    }
 
 
 def base(verb: tuple[str, ...], f: dict[str, Path]) -> list[str]:
@@ -106,16 +129,23 @@ def base(verb: tuple[str, ...], f: dict[str, Path]) -> list[str]:
         ("trajectories", "fit"): [f["traj"]],
         ("assignment", "solve"): [f["case"]],
         ("assignment", "count"): ["2", "3"],
-        ("fusion", "weights"): ["--s1", "[[2, 0.3], [0.3, 1]]", "--s2", "[[1, 0], [0, 3]]",
-                                "--n", "30"],
+        ("fusion", "weights"): [
+            "--s1",
+            "[[2, 0.3], [0.3, 1]]",
+            "--s2",
+            "[[1, 0], [0, 3]]",
+            "--n",
+            "30",
+        ],
         ("montecarlo",): ["no-such-study", "--trials", "2"],
         ("demo",): ["no-such-problem"],
         ("compare",): ["--problems", "no-such-problem"],
     }
     rest = good.get(verb)
     if rest is None:  # biasfield verbs: a damaged recording (refused before any work)
-        rest = [f["damaged"]] + (["--radars", f["damaged"]]
-                                 if any(a.dest == "radars" for a in flags(verb)) else [])
+        rest = [f["damaged"]] + (
+            ["--radars", f["damaged"]] if any(a.dest == "radars" for a in flags(verb)) else []
+        )
     return [*verb, *map(str, rest)]
 
 
@@ -133,8 +163,12 @@ def test_the_walk_finds_every_verb() -> None:
 def test_every_verb_without_arguments_and_with_help(tmp_path: Path) -> None:
     """``--help`` of every verb; every verb without arguments (not the faces whose
     defaults are a whole demo, comparison or study run)."""
-    runs = run_many([[*v, "--json"] for v in sorted(VERBS) if v not in HEAVY]
-                    + [[*v, "--help"] for v in sorted(VERBS)], expect=None, cwd=tmp_path)
+    runs = run_many(
+        [[*v, "--json"] for v in sorted(VERBS) if v not in HEAVY]
+        + [[*v, "--help"] for v in sorted(VERBS)],
+        expect=None,
+        cwd=tmp_path,
+    )
     for run in runs:
         check_contract(run)
         if "--help" in run.argv:
@@ -143,21 +177,31 @@ def test_every_verb_without_arguments_and_with_help(tmp_path: Path) -> None:
     # a verb with a required input refuses its absence with exit 2
     for run in required:
         verb = tuple(a for a in run.argv if not a.startswith("--"))
-        needs = any(a.required or (not a.option_strings and a.nargs not in ("?", "*"))
-                    for a in VERBS[verb]._actions if not isinstance(a, argparse._HelpAction))
+        needs = any(
+            a.required or (not a.option_strings and a.nargs not in ("?", "*"))
+            for a in VERBS[verb]._actions
+            if not isinstance(a, argparse._HelpAction)
+        )
         if needs:
             assert run.code == 2, run.argv
 
 
 def test_every_verb_on_its_base_inputs(inputs: dict[str, Path]) -> None:
-    runs = run_many([[*base(v, inputs), "--json"] for v in sorted(VERBS)], expect=None,
-                    cwd=inputs["dir"])
+    runs = run_many(
+        [[*base(v, inputs), "--json"] for v in sorted(VERBS)], expect=None, cwd=inputs["dir"]
+    )
     for run in runs:
         check_contract(run)
     ok = {tuple(r.argv[:2]): r.code for r in runs}
     # the good inputs are solved (0 or 1), the damaged ones refused (2)
-    for verb in [("plane", "fit"), ("plane", "track"), ("trajectories", "fit"),
-                 ("assignment", "solve"), ("assignment", "count"), ("fusion", "weights")]:
+    for verb in [
+        ("plane", "fit"),
+        ("plane", "track"),
+        ("trajectories", "fit"),
+        ("assignment", "solve"),
+        ("assignment", "count"),
+        ("fusion", "weights"),
+    ]:
         assert ok[verb] in (0, 1), (verb, ok[verb])
 
 
@@ -180,12 +224,11 @@ def _flag_cases() -> list[tuple[tuple[str, ...], str, str | None]]:
 FLAG_CASES = _flag_cases()
 
 
-def _run_flag_case(case: tuple[tuple[str, ...], str, str | None], f: dict[str, Path]
-                   ) -> CliRun:
+def _run_flag_case(case: tuple[tuple[str, ...], str, str | None], f: dict[str, Path]) -> CliRun:
     verb, flag, value = case
     argv = base(verb, f)
     if verb in HEAVY and value is not None:
-        argv = [*verb, flag, value, *argv[len(verb):]]
+        argv = [*verb, flag, value, *argv[len(verb) :]]
     else:
         argv += [flag] if value is None else [flag, value]
     run = run_cli(*argv, "--json", expect=None, cwd=f["dir"], timeout=300)
@@ -195,12 +238,14 @@ def _run_flag_case(case: tuple[tuple[str, ...], str, str | None], f: dict[str, P
     return run
 
 
-@settings(max_examples=N_CI if not FULL else len(FLAG_CASES), deadline=None,
-          derandomize=True, suppress_health_check=[HealthCheck.too_slow,
-                                                   HealthCheck.function_scoped_fixture])
+@settings(
+    max_examples=N_CI if not FULL else len(FLAG_CASES),
+    deadline=None,
+    derandomize=True,
+    suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture],
+)
 @given(case=st.sampled_from(FLAG_CASES))
-def test_sampled_flags_keep_the_exit_code_contract(inputs: dict[str, Path],
-                                                   case: Any) -> None:
+def test_sampled_flags_keep_the_exit_code_contract(inputs: dict[str, Path], case: Any) -> None:
     _run_flag_case(case, inputs)
 
 
@@ -209,7 +254,7 @@ def test_every_flag_keeps_the_exit_code_contract(inputs: dict[str, Path]) -> Non
     """Every (verb, flag, value) case (``make test-all``); the counts go to the notes."""
     counts = {0: 0, 1: 0, 2: 0}
     for i in range(0, len(FLAG_CASES), 4):
-        chunk = FLAG_CASES[i:i + 4]
+        chunk = FLAG_CASES[i : i + 4]
         from concurrent.futures import ThreadPoolExecutor
 
         with ThreadPoolExecutor(max_workers=4) as ex:
@@ -220,8 +265,16 @@ def test_every_flag_keeps_the_exit_code_contract(inputs: dict[str, Path]) -> Non
 
 # ------------------------------------------------------------ the small silent cases
 def test_empty_origin_is_refused(inputs: dict[str, Path]) -> None:
-    run = run_cli("biasfield", "build", inputs["damaged"], "--radars", inputs["damaged"],
-                  "--origin", "", expect=None)
+    run = run_cli(
+        "biasfield",
+        "build",
+        inputs["damaged"],
+        "--radars",
+        inputs["damaged"],
+        "--origin",
+        "",
+        expect=None,
+    )
     assert run.code == 2 and "--origin" in run.err, run.err
 
 

@@ -28,8 +28,8 @@ def test_trajectories_bound_and_efficiency_of_the_closed_form() -> None:
         theta, crb = ad.truth("diverging", n, seed, data)
         a = np.zeros((q * n, q + 1))  # θ = (y0, V_1..V_Q): diverging (4)-(5)
         for j, t in enumerate(data.times):
-            a[j * n:(j + 1) * n, 0] = 1.0
-            a[j * n:(j + 1) * n, 1 + j] = t
+            a[j * n : (j + 1) * n, 0] = 1.0
+            a[j * n : (j + 1) * n, 1 + j] = t
         psi = np.linalg.inv(a.T @ a)
         assert crb == pytest.approx(np.trace(psi), rel=1e-8)
         vals = np.concatenate([np.asarray(v, float) for v in data.values])
@@ -46,15 +46,17 @@ def test_trajectories_bound_and_efficiency_of_the_closed_form() -> None:
 
 
 def test_efficiency_through_the_harness_efficient_and_biased(
-        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     """200 seeded draws of 10 samples of N(μ, I₃): n Σ‖x̄ − μ‖² is χ²(600), so the
     efficient estimator's 1/efficiency is 1 ± 4·√(2/600); the biased one's E is twice
     the bound (Var of n‖e + δ‖²: 6 + 4·3 = 18 per draw): 1/efficiency = 2 ± 4·√(18·200)/600."""
     # registered for this test only (the registry's documented order is tested elsewhere)
     monkeypatch.setitem(cs.REGISTRY, "gaussmean", "tests.harness_adapters:GaussMean")
     m = 200
-    rows = harness.run_sweep(["gaussmean"], tmp_path, sizes=[10], seeds=range(m),
-                             isolate=False, repeats=1)
+    rows = harness.run_sweep(
+        ["gaussmean"], tmp_path, sizes=[10], seeds=range(m), isolate=False, repeats=1
+    )
     summ = {s["solver"]: s for s in harness.summarise(rows, 5.0)}
     exact, biased = summ["numpy"], summ["biased"]
     assert exact["draws"] == biased["draws"] == m
@@ -71,5 +73,6 @@ def test_efficiency_through_the_harness_efficient_and_biased(
 def harness_report(out: Path, rows: list[dict]) -> str:
     from solvers_cmp import report
 
-    return report.write_harness_report(out, rows, profile="default", time_limit=5.0,
-                                       error_tol=1e-5, violation_tol=1e-6)
+    return report.write_harness_report(
+        out, rows, profile="default", time_limit=5.0, error_tol=1e-5, violation_tol=1e-6
+    )

@@ -22,11 +22,12 @@ PROBLEMS = ("plane", "trajectories", "fusion", "biasfield", "assignment")
 
 def test_the_default_profile_is_the_stated_target() -> None:
     prof = harness.PROFILES["default"]
-    assert (prof.error_tol, prof.violation_tol) == (bp.TARGET["error"],
-                                                    bp.TARGET["violation"])
+    assert (prof.error_tol, prof.violation_tol) == (bp.TARGET["error"], bp.TARGET["violation"])
     high = harness.PROFILES["high"]
-    assert (high.error_tol, high.violation_tol) == (bp.HIGH_TARGET["error"],
-                                                    bp.HIGH_TARGET["violation"])
+    assert (high.error_tol, high.violation_tol) == (
+        bp.HIGH_TARGET["error"],
+        bp.HIGH_TARGET["violation"],
+    )
     assert high.error_tol < prof.error_tol and high.violation_tol < prof.violation_tol
 
 
@@ -45,21 +46,22 @@ def test_osqp_gets_the_same_options_through_cvxpy_and_casadi(cls: str) -> None:
 
 
 @pytest.mark.parametrize("problem", PROBLEMS)
-def test_every_default_solver_reaches_the_target_on_a_case(problem: str,
-                                                           tmp_path: Path) -> None:
+def test_every_default_solver_reaches_the_target_on_a_case(problem: str, tmp_path: Path) -> None:
     """The smallest default size of every instance, seed 0, in the isolated worker (a
     crash or a hang is a failed row, not a failed test run), the runs the profile marks
     too slow for the size left out (as in the quick sweep); each solver of the problem
     must have at least one successful row."""
     ad = cs.adapter(problem)
     size = min(ad.sizes)
-    rows = harness.run_sweep([problem], tmp_path, sizes=[size], time_limit=30.0,
-                             repeats=1, skip_slow=True)
+    rows = harness.run_sweep(
+        [problem], tmp_path, sizes=[size], time_limit=30.0, repeats=1, skip_slow=True
+    )
     solvers = {r["solver"] for r in rows}
     ok = {r["solver"] for r in rows if r["success"]}
     assert solvers - ok == set(), {
-        s: [(r["instance"], r["formulation"], r["reason"]) for r in rows
-            if r["solver"] == s] for s in solvers - ok}
+        s: [(r["instance"], r["formulation"], r["reason"]) for r in rows if r["solver"] == s]
+        for s in solvers - ok
+    }
     for r in rows:
         if r["success"]:  # judged against the target, not looser
             assert r["solution_error"] <= bp.TARGET["error"]

@@ -94,11 +94,22 @@ def _rows(rng: np.random.Generator, truth: dict[str, float], cases: int) -> list
     for c in range(cases):
         base = rng.lognormal(0, 0.5)  # instance difficulty, shared by the solvers
         for solver, t in truth.items():
-            out.append({"problem": "toy", "instance": "i", "size": c, "seed": 0,
-                        "formulation": "original form", "solver": solver, "success": True,
-                        "solve_time": t * base * rng.lognormal(0, 0.15),
-                        "build_time": 0.0, "solution_error": 0.0, "max_violation": 0.0,
-                        "status": "optimal"})
+            out.append(
+                {
+                    "problem": "toy",
+                    "instance": "i",
+                    "size": c,
+                    "seed": 0,
+                    "formulation": "original form",
+                    "solver": solver,
+                    "success": True,
+                    "solve_time": t * base * rng.lognormal(0, 0.15),
+                    "build_time": 0.0,
+                    "solution_error": 0.0,
+                    "max_violation": 0.0,
+                    "status": "optimal",
+                }
+            )
     return out
 
 
@@ -120,11 +131,17 @@ def test_two_noisy_runs_give_the_same_headline_with_ties() -> None:
 
 def test_overlapping_intervals_are_ties_and_disjoint_ones_are_not() -> None:
     def row(name: str, t: float, lo: float, hi: float) -> dict:
-        return {"solver": name, "success_rate": 1.0, "sgm_total_time": t,
-                "sgm_total_lo": lo, "sgm_total_hi": hi}
+        return {
+            "solver": name,
+            "success_rate": 1.0,
+            "sgm_total_time": t,
+            "sgm_total_lo": lo,
+            "sgm_total_hi": hi,
+        }
 
-    ranked = rank_rows([row("slow", 3.0, 2.9, 3.1), row("b", 1.1, 1.0, 1.3),
-                        row("a", 1.0, 0.8, 1.05)])
+    ranked = rank_rows(
+        [row("slow", 3.0, 2.9, 3.1), row("b", 1.1, 1.0, 1.3), row("a", 1.0, 0.8, 1.05)]
+    )
     got = {r["solver"]: (r["rank"], r["tied"]) for r in ranked}
     assert got == {"a": (1, True), "b": (1, True), "slow": (3, False)}
     lo, hi = sgm_interval([0.001, 0.002, 0.004, 0.003])
@@ -133,8 +150,15 @@ def test_overlapping_intervals_are_ties_and_disjoint_ones_are_not() -> None:
 
 # ------------------------------------------------------------ timing columns
 def test_repetitions_build_and_closed_form_build_are_measured(tmp_path: Path) -> None:
-    rows = harness.run_sweep(["trajectories"], tmp_path, sizes=[10], solvers=["CLARABEL"],
-                             instances=["diverging"], isolate=False, repeats=3)
+    rows = harness.run_sweep(
+        ["trajectories"],
+        tmp_path,
+        sizes=[10],
+        solvers=["CLARABEL"],
+        instances=["diverging"],
+        isolate=False,
+        repeats=3,
+    )
     by = {r["formulation"]: r for r in rows}
     cf, gen = by["closed_form"], by["constrained"]
     assert cf["success"] and gen["success"]
@@ -146,15 +170,33 @@ def test_repetitions_build_and_closed_form_build_are_measured(tmp_path: Path) ->
 
 # ------------------------------------------------------------ resume cannot lie
 def _cli(*args: str) -> dict:
-    out = subprocess.run([str(OPTMODELS), *args], capture_output=True, text=True,
-                         env=_env(), timeout=300, check=False)
+    out = subprocess.run(
+        [str(OPTMODELS), *args],
+        capture_output=True,
+        text=True,
+        env=_env(),
+        timeout=300,
+        check=False,
+    )
     assert out.returncode == 0, out.stderr[-2000:]
     return json.loads(out.stdout)
 
 
 def test_cli_rerun_with_another_time_limit_recomputes(tmp_path: Path) -> None:
-    base = ["compare", "--problems", "fusion", "--instances", "independent", "--sizes", "3",
-            "--solvers", "CLARABEL", "--out", str(tmp_path), "--json"]
+    base = [
+        "compare",
+        "--problems",
+        "fusion",
+        "--instances",
+        "independent",
+        "--sizes",
+        "3",
+        "--solvers",
+        "CLARABEL",
+        "--out",
+        str(tmp_path),
+        "--json",
+    ]
     first = _cli(*base, "--time-limit", "5")
     path = tmp_path / "results.csv"
     rows1 = list(csv.DictReader(path.open()))
@@ -171,25 +213,41 @@ def test_cli_rerun_with_another_time_limit_recomputes(tmp_path: Path) -> None:
 
 
 def test_compare_default_out_differs_from_the_demos() -> None:
-    out = subprocess.run([str(OPTMODELS), "compare", "--help"], capture_output=True, text=True,
-                         env=_env(), timeout=120, check=True).stdout
+    out = subprocess.run(
+        [str(OPTMODELS), "compare", "--help"],
+        capture_output=True,
+        text=True,
+        env=_env(),
+        timeout=120,
+        check=True,
+    ).stdout
     assert "report/compare-full" in " ".join(out.split())
 
 
 # ------------------------------------------------------------ paired ranking
-def _sized_rows(rng: np.random.Generator, truth: dict[str, float], sizes: list[int]
-                ) -> list[dict]:
+def _sized_rows(rng: np.random.Generator, truth: dict[str, float], sizes: list[int]) -> list[dict]:
     """Cases whose times span 100× with their size (t ∝ size), each solver a fixed factor
     of the others plus 10 % timing noise: the spread of case sizes is what an unpaired
     interval sees."""
     out = []
     for size in sizes:
         for solver, f in truth.items():
-            out.append({"problem": "toy", "instance": "i", "size": size, "seed": 0,
-                        "formulation": "original form", "solver": solver, "success": True,
-                        "solve_time": f * 1e-3 * size * rng.lognormal(0, 0.1),
-                        "build_time": 0.0, "solution_error": 0.0, "max_violation": 0.0,
-                        "status": "optimal"})
+            out.append(
+                {
+                    "problem": "toy",
+                    "instance": "i",
+                    "size": size,
+                    "seed": 0,
+                    "formulation": "original form",
+                    "solver": solver,
+                    "success": True,
+                    "solve_time": f * 1e-3 * size * rng.lognormal(0, 0.1),
+                    "build_time": 0.0,
+                    "solution_error": 0.0,
+                    "max_violation": 0.0,
+                    "status": "optimal",
+                }
+            )
     return out
 
 
@@ -224,8 +282,17 @@ def test_a_skipped_run_counts_as_a_failure_of_its_solver() -> None:
     cases only: its success rate drops and it ranks after the solvers that ran them."""
     rows = _sized_rows(np.random.default_rng(5), {"A": 1.0, "Q": 0.5}, [10, 100, 1000])
     rows = [r for r in rows if not (r["solver"] == "Q" and r["size"] == 1000)]
-    skipped = [{"problem": "toy", "instance": "i", "size": 1000, "seed": 0,
-                "formulation": "original form", "solver": "Q", "why": "too slow"}]
+    skipped = [
+        {
+            "problem": "toy",
+            "instance": "i",
+            "size": 1000,
+            "seed": 0,
+            "formulation": "original form",
+            "solver": "Q",
+            "why": "too slow",
+        }
+    ]
     by = {s["solver"]: s for s in summarise(rows, 5.0, skipped=skipped)}
     assert by["Q"]["runs"] == 3 and by["Q"]["skipped"] == 1
     assert by["Q"]["success_rate"] == pytest.approx(2 / 3)
@@ -238,20 +305,26 @@ def test_linear_assignment_is_a_reduction_row_only(tmp_path: Path) -> None:
     joint MILP alone, and the report's headline names no linear assignment solver."""
     from solvers_cmp import report
 
-    rows = harness.run_sweep(["assignment"], tmp_path, sizes=[4], isolate=False,
-                             repeats=1)
-    assert {r["formulation"] for r in rows} == {"joint MILP", "linear assignment",
-                                                "enumeration (14)"}
+    rows = harness.run_sweep(["assignment"], tmp_path, sizes=[4], isolate=False, repeats=1)
+    assert {r["formulation"] for r in rows} == {
+        "joint MILP",
+        "linear assignment",
+        "enumeration (14)",
+    }
     summ = summarise(rows, 5.0)
     kinds = {s["formulation"]: s["kind"] for s in summ}
-    assert kinds == {"joint MILP": "original", "linear assignment": "reduction",
-                     "enumeration (14)": "reference"}
+    assert kinds == {
+        "joint MILP": "original",
+        "linear assignment": "reduction",
+        "enumeration (14)": "reference",
+    }
     assert all("rank" not in s for s in summ if s["kind"] != "original")
     head = headline(summ)
     assert list(head) == ["assignment: joint MILP"]
     assert "scipy" not in head["assignment: joint MILP"]
-    md = report.write_harness_report(tmp_path, rows, profile="default", time_limit=5.0,
-                                     error_tol=1e-5, violation_tol=1e-6)
+    md = report.write_harness_report(
+        tmp_path, rows, profile="default", time_limit=5.0, error_tol=1e-5, violation_tol=1e-6
+    )
     table = md.split("## Headline")[1].split("\n## ")[0]
     line = next(x for x in table.splitlines() if x.startswith("| assignment"))
     best_generic = line.split("|")[3]
@@ -259,17 +332,23 @@ def test_linear_assignment_is_a_reduction_row_only(tmp_path: Path) -> None:
     assert "scipy (linear assignment)" in line  # in the reduction column
 
 
-def test_a_results_file_of_the_previous_columns_is_set_aside_and_rerun(tmp_path: Path
-                                                                       ) -> None:
+def test_a_results_file_of_the_previous_columns_is_set_aside_and_rerun(tmp_path: Path) -> None:
     """A results.csv written before the efficiency columns: its rows cannot be reused
     (no estimate error), so they move to results.csv.skipped and the runs are redone."""
     from solvers_cmp.harness.results import COLUMNS
 
-    old_cols = COLUMNS[:COLUMNS.index("estimate_sq_error")]
+    old_cols = COLUMNS[: COLUMNS.index("estimate_sq_error")]
     path = tmp_path / "results.csv"
     path.write_text(",".join(old_cols) + "\n" + ",".join("1" for _ in old_cols) + "\n")
-    rows = harness.run_sweep(["trajectories"], tmp_path, sizes=[10], solvers=["CLARABEL"],
-                             instances=["diverging"], isolate=False, repeats=1)
+    rows = harness.run_sweep(
+        ["trajectories"],
+        tmp_path,
+        sizes=[10],
+        solvers=["CLARABEL"],
+        instances=["diverging"],
+        isolate=False,
+        repeats=1,
+    )
     assert len(rows) == 3 and all(np.isfinite(r["crb"]) for r in rows if r["success"])
     lines = path.read_text().splitlines()
     assert lines[0] == ",".join(COLUMNS) and len(lines) == 4
@@ -287,14 +366,24 @@ def test_the_quick_sweep_leaves_out_too_slow_runs_and_says_so(tmp_path: Path) ->
     from optmodels.cli.compare import _run_harness
     from solvers_cmp.harness.profiles import TOO_SLOW
 
-    res = _run_harness(tmp_path, ["fusion"], sizes=[20], solvers=["CASADI_QPOASES",
-                                                                  "CLARABEL"],
-                       profile="default", seed=0, time_limit=5.0, quick=True,
-                       progress=False, instances=["correlated"], scheduler="serial",
-                       repeats=1)
+    res = _run_harness(
+        tmp_path,
+        ["fusion"],
+        sizes=[20],
+        solvers=["CASADI_QPOASES", "CLARABEL"],
+        profile="default",
+        seed=0,
+        time_limit=5.0,
+        quick=True,
+        progress=False,
+        instances=["correlated"],
+        scheduler="serial",
+        repeats=1,
+    )
     why = TOO_SLOW[("fusion", "CASADI_QPOASES", "min-trace W", None)][1]
     assert [(k["solver"], k["size"], k["why"]) for k in res["skipped"]] == [
-        ("CASADI_QPOASES", 20, why)]
+        ("CASADI_QPOASES", 20, why)
+    ]
     ran = {r["solver"] for r in _csv.DictReader((tmp_path / "results.csv").open())}
     assert ran == {"numpy", "CLARABEL"}
     md = (tmp_path / "report.md").read_text()

@@ -21,6 +21,7 @@ from tests.conftest import assert_verified
 
 PROBLEMS = registry.names()
 
+
 def _instance(ad: cs.Adapter, closed: bool) -> str:
     """The adapter's first instance with (``closed``) or without a closed-form run."""
     for inst in ad.instances:
@@ -31,8 +32,11 @@ def _instance(ad: cs.Adapter, closed: bool) -> str:
 
 def _generic(ad: cs.Adapter, inst: str) -> cs.Run:
     """The first run of a generic solver (not a closed form, not an enumeration)."""
-    return next(r for r in ad.runs(inst)
-                if r.formulation != "closed_form" and r.solver not in ("numpy", "python"))
+    return next(
+        r
+        for r in ad.runs(inst)
+        if r.formulation != "closed_form" and r.solver not in ("numpy", "python")
+    )
 
 
 def _solutions(monkeypatch: pytest.MonkeyPatch) -> list[Any]:
@@ -65,15 +69,23 @@ def test_registry_is_discovered_in_its_documented_order() -> None:
     assert tuple(runners()) == PROBLEMS
     assert tuple(cs.known_problems()) == PROBLEMS
     assert tuple(s.problem for s in STUDIES.values()) == PROBLEMS
-    assert list(STUDIES) == ["plane-angle", "trajectories-eta", "fusion-weight",
-                             "biasfield-recovery", "assignment-separation"]
+    assert list(STUDIES) == [
+        "plane-angle",
+        "trajectories-eta",
+        "fusion-weight",
+        "biasfield-recovery",
+        "assignment-separation",
+    ]
 
 
 def test_import_optmodels_imports_no_problem() -> None:
-    code = ("import sys, optmodels; print(sorted(m for m in sys.modules if m.split('.')[:2] "
-            "in [['optmodels', p] for p in optmodels.__all__]))")
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                         check=True).stdout
+    code = (
+        "import sys, optmodels; print(sorted(m for m in sys.modules if m.split('.')[:2] "
+        "in [['optmodels', p] for p in optmodels.__all__]))"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, check=True
+    ).stdout
     assert out.strip() == "[]"
     code = "from optmodels import plane, assignment; print(plane.solve, assignment.solve)"
     subprocess.run([sys.executable, "-c", code], check=True, capture_output=True)
@@ -88,14 +100,20 @@ def test_bad_input_is_one_problem_error(name: str) -> None:
     data = ad.make(ad.instances[0], ad.sizes[0], 0)
     for fn in entries:
         if prob.api["data"] is None:  # the entry takes arrays: the instance is its arguments
-            args = {k: np.array(v, dtype=float, copy=True) for k, v in data.items()
-                    if isinstance(v, np.ndarray)}
+            args = {
+                k: np.array(v, dtype=float, copy=True)
+                for k, v in data.items()
+                if isinstance(v, np.ndarray)
+            }
             first = next(iter(args))
             args[first].flat[0] = np.nan
             call = lambda fn=fn, args=args: fn(**args)  # noqa: E731
         else:
-            params = [p for p in inspect.signature(fn).parameters.values()
-                      if p.default is p.empty and p.kind == p.POSITIONAL_OR_KEYWORD]
+            params = [
+                p
+                for p in inspect.signature(fn).parameters.values()
+                if p.default is p.empty and p.kind == p.POSITIONAL_OR_KEYWORD
+            ]
             rest = [ad.instances[0]] * (len(params) - 1)
             call = lambda fn=fn, rest=rest: fn(object(), *rest)  # noqa: E731
         with pytest.raises(ProblemError, match=rf"^{name}\b"):
@@ -150,8 +168,7 @@ def test_cli_verb_demo_and_adapter(name: str) -> None:
     parser = cli.build_parser()
     sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
     assert name in sub.choices
-    verbs = next(a for a in sub.choices[name]._actions
-                 if isinstance(a, argparse._SubParsersAction))
+    verbs = next(a for a in sub.choices[name]._actions if isinstance(a, argparse._SubParsersAction))
     assert verbs.choices, name
     mod = cli_problems.with_hook("run_demo")[name]
     assert isinstance(mod.DEMO_TITLE, str) and mod.DEMO_TITLE.startswith("- ")
@@ -199,17 +216,23 @@ def _skeleton_deviations(name: str) -> set[str]:
     if data_cls is not None and data_cls.__module__ != f"{pkg}.data":
         bad.add("data")
     sol = module("solution")
-    if sol is None or not callable(getattr(sol, "_failure", None)) or not any(
+    if (
+        sol is None
+        or not callable(getattr(sol, "_failure", None))
+        or not any(
             isinstance(c, type) and issubclass(c, Solution) and c.__module__ == sol.__name__
-            for c in vars(sol).values()):
+            for c in vars(sol).values()
+        )
+    ):
         bad.add("solution")
     ver = module("verify")
     fin = getattr(ver, "_finish", None)
-    if fin is None or fin.__module__ != f"{pkg}.verify" or "finish(" not in inspect.getsource(
-            fin):
+    if fin is None or fin.__module__ != f"{pkg}.verify" or "finish(" not in inspect.getsource(fin):
         bad.add("verify._finish")
-    if p.entry("closed_form") is not None and p.entry("closed_form").__module__ != \
-            f"{pkg}.closedform":
+    if (
+        p.entry("closed_form") is not None
+        and p.entry("closed_form").__module__ != f"{pkg}.closedform"
+    ):
         bad.add("closedform")
     if p.entry("solve").__module__ != f"{pkg}.generic":
         bad.add("generic.solve")
@@ -226,8 +249,9 @@ def test_every_problem_package_has_the_one_skeleton(name: str) -> None:
     bad = _skeleton_deviations(name)
     pending = {role for (n, role) in PENDING_SKELETON if n == name}
     assert bad - pending == set(), f"{name}: not in the skeleton: {sorted(bad - pending)}"
-    assert pending - bad == set(), (f"{name}: {sorted(pending - bad)} now fill the skeleton; "
-                                    "remove them from PENDING_SKELETON")
+    assert pending - bad == set(), (
+        f"{name}: {sorted(pending - bad)} now fill the skeleton; remove them from PENDING_SKELETON"
+    )
 
 
 # --------------------------------------------------------------------------- private names
@@ -260,16 +284,21 @@ def _private_imports() -> dict[str, set[str]]:
             return False
 
     found: dict[str, set[str]] = {}
-    for path in sorted([*root.joinpath("optmodels").rglob("*.py"),
-                        *root.joinpath("solvers_cmp").rglob("*.py")]):
+    for path in sorted(
+        [*root.joinpath("optmodels").rglob("*.py"), *root.joinpath("solvers_cmp").rglob("*.py")]
+    ):
         rel = path.relative_to(root)
         mod = ".".join(rel.with_suffix("").parts).removesuffix(".__init__")
         tree = ast.parse(path.read_text(encoding="utf-8"))
         modules: dict[str, str] = {}
         hits: set[str] = set()
         for node in ast.walk(tree):
-            if isinstance(node, ast.ImportFrom) and node.level == 0 and node.module \
-                    and node.module.split(".")[0] in ("optmodels", "solvers_cmp"):
+            if (
+                isinstance(node, ast.ImportFrom)
+                and node.level == 0
+                and node.module
+                and node.module.split(".")[0] in ("optmodels", "solvers_cmp")
+            ):
                 for a in node.names:
                     full = f"{node.module}.{a.name}"
                     if a.name.startswith("_") and not a.name.startswith("__"):
@@ -282,10 +311,14 @@ def _private_imports() -> dict[str, set[str]]:
                     if a.name.split(".")[0] in ("optmodels", "solvers_cmp") and a.asname:
                         modules[a.asname] = a.name
         for node in ast.walk(tree):
-            if isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name) \
-                    and node.value.id in modules and node.attr.startswith("_") \
-                    and not node.attr.startswith("__") \
-                    and _package(modules[node.value.id]) != _package(mod):
+            if (
+                isinstance(node, ast.Attribute)
+                and isinstance(node.value, ast.Name)
+                and node.value.id in modules
+                and node.attr.startswith("_")
+                and not node.attr.startswith("__")
+                and _package(modules[node.value.id]) != _package(mod)
+            ):
                 hits.add(f"{modules[node.value.id]}.{node.attr}")
         if hits:
             found[str(rel)] = hits

@@ -37,8 +37,9 @@ def test_spd_checks() -> None:
 
 
 def test_solution_require_ok_and_json() -> None:
-    good = Solution(status=Status.OPTIMAL, objective=1.0, method="x",
-                    residuals={"a": 1e-12, "b": 3e-10})
+    good = Solution(
+        status=Status.OPTIMAL, objective=1.0, method="x", residuals={"a": 1e-12, "b": 3e-10}
+    )
     assert good.require_ok() is good
     assert good.max_residual == 3e-10
     json.dumps(good.to_dict())
@@ -51,9 +52,9 @@ def test_solution_require_ok_and_json() -> None:
 
 # ------------------------------------------------- ragged / object arrays (issue 28.4)
 RAGGED = [
-    [[1.0, 2.0, 3.0], [4.0, 5.0]],                       # rows of different lengths
-    [1.0, [2.0, 3.0]],                                   # a scalar beside a row
-    [[[1.0, 2.0], [3.0, 4.0]], [[1.0, 2.0], [3.0]]],     # ragged one level down
+    [[1.0, 2.0, 3.0], [4.0, 5.0]],  # rows of different lengths
+    [1.0, [2.0, 3.0]],  # a scalar beside a row
+    [[[1.0, 2.0], [3.0, 4.0]], [[1.0, 2.0], [3.0]]],  # ragged one level down
     np.array([np.zeros(2), np.zeros(3)], dtype=object),  # an object array of rows
     [np.zeros(2), np.zeros(3)],
 ]
@@ -65,12 +66,19 @@ def test_ragged_input_is_one_problem_error(value: object) -> None:
         as_finite_array("points", value)
 
 
-@pytest.mark.parametrize("value, what", [
-    (["1.5", "2"], "text entries"), ([1.0, None], "NoneType"), ("1.5", "str"),
-    (None, "None"), ({"a": 1.0}, "dict"), ([1.0, 2j], "complex"),
-    (np.array(["2026-01-01"], dtype="datetime64[ns]"), "datetime64"),
-    (np.array([1.0, "x"], dtype=object), "str"),
-])
+@pytest.mark.parametrize(
+    "value, what",
+    [
+        (["1.5", "2"], "text entries"),
+        ([1.0, None], "NoneType"),
+        ("1.5", "str"),
+        (None, "None"),
+        ({"a": 1.0}, "dict"),
+        ([1.0, 2j], "complex"),
+        (np.array(["2026-01-01"], dtype="datetime64[ns]"), "datetime64"),
+        (np.array([1.0, "x"], dtype=object), "str"),
+    ],
+)
 def test_non_numeric_input_is_refused(value: object, what: str) -> None:
     with pytest.raises(ProblemError, match=f"^x: .*{what}"):
         as_finite_array("x", value)
@@ -89,19 +97,31 @@ def test_one_encoder_for_to_dict_and_cli() -> None:
     from optmodels.cli.contract import _dumps
     from optmodels.core import json_text, to_jsonable
 
-    sol = Solution(status=Status.OPTIMAL, objective=float("inf"), method="x",
-                   residuals={"a": float("-inf"), "b": 1e-9},
-                   info={"v": np.array([1.0, np.nan, np.inf]), "k": np.int64(3),
-                         "t": (np.float32(0.5), -np.inf)})
-    want = {"objective": None, "residuals": {"a": None, "b": 1e-9},
-            "info": {"v": [1.0, None, None], "k": 3, "t": [0.5, None]}}
+    sol = Solution(
+        status=Status.OPTIMAL,
+        objective=float("inf"),
+        method="x",
+        residuals={"a": float("-inf"), "b": 1e-9},
+        info={
+            "v": np.array([1.0, np.nan, np.inf]),
+            "k": np.int64(3),
+            "t": (np.float32(0.5), -np.inf),
+        },
+    )
+    want = {
+        "objective": None,
+        "residuals": {"a": None, "b": 1e-9},
+        "info": {"v": [1.0, None, None], "k": 3, "t": [0.5, None]},
+    }
     d = sol.to_dict()
     for key, value in want.items():
         assert d[key] == value
     assert d["status"] == "optimal"
     assert json.loads(json_text(sol.to_dict())) == d
     assert json.loads(_dumps({"solution": sol.to_dict(), "bound": np.inf})) == {
-        "solution": d, "bound": None}
+        "solution": d,
+        "bound": None,
+    }
     assert to_jsonable({1: np.bool_(True)}) == {"1": True}
     with pytest.raises(TypeError):
         json_text({"x": object()})
@@ -148,14 +168,21 @@ def test_trajectory_and_assignment_rows() -> None:
 
     rng = np.random.default_rng(3)
     t = [np.arange(10.0), np.arange(12.0)]
-    sol = tr.closed_form(tr.TrajectoryData(t, [2 * t[0] + rng.normal(size=10),
-                                               -t[1] + rng.normal(size=12)], 1.0))
+    sol = tr.closed_form(
+        tr.TrajectoryData(t, [2 * t[0] + rng.normal(size=10), -t[1] + rng.normal(size=12)], 1.0)
+    )
     rows = sol.to_rows()
     np.testing.assert_array_equal([r["velocity"] for r in rows], sol.velocity)
     np.testing.assert_array_equal([r["start"] for r in rows], sol.start)
-    a = asg.AssignmentData(np.array([[0.0, 0.0], [10.0, 0.0]]), np.stack([np.eye(2)] * 2),
-                           np.array([[0.1, -0.2], [9.8, 0.3], [5.0, 5.0]]), np.eye(2),
-                           400.0, 0.9, 0.2)
+    a = asg.AssignmentData(
+        np.array([[0.0, 0.0], [10.0, 0.0]]),
+        np.stack([np.eye(2)] * 2),
+        np.array([[0.1, -0.2], [9.8, 0.3], [5.0, 5.0]]),
+        np.eye(2),
+        400.0,
+        0.9,
+        0.2,
+    )
     s = asg.solve(a)
     assert [r["group"] for r in s.to_rows()] == s.assignment.tolist()
     assert s.to_frame()["measurement"].tolist() == [0, 1, 2]
@@ -179,7 +206,9 @@ def test_json_document_refuses_duplicate_keys_and_constants() -> None:
     from optmodels.core import json_document
 
     assert json_document('{"a": [1, 2.5], "b": {"c": null}}', where="case.json") == {
-        "a": [1, 2.5], "b": {"c": None}}
+        "a": [1, 2.5],
+        "b": {"c": None},
+    }
     with pytest.raises(ProblemError, match=r"^case.json: the key 'pd' is given twice"):
         json_document('{"pd": 0.9, "rho": 0.1, "pd": 0.5}', where="case.json")
     with pytest.raises(ProblemError, match=r"^x: the key 'k' is given twice"):
@@ -198,9 +227,11 @@ def test_empty_matrices_are_one_problem_error() -> None:
 
     with pytest.raises(ProblemError, match=r"^cov: empty \(0 × 0\)"):
         check_spd("cov", np.zeros((0, 0)))
-    check_spd_stack("covs", np.zeros((0, 2, 2)))          # no matrices: nothing to check
-    for args in ((np.zeros(0), np.zeros((0, 0)), np.zeros(0), np.zeros((0, 0))),
-                 (np.zeros((0, 0)),) * 4):
+    check_spd_stack("covs", np.zeros((0, 2, 2)))  # no matrices: nothing to check
+    for args in (
+        (np.zeros(0), np.zeros((0, 0)), np.zeros(0), np.zeros((0, 0))),
+        (np.zeros((0, 0)),) * 4,
+    ):
         with pytest.raises(ProblemError, match=r"^fusion.fuse S1: empty"):
             fu.fuse(*args)
     with pytest.raises(ProblemError, match=r"^fusion.weight_matrix S1: empty"):

@@ -117,13 +117,18 @@ def test_fit_tracks_on_a_silent_peer(silent_peer: str) -> None:
 
 
 @pytest.mark.parametrize("peer", ["silent_peer", "http_peer"])
-def test_cli_montecarlo_on_a_peer_that_is_not_dask(peer: str,
-                                                   request: pytest.FixtureRequest) -> None:
+def test_cli_montecarlo_on_a_peer_that_is_not_dask(
+    peer: str, request: pytest.FixtureRequest
+) -> None:
     address = request.getfixturevalue(peer)
     t0 = time.monotonic()
-    proc = subprocess.run([str(OPTMODELS), "montecarlo", "trajectories-eta", "--trials", "2",
-                           "--scheduler", address], capture_output=True, text=True,
-                          timeout=60, env={**os.environ})
+    proc = subprocess.run(
+        [str(OPTMODELS), "montecarlo", "trajectories-eta", "--trials", "2", "--scheduler", address],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        env={**os.environ},
+    )
     assert proc.returncode == 2, proc.stderr
     assert "Dask" in proc.stderr and "Traceback" not in proc.stderr
     assert time.monotonic() - t0 < 30.0  # 10 s deadline plus start-up

@@ -34,15 +34,26 @@ def _radar_rows(rng: np.random.Generator, m: int = 3) -> list[list[str]]:
     lat = ORIGIN[0] + rng.uniform(-1.0, 1.0, m)
     lon = ORIGIN[1] + rng.uniform(-1.0, 1.0, m)
     alt = rng.uniform(0.0, 500.0, m)
-    return [[f"R{i}", repr(float(lat[i])), repr(float(lon[i])), repr(float(alt[i])), "50.0",
-             "0.08", "300000.0"] for i in range(m)]
+    return [
+        [
+            f"R{i}",
+            repr(float(lat[i])),
+            repr(float(lon[i])),
+            repr(float(alt[i])),
+            "50.0",
+            "0.08",
+            "300000.0",
+        ]
+        for i in range(m)
+    ]
 
 
 RADAR_HEADER = ["name", "lat", "lon", "alt", "sigma_range", "sigma_azimuth", "max_range"]
 
 
-def _write(path: Path, header: list[str], rows: list[list[str]], *, bom: bool = False,
-           crlf: bool = False) -> Path:
+def _write(
+    path: Path, header: list[str], rows: list[list[str]], *, bom: bool = False, crlf: bool = False
+) -> Path:
     eol = "\r\n" if crlf else "\n"
     text = eol.join(",".join(r) for r in [header, *rows]) + eol
     path.write_bytes(((BOM if bom else "") + text).encode("utf-8"))
@@ -51,26 +62,35 @@ def _write(path: Path, header: list[str], rows: list[list[str]], *, bom: bool = 
 
 # --------------------------------------------------------------------------- BOM
 def test_bom_and_crlf_csv_read_as_plain_in_every_reader(tmp_path: Path) -> None:
-    """"CSV UTF-8" from a spreadsheet (BOM + CRLF) gives exactly the numbers of the plain
+    """ "CSV UTF-8" from a spreadsheet (BOM + CRLF) gives exactly the numbers of the plain
     file in all five readers, and those numbers are the ones written (repr round trip);
     the lat/lon radar sites equal pymap3d's ENU of the written coordinates to 1 mm."""
     rng = np.random.default_rng(11)
     pts = rng.normal(scale=1e3, size=(8, 3))
     t = np.arange(8.0)
     plane_rows = [[repr(float(v)) for v in (*p, ti)] for p, ti in zip(pts, t, strict=True)]
-    traj_rows = [[o, repr(float(ti)), repr(float(y))] for o, ti, y in
-                 zip("aabbaabb", t, rng.normal(size=8), strict=True)]
+    traj_rows = [
+        [o, repr(float(ti)), repr(float(y))]
+        for o, ti, y in zip("aabbaabb", t, rng.normal(size=8), strict=True)
+    ]
     radar_rows = _radar_rows(rng)
-    plot_rows = [[repr(float(k)), f"R{k % 3}", repr(float(1e4 + 100 * k)),
-                  repr(float(10 * k)), f"AC{k % 2}"] for k in range(9)]
-    track_rows = [[f"F{k % 2}", repr(float(k)), repr(55.0 + 1e-3 * k), repr(83.0 - 1e-3 * k),
-                   "9000.0"] for k in range(10)]
+    plot_rows = [
+        [repr(float(k)), f"R{k % 3}", repr(float(1e4 + 100 * k)), repr(float(10 * k)), f"AC{k % 2}"]
+        for k in range(9)
+    ]
+    track_rows = [
+        [f"F{k % 2}", repr(float(k)), repr(55.0 + 1e-3 * k), repr(83.0 - 1e-3 * k), "9000.0"]
+        for k in range(10)
+    ]
     cases = {
         "plane": (["x", "y", "z", "t"], plane_rows, io.read_plane_csv),
         "traj": (["object", "t", "y"], traj_rows, io.read_trajectory_csv),
         "radars": (RADAR_HEADER, radar_rows, lambda p: bf.read_radars(p)),
-        "tracks": (["object", "time", "lat", "lon", "alt"], track_rows,
-                   lambda p: bf.read_tracks(p, ORIGIN)),
+        "tracks": (
+            ["object", "time", "lat", "lon", "alt"],
+            track_rows,
+            lambda p: bf.read_tracks(p, ORIGIN),
+        ),
     }
     got: dict[str, tuple] = {}
     for key, (header, rows, read) in cases.items():
@@ -96,13 +116,15 @@ def test_bom_and_crlf_csv_read_as_plain_in_every_reader(tmp_path: Path) -> None:
     np.testing.assert_array_equal(tracks_bom.active, tracks.active)
     header = ["time", "radar", "range", "azimuth", "object"]
     plots, _ = bf.read_plots(_write(tmp_path / "plots.csv", header, plot_rows), radars)
-    plots_bom, _ = bf.read_plots(_write(tmp_path / "plots_bom.csv", header, plot_rows,
-                                        bom=True, crlf=True), radars)
+    plots_bom, _ = bf.read_plots(
+        _write(tmp_path / "plots_bom.csv", header, plot_rows, bom=True, crlf=True), radars
+    )
     np.testing.assert_array_equal(plots_bom.range, plots.range)
     np.testing.assert_array_equal(plots_bom.radar, np.arange(9) % 3)
     # degrees -> radians: 1 ulp of 2π
-    np.testing.assert_allclose(plots_bom.azimuth, np.deg2rad(10.0 * np.arange(9)), rtol=0,
-                               atol=1e-15)
+    np.testing.assert_allclose(
+        plots_bom.azimuth, np.deg2rad(10.0 * np.arange(9)), rtol=0, atol=1e-15
+    )
 
 
 def test_read_csv_rows_public_lines_and_spreadsheet_artefacts(tmp_path: Path) -> None:
@@ -116,15 +138,16 @@ def test_read_csv_rows_public_lines_and_spreadsheet_artefacts(tmp_path: Path) ->
     assert rows == [["1", "2", "3"], ["4", "5", "6"], ["7", "8", "9.5"]]
     ref = tmp_path / "ref.csv"
     ref.write_text("x,y,z\n1,2,3\n4,5,6\n7,8,9.5\n")
-    np.testing.assert_array_equal(io.read_plane_csv(p)["points"],
-                                  io.read_plane_csv(ref)["points"])
+    np.testing.assert_array_equal(io.read_plane_csv(p)["points"], io.read_plane_csv(ref)["points"])
     assert not hasattr(io, "_read_rows")
 
 
 # --------------------------------------------------------------------------- encodings
 def test_latin1_csv_refused_with_file_line_and_byte(tmp_path: Path) -> None:
-    data = "name,x,y,sigma_range,sigma_azimuth,max_range\nA,0,0,50,0.1,1e5\n" \
-           "München,1e4,0,50,0.1,1e5\n".encode("latin-1")
+    data = (
+        "name,x,y,sigma_range,sigma_azimuth,max_range\nA,0,0,50,0.1,1e5\n"
+        "München,1e4,0,50,0.1,1e5\n".encode("latin-1")
+    )
     p = tmp_path / "radars.csv"
     p.write_bytes(data)
     pos = data.index(b"\xfc")
@@ -201,9 +224,14 @@ def test_semicolon_duplicate_and_ragged_csv(tmp_path: Path) -> None:
 # --------------------------------------------------------------------------- paths
 def test_missing_directory_and_unreadable_files(tmp_path: Path, monkeypatch) -> None:
     radars = bf.RadarSet(np.array([[0.0, 0.0], [1e4, 0.0]]), 50.0, 1e-3, 1e5, ("A", "B"))
-    readers = [io.read_plane_csv, io.read_trajectory_csv, bf.read_radars,
-               lambda p: bf.read_plots(p, radars), lambda p: bf.read_tracks(p, ORIGIN),
-               lambda p: io.read_npz(p)]
+    readers = [
+        io.read_plane_csv,
+        io.read_trajectory_csv,
+        bf.read_radars,
+        lambda p: bf.read_plots(p, radars),
+        lambda p: bf.read_tracks(p, ORIGIN),
+        lambda p: io.read_npz(p),
+    ]
     folder = tmp_path / "folder.parquet"
     folder.mkdir()
     for read in readers:
@@ -250,8 +278,17 @@ def test_fake_empty_and_malformed_parquet(tmp_path: Path) -> None:
     with pytest.raises(ProblemError, match="not a readable Parquet file"):
         bf.read_plots(fake, radars)
     good = tmp_path / "good.parquet"
-    pq.write_table(pa.table({"time": [0.0, 1.0], "radar": ["A", "B"],
-                             "range": [1000.0, 2000.0], "azimuth": [10.0, 20.0]}), good)
+    pq.write_table(
+        pa.table(
+            {
+                "time": [0.0, 1.0],
+                "radar": ["A", "B"],
+                "range": [1000.0, 2000.0],
+                "azimuth": [10.0, 20.0],
+            }
+        ),
+        good,
+    )
     raw = good.read_bytes()
     cut = tmp_path / "cut.parquet"
     cut.write_bytes(raw[: len(raw) // 2])
@@ -260,19 +297,38 @@ def test_fake_empty_and_malformed_parquet(tmp_path: Path) -> None:
     table, _ = bf.read_plots(good, radars)
     np.testing.assert_allclose(table.azimuth, np.deg2rad([10.0, 20.0]), rtol=1e-15)
     nulls = tmp_path / "nulls.parquet"
-    pq.write_table(pa.table({"time": [0.0, 1.0], "radar": ["A", "B"],
-                             "range": pa.array(["1000", None]), "azimuth": [1.0, 2.0]}), nulls)
+    pq.write_table(
+        pa.table(
+            {
+                "time": [0.0, 1.0],
+                "radar": ["A", "B"],
+                "range": pa.array(["1000", None]),
+                "azimuth": [1.0, 2.0],
+            }
+        ),
+        nulls,
+    )
     with pytest.raises(ProblemError, match="row 2, column 'range': nan \\(NaN/inf"):
         bf.read_plots(nulls, radars)
     dup = tmp_path / "dup.parquet"
-    pq.write_table(pa.table({"time": [0.0], "Time": [1.0], "radar": ["A"], "range": [1.0],
-                             "azimuth": [1.0]}), dup)
+    pq.write_table(
+        pa.table({"time": [0.0], "Time": [1.0], "radar": ["A"], "range": [1.0], "azimuth": [1.0]}),
+        dup,
+    )
     with pytest.raises(ProblemError, match="'time' appears more than once"):
         bf.read_plots(dup, radars)
     none = tmp_path / "none.parquet"
-    pq.write_table(pa.table({"time": pa.array([], pa.float64()), "radar": pa.array([], pa.string()),
-                             "range": pa.array([], pa.float64()),
-                             "azimuth": pa.array([], pa.float64())}), none)
+    pq.write_table(
+        pa.table(
+            {
+                "time": pa.array([], pa.float64()),
+                "radar": pa.array([], pa.string()),
+                "range": pa.array([], pa.float64()),
+                "azimuth": pa.array([], pa.float64()),
+            }
+        ),
+        none,
+    )
     with pytest.raises(ProblemError, match="no data rows"):
         bf.read_plots(none, radars)
 
@@ -285,8 +341,11 @@ def _field_npz(tmp_path: Path) -> tuple[Path, bf.FieldData]:
     return path, fd
 
 
-NPZ_KEYS = {"what": "FieldData .npz", "required": ("radars", "centers", "xi", "P"),
-            "one_of": ("edges", "adjacency")}
+NPZ_KEYS = {
+    "what": "FieldData .npz",
+    "required": ("radars", "centers", "xi", "P"),
+    "one_of": ("edges", "adjacency"),
+}
 
 
 def test_read_npz_round_trip_and_truncated_archives(tmp_path: Path) -> None:
@@ -341,11 +400,15 @@ def test_read_radars_geodetic_ranges(tmp_path: Path) -> None:
     rng = np.random.default_rng(5)
     rows = _radar_rows(rng)
     p = tmp_path / "r.csv"
-    for col, value, text in ((1, "95", "'lat': 95° is outside \\[-90, 90\\]°"),
-                             (1, "-90.5", "'lat': -90.5°"),
-                             (2, "400", "'lon': 400° is outside \\[-180, 360\\)°"),
-                             (2, "-180.5", "'lon': -180.5°"), (2, "360", "'lon': 360°"),
-                             (3, "nan", "'alt'.*NaN/inf"), (1, "", "'lat': '' is not a number")):
+    for col, value, text in (
+        (1, "95", "'lat': 95° is outside \\[-90, 90\\]°"),
+        (1, "-90.5", "'lat': -90.5°"),
+        (2, "400", "'lon': 400° is outside \\[-180, 360\\)°"),
+        (2, "-180.5", "'lon': -180.5°"),
+        (2, "360", "'lon': 360°"),
+        (3, "nan", "'alt'.*NaN/inf"),
+        (1, "", "'lat': '' is not a number"),
+    ):
         bad = [r.copy() for r in rows]
         bad[1][col] = value
         _write(p, RADAR_HEADER, bad)
@@ -357,8 +420,7 @@ def test_read_radars_geodetic_ranges(tmp_path: Path) -> None:
         west[i][2] = repr(lon)
         east[i][2] = repr(lon % 360.0)
     r_w, org_w = bf.read_radars(_write(tmp_path / "w.csv", RADAR_HEADER, west))
-    r_e, _ = bf.read_radars(_write(tmp_path / "e.csv", RADAR_HEADER, east),
-                                origin=org_w)
+    r_e, _ = bf.read_radars(_write(tmp_path / "e.csv", RADAR_HEADER, east), origin=org_w)
     np.testing.assert_allclose(r_e.sites, r_w.sites, rtol=0, atol=1e-6)
     assert r_w.sites[2, 0] != 0  # the third radar is really elsewhere
     pole = [r.copy() for r in rows]
@@ -366,14 +428,19 @@ def test_read_radars_geodetic_ranges(tmp_path: Path) -> None:
     r_p, _ = bf.read_radars(_write(tmp_path / "pole.csv", RADAR_HEADER, pole))
     # independent ENU of the pole (WGS84 by hand): ECEF difference projected on North
     a, e2 = 6378137.0, 6.69437999014e-3
-    phi, lam, h0 = (np.deg2rad(float(rows[0][1])), np.deg2rad(float(rows[0][2])),
-                    float(rows[0][3]))
+    phi, lam, h0 = (np.deg2rad(float(rows[0][1])), np.deg2rad(float(rows[0][2])), float(rows[0][3]))
     n0 = a / np.sqrt(1.0 - e2 * np.sin(phi) ** 2)
-    x0 = np.array([(n0 + h0) * np.cos(phi) * np.cos(lam), (n0 + h0) * np.cos(phi) * np.sin(lam),
-                   (n0 * (1.0 - e2) + h0) * np.sin(phi)])
+    x0 = np.array(
+        [
+            (n0 + h0) * np.cos(phi) * np.cos(lam),
+            (n0 + h0) * np.cos(phi) * np.sin(lam),
+            (n0 * (1.0 - e2) + h0) * np.sin(phi),
+        ]
+    )
     d = np.array([0.0, 0.0, a * np.sqrt(1.0 - e2) + float(pole[1][3])]) - x0
-    north = (-np.sin(phi) * np.cos(lam) * d[0] - np.sin(phi) * np.sin(lam) * d[1]
-             + np.cos(phi) * d[2])
+    north = (
+        -np.sin(phi) * np.cos(lam) * d[0] - np.sin(phi) * np.sin(lam) * d[1] + np.cos(phi) * d[2]
+    )
     assert abs(r_p.sites[1, 0]) < 1e-6  # straight North: no East component
     assert r_p.sites[1, 1] == pytest.approx(north, abs=1e-3)  # ~1e-10 relative at 3600 km
 
@@ -381,9 +448,11 @@ def test_read_radars_geodetic_ranges(tmp_path: Path) -> None:
 def test_read_radars_values_names_and_origin(tmp_path: Path) -> None:
     rows = _radar_rows(np.random.default_rng(6))
     p = tmp_path / "r.csv"
-    for col, value, text in ((4, "-50", "'sigma_range': -50 \\(must be positive\\)"),
-                             (5, "0", "'sigma_azimuth': 0 \\(must be positive\\)"),
-                             (6, "inf", "'max_range'.*NaN/inf")):
+    for col, value, text in (
+        (4, "-50", "'sigma_range': -50 \\(must be positive\\)"),
+        (5, "0", "'sigma_azimuth': 0 \\(must be positive\\)"),
+        (6, "inf", "'max_range'.*NaN/inf"),
+    ):
         bad = [r.copy() for r in rows]
         bad[2][col] = value
         _write(p, RADAR_HEADER, bad)
@@ -402,11 +471,13 @@ def test_read_radars_values_names_and_origin(tmp_path: Path) -> None:
     with pytest.raises(ProblemError, match=f"{p}: .*at least 2 radars"):
         bf.read_radars(p)
     _write(p, RADAR_HEADER, rows)
-    for origin, text in (((95.0, 0.0, 0.0), "origin lat: must be <= 90"),
-                         ((0.0, 400.0, 0.0), "origin lon: must be < 360"),
-                         ((0.0, 0.0), "origin: expected \\(lat, lon, alt\\)"),
-                         ("55,83,0", "origin: expected \\(lat, lon, alt\\)"),
-                         ((0.0, 0.0, float("nan")), "origin alt: got NaN")):
+    for origin, text in (
+        ((95.0, 0.0, 0.0), "origin lat: must be <= 90"),
+        ((0.0, 400.0, 0.0), "origin lon: must be < 360"),
+        ((0.0, 0.0), "origin: expected \\(lat, lon, alt\\)"),
+        ("55,83,0", "origin: expected \\(lat, lon, alt\\)"),
+        ((0.0, 0.0, float("nan")), "origin alt: got NaN"),
+    ):
         with pytest.raises(ProblemError, match=f"biasfield.read_radars {text}"):
             bf.read_radars(p, origin=origin)  # type: ignore[arg-type]
 
@@ -416,11 +487,13 @@ def test_read_plots_values(tmp_path: Path) -> None:
     radars = bf.RadarSet(np.array([[0.0, 0.0], [1e4, 0.0]]), 50.0, 1e-3, 1e5, ("A", "B"))
     p = tmp_path / "p.csv"
     header = "time,radar,range,azimuth\n"
-    for body, text in (("0,A,-1,10\n", "line 2, column 'range': -1 m is negative"),
-                       ("0,A,1000,nan\n", "line 2, column 'azimuth'.*NaN/inf"),
-                       ("0,A,1000,400\n", "line 2, column 'azimuth': 400° is outside"),
-                       ("0,A,1e3,1\ninf,B,1e3,1\n", "line 3, column 'time'.*NaN/inf"),
-                       ("0,A,1e3,1\n1,C,1e3,1\n", "unknown radar id.*first at line 3")):
+    for body, text in (
+        ("0,A,-1,10\n", "line 2, column 'range': -1 m is negative"),
+        ("0,A,1000,nan\n", "line 2, column 'azimuth'.*NaN/inf"),
+        ("0,A,1000,400\n", "line 2, column 'azimuth': 400° is outside"),
+        ("0,A,1e3,1\ninf,B,1e3,1\n", "line 3, column 'time'.*NaN/inf"),
+        ("0,A,1e3,1\n1,C,1e3,1\n", "unknown radar id.*first at line 3"),
+    ):
         p.write_text(header + body)
         with pytest.raises(ProblemError, match=f"{p}: {text}"):
             bf.read_plots(p, radars)
@@ -442,11 +515,13 @@ def test_read_plots_values(tmp_path: Path) -> None:
 def test_read_tracks_values_and_grid_guard(tmp_path: Path) -> None:
     p = tmp_path / "t.csv"
     header = "object,time,lat,lon\n"
-    for body, text in (("a,0,95,37\na,1,95.01,37\n", "line 2, column 'lat': 95°"),
-                       ("a,0,55,37\na,1,55,400\n", "line 3, column 'lon': 400°"),
-                       ("a,0,55,37\na,0,55.1,37\n", "fewer than 2 reports at distinct"),
-                       (",0,55,37\na,1,55.1,37\n", "line 2: empty 'object' label"),
-                       ("a,0,55,37\na,1.7e12,55.1,37\n", "grid values .*times in seconds")):
+    for body, text in (
+        ("a,0,95,37\na,1,95.01,37\n", "line 2, column 'lat': 95°"),
+        ("a,0,55,37\na,1,55,400\n", "line 3, column 'lon': 400°"),
+        ("a,0,55,37\na,0,55.1,37\n", "fewer than 2 reports at distinct"),
+        (",0,55,37\na,1,55.1,37\n", "line 2: empty 'object' label"),
+        ("a,0,55,37\na,1.7e12,55.1,37\n", "grid values .*times in seconds"),
+    ):
         p.write_text(header + body)
         with pytest.raises(ProblemError, match=text):
             bf.read_tracks(p, ORIGIN)
@@ -482,10 +557,14 @@ def test_radar_set_plot_table_and_paths_validation() -> None:
     # V(x) for a point 1 km North of radar 0: diag(σ_r², (r σ_az)²) in (East, North) axes
     # rotated: the range axis is North, the azimuth axis East
     v = radars.cartesian_cov(0, [0.0, 1000.0])
-    np.testing.assert_allclose(v, np.diag([(1000.0 * 1e-3) ** 2, 50.0 ** 2]), rtol=1e-12,
-                               atol=1e-9)
-    table = bf.PlotTable(np.array([0.0, 1.0]), np.array([0, 5]), np.array([1e3, 2e3]),
-                         np.zeros(2), np.zeros(2, dtype=int))
+    np.testing.assert_allclose(v, np.diag([(1000.0 * 1e-3) ** 2, 50.0**2]), rtol=1e-12, atol=1e-9)
+    table = bf.PlotTable(
+        np.array([0.0, 1.0]),
+        np.array([0, 5]),
+        np.array([1e3, 2e3]),
+        np.zeros(2),
+        np.zeros(2, dtype=int),
+    )
     with pytest.raises(ProblemError, match="unknown radar index 5"):
         table.cartesian(radars)  # rows of radar 5 were left uninitialised (np.empty)
     with pytest.raises(ProblemError, match="AircraftPaths times"):  # np.interp gave junk
@@ -497,10 +576,10 @@ def test_radar_set_plot_table_and_paths_validation() -> None:
     with pytest.raises(ProblemError, match="AircraftPaths active"):
         AircraftPaths(np.array([0.0, 1.0]), np.zeros((1, 2, 2)), np.ones((1, 2)))
     with pytest.raises(ProblemError, match="AircraftPaths positions"):
-        AircraftPaths(np.array([0.0, 1.0]), np.full((1, 2, 2), np.nan),
-                         np.ones((1, 2), bool))
-    paths = AircraftPaths(np.array([0.0, 10.0]), np.array([[[0.0, 0.0], [100.0, -50.0]]]),
-                             np.ones((1, 2), bool))
+        AircraftPaths(np.array([0.0, 1.0]), np.full((1, 2, 2), np.nan), np.ones((1, 2), bool))
+    paths = AircraftPaths(
+        np.array([0.0, 10.0]), np.array([[[0.0, 0.0], [100.0, -50.0]]]), np.ones((1, 2), bool)
+    )
     np.testing.assert_allclose(paths.at(0, 2.5), [25.0, -12.5], rtol=1e-15)
     with pytest.raises(ProblemError, match=r"AircraftPaths.at a"):
         paths.at(1, 0.0)
@@ -523,8 +602,11 @@ def test_writers_create_parents_and_refuse_directories(tmp_path: Path) -> None:
     back_p = io.read_plane_csv(pc)
     np.testing.assert_array_equal(back_p["points"], pts)  # %.17g round-trips exactly
     np.testing.assert_array_equal(back_p["alpha2"], np.linspace(1.0, 2.0, 6))
-    for write in (lambda p: io.write_csv(p, rows), lambda p: io.write_json(p, {}),
-                  lambda p: io.write_plane_csv(p, pts)):
+    for write in (
+        lambda p: io.write_csv(p, rows),
+        lambda p: io.write_json(p, {}),
+        lambda p: io.write_plane_csv(p, pts),
+    ):
         with pytest.raises(ProblemError, match=f"{tmp_path}: is an existing directory"):
             write(tmp_path)
         with pytest.raises(ProblemError, match="is an existing file"):

@@ -45,8 +45,9 @@ def test_fuse_closed_form_equals_cvxpy(m: int) -> None:
     # Clarabel on a 2-term convex QP: 1e-8 relative is within its default tolerances
     np.testing.assert_allclose(g.estimate, cf.estimate, rtol=1e-7, atol=1e-8)
     assert cf.residuals["gradient"] < 1e-12 and g.residuals["gradient"] < 1e-7
-    np.testing.assert_allclose(cf.covariance, np.linalg.inv(np.linalg.inv(s1) + np.linalg.inv(s2)),
-                               rtol=1e-10)
+    np.testing.assert_allclose(
+        cf.covariance, np.linalg.inv(np.linalg.inv(s1) + np.linalg.inv(s2)), rtol=1e-10
+    )
 
 
 @pytest.mark.parametrize("m", [2, 3, 4])
@@ -86,8 +87,7 @@ def test_printed_13_14_elementwise() -> None:
             e[i, j] = 1.0
             col = i + j * m  # vec order of (12)
             np.testing.assert_allclose(p1[:, col], vec((np.eye(m) - w) @ e @ c1 @ w), atol=1e-12)
-            np.testing.assert_allclose(p2[:, col], vec(-w @ e @ c2 @ (np.eye(m) - w)),
-                                       atol=1e-12)
+            np.testing.assert_allclose(p2[:, col], vec(-w @ e @ c2 @ (np.eye(m) - w)), atol=1e-12)
 
 
 @pytest.mark.parametrize("mean", ["known", "sample"])
@@ -197,8 +197,9 @@ def test_correlated_fusion_closed_form_equals_cvxpy(m: int, rank: int) -> None:
 def test_correlated_weight_reduces_to_the_paper_weight() -> None:
     rng = np.random.default_rng(40)
     s1, s2 = spd(rng, 3), spd(rng, 3)
-    np.testing.assert_allclose(fu.weight_matrix_correlated(s1, s2, np.zeros((3, 3))),
-                               fu.weight_matrix(s1, s2), atol=1e-12)
+    np.testing.assert_allclose(
+        fu.weight_matrix_correlated(s1, s2, np.zeros((3, 3))), fu.weight_matrix(s1, s2), atol=1e-12
+    )
     w = fu.weight_matrix(s1, s2)
     inv = np.linalg.inv(np.linalg.inv(s1) + np.linalg.inv(s2))
     np.testing.assert_allclose(fu.fused_covariance(w, s1, s2), inv, rtol=1e-10)
@@ -215,8 +216,7 @@ def test_correlated_fusion_by_monte_carlo() -> None:
     e = rng.multivariate_normal(np.zeros(2 * m), j, size=trials, method="eigh")
     fused = e[:, :m] + (e[:, m:] - e[:, :m]) @ w.T
     pred = fu.fused_covariance(w, s1, s2, s12)
-    np.testing.assert_allclose(np.var(fused, axis=0), np.diag(pred),
-                               rtol=4 * np.sqrt(2 / trials))
+    np.testing.assert_allclose(np.var(fused, axis=0), np.diag(pred), rtol=4 * np.sqrt(2 / trials))
 
 
 def test_weight_from_samples_converges() -> None:
@@ -229,7 +229,8 @@ def test_weight_from_samples_converges() -> None:
     a2 = rng.multivariate_normal([1.0, 2.0], s2, size=n)
     w_hat = fu.weight_from_samples(a1, a2)
     sd = np.sqrt(np.diag(fu.weight_covariance(s1, s2, n, n, mean="sample"))).reshape(
-        2, 2, order="F")
+        2, 2, order="F"
+    )
     assert np.all(np.abs(w_hat - fu.weight_matrix(s1, s2)) < 5 * sd)
     with pytest.raises(ProblemError, match="snapshots"):
         fu.weight_from_samples(a1[:2], a2[:2])
@@ -237,8 +238,9 @@ def test_weight_from_samples_converges() -> None:
 
 # ---------------------------------------------------------------- two-site system
 SYSTEM = fu.TwoSiteSystem.on_baseline()
-POSITIONS = np.array([[8_000.0, 30_000.0], [-25_000.0, 12_000.0], [3_000.0, 55_000.0],
-                      [30_000.0, 6_000.0]])
+POSITIONS = np.array(
+    [[8_000.0, 30_000.0], [-25_000.0, 12_000.0], [3_000.0, 55_000.0], [30_000.0, 6_000.0]]
+)
 
 
 def test_two_site_model_and_estimators() -> None:
@@ -302,8 +304,9 @@ def test_joint_ml_and_correlated_fusion_agree_to_first_order() -> None:
     ratios: dict[str, list[float]] = {"correlated": [], "paper": []}
     x = POSITIONS[1]
     for eps in (1.0, 0.01):
-        sys_e = fu.TwoSiteSystem.on_baseline(sigma_azimuth=3e-3 * eps,
-                                             sigma_range_difference=3.0 * eps)
+        sys_e = fu.TwoSiteSystem.on_baseline(
+            sigma_azimuth=3e-3 * eps, sigma_range_difference=3.0 * eps
+        )
         z = sys_e.sample(x, 2000, rng)
         ml = sys_e.joint_ml(z).require_ok().estimate
         rms = np.sqrt(np.mean(np.sum((ml - x) ** 2, axis=1)))
@@ -316,8 +319,9 @@ def test_joint_ml_and_correlated_fusion_agree_to_first_order() -> None:
     s1, s2, s12 = SYSTEM.covariances(x)
     w = fu.weight_matrix_correlated(s1, s2, s12)
     np.testing.assert_allclose(fu.fused_covariance(w, s1, s2, s12), SYSTEM.crb(x), rtol=1e-8)
-    assert np.trace(fu.fused_covariance(fu.weight_matrix(s1, s2), s1, s2, s12)) > 1.01 * \
-        np.trace(SYSTEM.crb(x))
+    assert np.trace(fu.fused_covariance(fu.weight_matrix(s1, s2), s1, s2, s12)) > 1.01 * np.trace(
+        SYSTEM.crb(x)
+    )
 
 
 def test_two_site_bad_input() -> None:
@@ -381,16 +385,15 @@ def test_degenerate_geometry_is_refused_or_flagged() -> None:
         sys_.covariances([-10e3, 0.0])
     # beyond B two different positions give identical noise-free measurements (to
     # round-off of 1e-16 × 4e4 m): the position along the line is not identifiable
-    np.testing.assert_allclose(sys_.measure([30e3, 0.0]), sys_.measure([50e3, 0.0]),
-                               atol=1e-9)
+    np.testing.assert_allclose(sys_.measure([30e3, 0.0]), sys_.measure([50e3, 0.0]), atol=1e-9)
     with pytest.raises(ProblemError, match=r"crb x = \(30000, 0\).*joint ML"):
         sys_.crb([30e3, 0.0])
     # between the sites the joint problem is regular: analytic CRB at the midpoint,
     # J = [(0, −1/h), (0, 1/h), (−2, 0)] → diag(σ_Δr²/4, h²σ_az²/2) (round-off only)
     h = 10e3
-    np.testing.assert_allclose(sys_.crb([0.0, 0.0]),
-                               np.diag([3.0**2 / 4, h**2 * 3e-3**2 / 2]), rtol=1e-12,
-                               atol=1e-12)
+    np.testing.assert_allclose(
+        sys_.crb([0.0, 0.0]), np.diag([3.0**2 / 4, h**2 * 3e-3**2 / 2]), rtol=1e-12, atol=1e-12
+    )
     # far on the bisector the conditions grow ∝ ρ (estimator 1: 2ρ/b, estimator 2:
     # 2e-3 ρ/m here): 1e9 m (2e6) is accepted, 1e12 m (2e9) is not
     s1, s2, _ = sys_.covariances([0.0, 1e9])
@@ -454,19 +457,32 @@ def test_nlp_status_tables() -> None:
     assert nlp_status("ipopt", {"return_status": "Solve_Succeeded", "success": True}) is st.OPTIMAL
     assert nlp_status("ipopt", {"return_status": "Brand_New_Code"}) is st.ERROR
     # a table entry never overrides CasADi's failure flag
-    assert nlp_status("sqpmethod", {"return_status": "Solve_Succeeded",
-                                    "success": False}) is st.ERROR
-    assert nlp_status("fatrop", {"return_status": "0", "success": True,
-                                 "unified_return_status": "SOLVER_RET_SUCCESS"}) is st.OPTIMAL
-    assert nlp_status("fatrop", {"return_status": "7", "success": False,
-                                 "unified_return_status": "SOLVER_RET_LIMITED"}) \
+    assert (
+        nlp_status("sqpmethod", {"return_status": "Solve_Succeeded", "success": False}) is st.ERROR
+    )
+    assert (
+        nlp_status(
+            "fatrop",
+            {"return_status": "0", "success": True, "unified_return_status": "SOLVER_RET_SUCCESS"},
+        )
+        is st.OPTIMAL
+    )
+    assert (
+        nlp_status(
+            "fatrop",
+            {"return_status": "7", "success": False, "unified_return_status": "SOLVER_RET_LIMITED"},
+        )
         is st.ITERATION_LIMIT
+    )
     assert nlp_status("blocksqp", {"return_status": "?"}) is st.ERROR
     # a real iteration cap of sqpmethod: ITERATION_LIMIT, not ERROR or OPTIMAL
     v = ca.SX.sym("v", 2)
     nlp = {"x": v, "f": (v[0] - 1) ** 4 + 10 * (v[1] - v[0] ** 2) ** 2, "g": v[0] + v[1] - 1}
-    res, _ = run_nlpsol(build_nlpsol(nlp, plugin="sqpmethod", options={"max_iter": 1}),
-                        x0=np.array([3.0, -2.0]), p=np.zeros(0))
+    res, _ = run_nlpsol(
+        build_nlpsol(nlp, plugin="sqpmethod", options={"max_iter": 1}),
+        x0=np.array([3.0, -2.0]),
+        p=np.zeros(0),
+    )
     assert res.status is st.ITERATION_LIMIT
     with pytest.raises(ProblemError, match="'bogus'"):
         build_nlpsol(nlp, plugin="sqpmethod", options={"bogus": 1})
@@ -479,8 +495,15 @@ def test_casadi_conic_bad_option_names_the_option() -> None:
     ProblemError naming the option; cvxpy_backend either re-raises it or reports a failed
     solve (Status.ERROR, NaN estimate) carrying that message -- never a traceback."""
     try:
-        sol = fu.fuse([0.0, 0.0], np.eye(2), [1.0, 1.0], 2 * np.eye(2), method="cvxpy",
-                      solver="CASADI_OSQP", bogus=1)
+        sol = fu.fuse(
+            [0.0, 0.0],
+            np.eye(2),
+            [1.0, 1.0],
+            2 * np.eye(2),
+            method="cvxpy",
+            solver="CASADI_OSQP",
+            bogus=1,
+        )
     except ProblemError as exc:
         assert "'bogus'" in str(exc)
     else:
@@ -510,8 +533,7 @@ def test_scalar_arguments_are_checked(bad: object) -> None:
     reals: dict[str, Any] = {
         "baseline": lambda: fu.TwoSiteSystem.on_baseline(bad),
         "sigma_azimuth": lambda: fu.TwoSiteSystem.on_baseline(sigma_azimuth=bad),
-        "sigma_range_difference": lambda: fu.TwoSiteSystem.on_baseline(
-            sigma_range_difference=bad),
+        "sigma_range_difference": lambda: fu.TwoSiteSystem.on_baseline(sigma_range_difference=bad),
     }
     for arg, call in counts.items():
         with pytest.raises(ProblemError, match=arg.split()[-1]):
@@ -535,8 +557,7 @@ def test_monte_carlo_weight_is_chunked_and_guarded(monkeypatch: pytest.MonkeyPat
     with pytest.raises(ProblemError, match=r"trials.*above the limit"):
         fu.monte_carlo_weight(s1, s2, 10, 10, trials=10**9)
     with pytest.raises(ProblemError, match="dimension"):
-        fu.monte_carlo_weight(np.eye(MAX_DIM + 1), np.eye(MAX_DIM + 1), 40, 40,
-                              trials=10)
+        fu.monte_carlo_weight(np.eye(MAX_DIM + 1), np.eye(MAX_DIM + 1), 40, 40, trials=10)
     monkeypatch.setattr(fu_sampling, "MC_CHUNK", 64 * 4)
     n, trials = 400, 20_000
     mc = fu.monte_carlo_weight(s1, s2, n, n, trials=trials, seed=3, mean="sample")
@@ -545,8 +566,9 @@ def test_monte_carlo_weight_is_chunked_and_guarded(monkeypatch: pytest.MonkeyPat
     np.testing.assert_allclose(np.diag(mc.cov), np.diag(lin), rtol=0.05)
     # E Ŵ = W + O(1/n): within 5 se of the mean plus the 1/n bias scale × sd
     sd = np.sqrt(np.diag(mc.cov)).reshape(2, 2, order="F")
-    assert np.all(np.abs(mc.mean - fu.weight_matrix(s1, s2)) < 5 * sd / np.sqrt(trials)
-                  + sd / np.sqrt(n))
+    assert np.all(
+        np.abs(mc.mean - fu.weight_matrix(s1, s2)) < 5 * sd / np.sqrt(trials) + sd / np.sqrt(n)
+    )
 
 
 def _exact_weight(s1: np.ndarray, s2: np.ndarray) -> np.ndarray:
@@ -557,8 +579,9 @@ def _exact_weight(s1: np.ndarray, s2: np.ndarray) -> np.ndarray:
     s = [[a[i][j] + Fr(float(s2[i, j])) for j in range(2)] for i in range(2)]
     det = s[0][0] * s[1][1] - s[0][1] * s[1][0]
     inv = [[s[1][1] / det, -s[0][1] / det], [-s[1][0] / det, s[0][0] / det]]
-    return np.array([[float(sum(a[i][k] * inv[k][j] for k in range(2))) for j in range(2)]
-                     for i in range(2)])
+    return np.array(
+        [[float(sum(a[i][k] * inv[k][j] for k in range(2))) for j in range(2)] for i in range(2)]
+    )
 
 
 def test_fuse_closed_form_is_rechecked_against_its_conditioning() -> None:
@@ -571,8 +594,7 @@ def test_fuse_closed_form_is_rechecked_against_its_conditioning() -> None:
     th = 0.3
     rot = np.array([[np.cos(th), -np.sin(th)], [np.sin(th), np.cos(th)]])
     a1, a2 = np.array([1.0, 2.0]), np.array([2.0, 3.0])
-    expect = {1e-9: Status.OPTIMAL, 1e-11: Status.OPTIMAL_INACCURATE,
-              1e-13: Status.ERROR}
+    expect = {1e-9: Status.OPTIMAL, 1e-11: Status.OPTIMAL_INACCURATE, 1e-13: Status.ERROR}
     for c, status in expect.items():
         s1 = rot @ np.diag([1.0, c]) @ rot.T
         s2 = rot @ np.diag([2.0, 3 * c]) @ rot.T
@@ -584,8 +606,7 @@ def test_fuse_closed_form_is_rechecked_against_its_conditioning() -> None:
             true_err = np.max(np.abs(sol.W - w_true)) / np.max(np.abs(w_true))
             assert true_err <= sol.residuals["weight_error"]
             est_true = a1 + w_true @ (a2 - a1)
-            assert np.max(np.abs(sol.estimate - est_true)) / 3.0 <= \
-                sol.residuals["estimate_error"]
+            assert np.max(np.abs(sol.estimate - est_true)) / 3.0 <= sol.residuals["estimate_error"]
         else:
             assert np.all(np.isnan(sol.estimate))
             with pytest.raises(ProblemError, match="ill-conditioned"):
@@ -601,7 +622,8 @@ def test_fuse_closed_form_is_rechecked_against_its_conditioning() -> None:
             sol = fu.fuse(a1, s1, a2, s2, method=method)  # type: ignore[arg-type]
             assert sol.status is Status.OPTIMAL
             # exact W; 1e-8 covers Clarabel's relative tolerance on the O(1) problem
-            np.testing.assert_allclose(sol.estimate, a1 + _exact_weight(s1, s2) @ (a2 - a1),
-                                       rtol=1e-8)
+            np.testing.assert_allclose(
+                sol.estimate, a1 + _exact_weight(s1, s2) @ (a2 - a1), rtol=1e-8
+            )
     with pytest.raises(ProblemError, match=r"S2.*positive definite"):
         fu.fuse(a1, np.eye(2), a2, np.diag([1.0, -1e-3]))

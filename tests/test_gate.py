@@ -83,9 +83,9 @@ def angle(a: np.ndarray, b: np.ndarray) -> float:
 
 
 @pytest.mark.parametrize(("turn", "expect"), [(1e-5, SMALL), (1e-2, LARGE)])
-def test_plane_solve_corrupted_point(monkeypatch: pytest.MonkeyPatch,
-                                     verdicts: list[Verdict], turn: float,
-                                     expect: Status) -> None:
+def test_plane_solve_corrupted_point(
+    monkeypatch: pytest.MonkeyPatch, verdicts: list[Verdict], turn: float, expect: Status
+) -> None:
     rng = np.random.default_rng(1)
     data = plane_data(rng)
     real = plane.generic.run_nlpsol
@@ -109,9 +109,9 @@ def test_plane_solve_corrupted_point(monkeypatch: pytest.MonkeyPatch,
 
 
 @pytest.mark.parametrize(("how", "expect"), [("turn", SMALL), ("stretch", LARGE)])
-def test_plane_closed_form_corrupted_kernel(monkeypatch: pytest.MonkeyPatch,
-                                            verdicts: list[Verdict], how: str,
-                                            expect: Status) -> None:
+def test_plane_closed_form_corrupted_kernel(
+    monkeypatch: pytest.MonkeyPatch, verdicts: list[Verdict], how: str, expect: Status
+) -> None:
     """Small: the kernel's normal turned by 1e-5 rad (re-checked by the kernel's own
     Rayleigh step); large: its length 1.01 (‖n‖² − 1 = 0.0201), since a turn the Newton
     step measures above 1e-3 rad is refused with a ProblemError before the gate."""
@@ -127,8 +127,9 @@ def test_plane_closed_form_corrupted_kernel(monkeypatch: pytest.MonkeyPatch,
         n = rotate(eig.normal[0], 1e-5, rng)[None]
         q = s2 - s1[..., :, None] * s1[..., None, :] / s0[..., None, None]
         qabs = s2abs + np.abs(s1)[..., :, None] * np.abs(s1)[..., None, :] / s0[..., None, None]
-        return dataclasses.replace(eig, normal=n,
-                                   check=plane.verify._rayleigh_check(q, qabs, base, n, count))
+        return dataclasses.replace(
+            eig, normal=n, check=plane.verify._rayleigh_check(q, qabs, base, n, count)
+        )
 
     monkeypatch.setattr(mod, "_closed_form_from_sums", corrupted)
     sol = plane.closed_form(data)
@@ -152,15 +153,15 @@ def trajectory_data(rng: np.random.Generator) -> tr.TrajectoryData:
 
 def _shift_velocity(theta: np.ndarray, fam: tr.Family, rel: float) -> tuple[np.ndarray, float]:
     th = np.array(theta, dtype=float, copy=True)
-    size = float(np.max(np.abs(th[len(fam.start_groups):])))
+    size = float(np.max(np.abs(th[len(fam.start_groups) :])))
     th[fam.velocity_index[0]] += rel * size
     return th, size
 
 
 @pytest.mark.parametrize(("rel", "expect"), [(1e-5, SMALL), (1e-2, LARGE)])
-def test_trajectories_closed_form_corrupted_kernel(monkeypatch: pytest.MonkeyPatch,
-                                                   verdicts: list[Verdict], rel: float,
-                                                   expect: Status) -> None:
+def test_trajectories_closed_form_corrupted_kernel(
+    monkeypatch: pytest.MonkeyPatch, verdicts: list[Verdict], rel: float, expect: Status
+) -> None:
     data = trajectory_data(np.random.default_rng(3))
     fam = tr.resolve_family("diverging", data.n_objects)
     honest = tr.closed_form(data)
@@ -182,16 +183,21 @@ def test_trajectories_closed_form_corrupted_kernel(monkeypatch: pytest.MonkeyPat
     if expect is LARGE:
         assert np.all(np.isnan(sol.theta))
         assert sol.info["rejected_theta"][fam.velocity_index[0], 0] == pytest.approx(
-            honest.velocity[0] + rel * size, rel=1e-9)
+            honest.velocity[0] + rel * size, rel=1e-9
+        )
     else:
         assert sol.velocity[0] == pytest.approx(honest.velocity[0] + rel * size, rel=1e-9)
 
 
 @pytest.mark.parametrize("reuse", [False, True])
 @pytest.mark.parametrize(("rel", "expect"), [(1e-5, SMALL), (1e-2, LARGE)])
-def test_trajectories_solve_corrupted_point(monkeypatch: pytest.MonkeyPatch,
-                                            verdicts: list[Verdict], rel: float,
-                                            expect: Status, reuse: bool) -> None:
+def test_trajectories_solve_corrupted_point(
+    monkeypatch: pytest.MonkeyPatch,
+    verdicts: list[Verdict],
+    rel: float,
+    expect: Status,
+    reuse: bool,
+) -> None:
     """The solver's θ shifted: downgraded, then refused. The decision is the strict gate
     of :func:`optmodels.trajectories.solution._finish_solve` (the same point through it
     gives the same solution); ``generic.solve`` still decides inline until it calls that
@@ -224,7 +230,9 @@ def test_trajectories_solve_corrupted_point(monkeypatch: pytest.MonkeyPatch,
                 theta, lines = back()
                 seen["theta"] = _shift_velocity(theta, fam, rel)[0]
                 return seen["theta"], lines
+
             return bad_back
+
         return prob, bad_set_values, first, cached
 
     # both paths: the fresh model and the compiled (DPP) model kept between solves
@@ -234,10 +242,10 @@ def test_trajectories_solve_corrupted_point(monkeypatch: pytest.MonkeyPatch,
     assert sol.status is expect, sol.message
     assert sol.residuals["stationarity"] == pytest.approx(rel, rel=1e-2)
     verdicts.clear()
-    common = {"status": Status.OPTIMAL, "method": sol.method, "message": "",
-              "solve_time": 0.0}
-    via_gate = tr.solution._finish_solve(data, fam, tr.fits._fit(data, fam), seen["theta"],
-                                         None, common)
+    common = {"status": Status.OPTIMAL, "method": sol.method, "message": "", "solve_time": 0.0}
+    via_gate = tr.solution._finish_solve(
+        data, fam, tr.fits._fit(data, fam), seen["theta"], None, common
+    )
     decided(verdicts, via_gate, expect)
     assert via_gate.residuals == pytest.approx(sol.residuals, rel=1e-6, abs=1e-12)
 
@@ -249,9 +257,9 @@ def spd(rng: np.random.Generator, m: int) -> np.ndarray:
 
 
 @pytest.mark.parametrize(("eps", "expect"), [(1e-5, SMALL), (1e-1, LARGE)])
-def test_fusion_closed_form_corrupted_kernel(monkeypatch: pytest.MonkeyPatch,
-                                             verdicts: list[Verdict], eps: float,
-                                             expect: Status) -> None:
+def test_fusion_closed_form_corrupted_kernel(
+    monkeypatch: pytest.MonkeyPatch, verdicts: list[Verdict], eps: float, expect: Status
+) -> None:
     rng = np.random.default_rng(5)
     m = 3
     s1, s2 = spd(rng, m), spd(rng, m)
@@ -280,9 +288,9 @@ def test_fusion_closed_form_corrupted_kernel(monkeypatch: pytest.MonkeyPatch,
 
 
 @pytest.mark.parametrize(("eps", "expect"), [(1e-5, SMALL), (1e-1, LARGE)])
-def test_fusion_cvxpy_corrupted_point(monkeypatch: pytest.MonkeyPatch,
-                                      verdicts: list[Verdict], eps: float,
-                                      expect: Status) -> None:
+def test_fusion_cvxpy_corrupted_point(
+    monkeypatch: pytest.MonkeyPatch, verdicts: list[Verdict], eps: float, expect: Status
+) -> None:
     rng = np.random.default_rng(6)
     m = 3
     s1, s2 = spd(rng, m), spd(rng, m)
@@ -322,10 +330,13 @@ def _kkt_gradient(data: bf.FieldData, phi: np.ndarray) -> float:
 
 
 @pytest.mark.parametrize(("eps", "expect"), [(1e-5, SMALL), (1e-1, LARGE)])
-def test_biasfield_closed_form_corrupted_kernel(monkeypatch: pytest.MonkeyPatch,
-                                                verdicts: list[Verdict],
-                                                field_data: bf.FieldData, eps: float,
-                                                expect: Status) -> None:
+def test_biasfield_closed_form_corrupted_kernel(
+    monkeypatch: pytest.MonkeyPatch,
+    verdicts: list[Verdict],
+    field_data: bf.FieldData,
+    eps: float,
+    expect: Status,
+) -> None:
     honest = bf.closed_form(field_data)
     verdicts.clear()
     mod = bf.closedform
@@ -360,13 +371,18 @@ def _scale_variables(real: Callable[..., Any], factor: float) -> Callable[..., A
             if v.value is not None and v.name().startswith(("eta", "var")):
                 v.value = v.value * factor
         return res
+
     return corrupted
 
 
 @pytest.mark.parametrize(("eps", "expect"), [(1e-5, SMALL), (1e-1, LARGE)])
-def test_biasfield_solve_corrupted_point(monkeypatch: pytest.MonkeyPatch,
-                                         verdicts: list[Verdict], field_data: bf.FieldData,
-                                         eps: float, expect: Status) -> None:
+def test_biasfield_solve_corrupted_point(
+    monkeypatch: pytest.MonkeyPatch,
+    verdicts: list[Verdict],
+    field_data: bf.FieldData,
+    eps: float,
+    expect: Status,
+) -> None:
     honest = bf.closed_form(field_data)
     verdicts.clear()
     monkeypatch.setattr(bf.problem, "run_solver", _scale_variables(bf.problem.run_solver, 1 + eps))
@@ -374,22 +390,29 @@ def test_biasfield_solve_corrupted_point(monkeypatch: pytest.MonkeyPatch,
     decided(verdicts, sol, expect)
     assert sol.residuals["stationarity"] == pytest.approx(eps, rel=1e-2)
     if expect is SMALL:
-        assert np.allclose(sol.eta, (1 + eps) * honest.eta, rtol=1e-5,
-                           atol=1e-6 * np.max(np.abs(honest.eta)))
+        assert np.allclose(
+            sol.eta, (1 + eps) * honest.eta, rtol=1e-5, atol=1e-6 * np.max(np.abs(honest.eta))
+        )
     else:
         assert np.all(np.isnan(sol.field))
 
 
 @pytest.mark.parametrize(("eps", "expect"), [(1e-5, SMALL), (1e-1, LARGE)])
-def test_biasfield_lipschitz_corrupted_point(monkeypatch: pytest.MonkeyPatch,
-                                             verdicts: list[Verdict],
-                                             field_data: bf.FieldData, eps: float,
-                                             expect: Status) -> None:
+def test_biasfield_lipschitz_corrupted_point(
+    monkeypatch: pytest.MonkeyPatch,
+    verdicts: list[Verdict],
+    field_data: bf.FieldData,
+    eps: float,
+    expect: Status,
+) -> None:
     monkeypatch.setattr(bf.problem, "run_solver", _scale_variables(bf.problem.run_solver, 1 + eps))
     sol = bf.solve_lipschitz(field_data)
     decided(verdicts, sol, expect)
-    assert REJECT_TOL >= sol.max_residual > VERIFY_TOL if expect is SMALL \
+    assert (
+        REJECT_TOL >= sol.max_residual > VERIFY_TOL
+        if expect is SMALL
         else sol.max_residual > REJECT_TOL
+    )
     assert np.all(np.isnan(sol.field)) == (expect is LARGE)
 
 
@@ -403,9 +426,9 @@ def assignment_case(rng: np.random.Generator, q: int = 4, n: int = 4) -> asg.Ass
 
 
 @pytest.mark.parametrize(("rel", "expect"), [(1e-5, SMALL), (1e-2, LARGE)])
-def test_assignment_solve_corrupted_point(monkeypatch: pytest.MonkeyPatch,
-                                          verdicts: list[Verdict], rel: float,
-                                          expect: Status) -> None:
+def test_assignment_solve_corrupted_point(
+    monkeypatch: pytest.MonkeyPatch, verdicts: list[Verdict], rel: float, expect: Status
+) -> None:
     """The MILP's objective off by ``rel``: downgraded, then refused, by the gate of
     :func:`optmodels.assignment.data._finish_point` (the same point through it gives the
     same solution); ``milp.solve`` still decides inline until it calls that function (see
@@ -434,26 +457,34 @@ def test_assignment_solve_corrupted_point(monkeypatch: pytest.MonkeyPatch,
     assert sol.status is expect, sol.message
     assert sol.residuals["objective"] == pytest.approx(rel, rel=1e-6)
     verdicts.clear()
-    common = {"status": Status.OPTIMAL, "method": sol.method, "message": "",
-              "build_time": 0.0, "solve_time": 0.0, "iterations": None}
-    via_gate = asg.data._finish_point(*captured["args"], common=common, gap_reached=None,
-                                      gap=0.0, info={})
+    common = {
+        "status": Status.OPTIMAL,
+        "method": sol.method,
+        "message": "",
+        "build_time": 0.0,
+        "solve_time": 0.0,
+        "iterations": None,
+    }
+    via_gate = asg.data._finish_point(
+        *captured["args"], common=common, gap_reached=None, gap=0.0, info={}
+    )
     decided(verdicts, via_gate, expect)
     assert via_gate.partition == sol.partition
     assert via_gate.residuals == sol.residuals
 
 
 @pytest.mark.parametrize(("rel", "expect"), [(1e-5, SMALL), (1e-2, LARGE)])
-def test_assignment_linear_corrupted_kernel(monkeypatch: pytest.MonkeyPatch,
-                                            verdicts: list[Verdict], rel: float,
-                                            expect: Status) -> None:
+def test_assignment_linear_corrupted_kernel(
+    monkeypatch: pytest.MonkeyPatch, verdicts: list[Verdict], rel: float, expect: Status
+) -> None:
     """The gains (kernel input of scipy's linear_sum_assignment) shifted so that the
     assignment's total disagrees with the recomputed score (13) by ``rel``."""
     rng = np.random.default_rng(10)
     means = rng.uniform(0, 40, (5, 2))
     meas = np.vstack([means + rng.normal(0, 0.3, (5, 2)), rng.uniform(0, 40, (1, 2))])
-    data = asg.AssignmentData(means, np.stack([np.eye(2)] * 5), meas, 0.25 * np.eye(2),
-                              1600.0, 0.9, 0.3, max_group_size=1)
+    data = asg.AssignmentData(
+        means, np.stack([np.eye(2)] * 5), meas, 0.25 * np.eye(2), 1600.0, 0.9, 0.3, max_group_size=1
+    )
     honest = asg.linear_assignment(data)
     assert honest.status is Status.OPTIMAL
     verdicts.clear()
@@ -511,7 +542,8 @@ def test_one_nlp_cache_and_precision_limit(monkeypatch: pytest.MonkeyPatch) -> N
     assert cb.NLP_CACHE.keys("plane") == []
     lim = cb.PRECISION_LIMIT
     assert cb.accept_precision_limit(Status.ERROR, lim, 5e-7, " ok") == (
-        Status.OPTIMAL_INACCURATE, lim + " ok")
+        Status.OPTIMAL_INACCURATE,
+        lim + " ok",
+    )
     assert cb.accept_precision_limit(Status.ERROR, lim, 2e-6, " ok") == (Status.ERROR, lim)
-    assert cb.accept_precision_limit(Status.ERROR, "Other", 0.0, " ok") == (
-        Status.ERROR, "Other")
+    assert cb.accept_precision_limit(Status.ERROR, "Other", 0.0, " ok") == (Status.ERROR, "Other")

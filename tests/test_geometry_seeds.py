@@ -18,10 +18,10 @@ def test_azimuth_is_clockwise_from_north_and_round_trips() -> None:
     np.testing.assert_allclose(p[:, 1], [0.0, np.pi / 2, -3 * np.pi / 4], atol=1e-15)
     rng = np.random.default_rng(0)
     x = rng.normal(scale=1e4, size=(200, 3))
-    np.testing.assert_allclose(geometry.from_polar3d(geometry.to_polar3d(x)), x, rtol=0,
-                               atol=1e-10)
-    np.testing.assert_allclose(geometry.from_polar2d(geometry.to_polar2d(x[:, :2])), x[:, :2],
-                               rtol=0, atol=1e-10)
+    np.testing.assert_allclose(geometry.from_polar3d(geometry.to_polar3d(x)), x, rtol=0, atol=1e-10)
+    np.testing.assert_allclose(
+        geometry.from_polar2d(geometry.to_polar2d(x[:, :2])), x[:, :2], rtol=0, atol=1e-10
+    )
     # elevation: asin(z / r) against the independent atan2 of the horizontal distance
     el = np.arctan2(x[:, 2], np.hypot(x[:, 0], x[:, 1]))
     np.testing.assert_allclose(geometry.to_polar3d(x)[:, 2], el, atol=1e-12)
@@ -45,10 +45,11 @@ def test_seed_helper_one_meaning() -> None:
     np.testing.assert_array_equal(a, b)  # the same stream as numpy's own seeding
     g = np.random.default_rng(3)
     assert seeds.as_generator("f seed", g) is g
-    np.testing.assert_array_equal(seeds.as_generator("f seed", [1, 2]).integers(0, 10**9, 3),
-                                  np.random.default_rng([1, 2]).integers(0, 10**9, 3))
+    np.testing.assert_array_equal(
+        seeds.as_generator("f seed", [1, 2]).integers(0, 10**9, 3),
+        np.random.default_rng([1, 2]).integers(0, 10**9, 3),
+    )
     for bad in (None, True, 1.5, "x", -1):
         with pytest.raises(ProblemError, match="f seed"):
             seeds.as_generator("f seed", bad)
-    assert isinstance(seeds.as_generator("f seed", None, allow_none=True),
-                      np.random.Generator)
+    assert isinstance(seeds.as_generator("f seed", None, allow_none=True), np.random.Generator)

@@ -36,8 +36,14 @@ def _lines(path: Path) -> int:
 def _start(code: str) -> subprocess.Popen[str]:
     """A study in a child interpreter, in its own session (so that a signal can go to
     the whole process group, as a terminal's Ctrl-C does)."""
-    return subprocess.Popen([sys.executable, "-c", code], cwd=ROOT, env=ENV,
-                            start_new_session=True, stderr=subprocess.PIPE, text=True)
+    return subprocess.Popen(
+        [sys.executable, "-c", code],
+        cwd=ROOT,
+        env=ENV,
+        start_new_session=True,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
 
 
 def _wait_lines(proc: subprocess.Popen[str], path: Path, n: int, timeout: float = 120) -> None:
@@ -45,8 +51,9 @@ def _wait_lines(proc: subprocess.Popen[str], path: Path, n: int, timeout: float 
     while _lines(path) < n:
         if proc.poll() is not None or time.monotonic() > deadline:
             proc.kill()
-            pytest.fail(f"no {n} checkpoint lines (exit {proc.returncode}): "
-                        f"{proc.communicate()[1][-2000:]}")
+            pytest.fail(
+                f"no {n} checkpoint lines (exit {proc.returncode}): {proc.communicate()[1][-2000:]}"
+            )
         time.sleep(0.05)
 
 
@@ -70,10 +77,11 @@ def test_serial_and_processes_identical() -> None:
 
 def test_dask_local_cluster_identical() -> None:
     import distributed  # in the test extra (pyproject): must be here, never skipped
-    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=False,
-                                  dashboard_address=None) as cluster:
-        by_address = mc.run(Slow(0.0), 50, seed=2, scheduler=cluster.scheduler_address,
-                            chunk=6)
+
+    with distributed.LocalCluster(
+        n_workers=2, threads_per_worker=1, processes=False, dashboard_address=None
+    ) as cluster:
+        by_address = mc.run(Slow(0.0), 50, seed=2, scheduler=cluster.scheduler_address, chunk=6)
         with distributed.Client(cluster) as client:
             by_client = mc.run(Slow(0.0), 50, seed=2, scheduler=client, chunk=11)
     local = mc.run(Slow(0.0), 50, seed=2, scheduler="serial")
@@ -84,12 +92,15 @@ def test_dask_local_cluster_identical() -> None:
 
 def test_checkpoint_resumes_after_kill(tmp_path: Path) -> None:
     ckpt = tmp_path / "study.jsonl"
-    code = ("from optmodels import montecarlo as mc\n"
-            "from tests.harness_adapters import Slow\n"
-            f"mc.run(Slow(0.01), 300, seed=9, scheduler='serial', chunk=5, "
-            f"checkpoint={str(ckpt)!r})\n")
-    proc = subprocess.Popen([sys.executable, "-c", code], cwd=ROOT,
-                            env={**os.environ, "PYTHONPATH": str(ROOT)})
+    code = (
+        "from optmodels import montecarlo as mc\n"
+        "from tests.harness_adapters import Slow\n"
+        f"mc.run(Slow(0.01), 300, seed=9, scheduler='serial', chunk=5, "
+        f"checkpoint={str(ckpt)!r})\n"
+    )
+    proc = subprocess.Popen(
+        [sys.executable, "-c", code], cwd=ROOT, env={**os.environ, "PYTHONPATH": str(ROOT)}
+    )
     try:
         deadline = time.monotonic() + 120
         while time.monotonic() < deadline:
@@ -131,11 +142,17 @@ def test_cut_short_checkpoint_line_is_ignored(tmp_path: Path) -> None:
     _same(res, mc.run(Slow(0.0), 30, seed=1, scheduler="serial"))
 
 
-@pytest.mark.parametrize("kwargs, match", [
-    ({"trials": 0}, "trials"), ({"trials": 2.5}, "trials"), ({"seed": -1}, "seed"),
-    ({"scheduler": "threads"}, "scheduler"), ({"workers": 0}, "workers"),
-    ({"chunk": 0}, "chunk"),
-])
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        ({"trials": 0}, "trials"),
+        ({"trials": 2.5}, "trials"),
+        ({"seed": -1}, "seed"),
+        ({"scheduler": "threads"}, "scheduler"),
+        ({"workers": 0}, "workers"),
+        ({"chunk": 0}, "chunk"),
+    ],
+)
 def test_bad_arguments(kwargs: dict[str, object], match: str) -> None:
     args = {"trials": 4, "seed": 0, **kwargs}
     with pytest.raises(ProblemError, match=match):
@@ -169,13 +186,16 @@ def test_fusion_weight_matches_linearisation() -> None:
 def test_assignment_rate_rises_with_separation() -> None:
     # 300 trials per point: se of a rate ≤ 0.029. Well resolved objects (6 σ apart) are
     # associated right nearly always; merged ones (0.5 σ) much less often.
-    far = mc.run("assignment-separation", 300, seed=1, scheduler="serial",
-                 params={"separation": 6.0})
-    near = mc.run("assignment-separation", 300, seed=1, scheduler="serial",
-                  params={"separation": 0.5})
+    far = mc.run(
+        "assignment-separation", 300, seed=1, scheduler="serial", params={"separation": 6.0}
+    )
+    near = mc.run(
+        "assignment-separation", 300, seed=1, scheduler="serial", params={"separation": 0.5}
+    )
     assert far.summary["rate"] >= 0.95
-    assert far.summary["rate"] - near.summary["rate"] > 4 * np.hypot(far.summary["se"],
-                                                                    near.summary["se"])
+    assert far.summary["rate"] - near.summary["rate"] > 4 * np.hypot(
+        far.summary["se"], near.summary["se"]
+    )
 
 
 # ------------------------------------------------------------------------ faults
@@ -183,8 +203,9 @@ def test_failing_trials_are_recorded_not_fatal(tmp_path: Path) -> None:
     ckpt = tmp_path / "f.jsonl"
     expected = _failing(0.05, 3, 400)
     assert 5 <= len(expected) <= 40  # ~20 of 400: the test exercises failures
-    res = mc.run(Flaky(0.05), 400, seed=3, scheduler="processes", workers=2, chunk=9,
-                 checkpoint=ckpt)
+    res = mc.run(
+        Flaky(0.05), 400, seed=3, scheduler="processes", workers=2, chunk=9, checkpoint=ckpt
+    )
     assert {i for i, _ in res.failures} == expected
     assert all(msg == "RuntimeError: trial exploded" for _, msg in res.failures)
     assert res.n_ok == 400 - len(expected) and res.requested == 400
@@ -193,15 +214,13 @@ def test_failing_trials_are_recorded_not_fatal(tmp_path: Path) -> None:
     # the summary is over them alone
     serial = mc.run(Flaky(0.05), 400, seed=3, scheduler="serial")
     _same(res, serial)
-    assert res.summary["mean_b"] == pytest.approx(float(np.mean(serial.values["b"])),
-                                                  rel=1e-15)
+    assert res.summary["mean_b"] == pytest.approx(float(np.mean(serial.values["b"])), rel=1e-15)
     # a rerun takes successes and failures from the checkpoint and runs nothing
     again = mc.run(Flaky(0.05), 400, seed=3, scheduler="serial", checkpoint=ckpt)
     assert again.resumed == 400 and again.failures == res.failures
     lines = _lines(ckpt)
     # unless asked: the failed trials run again (and, being deterministic, fail again)
-    retry = mc.run(Flaky(0.05), 400, seed=3, scheduler="serial", checkpoint=ckpt,
-                   retry_failed=True)
+    retry = mc.run(Flaky(0.05), 400, seed=3, scheduler="serial", checkpoint=ckpt, retry_failed=True)
     assert retry.resumed == 400 - len(expected) and retry.failures == res.failures
     assert _lines(ckpt) > lines
 
@@ -214,11 +233,13 @@ def test_all_trials_failing_gives_an_empty_result() -> None:
 
 def test_sigkill_of_the_parent_leaves_no_worker(tmp_path: Path) -> None:
     ckpt = tmp_path / "k.jsonl"
-    code = ("from optmodels import montecarlo as mc\n"
-            "from tests.harness_adapters import Slow\n"
-            "if __name__ == '__main__':\n"
-            f"    mc.run(Slow(0.01), 200, seed=4, workers=2, chunk=4, "
-            f"checkpoint={str(ckpt)!r})\n")
+    code = (
+        "from optmodels import montecarlo as mc\n"
+        "from tests.harness_adapters import Slow\n"
+        "if __name__ == '__main__':\n"
+        f"    mc.run(Slow(0.01), 200, seed=4, workers=2, chunk=4, "
+        f"checkpoint={str(ckpt)!r})\n"
+    )
     proc = _start(code)
     _wait_lines(proc, ckpt, 4)  # header + 3 chunks: the pool is up and working
     kids = children(proc.pid)
@@ -234,16 +255,18 @@ def test_sigkill_of_the_parent_leaves_no_worker(tmp_path: Path) -> None:
 
 def test_ctrl_c_saves_and_exits_in_one_line(tmp_path: Path) -> None:
     ckpt = tmp_path / "i.jsonl"
-    code = ("import sys\n"
-            "from optmodels import montecarlo as mc\n"
-            "from tests.harness_adapters import Slow\n"
-            "if __name__ == '__main__':\n"
-            "    try:\n"
-            f"        mc.run(Slow(0.01), 200, seed=6, workers=2, chunk=4, "
-            f"checkpoint={str(ckpt)!r})\n"
-            "    except KeyboardInterrupt as exc:  # what the CLI does: one line, exit 130\n"
-            "        print(f'optmodels: {exc}', file=sys.stderr)\n"
-            "        sys.exit(130)\n")
+    code = (
+        "import sys\n"
+        "from optmodels import montecarlo as mc\n"
+        "from tests.harness_adapters import Slow\n"
+        "if __name__ == '__main__':\n"
+        "    try:\n"
+        f"        mc.run(Slow(0.01), 200, seed=6, workers=2, chunk=4, "
+        f"checkpoint={str(ckpt)!r})\n"
+        "    except KeyboardInterrupt as exc:  # what the CLI does: one line, exit 130\n"
+        "        print(f'optmodels: {exc}', file=sys.stderr)\n"
+        "        sys.exit(130)\n"
+    )
     proc = _start(code)
     _wait_lines(proc, ckpt, 4)
     kids = children(proc.pid)
@@ -299,7 +322,8 @@ def test_empty_and_cut_short_checkpoints_start_afresh(tmp_path: Path) -> None:
 
 
 def test_garbage_checkpoint_lines_are_skipped_and_said(
-        tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+    tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
     ckpt = tmp_path / "g.jsonl"
     mc.run(Slow(0.0), 20, seed=1, scheduler="serial", checkpoint=ckpt, chunk=5)
     with ckpt.open("ab") as fh:
@@ -325,13 +349,16 @@ def test_foreign_file_is_refused_untouched(tmp_path: Path) -> None:
 
 def test_second_writer_is_refused_and_a_stale_lock_is_not(tmp_path: Path) -> None:
     ckpt = tmp_path / "w.jsonl"
-    code = ("import time\n"
-            "from optmodels.execution import LineLog\n"
-            f"log = LineLog({str(ckpt)!r}, 'holder')\n"
-            "print('locked', flush=True)\n"
-            "time.sleep(60)\n")
-    holder = subprocess.Popen([sys.executable, "-c", code], cwd=ROOT, env=ENV,
-                              stdout=subprocess.PIPE, text=True)
+    code = (
+        "import time\n"
+        "from optmodels.execution import LineLog\n"
+        f"log = LineLog({str(ckpt)!r}, 'holder')\n"
+        "print('locked', flush=True)\n"
+        "time.sleep(60)\n"
+    )
+    holder = subprocess.Popen(
+        [sys.executable, "-c", code], cwd=ROOT, env=ENV, stdout=subprocess.PIPE, text=True
+    )
     try:
         assert holder.stdout is not None and holder.stdout.readline().strip() == "locked"
         busy = re.escape(f"in use by another process (pid {holder.pid})")
@@ -343,33 +370,45 @@ def test_second_writer_is_refused_and_a_stale_lock_is_not(tmp_path: Path) -> Non
     assert mc.run(Slow(0.0), 5, seed=1, scheduler="serial", checkpoint=ckpt).n_ok == 5
 
 
-@pytest.mark.parametrize("kwargs, match", [
-    ({"trials": float("nan")}, "trials"), ({"trials": True}, "trials"),
-    ({"trials": 1e300}, "trials: must be <= 10000000"),  # the size guard, not a hang
-    ({"workers": 10**6}, "workers: must be <= 256"),
-    ({"checkpoint": "DIR"}, "is a directory"),
-    ({"study": "plane-angle", "params": {"n": "abc"}}, "PlaneAngle n"),
-    ({"study": "plane-angle", "params": {"setting": "sky"}}, "setting"),
-    ({"study": "plane-angle", "params": {"zz": 1}}, "unknown parameter"),
-    ({"study": "plane-angle", "params": [1]}, "params: expected a mapping"),
-    ({"study": "fusion-weight", "params": {"n": 3}}, "FusionWeight n"),
-    ({"study": "fusion-weight", "params": {"s1": [[1, 2], [2, 1]]}}, "s1"),
-    ({"study": "assignment-separation", "params": {"prior_sigma": 0}}, "prior_sigma"),
-    ({"scheduler": "tcp://"}, "scheduler"), ({"scheduler": 3}, "scheduler"),
-])
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        ({"trials": float("nan")}, "trials"),
+        ({"trials": True}, "trials"),
+        ({"trials": 1e300}, "trials: must be <= 10000000"),  # the size guard, not a hang
+        ({"workers": 10**6}, "workers: must be <= 256"),
+        ({"checkpoint": "DIR"}, "is a directory"),
+        ({"study": "plane-angle", "params": {"n": "abc"}}, "PlaneAngle n"),
+        ({"study": "plane-angle", "params": {"setting": "sky"}}, "setting"),
+        ({"study": "plane-angle", "params": {"zz": 1}}, "unknown parameter"),
+        ({"study": "plane-angle", "params": [1]}, "params: expected a mapping"),
+        ({"study": "fusion-weight", "params": {"n": 3}}, "FusionWeight n"),
+        ({"study": "fusion-weight", "params": {"s1": [[1, 2], [2, 1]]}}, "s1"),
+        ({"study": "assignment-separation", "params": {"prior_sigma": 0}}, "prior_sigma"),
+        ({"scheduler": "tcp://"}, "scheduler"),
+        ({"scheduler": 3}, "scheduler"),
+    ],
+)
 def test_bad_arguments_more(tmp_path: Path, kwargs: dict[str, object], match: str) -> None:
     args: dict[str, object] = {"study": Slow(0.0), "trials": 4, "seed": 0, **kwargs}
     if args.get("checkpoint") == "DIR":
         args["checkpoint"] = tmp_path
     with pytest.raises(ProblemError, match=match):
-        mc.run(args.pop("study"), args.pop("trials"), args.pop("seed"),  # type: ignore[arg-type]
-               scheduler=args.pop("scheduler", "serial"), **args)  # type: ignore[arg-type]
+        mc.run(
+            args.pop("study"),
+            args.pop("trials"),
+            args.pop("seed"),  # type: ignore[arg-type]
+            scheduler=args.pop("scheduler", "serial"),
+            **args,
+        )  # type: ignore[arg-type]
 
 
 def test_unreachable_dask_scheduler_is_a_clear_error() -> None:
     t0 = time.monotonic()
-    with pytest.raises(ProblemError, match=re.escape(
-            "cannot reach the Dask scheduler at tcp://127.0.0.1:9 within 1 s")):
+    with pytest.raises(
+        ProblemError,
+        match=re.escape("cannot reach the Dask scheduler at tcp://127.0.0.1:9 within 1 s"),
+    ):
         mc.run(Slow(0.0), 4, scheduler="tcp://127.0.0.1:9", connect_timeout=1.0)
     assert time.monotonic() - t0 < 15  # the connect timeout, not distributed's 30 s
 
@@ -385,24 +424,35 @@ def test_execute_serial_pool_and_a_lost_task() -> None:
     tasks = [(math.sqrt, float(x)) for x in xs]
     got: dict[str, dict[int, float]] = {"serial": {}, "processes": {}}
     for engine in got:
-        desc = execute(operator.call, tasks, scheduler=engine, workers=2,
-                       on_result=lambda k, v, e=engine: got[e].__setitem__(k, v))
+        desc = execute(
+            operator.call,
+            tasks,
+            scheduler=engine,
+            workers=2,
+            on_result=lambda k, v, e=engine: got[e].__setitem__(k, v),
+        )
         assert desc.startswith(engine)
         assert sorted(got[engine]) == list(range(6))
-        np.testing.assert_allclose([got[engine][k] for k in range(6)], np.sqrt(xs),
-                                   rtol=1e-15)
+        np.testing.assert_allclose([got[engine][k] for k in range(6)], np.sqrt(xs), rtol=1e-15)
     # a task that kills its worker is lost (with whatever was in flight with it), the
     # others still run in a new pool; each task is reported exactly once
     tasks.insert(2, (os._exit, 3))
     done: dict[int, float] = {}
     lost: list[int] = []
-    execute(operator.call, tasks, scheduler="processes", workers=1,
-            on_result=done.__setitem__, on_lost=lambda k, msg: lost.append(k))
+    execute(
+        operator.call,
+        tasks,
+        scheduler="processes",
+        workers=1,
+        on_result=done.__setitem__,
+        on_lost=lambda k, msg: lost.append(k),
+    )
     assert 2 in lost and len(lost) <= 2 and not set(lost) & set(done)
     assert sorted([*lost, *done]) == list(range(7))
     want = dict(enumerate(np.sqrt(np.insert(xs, 2, np.nan))))
     for k, v in done.items():
         assert v == pytest.approx(want[k], rel=1e-15)
     with pytest.raises(ProblemError, match="compare scheduler"):
-        execute(operator.call, tasks, scheduler="nowhere", on_result=done.__setitem__,
-                what="compare")
+        execute(
+            operator.call, tasks, scheduler="nowhere", on_result=done.__setitem__, what="compare"
+        )

@@ -114,8 +114,9 @@ def test_full_nlp_derivatives_equal_casadi_ad(n: int) -> None:
         a, b = (a if isinstance(a, tuple) else (a,)), (b if isinstance(b, tuple) else (b,))
         for u, v in zip(a, b, strict=True):
             assert u.sparsity() == v.sparsity()
-            np.testing.assert_allclose(np.asarray(u.nonzeros()), np.asarray(v.nonzeros()),
-                                       rtol=1e-13, atol=1e-13)
+            np.testing.assert_allclose(
+                np.asarray(u.nonzeros()), np.asarray(v.nonzeros()), rtol=1e-13, atol=1e-13
+            )
     # the structure used by the solver: 7N + 3 and 9N + 3 non-zeros
     assert mine[0].sparsity_out(1).nnz() == 7 * n + 3
     assert mine[1].sparsity_out(0).nnz() == 9 * n + 3
@@ -220,8 +221,9 @@ def test_projection_is_the_constrained_minimiser() -> None:
     g = np.linalg.solve(data.covs, (x - data.points)[..., None])[..., 0]
     parallel = np.cross(g, n)
     assert np.max(np.linalg.norm(parallel, axis=1) / np.linalg.norm(g, axis=1)) <= 1e-10
-    assert plane.objective(data, x) == pytest.approx(plane.reduced_objective(data, n, 100.0),
-                                                    rel=1e-12)
+    assert plane.objective(data, x) == pytest.approx(
+        plane.reduced_objective(data, n, 100.0), rel=1e-12
+    )
 
 
 def test_cramer_rao_matches_monte_carlo_on_paper_example() -> None:
@@ -275,10 +277,12 @@ def test_planarity_statistic_at_the_papers_start_time() -> None:
     # the χ²(197) law holds there. 1000 runs: standard error of the mean √(2·197/1000)
     # = 0.63; allow 4 of them.
     rng = np.random.default_rng(12)
-    lam = np.array([
-        plane.closed_form(plane.PlaneData(sc.points, sc.cov)).info["lambda_min"]
-        for sc in (scenarios.paper_plane_example(rng, duration=2.0) for _ in range(1000))
-    ])
+    lam = np.array(
+        [
+            plane.closed_form(plane.PlaneData(sc.points, sc.cov)).info["lambda_min"]
+            for sc in (scenarios.paper_plane_example(rng, duration=2.0) for _ in range(1000))
+        ]
+    )
     assert np.mean(lam) == pytest.approx(197.0, abs=4 * np.sqrt(2 * 197 / 1000))
 
 
@@ -287,10 +291,12 @@ def test_short_arc_statistic_falls_below_chi2() -> None:
     # plane is not resolved and Λ_min is far below its χ²(N-3) mean (documented limit of
     # the test: conservative on short arcs). 500 runs; the χ²(17) mean has se 0.26.
     rng = np.random.default_rng(13)
-    lam = np.array([
-        plane.closed_form(plane.PlaneData(sc.points, sc.cov)).info["lambda_min"]
-        for sc in (scenarios.paper_plane_example(rng, duration=0.2) for _ in range(500))
-    ])
+    lam = np.array(
+        [
+            plane.closed_form(plane.PlaneData(sc.points, sc.cov)).info["lambda_min"]
+            for sc in (scenarios.paper_plane_example(rng, duration=0.2) for _ in range(500))
+        ]
+    )
     assert np.mean(lam) < 17.0 - 10 * np.sqrt(2 * 17 / 500)
 
 
@@ -331,10 +337,12 @@ def test_paper_rule_false_alarm_by_monte_carlo() -> None:
     # runs, expected rejection count 4000·p with p from χ²(997) (~78), binomial sd ~8.7.
     # The claimed 0.003 would give 12: excluded by > 7 sd.
     rng = np.random.default_rng(21)
-    lam = np.array([
-        plane.closed_form(plane.PlaneData(sc.points, sc.cov)).info["lambda_min"]
-        for sc in (scenarios.paper_plane_example(rng) for _ in range(4000))
-    ])
+    lam = np.array(
+        [
+            plane.closed_form(plane.PlaneData(sc.points, sc.cov)).info["lambda_min"]
+            for sc in (scenarios.paper_plane_example(rng) for _ in range(4000))
+        ]
+    )
     rejected = int(np.sum(np.sqrt(2 * lam) > np.sqrt(2 * 1000) + 2))
     p = stats.chi2.sf((np.sqrt(2000) + 2) ** 2 / 2, 997)
     assert abs(rejected - 4000 * p) <= 4 * np.sqrt(4000 * p * (1 - p))
@@ -379,13 +387,25 @@ def test_sequence_matches_batch_closed_form_and_generic() -> None:
         (np.full((5, 3), np.nan), np.eye(3), None, "NaN"),
         (np.ones((5, 2)), np.eye(3), None, r"shape \(\*, 3\)"),
         (np.random.default_rng(0).normal(size=(5, 3)), -np.eye(3), None, "positive definite"),
-        (np.random.default_rng(0).normal(size=(5, 3)), np.triu(np.ones((3, 3))), None,
-         "not symmetric"),
+        (
+            np.random.default_rng(0).normal(size=(5, 3)),
+            np.triu(np.ones((3, 3))),
+            None,
+            "not symmetric",
+        ),
         (np.random.default_rng(0).normal(size=(5, 3)), np.eye(3), -np.ones(5), "alpha2"),
-        (np.random.default_rng(0).normal(size=(5, 3)), np.stack([np.eye(3)] * 5), np.ones(5),
-         "alpha2"),
-        (np.random.default_rng(0).normal(size=(5, 3)), np.stack([np.eye(3)] * 4), None,
-         "cov: expected shape"),
+        (
+            np.random.default_rng(0).normal(size=(5, 3)),
+            np.stack([np.eye(3)] * 5),
+            np.ones(5),
+            "alpha2",
+        ),
+        (
+            np.random.default_rng(0).normal(size=(5, 3)),
+            np.stack([np.eye(3)] * 4),
+            None,
+            "cov: expected shape",
+        ),
         (np.tile([1.0, 2.0, 3.0], (6, 1)), np.eye(3), None, "identical"),
         (np.outer(np.arange(6.0), [1.0, 2.0, 3.0]), np.eye(3), None, "collinear"),
     ],
@@ -448,8 +468,7 @@ def test_rotation_translation_equivariance(seed: int, shift: float, n: int) -> N
     assert plane.angle_error(s1.normal, rot @ s0.normal) <= 1e-8
     sign = np.sign(s1.normal @ (rot @ s0.normal))
     scale = np.max(np.abs(moved.points))
-    assert sign * s1.offset == pytest.approx(s0.offset + (rot @ s0.normal) @ t,
-                                             abs=1e-9 * scale)
+    assert sign * s1.offset == pytest.approx(s0.offset + (rot @ s0.normal) @ t, abs=1e-9 * scale)
     assert s1.objective == pytest.approx(s0.objective, rel=1e-7)
     r1 = plane.solve(moved, "reduced")
     assert plane.angle_error(r1.normal, s1.normal) <= ANGLE_TOL
@@ -481,14 +500,14 @@ def test_general_covariance_ml_attains_crb_radar_broadside() -> None:
         sol = plane.solve(data, "reduced").require_ok()
         errs.append(plane.angle_error(sol.normal, sc.normal))
         if crb is None:
-            crb = plane.cramer_rao_bound(plane.PlaneData(sc.truth, sc.cov), sc.normal,
-                                         sc.offset)
+            crb = plane.cramer_rao_bound(plane.PlaneData(sc.truth, sc.cov), sc.normal, sc.offset)
     assert np.sqrt(np.mean(np.square(errs))) == pytest.approx(crb.angle_rms, rel=0.16)
 
 
 # --------------------------------------------------------------------------- issue 14
-def collinear_then_arc(sigma: float, rng: np.random.Generator | None = None,
-                       n_line: int = 20, n_arc: int = 20) -> tuple[np.ndarray, np.ndarray]:
+def collinear_then_arc(
+    sigma: float, rng: np.random.Generator | None = None, n_line: int = 20, n_arc: int = 20
+) -> tuple[np.ndarray, np.ndarray]:
     """``n_line`` points on a straight line (50 m apart), then a 1000 m-radius arc in the
     plane y = 0 (true normal (0, 1, 0)); times 0.1 s apart; optional noise ``sigma``."""
     line = np.column_stack([np.arange(n_line) * 50.0, np.zeros(n_line), np.zeros(n_line)])
@@ -595,13 +614,16 @@ def test_planarity_test_resolved_on_short_and_long_arcs() -> None:
     # per run plus the tiny curvature: allow 5 of 200), so planar=False. 10 s of it
     # (a 5 km arc) is resolved in every run.
     rng = np.random.default_rng(14)
-    short = [plane.planarity_test(plane.PlaneData(sc.points, sc.cov))
-             for sc in (scenarios.paper_plane_example(rng, duration=0.2) for _ in range(200))]
+    short = [
+        plane.planarity_test(plane.PlaneData(sc.points, sc.cov))
+        for sc in (scenarios.paper_plane_example(rng, duration=0.2) for _ in range(200))
+    ]
     assert sum(r.resolved for r in short) <= 5
     assert not any(r.planar for r in short if not r.resolved)
     assert all(np.isnan(r.p_value) for r in short if not r.resolved)
-    long = plane.planarity_test(plane.PlaneData(scenarios.paper_plane_example(15).points,
-                                                625.0 * np.eye(3)))
+    long = plane.planarity_test(
+        plane.PlaneData(scenarios.paper_plane_example(15).points, 625.0 * np.eye(3))
+    )
     assert long.resolved and long.line_statistic > 100 * long.line_threshold
     # general D_i: the lower bound of the line statistic still resolves the radar plane
     sc = scenarios.radar_plane(60, 3, geometry="broadside")
@@ -618,8 +640,9 @@ def anisotropic_instance(rot: np.ndarray) -> tuple[plane.PlaneData, np.ndarray]:
     n = 60
     th = 0.3
     rz = np.array([[np.cos(th), -np.sin(th), 0], [np.sin(th), np.cos(th), 0], [0, 0, 1]])
-    truth = np.column_stack([rng.uniform(-1000, 1000, n), np.full(n, 200.0),
-                             rng.uniform(-1000, 1000, n)]) + np.array([3000.0, 0.0, 2000.0])
+    truth = np.column_stack(
+        [rng.uniform(-1000, 1000, n), np.full(n, 200.0), rng.uniform(-1000, 1000, n)]
+    ) + np.array([3000.0, 0.0, 2000.0])
     truth = truth @ rz.T @ rot.T
     d = rot @ np.diag([1.0, 1.0, 1e-13]) @ rot.T
     d = 0.5 * (d + d.T)
@@ -663,8 +686,7 @@ def test_closed_form_recheck_estimates_the_error() -> None:
     for delta in (1e-7, 1e-5, 1e-3):
         tilted = cf.normal + delta * t[0]
         tilted /= np.linalg.norm(tilted)
-        chk = _rayleigh_check(q, qabs, data.base_cov / spread**2, tilted[None],
-                              np.array([200.0]))
+        chk = _rayleigh_check(q, qabs, data.base_cov / spread**2, tilted[None], np.array([200.0]))
         assert chk.step[0] == pytest.approx(delta, rel=0.01)
 
 
@@ -674,8 +696,7 @@ def test_solve_recheck_downgrades_an_early_stop() -> None:
     sc = scenarios.two_source_plane(60, np.random.default_rng(3))
     data = plane.PlaneData(sc.points, sc.cov, sc.alpha2)
     cf = plane.closed_form(data)
-    sol = plane.solve(data, "reduced", plugin="sqpmethod", plugin_options={"max_iter": 1},
-                      starts=1)
+    sol = plane.solve(data, "reduced", plugin="sqpmethod", plugin_options={"max_iter": 1}, starts=1)
     est = sol.info["verification"]["stationarity"]
     # a solve that is not OK returns no estimate; what the solver stopped at is kept
     assert not sol.ok and np.all(np.isnan(sol.normal))
@@ -690,8 +711,9 @@ def test_nearly_collinear_points_are_refused_not_fitted() -> None:
     # Across-line spread 1e-12 of the length with noise σ = 1 m: no plane can be computed
     # to working precision. closed_form raises; solve returns a non-OK status.
     rng = np.random.default_rng(5)
-    x = np.column_stack([np.linspace(0, 1000, 30), 1e-9 * rng.normal(size=30),
-                         1e-9 * rng.normal(size=30)]) + np.array([3000.0, 200.0, 100.0])
+    x = np.column_stack(
+        [np.linspace(0, 1000, 30), 1e-9 * rng.normal(size=30), 1e-9 * rng.normal(size=30)]
+    ) + np.array([3000.0, 200.0, 100.0])
     data = plane.PlaneData(x, np.eye(3))
     with pytest.raises(ProblemError, match="not determined"):
         plane.closed_form(data)
@@ -727,25 +749,29 @@ _DATA = plane.PlaneData(_SC.points, _SC.cov)
         (lambda: plane.solve(_DATA, ipopt_options="tol=1"), "ipopt_options"),
         (lambda: plane.solve(_DATA, initial_normal=[0, 0, 0]), "initial_normal"),
         (lambda: plane.solve(_DATA, initial_normal=[1j, 0, 0]), "initial_normal"),
-        (lambda: plane.identify_sequence(_SC.times, _SC.points, _SC.cov, start="2 s"),
-         "start"),
-        (lambda: plane.identify_sequence(_SC.times, _SC.points, _SC.cov, start=np.nan),
-         "start"),
-        (lambda: plane.identify_sequence(_SC.times, _SC.points, _SC.cov, level="x"),
-         "level"),
-        (lambda: plane.identify_sequence(_SC.times, _SC.points, _SC.cov, resolve_every=2.5),
-         "resolve_every"),
-        (lambda: plane.identify_sequence(_SC.times, _SC.points, _SC.cov, resolve_every=0),
-         "resolve_every"),
-        (lambda: plane.identify_sequence(_SC.times, _SC.points, _SC.cov, resolve_every=5,
-                                         formulation="bad"), "formulation"),
+        (lambda: plane.identify_sequence(_SC.times, _SC.points, _SC.cov, start="2 s"), "start"),
+        (lambda: plane.identify_sequence(_SC.times, _SC.points, _SC.cov, start=np.nan), "start"),
+        (lambda: plane.identify_sequence(_SC.times, _SC.points, _SC.cov, level="x"), "level"),
+        (
+            lambda: plane.identify_sequence(_SC.times, _SC.points, _SC.cov, resolve_every=2.5),
+            "resolve_every",
+        ),
+        (
+            lambda: plane.identify_sequence(_SC.times, _SC.points, _SC.cov, resolve_every=0),
+            "resolve_every",
+        ),
+        (
+            lambda: plane.identify_sequence(
+                _SC.times, _SC.points, _SC.cov, resolve_every=5, formulation="bad"
+            ),
+            "formulation",
+        ),
         (lambda: plane.identify_sequence(_SC.times[:3], _SC.points, _SC.cov), "times"),
         (lambda: plane.cramer_rao_bound(_DATA, [0, 1, 0], np.nan), "offset"),
         (lambda: plane.cramer_rao_bound(_DATA, [0, 0, 0], 0.0), "normal"),
         (lambda: plane.reduced_objective(_DATA, [0, 1, np.inf], 0.0), "normal"),
         (lambda: plane.project(_DATA, [0, 1, 0], "0"), "offset"),
-        (lambda: plane.constraint_residuals(_DATA, _SC.points[:3], [0, 1, 0], 0.0),
-         "projected"),
+        (lambda: plane.constraint_residuals(_DATA, _SC.points[:3], [0, 1, 0], 0.0), "projected"),
         (lambda: plane.angle_error([0, 0, 0], [0, 1, 0]), "zero"),
         (lambda: plane.angle_error([np.inf, 0, 0], [0, 1, 0]), "infinite"),
         (lambda: plane.plane_errors([0, 1, 0], 0.0, [0, 1, 0], "a"), "true_offset"),
@@ -753,8 +779,7 @@ _DATA = plane.PlaneData(_SC.points, _SC.cov)
         (lambda: plane.PlaneData(_SC.points.astype(complex), _SC.cov), "complex"),
         (lambda: plane.PlaneData(_SC.points, _SC.cov * (1 + 1j)), "complex"),
         (lambda: plane.PlaneData(_SC.points, np.full((3, 3), np.nan)), "NaN"),
-        (lambda: plane.PlaneData(_SC.points, _SC.cov, np.full(len(_SC.points), np.inf)),
-         "alpha2"),
+        (lambda: plane.PlaneData(_SC.points, _SC.cov, np.full(len(_SC.points), np.inf)), "alpha2"),
         (lambda: scenarios.paper_plane_example(0, radius=-1.0), "radius"),
         (lambda: scenarios.paper_plane_example(0, duration=np.nan), "duration"),
         (lambda: scenarios.paper_plane_example(0, rate_hz=1.0, duration=1.0), "samples"),
@@ -763,8 +788,7 @@ _DATA = plane.PlaneData(_SC.points, _SC.cov)
         (lambda: scenarios.two_source_plane(10, sigma="1"), "sigma"),
         (lambda: scenarios.radar_plane(10, r_min=5e4, r_max=2e4), "r_max"),
         (lambda: scenarios.radar_plane(10, geometry="side"), "geometry"),
-        (lambda: scenarios.radar_covariances(np.zeros((2, 3)), np.zeros(3), 1, 1, 1),
-         "coincide"),
+        (lambda: scenarios.radar_covariances(np.zeros((2, 3)), np.zeros(3), 1, 1, 1), "coincide"),
     ],
 )
 def test_bad_scalars_and_arrays_are_problem_errors(call, match) -> None:

@@ -19,8 +19,9 @@ TIGHT = {"tol": 1e-14, "constr_viol_tol": 1e-14}
 def _reduced(points: np.ndarray, cov: np.ndarray) -> plane.PlaneSolution:
     """The reduced NLP (1.12)-(1.13), cold (3 starts), tight tolerances: independent of
     fit_general (CasADi + IPOPT, its own starts)."""
-    return plane.solve(plane.PlaneData(points, cov), "reduced", starts=3,
-                       ipopt_options=TIGHT).require_ok()
+    return plane.solve(
+        plane.PlaneData(points, cov), "reduced", starts=3, ipopt_options=TIGHT
+    ).require_ok()
 
 
 # --------------------------------------------------------------------------- vs the NLP
@@ -43,8 +44,11 @@ def test_sliding_windows_agree_with_reduced_nlp(seed: int) -> None:
         assert float(plane.angle_error(fit.normal, sol.normal)) <= 1e-8
         assert fit.offset == pytest.approx(sol.offset, rel=1e-9, abs=1e-6)
         assert fit.objective == pytest.approx(
-            plane.reduced_objective(plane.PlaneData(tr.points[sl], tr.cov[sl]),
-                                    sol.normal, sol.offset), rel=1e-9)
+            plane.reduced_objective(
+                plane.PlaneData(tr.points[sl], tr.cov[sl]), sol.normal, sol.offset
+            ),
+            rel=1e-9,
+        )
         assert fit.numerical_error <= 1e-8
         compared += 1
     assert compared >= 5
@@ -88,15 +92,18 @@ def test_statistic_is_chi2_n_minus_3_on_planar_radar_data() -> None:
     """Monte Carlo: min (1.12) ~ χ²(N − 3) for planar motion (mean N − 3, variance 2(N − 3));
     400 runs: the mean is within 4 standard errors."""
     n, runs = 60, 400
-    vals = np.array([fit_general(sc.points, sc.cov).objective
-                     for sc in (scenarios.radar_plane(n, 1000 + r) for r in range(runs))])
+    vals = np.array(
+        [
+            fit_general(sc.points, sc.cov).objective
+            for sc in (scenarios.radar_plane(n, 1000 + r) for r in range(runs))
+        ]
+    )
     dof = n - 3
     assert abs(vals.mean() - dof) <= 4 * np.sqrt(2 * dof / runs)
 
 
 # --------------------------------------------------------------------------- resolved
-def _line_track(rng: np.random.Generator, n: int) -> tuple[np.ndarray, np.ndarray,
-                                                           np.ndarray]:
+def _line_track(rng: np.random.Generator, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     site = np.zeros(3)
     d = np.array([0.6, 0.7, 0.39])
     d /= np.linalg.norm(d)
@@ -129,8 +136,9 @@ def test_line_statistic_equals_the_two_smallest_eigenvalues_under_proportional_c
     n = 50
     d = np.array([1.0, 2.0, 0.5]) / np.linalg.norm([1.0, 2.0, 0.5])
     base = np.array([[100.0, 20.0, 0.0], [20.0, 60.0, 10.0], [0.0, 10.0, 300.0]])
-    truth = np.outer(np.linspace(0, 3000, n), d) + 3.0 * np.outer(np.sin(np.linspace(0, 3, n)),
-                                                                 [0.0, 0.0, 1.0])
+    truth = np.outer(np.linspace(0, 3000, n), d) + 3.0 * np.outer(
+        np.sin(np.linspace(0, 3, n)), [0.0, 0.0, 1.0]
+    )
     pts = truth + rng.multivariate_normal(np.zeros(3), base, size=n)
     data = plane.PlaneData(pts, base)
     fit = fit_general(pts, np.broadcast_to(base, (n, 3, 3)))
@@ -164,8 +172,7 @@ def test_resolved_at_level_matches_the_threshold() -> None:
 def test_not_converged_is_never_ok() -> None:
     sc = scenarios.radar_plane(100, 2)
     cold = fit_general(sc.points, sc.cov)
-    bad = fit_general(sc.points, sc.cov, normal0=np.cross(cold.normal, [1.0, 0.0, 0.0]),
-                      max_iter=1)
+    bad = fit_general(sc.points, sc.cov, normal0=np.cross(cold.normal, [1.0, 0.0, 0.0]), max_iter=1)
     assert not bad.converged and not bad.ok and bad.status == Status.ITERATION_LIMIT
     assert not bad.resolved
     sol = bad.to_solution(plane.PlaneData(sc.points, sc.cov))
@@ -260,8 +267,10 @@ def test_scenarios_radar_covariances_is_the_plane_function() -> None:
     rng = np.random.default_rng(4)
     x = rng.normal(size=(20, 3)) * [2e4, 2e4, 3e3] + [0.0, 0.0, 5e3]
     site = np.array([1.0, 2.0, 3.0])
-    np.testing.assert_array_equal(scenarios.radar_covariances(x, site, 10.0, 2e-3, 3e-3),
-                                  radar_covariances(x, site, 10.0, 2e-3, 3e-3))
+    np.testing.assert_array_equal(
+        scenarios.radar_covariances(x, site, 10.0, 2e-3, 3e-3),
+        radar_covariances(x, site, 10.0, 2e-3, 3e-3),
+    )
 
 
 @pytest.mark.parametrize(

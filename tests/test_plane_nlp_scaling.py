@@ -63,10 +63,15 @@ def _feasible(data: plane.PlaneData, sol: plane.PlaneSolution) -> None:
     assert sol.objective == pytest.approx(plane.objective(data, sol.projected), rel=1e-12)
 
 
-@pytest.mark.parametrize("make", [lambda: _general(2000, 11)[0],
-                                  lambda: _general(2000, 12, "broadside")[0],
-                                  lambda: _random_general(2000, 13)],
-                         ids=["radar-edge-on", "radar-broadside", "random-spd"])
+@pytest.mark.parametrize(
+    "make",
+    [
+        lambda: _general(2000, 11)[0],
+        lambda: _general(2000, 12, "broadside")[0],
+        lambda: _random_general(2000, 13),
+    ],
+    ids=["radar-edge-on", "radar-broadside", "random-spd"],
+)
 def test_full_via_reduced_equals_independent_full_and_reduced(make) -> None:
     data = make()
     fast = plane.solve(data, "full", starts=3)
@@ -145,8 +150,9 @@ def test_other_plugins_start_from_the_axes_by_default() -> None:
     tight = {"tol_pr": 1e-12, "tol_du": 1e-12}  # sqpmethod's defaults are 1e-6
     sqp = plane.solve(data, "full", starts=3, plugin="sqpmethod", plugin_options=tight)
     assert sqp.info["via_reduced"] is False and sqp.info["reduced_iterations"] == 0
-    both = plane.solve(data, "full", starts=3, plugin="sqpmethod", plugin_options=tight,
-                       via_reduced=True)
+    both = plane.solve(
+        data, "full", starts=3, plugin="sqpmethod", plugin_options=tight, via_reduced=True
+    )
     assert both.info["via_reduced"] is True and both.info["reduced_iterations"] > 0
     for sol in (sqp, both):
         _feasible(data, sol)

@@ -28,8 +28,7 @@ def _long_track(n: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
     rng = np.random.default_rng(seed)
     t = np.arange(n, dtype=float)
     ph = 200.0 / 7000.0 * t
-    truth = np.column_stack([1e5 + 7000 * np.cos(ph), 5e4 + 7000 * np.sin(ph),
-                             9000.0 + 0 * t])
+    truth = np.column_stack([1e5 + 7000 * np.cos(ph), 5e4 + 7000 * np.sin(ph), 9000.0 + 0 * t])
     return t, truth + 30.0 * rng.normal(size=truth.shape)
 
 
@@ -39,8 +38,9 @@ def test_window_moments_match_from_scratch_and_naive_removal_does_not() -> None:
     # 100 points (naive removal: 1.8e-7 relative; the epochs: 1e-14)
     rng = np.random.default_rng(2)
     t = np.arange(20000.0)
-    pts = np.column_stack([1e5 + 200 * t, 3e4 + 5000 * np.sin(t / 30),
-                           8000 + 30 * rng.normal(size=len(t))])
+    pts = np.column_stack(
+        [1e5 + 200 * t, 3e4 + 5000 * np.sin(t / 30), 8000 + 30 * rng.normal(size=len(t))]
+    )
     w = 1.0 / rng.uniform(0.5, 2.0, len(t))
     hi = np.arange(10, len(t))
     lo = np.maximum(hi - 99, 0)
@@ -55,8 +55,9 @@ def test_window_moments_match_from_scratch_and_naive_removal_does_not() -> None:
     y = (pts - pts[0]) / mom.spread
     c0 = np.concatenate([[0.0], np.cumsum(w)])
     c1 = np.concatenate([np.zeros((1, 3)), np.cumsum(w[:, None] * y, axis=0)])
-    c2 = np.concatenate([np.zeros((1, 3, 3)),
-                         np.cumsum(w[:, None, None] * y[:, :, None] * y[:, None, :], axis=0)])
+    c2 = np.concatenate(
+        [np.zeros((1, 3, 3)), np.cumsum(w[:, None, None] * y[:, :, None] * y[:, None, :], axis=0)]
+    )
     a0, a1, a2 = c0[hi + 1] - c0[lo], c1[hi + 1] - c1[lo], c2[hi + 1] - c2[lo]
     naive = a2 - a1[:, :, None] * a1[:, None, :] / a0[:, None, None]
     assert float(np.max(np.abs(naive - ref.q) / scale)) > 1e5 * max(ours, 1e-16)
@@ -83,7 +84,7 @@ def test_sliding_windows_equal_the_closed_form_of_each_window(window: str) -> No
     tr = track(t, pts, cov, alpha2=alpha2, window=window, false_alarm_rate_per_h=3.6e-9)
     assert not tr.change.any() and tr.method == "closed_form"
     if isinstance(tr.window, int):
-        assert np.all(tr.n_points[tr.window:] == tr.window)
+        assert np.all(tr.n_points[tr.window :] == tr.window)
     for k in range(0, tr.n_steps, 7):
         m = (t <= tr.times[k]) & (t >= tr.window_start[k])
         assert m.sum() == tr.n_points[k]
@@ -114,10 +115,10 @@ def test_growing_window_equals_identify_sequence() -> None:
 
 
 # --------------------------------------------------------------------------- resolved
-def _line_then_arc(sigma: float, rng: np.random.Generator | None = None,
-                   n_line: int = 20, n_arc: int = 30) -> tuple[np.ndarray, np.ndarray]:
-    line = np.column_stack([np.linspace(-1000.0, 0.0, n_line), np.zeros(n_line),
-                            np.zeros(n_line)])
+def _line_then_arc(
+    sigma: float, rng: np.random.Generator | None = None, n_line: int = 20, n_arc: int = 30
+) -> tuple[np.ndarray, np.ndarray]:
+    line = np.column_stack([np.linspace(-1000.0, 0.0, n_line), np.zeros(n_line), np.zeros(n_line)])
     ph = 0.075 * np.arange(1, n_arc + 1)
     arc = np.column_stack([1000 * np.sin(ph), np.zeros(n_arc), 1000 * (1 - np.cos(ph))])
     pts = np.vstack([line, arc]) + np.array([5000.0, 2000.0, 3000.0])
@@ -186,16 +187,23 @@ def test_chow_statistic_is_the_linear_glr_and_close_to_the_exact_one(tilt: float
     jb, bb = det.score_info_points(cf.normal, cf.offset, x[60], x[b_idx], covs[b_idx], sp, ell)
     u = float(det.chow_statistic(ja[None], ba[None], jb[None], bb[None])[0])
     e = plane.verify._tangent_basis(cf.normal[None])[0]
+
     def design(idx: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         h = np.column_stack([(x[idx] - x[60]) @ e.T / (sp * ell), -np.ones(len(idx))])
         r = (x[idx] @ cf.normal - cf.offset) / sp
         return h, r, np.full(len(idx), float(cf.normal @ cov @ cf.normal) / sp**2)
+
     both = np.concatenate([a_idx, b_idx])
-    lin = (_regression_rss(*design(both)) - _regression_rss(*design(a_idx))
-           - _regression_rss(*design(b_idx)))
+    lin = (
+        _regression_rss(*design(both))
+        - _regression_rss(*design(a_idx))
+        - _regression_rss(*design(b_idx))
+    )
     assert u == pytest.approx(lin, rel=1e-8, abs=1e-9)
-    lam = [plane.closed_form(plane.PlaneData(x[i], cov)).info["lambda_min"]
-           for i in (both, a_idx, b_idx)]
+    lam = [
+        plane.closed_form(plane.PlaneData(x[i], cov)).info["lambda_min"]
+        for i in (both, a_idx, b_idx)
+    ]
     exact = lam[0] - lam[1] - lam[2]
     assert abs(u - exact) <= 0.12 * exact + 0.6
     # the moments route (the closed-form path of track) gives the same J, b and U
@@ -206,8 +214,7 @@ def test_chow_statistic_is_the_linear_glr_and_close_to_the_exact_one(tilt: float
     ja2, ba2 = det.score_info_moments(*args, ma, cov, np.full(1, ell))
     jb2, bb2 = det.score_info_moments(*args, mb, cov, np.full(1, ell))
     assert np.allclose(ja2[0], ja, rtol=1e-9) and np.allclose(jb2[0], jb, rtol=1e-9)
-    assert float(det.chow_statistic(ja2, ba2, jb2, bb2)[0]) == pytest.approx(u, rel=1e-8,
-                                                                             abs=1e-9)
+    assert float(det.chow_statistic(ja2, ba2, jb2, bb2)[0]) == pytest.approx(u, rel=1e-8, abs=1e-9)
 
 
 def test_detector_statistic_is_chi2_3_on_planar_tracks() -> None:
@@ -218,8 +225,14 @@ def test_detector_statistic_is_chi2_3_on_planar_tracks() -> None:
     u = []
     for _ in range(300):
         sc = plane_change_track(rng, tilt_deg=0.0, before=60.0, after=0.0)
-        tr = track(sc.times, sc.points, sc.cov, window_seconds=40.0, scales=[10.0],
-                   false_alarm_rate_per_h=3.6e-9)
+        tr = track(
+            sc.times,
+            sc.points,
+            sc.cov,
+            window_seconds=40.0,
+            scales=[10.0],
+            false_alarm_rate_per_h=3.6e-9,
+        )
         u.append(tr.detector[-1])
     u = np.asarray(u)
     assert np.all(np.isfinite(u))
@@ -298,7 +311,8 @@ def test_detectable_tilt_has_the_stated_power(about: str) -> None:
         # chord that estimates it (half its arc: 2.5 s × 0.0286 rad/s = 4°, cos = 0.9974)
         tangent = (x[41] - x[39]) / np.linalg.norm(x[41] - x[39])
         assert abs(float(np.cross(n, e.T @ u) @ tangent)) == pytest.approx(
-            np.cos(2.5 * 200.0 / 7000.0), abs=1e-4)
+            np.cos(2.5 * 200.0 / 7000.0), abs=1e-4
+        )
     else:
         theta = float(det.detectable_tilt(ja[None], jb[None], np.ones(1), lam)[0])
         f = ja @ np.linalg.solve(ja + jb, jb)
@@ -307,8 +321,11 @@ def test_detectable_tilt_has_the_stated_power(about: str) -> None:
     k = np.cross(n, e.T @ u)
     k /= np.linalg.norm(k)
     v = b_pts - c
-    b_rot = c + (v * np.cos(theta) + np.cross(k, v) * np.sin(theta)
-                 + np.outer(v @ k, k) * (1 - np.cos(theta)))
+    b_rot = c + (
+        v * np.cos(theta)
+        + np.cross(k, v) * np.sin(theta)
+        + np.outer(v @ k, k) * (1 - np.cos(theta))
+    )
     rng = np.random.default_rng(3)
     hits = 0
     runs = 400
@@ -338,8 +355,13 @@ def test_detectable_tilt_grows_with_the_noise() -> None:
     sc = plane_change_track(9, tilt_deg=0.0, before=100.0, after=0.0, sigma=1.0)
     out = []
     for sig in (10.0, 40.0):
-        tr = track(sc.times, sc.truth, sig**2 * np.eye(3), window_seconds=40.0,
-                   false_alarm_rate_per_h=3.6e-9)
+        tr = track(
+            sc.times,
+            sc.truth,
+            sig**2 * np.eye(3),
+            window_seconds=40.0,
+            false_alarm_rate_per_h=3.6e-9,
+        )
         th = tr.detectable_tilt
         out.append(np.median(np.sin(th[np.isfinite(th)])))
     assert out[1] / out[0] == pytest.approx(4.0, rel=1e-6)
@@ -386,8 +408,20 @@ def test_rows_and_json() -> None:
     tr = track(sc.times, sc.points, sc.cov, window_seconds=40.0)
     rows = tr.to_rows()
     assert len(rows) == tr.n_steps
-    assert {"time", "nx", "ny", "nz", "offset", "statistic", "threshold", "resolved",
-            "planar", "change", "detector", "detectable_tilt"} <= set(rows[0])
+    assert {
+        "time",
+        "nx",
+        "ny",
+        "nz",
+        "offset",
+        "statistic",
+        "threshold",
+        "resolved",
+        "planar",
+        "change",
+        "detector",
+        "detectable_tilt",
+    } <= set(rows[0])
     assert [r["change"] for r in rows] == tr.change.tolist()
     d = tr.to_dict()
     text = json.dumps(d, allow_nan=False)
@@ -395,31 +429,35 @@ def test_rows_and_json() -> None:
     assert len(back["normals"]) == tr.n_steps and len(back["normals"][0]) == 3
     assert back["change_times"] == tr.change_times.tolist()
     nan_rows = ~tr.resolved
-    assert all(v is None for row in np.asarray(back["normals"], dtype=object)[nan_rows]
-               for v in row)
+    assert all(
+        v is None for row in np.asarray(back["normals"], dtype=object)[nan_rows] for v in row
+    )
 
 
-@pytest.mark.parametrize(("kwargs", "match"), [
-    ({"window": True}, "plane.track window"),
-    ({"window_points": 3}, "plane.track window_points"),
-    ({"window_points": 40.0}, "plane.track window_points"),
-    ({"window_seconds": -5.0}, "plane.track window_seconds"),
-    ({"window_seconds": 1e-3}, "plane.track window_seconds"),
-    ({"window_seconds": 40.0, "scales": [30.0]}, "plane.track scales"),
-    ({"window": "40s", "window_points": 40}, "give one window"),
-    ({"window": "40"}, "does not say its unit"),
-    ({"window": "3pts"}, r"plane.track window \(points\)"),
-    ({"level": 1.0}, "plane.track level"),
-    ({"false_alarm_rate_per_h": 0.0}, "plane.track false_alarm_rate_per_h"),
-    ({"false_alarm_rate_per_h": 36000.0}, "plane.track false_alarm_rate_per_h"),
-    ({"scales": []}, "plane.track scales"),
-    ({"scales": [5.0, -1.0]}, r"plane.track scales\[1\]"),
-    ({"window_points": 40, "scales": [2.5]}, r"plane.track scales\[0\]"),
-    ({"start": 1e9}, "plane.track start"),
-    ({"power": 0.0}, "plane.track power"),
-    ({"min_reference": 2}, "plane.track min_reference"),
-    ({"max_reference_sd": 0.0}, "plane.track max_reference_sd"),
-])
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        ({"window": True}, "plane.track window"),
+        ({"window_points": 3}, "plane.track window_points"),
+        ({"window_points": 40.0}, "plane.track window_points"),
+        ({"window_seconds": -5.0}, "plane.track window_seconds"),
+        ({"window_seconds": 1e-3}, "plane.track window_seconds"),
+        ({"window_seconds": 40.0, "scales": [30.0]}, "plane.track scales"),
+        ({"window": "40s", "window_points": 40}, "give one window"),
+        ({"window": "40"}, "does not say its unit"),
+        ({"window": "3pts"}, r"plane.track window \(points\)"),
+        ({"level": 1.0}, "plane.track level"),
+        ({"false_alarm_rate_per_h": 0.0}, "plane.track false_alarm_rate_per_h"),
+        ({"false_alarm_rate_per_h": 36000.0}, "plane.track false_alarm_rate_per_h"),
+        ({"scales": []}, "plane.track scales"),
+        ({"scales": [5.0, -1.0]}, r"plane.track scales\[1\]"),
+        ({"window_points": 40, "scales": [2.5]}, r"plane.track scales\[0\]"),
+        ({"start": 1e9}, "plane.track start"),
+        ({"power": 0.0}, "plane.track power"),
+        ({"min_reference": 2}, "plane.track min_reference"),
+        ({"max_reference_sd": 0.0}, "plane.track max_reference_sd"),
+    ],
+)
 def test_bad_arguments_are_problem_errors(kwargs: dict, match: str) -> None:
     sc = plane_change_track(14, before=30.0, after=0.0)
     with pytest.raises(ProblemError, match=match):
@@ -506,10 +544,8 @@ def test_score_has_mean_zero_for_anisotropic_covariances() -> None:
     assert np.abs(naive.mean(axis=0)[0]) > 10 * se[0]  # what the correction removes
     xn = x + (chol @ rng.normal(size=(len(x), 3, 1)))[..., 0]
     jp, bp = det.score_info_points(n, a, c, xn, covs, 1000.0, 0.7)
-    mom = range_moments(xn, 1.0 / alpha2, np.array([0]), np.array([len(x) - 1]),
-                        spread=1000.0)
-    jm, bm = det.score_info_moments(n[None], np.array([a]), c[None], mom, cov,
-                                    np.array([0.7]))
+    mom = range_moments(xn, 1.0 / alpha2, np.array([0]), np.array([len(x) - 1]), spread=1000.0)
+    jm, bm = det.score_info_moments(n[None], np.array([a]), c[None], mom, cov, np.array([0.7]))
     assert np.allclose(jm[0], jp, rtol=1e-9, atol=1e-12 * np.abs(jp).max())
     assert np.allclose(bm[0], bp, rtol=1e-9, atol=1e-12 * np.abs(bp).max())
 
@@ -518,7 +554,8 @@ def test_score_has_mean_zero_for_anisotropic_covariances() -> None:
 def test_false_alarm_rate_with_radar_covariances() -> None:
     # general D_i (fit_general per window), stated 60 per hour over 1 h of planar track
     # (≈ 20 s); measured 17-27 per hour
-    r = false_alarm_runs(1.0, 13, window="40s", errors="radar", false_alarm_rate_per_h=60.0,
-                         run_hours=0.25)
+    r = false_alarm_runs(
+        1.0, 13, window="40s", errors="radar", false_alarm_rate_per_h=60.0, run_hours=0.25
+    )
     assert r["alarms"] > 0
     assert r["rate"] <= r["stated"] + 3 * r["se"]

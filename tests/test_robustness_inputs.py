@@ -37,11 +37,43 @@ from tests.test_robustness import accept
 
 # ------------------------------------------------------------------------ the pool
 POOL: list[Any] = [
-    "high", None, True, np.nan, np.inf, -np.inf, complex(1.0, 1.0), [1.0, 2.0],
-    np.array([1.0, 2.0]), -1, 0, 0.5, 2.5, 3, np.int64(3), np.float64(0.3), 1e300,
+    "high",
+    None,
+    True,
+    np.nan,
+    np.inf,
+    -np.inf,
+    complex(1.0, 1.0),
+    [1.0, 2.0],
+    np.array([1.0, 2.0]),
+    -1,
+    0,
+    0.5,
+    2.5,
+    3,
+    np.int64(3),
+    np.float64(0.3),
+    1e300,
 ]
-POOL_IDS = ["str", "None", "bool", "nan", "inf", "-inf", "complex", "list", "array", "-1",
-            "0", "0.5", "2.5", "3", "int64", "float64", "1e300"]
+POOL_IDS = [
+    "str",
+    "None",
+    "bool",
+    "nan",
+    "inf",
+    "-inf",
+    "complex",
+    "list",
+    "array",
+    "-1",
+    "0",
+    "0.5",
+    "2.5",
+    "3",
+    "int64",
+    "float64",
+    "1e300",
+]
 
 
 def _real(v: Any) -> float | None:
@@ -111,9 +143,15 @@ _T = [np.arange(10.0), np.arange(12.0)]
 _Y = [2.0 * _T[0] + 1.0 + _RNG.normal(size=10), -1.0 * _T[1] + 1.0 + _RNG.normal(size=12)]
 _TD = tr.TrajectoryData(_T, _Y, 1.0)
 _S1, _S2 = np.array([[2.0, 0.3], [0.3, 1.0]]), np.array([[1.0, -0.2], [-0.2, 3.0]])
-_A = dict(means=np.array([[0.0, 0.0], [10.0, 0.0]]), covs=np.stack([np.eye(2)] * 2),
-          measurements=np.array([[0.1, -0.2], [9.8, 0.3], [5.0, 5.0]]), meas_cov=np.eye(2),
-          volume=400.0, pd=0.9, rho=0.2)
+_A = dict(
+    means=np.array([[0.0, 0.0], [10.0, 0.0]]),
+    covs=np.stack([np.eye(2)] * 2),
+    measurements=np.array([[0.1, -0.2], [9.8, 0.3], [5.0, 5.0]]),
+    meas_cov=np.eye(2),
+    volume=400.0,
+    pd=0.9,
+    rho=0.2,
+)
 _AD = asg.AssignmentData(**_A)
 _FD = bf.synthetic_field_data(0, cells=12)[0]
 
@@ -123,58 +161,78 @@ def _assignment_data(**kw: Any) -> asg.AssignmentData:
 
 
 CASES: dict[str, tuple[Callable[[Any], Any], Callable[[Any], bool | None]]] = {
-    "plane.planarity_test level": (lambda v: plane.planarity_test(_PTS, _PTS_CF, level=v),
-                                   open_unit),
+    "plane.planarity_test level": (
+        lambda v: plane.planarity_test(_PTS, _PTS_CF, level=v),
+        open_unit,
+    ),
     "plane.identify_sequence level": (
-        lambda v: plane.identify_sequence(np.arange(30.0), _PTS.points, 25.0 * np.eye(3),
-                                          level=v), open_unit),
-    "plane.solve starts": (lambda v: plane.solve(_PTS, "reduced", starts=v),
-                           count(1, bounded=False)),
+        lambda v: plane.identify_sequence(np.arange(30.0), _PTS.points, 25.0 * np.eye(3), level=v),
+        open_unit,
+    ),
+    "plane.solve starts": (
+        lambda v: plane.solve(_PTS, "reduced", starts=v),
+        count(1, bounded=False),
+    ),
     "trajectories.TrajectoryData epoch": (
-        lambda v: tr.closed_form(tr.TrajectoryData(_T, _Y, 1.0, epoch=v)), real),
+        lambda v: tr.closed_form(tr.TrajectoryData(_T, _Y, 1.0, epoch=v)),
+        real,
+    ),
     # σ² may also be one value per object: a list/array of two is a valid per-object σ²
     "trajectories.TrajectoryData sigma2": (
         lambda v: tr.closed_form(tr.TrajectoryData(_T, _Y, v)),
-        lambda v: True if isinstance(v, list | np.ndarray) else positive(v)),
+        lambda v: True if isinstance(v, list | np.ndarray) else positive(v),
+    ),
     "trajectories.family_test level": (lambda v: tr.family_test(_TD, level=v), open_unit),
     "trajectories.eta n": (lambda v: tr.eta(v), count(2)),
     "fusion.weight_covariance n1": (
-        lambda v: fu.weight_covariance(_S1, _S2, v, 30, mean="sample"), count(4)),
+        lambda v: fu.weight_covariance(_S1, _S2, v, 30, mean="sample"),
+        count(4),
+    ),
     "fusion.sample_covariance_moments n": (
-        lambda v: fu.sample_covariance_moments(_S1, v), count(1)),
+        lambda v: fu.sample_covariance_moments(_S1, v),
+        count(1),
+    ),
     "fusion.monte_carlo_weight trials": (
         lambda v: fu.monte_carlo_weight(_S1, _S2, 10, 10, trials=v, seed=1),
-        count(1, bounded=False)),
+        count(1, bounded=False),
+    ),
     "fusion.TwoSiteSystem.on_baseline baseline": (
-        lambda v: fu.TwoSiteSystem.on_baseline(v).covariances([0.0, 30e3]), positive),
+        lambda v: fu.TwoSiteSystem.on_baseline(v).covariances([0.0, 30e3]),
+        positive,
+    ),
     "fusion.TwoSiteSystem.on_baseline sigma_azimuth": (
         lambda v: fu.TwoSiteSystem.on_baseline(sigma_azimuth=v).covariances([0.0, 30e3]),
-        positive),
+        positive,
+    ),
     "assignment.AssignmentData pd": (lambda v: asg.solve(_assignment_data(pd=v)), probability),
-    "assignment.AssignmentData volume": (lambda v: asg.solve(_assignment_data(volume=v)),
-                                         positive),
-    "assignment.AssignmentData rho": (lambda v: asg.solve(_assignment_data(rho=v)),
-                                      probability),
+    "assignment.AssignmentData volume": (lambda v: asg.solve(_assignment_data(volume=v)), positive),
+    "assignment.AssignmentData rho": (lambda v: asg.solve(_assignment_data(rho=v)), probability),
     "assignment.k_best k": (lambda v: asg.k_best(_AD, v), count(1, bounded=False)),
     "assignment.count_hypotheses q": (lambda v: asg.count_hypotheses(v, 3), count(0)),
     "assignment.solve mip_gap": (
         lambda v: asg.solve(_AD, mip_gap=v),
         lambda v: (lambda x: x is not None and 0 <= x < 1 if x is None or x < 1e100 else None)(
-            _real(v))),
+            _real(v)
+        ),
+    ),
     "assignment.solve time_limit": (lambda v: asg.solve(_AD, time_limit=v), or_none(positive)),
     # a pair is the only valid box: [1, 2] / array([1, 2]) are pairs (for this field a
     # proven-infeasible one), every scalar is refused
-    "biasfield.solve box": (lambda v: bf.solve(_FD, box=v),
-                            lambda v: True if v is None else (None if np.size(v) == 2
-                                                              and not isinstance(v, str)
-                                                              else False)),
-    "biasfield.solve_lipschitz cap": (lambda v: bf.solve_lipschitz(_FD, cap=v),
-                                      or_none(positive)),
+    "biasfield.solve box": (
+        lambda v: bf.solve(_FD, box=v),
+        lambda v: (
+            True if v is None else (None if np.size(v) == 2 and not isinstance(v, str) else False)
+        ),
+    ),
+    "biasfield.solve_lipschitz cap": (lambda v: bf.solve_lipschitz(_FD, cap=v), or_none(positive)),
     "biasfield.synthetic_field_data cells": (
-        lambda v: bf.synthetic_field_data(0, cells=v), count(4, bounded=False)),
+        lambda v: bf.synthetic_field_data(0, cells=v),
+        count(4, bounded=False),
+    ),
     "montecarlo.run trials": (
         lambda v: mc.run(mc.TrajectoriesEta(q=2, n=3), v, 0, scheduler="serial"),
-        count(1, bounded=False)),
+        count(1, bounded=False),
+    ),
 }
 
 
@@ -195,8 +253,9 @@ def test_scalar_arguments(case: str, value: Any) -> None:
 
 
 # ------------------------------------------------------------ large clock offsets
-@settings(max_examples=40, deadline=None, derandomize=True,
-          suppress_health_check=[HealthCheck.too_slow])
+@settings(
+    max_examples=40, deadline=None, derandomize=True, suppress_health_check=[HealthCheck.too_slow]
+)
 @given(
     offset=st.sampled_from([1.0e6, 1.7e9, 1.7e9 + 0.123456, 1e10, -3e9]),
     family=st.sampled_from(["diverging", "parallel", "independent"]),
@@ -233,17 +292,27 @@ def test_clock_origin_does_not_change_velocities(
     # allow |V| · 4 ulp on top of 1e-9 relative.
     v_ref, v_got = np.asarray(ref.velocity), np.asarray(got.velocity)
     assert np.allclose(v_got, v_ref, rtol=1e-9, atol=1e-9 * np.max(np.abs(v_ref))), (
-        offset, family, method, v_got, v_ref)
-    s_tol = 4 * np.spacing(abs(offset)) * np.max(np.abs(v_ref)) + 1e-9 * np.max(
-        np.abs(ref.start))
+        offset,
+        family,
+        method,
+        v_got,
+        v_ref,
+    )
+    s_tol = 4 * np.spacing(abs(offset)) * np.max(np.abs(v_ref)) + 1e-9 * np.max(np.abs(ref.start))
     assert np.max(np.abs(np.asarray(got.start) - ref.start)) <= s_tol, (
-        offset, family, method, got.start, ref.start)
+        offset,
+        family,
+        method,
+        got.start,
+        ref.start,
+    )
     assert np.all(np.isfinite(got.covariance))
 
 
 # ------------------------------------------------------- degenerate sequences
-@settings(max_examples=25, deadline=None, derandomize=True,
-          suppress_health_check=[HealthCheck.too_slow])
+@settings(
+    max_examples=25, deadline=None, derandomize=True, suppress_health_check=[HealthCheck.too_slow]
+)
 @given(
     n_line=st.integers(4, 30),
     scale=st.sampled_from([1.0, 1e3, 1e5]),
@@ -283,15 +352,19 @@ def _plane_text(rng: np.random.Generator) -> str:
 
 
 def _trajectory_text(rng: np.random.Generator) -> str:
-    rows = [f"{j},{t:.17g},{2.0 * t + j + rng.normal():.17g}\n" for j in range(2)
-            for t in np.arange(6.0)]
+    rows = [
+        f"{j},{t:.17g},{2.0 * t + j + rng.normal():.17g}\n"
+        for j in range(2)
+        for t in np.arange(6.0)
+    ]
     return "object,t,y\n" + "".join(rows)
 
 
 def _radars_text(rng: np.random.Generator) -> str:
     return "name,x,y,sigma_range,sigma_azimuth,max_range\n" + "".join(
         f"R{i},{rng.uniform(-5e4, 5e4):.17g},{rng.uniform(-5e4, 5e4):.17g},50,0.08,300000\n"
-        for i in range(3))
+        for i in range(3)
+    )
 
 
 READERS: dict[str, tuple[Callable[[np.random.Generator], str], Callable[[Any], Any]]] = {
@@ -314,14 +387,18 @@ def _mutate(raw: bytes, kind: str, rng: np.random.Generator) -> bytes:
         return raw[: int(rng.integers(0, len(raw)))]
     if kind == "insert":
         at = int(rng.integers(0, len(raw)))
-        return raw[:at] + rng.integers(0, 256, size=int(rng.integers(1, 8))).astype(
-            np.uint8).tobytes() + raw[at:]
+        return (
+            raw[:at]
+            + rng.integers(0, 256, size=int(rng.integers(1, 8))).astype(np.uint8).tobytes()
+            + raw[at:]
+        )
     if kind == "cell":
         lines = raw.split(b"\n")
         i = int(rng.integers(1, max(len(lines) - 1, 2)))
         cells = lines[i].split(b",")
-        cells[int(rng.integers(0, len(cells)))] = [b"nan", b"", b"abc", b"inf", b"1e999",
-                                                   b"-"][int(rng.integers(0, 6))]
+        cells[int(rng.integers(0, len(cells)))] = [b"nan", b"", b"abc", b"inf", b"1e999", b"-"][
+            int(rng.integers(0, 6))
+        ]
         lines[i] = b",".join(cells)
         return b"\n".join(lines)
     if kind == "semicolon":
@@ -331,16 +408,22 @@ def _mutate(raw: bytes, kind: str, rng: np.random.Generator) -> bytes:
     return b""
 
 
-@settings(max_examples=150, deadline=None, derandomize=True,
-          suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
+@settings(
+    max_examples=150,
+    deadline=None,
+    derandomize=True,
+    suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture],
+)
 @given(
     reader=st.sampled_from(sorted(READERS)),
-    kind=st.sampled_from(["bom", "bom_crlf", "latin1", "cut", "insert", "cell", "semicolon",
-                          "nul", "empty"]),
+    kind=st.sampled_from(
+        ["bom", "bom_crlf", "latin1", "cut", "insert", "cell", "semicolon", "nul", "empty"]
+    ),
     seed=st.integers(0, 2**16),
 )
-def test_damaged_files_are_read_or_refused(tmp_path_factory: pytest.TempPathFactory,
-                                           reader: str, kind: str, seed: int) -> None:
+def test_damaged_files_are_read_or_refused(
+    tmp_path_factory: pytest.TempPathFactory, reader: str, kind: str, seed: int
+) -> None:
     """Every reader, every damage: a BOM (with or without CRLF) gives exactly the plain
     file's numbers; anything else is read or refused with one ProblemError naming the
     file -- never a raw UnicodeDecodeError/ValueError/IndexError."""
@@ -382,8 +465,12 @@ def _same_reading(a: Any, b: Any) -> None:
 
 
 # ----------------------------------------------------- Monte Carlo under faults
-@settings(max_examples=30, deadline=None, derandomize=True,
-          suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
+@settings(
+    max_examples=30,
+    deadline=None,
+    derandomize=True,
+    suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture],
+)
 @given(
     p=st.sampled_from([0.0, 0.1, 0.5, 1.1]),
     stop=st.integers(0, 40),

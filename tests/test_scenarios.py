@@ -47,5 +47,6 @@ def test_paper_example_geometry() -> None:
     # chord speed of a 1130 m circle at 500 m/s over 0.01 s: 500·(1 - O((v dt / r)²/24))
     np.testing.assert_allclose(speed, 500.0, rtol=1e-5)
     centre = np.array([5000 * np.cos(np.pi / 4), 0, 5000 * np.sin(np.pi / 4)])
-    np.testing.assert_allclose(np.linalg.norm(sc.truth - centre, axis=1),
-                               scenarios.PAPER_RADIUS, rtol=1e-12)
+    np.testing.assert_allclose(
+        np.linalg.norm(sc.truth - centre, axis=1), scenarios.PAPER_RADIUS, rtol=1e-12
+    )

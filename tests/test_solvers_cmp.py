@@ -27,9 +27,19 @@ def test_plane_comparison_small(tmp_path: Path) -> None:
     # edge-on radar: weights barely vary along the normal; ML ≈ SVD (ratio ~0.9-1.0)
     assert 0.7 < by["radar-edge-on"]["ratio_ml_over_svd"] < 1.15
     rows = list(csv.DictReader((tmp_path / "plane_timing.csv").open()))
-    assert {"problem", "size", "formulation", "solver", "status", "objective_gap",
-            "solution_error", "max_violation", "build_time", "solve_time",
-            "iterations"} <= set(rows[0])
+    assert {
+        "problem",
+        "size",
+        "formulation",
+        "solver",
+        "status",
+        "objective_gap",
+        "solution_error",
+        "max_violation",
+        "build_time",
+        "solve_time",
+        "iterations",
+    } <= set(rows[0])
     assert "| two-source |" in md
     env = report.environment()
     assert env["packages"]["casadi"] and env["cores"]
@@ -95,8 +105,11 @@ def test_assignment_comparison_small(tmp_path: Path) -> None:
     from solvers_cmp import assignment as cmp_as
 
     rows = cmp_as.rows(((3, 4, None), (5, 6, None), (20, 22, 3.0)), repeats=1)
-    assert {r["formulation"] for r in rows} >= {"joint MILP", "enumeration (14)",
-                                                 "linear assignment"}
+    assert {r["formulation"] for r in rows} >= {
+        "joint MILP",
+        "enumeration (14)",
+        "linear assignment",
+    }
     for r in rows:
         assert r["status"] == "optimal" and r["solution_error"] == 0, r
         assert abs(r["objective_gap"]) < 1e-9

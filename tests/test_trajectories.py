@@ -23,8 +23,9 @@ def _family(name: str, q: int) -> tr.Family | str:
     return name
 
 
-def random_data(seed: int, *, q: int = 5, d: int | None = None, weighted: bool = False,
-                epoch: float = 0.0) -> tr.TrajectoryData:
+def random_data(
+    seed: int, *, q: int = 5, d: int | None = None, weighted: bool = False, epoch: float = 0.0
+) -> tr.TrajectoryData:
     """Unequal N_j (3..40) and unequal, unsorted times over 0..100 s."""
     rng = np.random.default_rng(seed)
     times = [rng.permutation(rng.uniform(0, 100, rng.integers(3, 41))) for _ in range(q)]
@@ -47,8 +48,9 @@ def rel_err(a: np.ndarray, b: np.ndarray) -> float:
 @pytest.mark.parametrize("formulation", ["constrained", "reduced"])
 @pytest.mark.parametrize("family", FAMILIES)
 @pytest.mark.parametrize(("d", "weighted"), [(None, False), (None, True), (2, True)])
-def test_closed_form_equals_generic_solve(solver: str, formulation: str, family: str,
-                                          d: int | None, weighted: bool) -> None:
+def test_closed_form_equals_generic_solve(
+    solver: str, formulation: str, family: str, d: int | None, weighted: bool
+) -> None:
     data = random_data(11, d=d, weighted=weighted)
     fam = _family(family, 5)
     g = tr.solve(data, fam, solver=solver, formulation=formulation).require_ok()
@@ -76,8 +78,10 @@ def test_solution_fields_follow_the_papers_ordering() -> None:
     assert div.covariance.shape == par.covariance.shape == (4, 4)
     assert div.dof == data.n_measurements - 4
     # objective is Σ w r², recomputed from the lines
-    r = [y - div.start[j] - div.velocity[j] * t
-         for j, (t, y) in enumerate(zip(data.times, data.values, strict=True))]
+    r = [
+        y - div.start[j] - div.velocity[j] * t
+        for j, (t, y) in enumerate(zip(data.times, data.values, strict=True))
+    ]
     assert div.objective == pytest.approx(sum(np.sum(x**2) for x in r), rel=1e-12)
 
 
@@ -86,8 +90,11 @@ def test_vector_values_are_independent_coordinates() -> None:
     sol = tr.closed_form(data, "diverging")
     assert sol.covariance.shape == (3, 6, 6)
     for k in range(3):
-        one = tr.TrajectoryData(data.times, [np.asarray(v)[:, k] for v in data.values],
-                                [np.asarray(s)[:] for s in data.sigma2])
+        one = tr.TrajectoryData(
+            data.times,
+            [np.asarray(v)[:, k] for v in data.values],
+            [np.asarray(s)[:] for s in data.sigma2],
+        )
         sk = tr.closed_form(one, "diverging")
         np.testing.assert_allclose(sol.theta[:, k], sk.theta, rtol=1e-12, atol=1e-12)
         np.testing.assert_allclose(sol.covariance[k], sk.covariance, rtol=1e-12)
@@ -106,8 +113,8 @@ def test_design_matrix_is_the_printed_5_and_11() -> None:
     a11[3] = np.concatenate(t)
     pos = 0
     for j, tj in enumerate(t):
-        a5[1 + j, pos:pos + tj.size] = tj
-        a11[j, pos:pos + tj.size] = 1.0
+        a5[1 + j, pos : pos + tj.size] = tj
+        a11[j, pos : pos + tj.size] = 1.0
         pos += tj.size
     np.testing.assert_array_equal(tr.design_matrix(data, "diverging").toarray().T, a5)
     np.testing.assert_array_equal(tr.design_matrix(data, "parallel").toarray().T, a11)
@@ -129,8 +136,9 @@ def test_psi_scales_with_sigma2() -> None:
     base = random_data(2)
     data = tr.TrajectoryData(base.times, base.values, 4.0)
     a = tr.design_matrix(data, "diverging").toarray()
-    np.testing.assert_allclose(tr.covariance(data, "diverging"), 4.0 * np.linalg.inv(a.T @ a),
-                               rtol=1e-10)
+    np.testing.assert_allclose(
+        tr.covariance(data, "diverging"), 4.0 * np.linalg.inv(a.T @ a), rtol=1e-10
+    )
 
 
 def test_psi_matches_monte_carlo() -> None:
@@ -141,14 +149,18 @@ def test_psi_matches_monte_carlo() -> None:
     runs = 4000
     rng = np.random.default_rng(2024)
     times = [np.sort(rng.uniform(5, 60, k)) for k in (6, 11, 8, 15)]
-    for family, start, vel in (("diverging", np.zeros(4), np.array([-2.0, -0.5, 1.0, 3.0])),
-                               ("parallel", np.array([0.0, 5.0, 9.0, 20.0]), np.full(4, 0.7))):
+    for family, start, vel in (
+        ("diverging", np.zeros(4), np.array([-2.0, -0.5, 1.0, 3.0])),
+        ("parallel", np.array([0.0, 5.0, 9.0, 20.0]), np.full(4, 0.7)),
+    ):
         sigma2 = 2.5
         psi = None
         est = np.empty((runs, 5))
         for k in range(runs):
-            vals = [start[j] + vel[j] * t + rng.normal(0, np.sqrt(sigma2), t.size)
-                    for j, t in enumerate(times)]
+            vals = [
+                start[j] + vel[j] * t + rng.normal(0, np.sqrt(sigma2), t.size)
+                for j, t in enumerate(times)
+            ]
             sol = tr.closed_form(tr.TrajectoryData(times, vals, sigma2), family)
             est[k] = sol.theta
             psi = sol.covariance if psi is None else psi
@@ -163,21 +175,23 @@ def test_psi_matches_monte_carlo() -> None:
 
 # --------------------------------------------------------------------------- (8)-(13) as printed
 def _printed_sums(data: tr.TrajectoryData) -> list[tuple[np.ndarray, np.ndarray]]:
-    return [(np.asarray(t, float), np.asarray(y, float))
-            for t, y in zip(data.times, data.values, strict=True)]
+    return [
+        (np.asarray(t, float), np.asarray(y, float))
+        for t, y in zip(data.times, data.values, strict=True)
+    ]
 
 
 def test_printed_8_9_diverging_is_right() -> None:
     """(8)-(9) typed from the paper, term by term, against the generic constrained solve."""
     data = random_data(31, q=4)
     obj = _printed_sums(data)
-    a = [np.sum(y * t) for t, y in obj]          # A_j = Σ y t
-    b = [np.sum(t) for t, _ in obj]              # B_j = Σ t
-    c = [np.sum(t * t) for t, _ in obj]          # C_j = Σ t²
-    d = sum(np.sum(y) for _, y in obj)           # D = ΣΣ y
-    e = sum(t.size for t, _ in obj)              # E = Σ N_j
-    a_c = sum(np.sum(a[j] / c[j] * t) for j, (t, _) in enumerate(obj))   # A_C
-    b_c = sum(np.sum(b[j] / c[j] * t) for j, (t, _) in enumerate(obj))   # B_C
+    a = [np.sum(y * t) for t, y in obj]  # A_j = Σ y t
+    b = [np.sum(t) for t, _ in obj]  # B_j = Σ t
+    c = [np.sum(t * t) for t, _ in obj]  # C_j = Σ t²
+    d = sum(np.sum(y) for _, y in obj)  # D = ΣΣ y
+    e = sum(t.size for t, _ in obj)  # E = Σ N_j
+    a_c = sum(np.sum(a[j] / c[j] * t) for j, (t, _) in enumerate(obj))  # A_C
+    b_c = sum(np.sum(b[j] / c[j] * t) for j, (t, _) in enumerate(obj))  # B_C
     y0 = (d - a_c) / (e - b_c)
     v = [(a[j] - y0 * b[j]) / c[j] for j in range(4)]
     g = tr.solve(data, "diverging", solver=SOLVERS[0]).require_ok()
@@ -190,12 +204,12 @@ def test_printed_12_13_parallel_E_erratum(printed_e: bool) -> None:
     with E = ΣΣ t² it is the generic constrained optimum."""
     data = random_data(32, q=4)
     obj = _printed_sums(data)
-    d = sum(np.sum(y * t) for t, y in obj)       # D = ΣΣ y t
-    a = [np.sum(y) for _, y in obj]              # A_j = Σ y
-    b = [np.sum(t) for t, _ in obj]              # B_j = Σ t
+    d = sum(np.sum(y * t) for t, y in obj)  # D = ΣΣ y t
+    a = [np.sum(y) for _, y in obj]  # A_j = Σ y
+    b = [np.sum(t) for t, _ in obj]  # B_j = Σ t
     n = [t.size for t, _ in obj]
-    a_n = sum(np.sum(a[j] * t) / n[j] for j, (t, _) in enumerate(obj))   # A_N
-    b_n = sum(np.sum(b[j] * t) / n[j] for j, (t, _) in enumerate(obj))   # B_N
+    a_n = sum(np.sum(a[j] * t) / n[j] for j, (t, _) in enumerate(obj))  # A_N
+    b_n = sum(np.sum(b[j] * t) / n[j] for j, (t, _) in enumerate(obj))  # B_N
     e = sum(np.sum(t if printed_e else t * t) for t, _ in obj)
     v = (d - a_n) / (e - b_n)
     y0 = [(a[j] - v * b[j]) / n[j] for j in range(4)]
@@ -226,8 +240,12 @@ def test_paper_covariance_18_20_against_design_matrix(family: str, n: int) -> No
     right = tr.paper_covariance(family, n, dt, sigma2)
     np.testing.assert_allclose(right, psi, rtol=1e-10, atol=1e-14 * np.max(np.abs(psi)))
     printed = tr.paper_covariance(family, n, dt, sigma2, printed=True)
-    wrong = {(i, j) for i in range(3) for j in range(3)
-             if not np.isclose(printed[i, j], psi[i, j], rtol=1e-10, atol=0)}
+    wrong = {
+        (i, j)
+        for i in range(3)
+        for j in range(3)
+        if not np.isclose(printed[i, j], psi[i, j], rtol=1e-10, atol=0)
+    }
     # (20) (1,2) = 3/(ΔT N(N+1)) coincides with 3(N-1)/(2N(N+1)) when ΔT = 2/(N-1)
     assert wrong == WRONG[family]
 
@@ -256,7 +274,8 @@ def test_covariance_depends_on_time_origin() -> None:
     # what survives a shift: velocity variances of the parallel and independent families
     q = 3
     assert tr.covariance(base, "parallel")[q, q] == pytest.approx(
-        tr.covariance(shifted, "parallel")[q, q], rel=1e-10)
+        tr.covariance(shifted, "parallel")[q, q], rel=1e-10
+    )
     # and the diverging fit itself moves (a different constraint)
     d0, d1 = tr.closed_form(base, "diverging"), tr.closed_form(shifted, "diverging")
     assert abs(d0.objective - d1.objective) > 1e-3 * d0.objective
@@ -276,8 +295,10 @@ def test_independent_variances_of_the_introduction() -> None:
 @pytest.mark.parametrize("q", [2, 3, 7])
 @pytest.mark.parametrize("n", [2, 3, 10, 200])
 def test_eta_against_psi_ratios(q: int, n: int) -> None:
-    for family, shared, unique in (("diverging", "start", "velocity"),
-                                   ("parallel", "velocity", "start")):
+    for family, shared, unique in (
+        ("diverging", "start", "velocity"),
+        ("parallel", "velocity", "start"),
+    ):
         sc = scenarios.equally_spaced(1, n=n, q=q, dt=0.3, family=family)
         r = tr.variance_ratios(sc.data(), family)
         np.testing.assert_allclose(r[shared], tr.eta0(q), rtol=1e-10)
@@ -316,8 +337,9 @@ def test_family_test_size_by_monte_carlo(sigma2_mode: str) -> None:
     rej = 0
     for _ in range(runs):
         vals = [vel[j] * t + rng.normal(0, 1, t.size) for j, t in enumerate(times)]
-        res = tr.family_test(tr.TrajectoryData(times, vals), "diverging", level=0.95,
-                             sigma2=sigma2_mode)
+        res = tr.family_test(
+            tr.TrajectoryData(times, vals), "diverging", level=0.95, sigma2=sigma2_mode
+        )
         rej += res.reject
     assert abs(rej / runs - 0.05) < 0.022
 
@@ -327,14 +349,16 @@ def test_family_test_statistic_distribution_and_power() -> None:
     data = sc.data()
     res = tr.family_test(data, "diverging")
     assert res.dof == data.n_objects - 1
-    lam = (tr.closed_form(data, "diverging").objective
-           - tr.closed_form(data, "independent").objective)
+    lam = (
+        tr.closed_form(data, "diverging").objective - tr.closed_form(data, "independent").objective
+    )
     assert res.statistic == pytest.approx(lam, rel=1e-12)
     assert res.p_value == pytest.approx(stats.chi2.sf(lam, res.dof), rel=1e-12)
     # the parallel hypothesis on diverging objects is rejected outright
     assert tr.family_test(data, "parallel").reject
-    assert tr.family_test(scenarios.launcher_release(5, family="parallel").data(),
-                          "diverging").reject
+    assert tr.family_test(
+        scenarios.launcher_release(5, family="parallel").data(), "diverging"
+    ).reject
 
 
 # --------------------------------------------------------------------------- invariances
@@ -356,8 +380,9 @@ def test_affine_change_of_units(seed: int, scale: float, shift: float) -> None:
     """y → c·y + s multiplies θ by c and adds s to each start; Ψ (in units of σ²) and
     the χ² objective (with σ² scaled by c²) are unchanged."""
     data = random_data(seed, q=3)
-    new = tr.TrajectoryData(data.times, [scale * np.asarray(v) + shift for v in data.values],
-                            scale**2)
+    new = tr.TrajectoryData(
+        data.times, [scale * np.asarray(v) + shift for v in data.values], scale**2
+    )
     for family in ("diverging", "parallel"):
         a, b = tr.closed_form(data, family), tr.closed_form(new, family)
         np.testing.assert_allclose(b.start, scale * a.start + shift, rtol=1e-8, atol=1e-8 * scale)
@@ -392,18 +417,26 @@ def test_solver_failure_is_not_a_solution() -> None:
         assert np.all(np.isnan(bad.theta))
 
 
-@pytest.mark.parametrize(("times", "values", "sigma2", "match"), [
-    ([[0.0, 1.0], [2.0, 2.0, 2.0]], [[0.0, 1.0], [1.0, 2.0, 3.0]], 1.0, "fewer than 2 distinct"),
-    ([[0.0, 1.0], []], [[0.0, 1.0], []], 1.0, "no measurements"),
-    ([[0.0, 1.0, 2.0]], [[0.0, np.nan, 1.0]], 1.0, "NaN"),
-    ([[0.0, 1.0, 2.0]], [[0.0, 1.0, 1.0]], -1.0, "positive"),
-    ([[0.0, 1.0, 2.0]], [[0.0, 1.0, 1.0]], [[1.0, 0.0, 1.0]], "positive"),
-    ([[0.0, 1.0, 2.0]], [[0.0, 1.0]], 1.0, "2 values for 3 times"),
-    ([], [], 1.0, "no objects"),
-    ([[0.0, 1.0], [0.0, 1.0]], [[0.0, 1.0]], 1.0, "1 objects"),
-    ([[0.0, 1.0], [0.0, 1.0]], [[0.0, 1.0], [[0.0, 1.0], [1.0, 2.0]]], 1.0, "coordinates"),
-    ([[0.0, 1.0, 2.0]], [[0.0, 1.0, 1.0]], [[1.0, 1.0]], "does not match"),
-])
+@pytest.mark.parametrize(
+    ("times", "values", "sigma2", "match"),
+    [
+        (
+            [[0.0, 1.0], [2.0, 2.0, 2.0]],
+            [[0.0, 1.0], [1.0, 2.0, 3.0]],
+            1.0,
+            "fewer than 2 distinct",
+        ),
+        ([[0.0, 1.0], []], [[0.0, 1.0], []], 1.0, "no measurements"),
+        ([[0.0, 1.0, 2.0]], [[0.0, np.nan, 1.0]], 1.0, "NaN"),
+        ([[0.0, 1.0, 2.0]], [[0.0, 1.0, 1.0]], -1.0, "positive"),
+        ([[0.0, 1.0, 2.0]], [[0.0, 1.0, 1.0]], [[1.0, 0.0, 1.0]], "positive"),
+        ([[0.0, 1.0, 2.0]], [[0.0, 1.0]], 1.0, "2 values for 3 times"),
+        ([], [], 1.0, "no objects"),
+        ([[0.0, 1.0], [0.0, 1.0]], [[0.0, 1.0]], 1.0, "1 objects"),
+        ([[0.0, 1.0], [0.0, 1.0]], [[0.0, 1.0], [[0.0, 1.0], [1.0, 2.0]]], 1.0, "coordinates"),
+        ([[0.0, 1.0, 2.0]], [[0.0, 1.0, 1.0]], [[1.0, 1.0]], "does not match"),
+    ],
+)
 def test_bad_input(times: list, values: list, sigma2: object, match: str) -> None:
     with pytest.raises(ProblemError, match=match):
         tr.TrajectoryData(times, values, sigma2)  # type: ignore[arg-type]
@@ -438,23 +471,28 @@ def test_bad_family_and_unidentifiable_data() -> None:
 SHIFT = 1.7e9
 
 
-def grid_data(seed: int, *, q: int = 5, offset: float = 0.0, epoch: float = 0.0,
-              d: int | None = None) -> tr.TrajectoryData:
+def grid_data(
+    seed: int, *, q: int = 5, offset: float = 0.0, epoch: float = 0.0, d: int | None = None
+) -> tr.TrajectoryData:
     rng = np.random.default_rng(seed)
     times = [np.round(rng.uniform(0, 100, rng.integers(3, 41)) * 1024) / 1024 for _ in range(q)]
     shape = (q,) if d is None else (q, d)
     y0, v = rng.normal(0, 10, shape), rng.normal(0, 2, shape)
-    vals = [y0[j] + np.multiply.outer(t, v[j]) + rng.normal(0, 1, (t.size, *shape[1:]))
-            for j, t in enumerate(times)]
+    vals = [
+        y0[j] + np.multiply.outer(t, v[j]) + rng.normal(0, 1, (t.size, *shape[1:]))
+        for j, t in enumerate(times)
+    ]
     return tr.TrajectoryData([t + offset for t in times], vals, 1.0, epoch=epoch)
 
 
-METHODS = [("closed_form", None)] + [(s, f) for s in SOLVERS if s != "SCS"
-                                      for f in ("constrained", "reduced")]
+METHODS = [("closed_form", None)] + [
+    (s, f) for s in SOLVERS if s != "SCS" for f in ("constrained", "reduced")
+]
 
 
-def _fit(data: tr.TrajectoryData, fam: tr.Family | str, method: str, form: str | None
-         ) -> tr.TrajectorySolution:
+def _fit(
+    data: tr.TrajectoryData, fam: tr.Family | str, method: str, form: str | None
+) -> tr.TrajectorySolution:
     if method == "closed_form":
         return tr.closed_form(data, fam)
     return tr.solve(data, fam, solver=method, formulation=form)  # type: ignore[arg-type]
@@ -462,14 +500,15 @@ def _fit(data: tr.TrajectoryData, fam: tr.Family | str, method: str, form: str |
 
 @pytest.mark.parametrize(("method", "form"), METHODS)
 @pytest.mark.parametrize("family", [*FAMILIES, "custom2"])
-def test_shifted_clock_gives_the_same_estimates(family: str, method: str,
-                                                form: str | None) -> None:
+def test_shifted_clock_gives_the_same_estimates(family: str, method: str, form: str | None) -> None:
     """Issue 14: the same data on a clock shifted by 1.7e9 s (times and epoch) give the same
     θ and Ψ to 1e-9 relative. Before: closed_form(parallel) returned velocity 3.18 against
     2.50 (optimal), solve refused the data as singular."""
-    fam: tr.Family | str = (tr.Family.custom(5, shared_start=[[0, 1], [3, 4]],
-                                             shared_velocity=[[0, 1, 2]])
-                            if family == "custom2" else _family(family, 5))
+    fam: tr.Family | str = (
+        tr.Family.custom(5, shared_start=[[0, 1], [3, 4]], shared_velocity=[[0, 1, 2]])
+        if family == "custom2"
+        else _family(family, 5)
+    )
     a = grid_data(7, epoch=12.5)
     b = grid_data(7, offset=SHIFT, epoch=12.5 + SHIFT)
     sa, sb = _fit(a, fam, method, form).require_ok(), _fit(b, fam, method, form).require_ok()
@@ -485,13 +524,15 @@ def test_shifted_clock_gives_the_same_estimates(family: str, method: str,
 
 @pytest.mark.parametrize(("method", "form"), METHODS)
 @pytest.mark.parametrize("family", ["parallel", "independent", "shared_velocity"])
-def test_velocities_do_not_depend_on_the_epoch(family: str, method: str,
-                                               form: str | None) -> None:
+def test_velocities_do_not_depend_on_the_epoch(family: str, method: str, form: str | None) -> None:
     """Without a shared start the velocities are origin-free: data at t ≈ 1.7e9 s with
     epoch 0 (POSIX time, the CLI default) give the velocities of the same data at t ≈ 0, and
     the starts move by −V·1.7e9 with Ψ transformed accordingly (Var(y0) ≈ T²Var(V))."""
-    fam = (tr.Family.custom(5, shared_velocity=[[0, 1, 2], [3, 4]])
-           if family == "shared_velocity" else family)
+    fam = (
+        tr.Family.custom(5, shared_velocity=[[0, 1, 2], [3, 4]])
+        if family == "shared_velocity"
+        else family
+    )
     a, b = grid_data(3), grid_data(3, offset=SHIFT)
     sa, sb = _fit(a, fam, method, form), _fit(b, fam, method, form)
     assert sa.status is sb.status is Status.OPTIMAL
@@ -536,8 +577,7 @@ def _exact_normal_equations(data: tr.TrajectoryData, fam: tr.Family | str) -> np
 
 @pytest.mark.parametrize("epoch", [0.0, SHIFT - 3600.0, -1e12])
 @pytest.mark.parametrize("family", ["diverging", "custom"])
-def test_shared_start_far_from_the_data_against_exact_arithmetic(family: str,
-                                                                 epoch: float) -> None:
+def test_shared_start_far_from_the_data_against_exact_arithmetic(family: str, epoch: float) -> None:
     """A shared start at an epoch far from the data (the lines meet there: a different,
     rigid hypothesis) is computed to ~1e-16 (measured ≤ 8e-16) against exact rationals;
     1e-10 leaves room for other BLAS. Before: 2-5 sigma off with status optimal."""
@@ -553,8 +593,10 @@ def test_shared_start_far_from_the_data_against_exact_arithmetic(family: str,
             # the re-check is the exact distance to the optimum, relative to max(|θ|, σ):
             # an OK status must mean what it says
             ns = len(g.family.start_groups)
-            size = np.r_[np.full(ns, np.max(np.abs(exact[:ns]))),
-                         np.full(exact.size - ns, np.max(np.abs(exact[ns:])))]
+            size = np.r_[
+                np.full(ns, np.max(np.abs(exact[:ns]))),
+                np.full(exact.size - ns, np.max(np.abs(exact[ns:]))),
+            ]
             err = float(np.max(np.abs(g.theta - exact) / np.maximum(size, cf.std)))
             limit = 1e-6 if g.status is Status.OPTIMAL else 1e-3
             assert err < limit, (solver, g.status, err)
@@ -583,8 +625,9 @@ def test_nan_std_never_with_an_ok_status(offset: float) -> None:
                 assert np.all(np.isfinite(sol.std)) and np.all(sol.std > 0)
             if family == "independent":
                 # at 1e12 s float64 resolves a 29 s spread to eps·1e12/29 = 7.7e-6 only
-                assert sol.status is (Status.OPTIMAL if offset < 1e11
-                                      else Status.OPTIMAL_INACCURATE)
+                assert sol.status is (
+                    Status.OPTIMAL if offset < 1e11 else Status.OPTIMAL_INACCURATE
+                )
                 assert rel_err(sol.velocity, ref.velocity) < 1e-9
                 # the velocities' σ are origin-free; the starts' are the extrapolation's
                 np.testing.assert_allclose(sol.std[2:], ref.std[2:], rtol=1e-9)
@@ -605,8 +648,12 @@ def test_epoch_too_far_is_downgraded_then_refused(method: str) -> None:
     assert 1e-2 < sol.info["extrapolation"] < 1.0
     assert rel_err(sol.velocity, ref.velocity) < 1e-9
     with pytest.raises(ProblemError, match="epoch"):
-        _fit(tr.TrajectoryData(base.times, base.values, epoch=-1e16), "parallel", method,
-             "constrained")
+        _fit(
+            tr.TrajectoryData(base.times, base.values, epoch=-1e16),
+            "parallel",
+            method,
+            "constrained",
+        )
 
 
 def test_times_unresolved_by_float64_are_downgraded_or_refused() -> None:
@@ -679,8 +726,7 @@ def _scalar_calls() -> list[tuple[str, object]]:
         ("q", lambda: tr.Family.diverging("3")),
         ("shared_start", lambda: tr.Family.custom(3, shared_start=[[0, 1.5]])),
         ("shared_start", lambda: tr.Family.custom(3, shared_start=[0, 1])),
-        ("family", lambda: tr.closed_form(data, tr.Family("x", 3, ((0, 1),), ((0,), (1,),
-                                                                              (2,))))),
+        ("family", lambda: tr.closed_form(data, tr.Family("x", 3, ((0, 1),), ((0,), (1,), (2,))))),
         ("n", lambda: tr.eta(2.5)),
         ("q", lambda: tr.eta(5, q="2")),
         ("q", lambda: tr.eta0(0)),
@@ -706,21 +752,25 @@ def test_scalar_arguments_give_problem_error(case: int) -> None:
         call()  # type: ignore[operator]
 
 
-@pytest.mark.parametrize(("times", "values", "sigma2", "match"), [
-    ([[0.0, 1.0, 2.0]], [[0.0, 1.0 + 1j, 1.0]], 1.0, "complex"),
-    ([[0.0, 1.0 + 0j, 2.0]], [[0.0, 1.0, 1.0]], 1.0, "complex"),
-    ([[0.0, 1.0, 2.0]], [[0.0, 1.0, 1.0]], [[1.0, 1.0 + 2j, 1.0]], "complex"),
-    ([[0.0, 1.0, 2.0]], [[0.0, 1.0, 1.0]], 1.0 + 2j, "complex"),
-    ([[0.0, np.inf, 2.0]], [[0.0, 1.0, 1.0]], 1.0, "infinite"),
-    ([[0.0, 1.0, 2.0]], [[0.0, -np.inf, 1.0]], 1.0, "infinite"),
-    ([[0.0, 1.0, 2.0]], [[0.0, 1.0, 1.0]], [[1.0, np.nan, 1.0]], "NaN"),
-    ([[0.0, 1.0, 2e100]], [[0.0, 1.0, 1.0]], 1.0, "above 1e"),
-    ([[0.0, 1.0, 2.0]], [[0.0, 1.0, -2e100]], 1.0, "above 1e"),
-    ([[0.0, 1.0, 2.0]], [[0.0, 1.0, 1.0]], 1e101, "positive"),
-    ([[0.0, 1.0, 2.0]], [[0.0, 1.0, 1.0]], [["a", "b", "c"]], "numeric"),
-])
-def test_bad_numbers_give_problem_error(times: list, values: list, sigma2: object,
-                                        match: str) -> None:
+@pytest.mark.parametrize(
+    ("times", "values", "sigma2", "match"),
+    [
+        ([[0.0, 1.0, 2.0]], [[0.0, 1.0 + 1j, 1.0]], 1.0, "complex"),
+        ([[0.0, 1.0 + 0j, 2.0]], [[0.0, 1.0, 1.0]], 1.0, "complex"),
+        ([[0.0, 1.0, 2.0]], [[0.0, 1.0, 1.0]], [[1.0, 1.0 + 2j, 1.0]], "complex"),
+        ([[0.0, 1.0, 2.0]], [[0.0, 1.0, 1.0]], 1.0 + 2j, "complex"),
+        ([[0.0, np.inf, 2.0]], [[0.0, 1.0, 1.0]], 1.0, "infinite"),
+        ([[0.0, 1.0, 2.0]], [[0.0, -np.inf, 1.0]], 1.0, "infinite"),
+        ([[0.0, 1.0, 2.0]], [[0.0, 1.0, 1.0]], [[1.0, np.nan, 1.0]], "NaN"),
+        ([[0.0, 1.0, 2e100]], [[0.0, 1.0, 1.0]], 1.0, "above 1e"),
+        ([[0.0, 1.0, 2.0]], [[0.0, 1.0, -2e100]], 1.0, "above 1e"),
+        ([[0.0, 1.0, 2.0]], [[0.0, 1.0, 1.0]], 1e101, "positive"),
+        ([[0.0, 1.0, 2.0]], [[0.0, 1.0, 1.0]], [["a", "b", "c"]], "numeric"),
+    ],
+)
+def test_bad_numbers_give_problem_error(
+    times: list, values: list, sigma2: object, match: str
+) -> None:
     with pytest.raises(ProblemError, match=match):
         tr.TrajectoryData(times, values, sigma2)  # type: ignore[arg-type]
 
@@ -730,15 +780,26 @@ def test_large_and_small_magnitudes(scale: float) -> None:
     """Times and values multiplied by c (σ² by c²): velocities unchanged, starts and σ
     scaled by c, status optimal, to 1e-12 relative (power-of-ten scalings round once)."""
     base = random_data(4, q=3)
-    data = tr.TrajectoryData([scale * np.asarray(t) for t in base.times],
-                             [scale * np.asarray(v) for v in base.values], scale**2)
+    data = tr.TrajectoryData(
+        [scale * np.asarray(t) for t in base.times],
+        [scale * np.asarray(v) for v in base.values],
+        scale**2,
+    )
     for family in ("diverging", "parallel"):
         a, b = tr.closed_form(base, family), tr.closed_form(data, family)
         assert b.status is Status.OPTIMAL
         assert rel_err(b.velocity, a.velocity) < 1e-12
         assert rel_err(b.start, scale * a.start) < 1e-12
-        assert rel_err(b.std, a.std * np.r_[np.full(len(b.family.start_groups), scale),
-                                            np.ones(b.theta.size - len(b.family.start_groups))]
-                       ) < 1e-12
+        assert (
+            rel_err(
+                b.std,
+                a.std
+                * np.r_[
+                    np.full(len(b.family.start_groups), scale),
+                    np.ones(b.theta.size - len(b.family.start_groups)),
+                ],
+            )
+            < 1e-12
+        )
         g = tr.solve(data, family)
         assert g.status is Status.OPTIMAL and rel_err(g.theta, b.theta) < 1e-9

@@ -9,6 +9,11 @@ PROBLEM = {
     "title": "ML joint assignment of measurements to unresolved objects (Logachev et al.)",
     "original": "(13)-(14)",
     "closed_form": None,
-    "api": {"data": "AssignmentData", "residuals": ("score", "log_likelihoods"),
-            "solve": "solve", "closed_form": None, "estimate": "assignment"},
+    "api": {
+        "data": "AssignmentData",
+        "residuals": ("score", "log_likelihoods"),
+        "solve": "solve",
+        "closed_form": None,
+        "estimate": "assignment",
+    },
 }

@@ -89,9 +89,9 @@ class PairTable:
         if np.ndim(rows) == 0 and np.ndim(cols) == 0:
             return self._one(int(rows), int(cols))
         r, c = np.broadcast_arrays(np.asarray(rows, dtype=int), np.asarray(cols, dtype=int))
-        return np.array([self._one(a, b) for a, b in zip(r.ravel().tolist(),
-                                                          c.ravel().tolist(), strict=True)]
-                        ).reshape(r.shape)
+        return np.array(
+            [self._one(a, b) for a, b in zip(r.ravel().tolist(), c.ravel().tolist(), strict=True)]
+        ).reshape(r.shape)
 
     def edges(self, neglect: float = PAIR_NEGLECT) -> tuple[np.ndarray, np.ndarray]:
         """The pairs (i < j) with u_ij above ``neglect``: the edges of the gating graph."""
@@ -106,17 +106,18 @@ class PairTable:
     def dense(self, where: str) -> FloatArray:
         """The (Q, Q) table (diagonal 1), refused above MAX_PAIR_TABLE_BYTES."""
         if self.q * self.q * 8 > MAX_PAIR_TABLE_BYTES:
-            raise ProblemError(f"{where}: the dense (Q, Q) table for Q = {self.q} needs "
-                               f"{self.q * self.q * 8 / 2**30:.3g} GiB; read the gated pairs "
-                               f"from AssignmentData.pair_table instead")
+            raise ProblemError(
+                f"{where}: the dense (Q, Q) table for Q = {self.q} needs "
+                f"{self.q * self.q * 8 / 2**30:.3g} GiB; read the gated pairs "
+                f"from AssignmentData.pair_table instead"
+            )
         out = np.full((self.q, self.q), U_FLOOR)
         np.fill_diagonal(out, 1.0)
         out[self.ii, self.jj] = out[self.jj, self.ii] = self.u
         return out
 
 
-def _dense_edges(u: FloatArray, neglect: float = PAIR_NEGLECT
-                 ) -> tuple[np.ndarray, np.ndarray]:
+def _dense_edges(u: FloatArray, neglect: float = PAIR_NEGLECT) -> tuple[np.ndarray, np.ndarray]:
     ii, jj = np.triu_indices(u.shape[0], 1)
     on = u[ii, jj] > neglect
     return ii[on], jj[on]
@@ -157,33 +158,41 @@ class AssignmentData:
     block_log_prior: Callable[[tuple[int, ...], bool], float] | None = None
     sensor: Resolution | None = None
     _pair_u: Any = field(default=None, init=False, repr=False, compare=False)
-    _log_w: dict[tuple[int, ...], float] = field(default_factory=dict, init=False,
-                                                  repr=False, compare=False)
-    _conn: dict[Any, float] = field(default_factory=dict, init=False, repr=False,
-                                    compare=False)
+    _log_w: dict[tuple[int, ...], float] = field(
+        default_factory=dict, init=False, repr=False, compare=False
+    )
+    _conn: dict[Any, float] = field(default_factory=dict, init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         w = "assignment.AssignmentData"
         self.means = as_finite_array(f"{w} means", self.means, ndim=2)
         q, d = self.means.shape
         if q < 1 or d < 1:
-            raise ProblemError(f"{w} means: need at least one object with at least one "
-                               f"coordinate, got shape {self.means.shape}")
+            raise ProblemError(
+                f"{w} means: need at least one object with at least one "
+                f"coordinate, got shape {self.means.shape}"
+            )
         self.covs = as_finite_array(f"{w} covs", self.covs, shape=(q, d, d))
         check_spd_stack(f"{w} covs", self.covs)
         meas = self.measurements
-        if meas is not None and not isinstance(meas, str) and as_float_array(
-                f"{w} measurements", meas).size == 0:
+        if (
+            meas is not None
+            and not isinstance(meas, str)
+            and as_float_array(f"{w} measurements", meas).size == 0
+        ):
             meas = np.zeros((0, d))
         self.measurements = as_finite_array(f"{w} measurements", meas, ndim=2)
         if self.measurements.shape[1] != d:
-            raise ProblemError(f"{w} measurements: expected (N, {d}) like means, got "
-                               f"{self.measurements.shape}")
+            raise ProblemError(
+                f"{w} measurements: expected (N, {d}) like means, got {self.measurements.shape}"
+            )
         n = self.measurements.shape[0]
         self.meas_cov = as_finite_array(f"{w} meas_cov", self.meas_cov, ndim=(2, 3))
         if self.meas_cov.shape not in ((d, d), (n, d, d)):
-            raise ProblemError(f"{w} meas_cov: expected ({d}, {d}) or one per measurement "
-                               f"({n}, {d}, {d}), got {self.meas_cov.shape}")
+            raise ProblemError(
+                f"{w} meas_cov: expected ({d}, {d}) or one per measurement "
+                f"({n}, {d}, {d}), got {self.meas_cov.shape}"
+            )
         check_spd_stack(f"{w} meas_cov", self.meas_cov)
         self.pd = as_probability(f"{w} pd", self.pd, low_open=True, high_open=True)
         # Δx (m^d, SI) enters through its logarithm: positive and finite. ρ is the prior
@@ -193,34 +202,37 @@ class AssignmentData:
         if self.sensor is not None:
             as_instance(f"{w} sensor", self.sensor, Resolution)
             if self.rho is not None:
-                raise ProblemError(f"{w} rho: give rho (a constant merge prior) or sensor "
-                                   f"(the resolution model), not both")
+                raise ProblemError(
+                    f"{w} rho: give rho (a constant merge prior) or sensor "
+                    f"(the resolution model), not both"
+                )
             if self.block_log_prior is not None:
-                raise ProblemError(f"{w} sensor: give sensor or your own block_log_prior, "
-                                   f"not both")
+                raise ProblemError(f"{w} sensor: give sensor or your own block_log_prior, not both")
             self.sensor._check(f"{w} sensor", d, q)
             if type(self.sensor).pair_probabilities is Resolution.pair_probabilities:
                 # the model's own gate: only the pairs that can be unresolved (k-d tree)
-                self._pair_u = PairTable(q, *self.sensor._gated_pairs(
-                    f"{w} sensor", self.means, self.covs, PAIR_NEGLECT))
+                self._pair_u = PairTable(
+                    q, *self.sensor._gated_pairs(f"{w} sensor", self.means, self.covs, PAIR_NEGLECT)
+                )
             else:  # a subclass with its own (dense) pair model
-                self._pair_u = np.asarray(self.sensor.pair_probabilities(self.means,
-                                                                         self.covs))
+                self._pair_u = np.asarray(self.sensor.pair_probabilities(self.means, self.covs))
         elif self.rho is None:
-            raise ProblemError(f"{w} rho: required without a sensor (the constant merge "
-                               f"prior, in (0, 1])")
+            raise ProblemError(
+                f"{w} rho: required without a sensor (the constant merge prior, in (0, 1])"
+            )
         else:
             self.rho = as_probability(f"{w} rho", self.rho, low_open=True)
         self._log_w, self._conn = {}, {}
         if self.max_group_size is not None:
-            self.max_group_size = as_count(f"{w} max_group_size", self.max_group_size,
-                                           minimum=1)
+            self.max_group_size = as_count(f"{w} max_group_size", self.max_group_size, minimum=1)
         if self.group_gate is not None:
             self.group_gate = as_positive(f"{w} group_gate", self.group_gate, allow_inf=True)
         for name in ("log_likelihood", "block_log_prior"):
             if getattr(self, name) is not None and not callable(getattr(self, name)):
-                raise ProblemError(f"{w} {name}: expected a callable or None, got "
-                                   f"{type(getattr(self, name)).__name__}")
+                raise ProblemError(
+                    f"{w} {name}: expected a callable or None, got "
+                    f"{type(getattr(self, name)).__name__}"
+                )
 
     @property
     def per_measurement_cov(self) -> bool:
@@ -281,12 +293,16 @@ def _logpdf(x: FloatArray, mean: FloatArray, cov: FloatArray) -> FloatArray:
     chol = np.linalg.cholesky(cov)
     z = np.linalg.solve(chol, (x - mean).T)
     d = x.shape[1]
-    return -0.5 * np.sum(z**2, axis=0) - np.sum(np.log(np.diag(chol))) - 0.5 * d * math.log(
-        2 * math.pi)
+    return (
+        -0.5 * np.sum(z**2, axis=0)
+        - np.sum(np.log(np.diag(chol)))
+        - 0.5 * d * math.log(2 * math.pi)
+    )
 
 
-def candidate_groups(data: AssignmentData, *, limit: int | None = None,
-                     model_gate: bool = True) -> list[tuple[int, ...]]:
+def candidate_groups(
+    data: AssignmentData, *, limit: int | None = None, model_gate: bool = True
+) -> list[tuple[int, ...]]:
     """Singletons and the groups allowed by ``max_group_size`` and ``group_gate`` (cliques
     of the gate graph: members pairwise within the gate under K_i + K_j), in
     lexicographic order by size.
@@ -306,8 +322,11 @@ def candidate_groups(data: AssignmentData, *, limit: int | None = None,
         the list or any model of that size is built.
     """
     as_instance("assignment.candidate_groups data", data, AssignmentData)
-    limit = MAX_CANDIDATE_GROUPS if limit is None else as_count(
-        "assignment.candidate_groups limit", limit, minimum=1)
+    limit = (
+        MAX_CANDIDATE_GROUPS
+        if limit is None
+        else as_count("assignment.candidate_groups limit", limit, minimum=1)
+    )
     q = data.q
     size = q if data.max_group_size is None else min(q, int(data.max_group_size))
 
@@ -316,7 +335,8 @@ def candidate_groups(data: AssignmentData, *, limit: int | None = None,
             f"assignment: {count} candidate groups (Q = {q}, max_group_size = "
             f"{data.max_group_size}, group_gate = {data.group_gate}), above the limit "
             f"{limit}; tighten group_gate or lower max_group_size (merges of more than a "
-            f"few objects are rarely plausible)")
+            f"few objects are rarely plausible)"
+        )
 
     gated = data.group_gate is not None and np.isfinite(data.group_gate)
     if data._pair_u is not None and not gated and model_gate:
@@ -329,10 +349,10 @@ def candidate_groups(data: AssignmentData, *, limit: int | None = None,
     if gated and size >= 2:
         gate2 = float(data.group_gate) ** 2
         for i in range(q - 1):  # Mahalanobis distance to the later objects, one batch
-            dm = data.means[i + 1:] - data.means[i]
-            s = data.covs[i + 1:] + data.covs[i]
+            dm = data.means[i + 1 :] - data.means[i]
+            s = data.covs[i + 1 :] + data.covs[i]
             d2 = np.einsum("kd,kd->k", dm, np.linalg.solve(s, dm[..., None])[..., 0])
-            ok[i, i + 1:] = ok[i + 1:, i] = d2 <= gate2
+            ok[i, i + 1 :] = ok[i + 1 :, i] = d2 <= gate2
     out: list[tuple[int, ...]] = [(j,) for j in range(q)]
     # grow cliques of the gate graph in lexicographic order; each carries the mask of the
     # objects adjacent to all its members
@@ -340,7 +360,7 @@ def candidate_groups(data: AssignmentData, *, limit: int | None = None,
     for _ in range(2, size + 1):
         nxt: list[tuple[tuple[int, ...], np.ndarray]] = []
         for g, common in frontier:
-            for j in np.flatnonzero(common[g[-1] + 1:]) + g[-1] + 1:
+            for j in np.flatnonzero(common[g[-1] + 1 :]) + g[-1] + 1:
                 nxt.append(((*g, int(j)), common & ok[j]))
             if len(out) + len(nxt) > limit:
                 raise refuse(f"more than {limit}")
@@ -351,8 +371,9 @@ def candidate_groups(data: AssignmentData, *, limit: int | None = None,
     return out
 
 
-def _connected_groups(data: AssignmentData, size: int, limit: int,
-                      refuse: Callable[[str], ProblemError]) -> list[tuple[int, ...]]:
+def _connected_groups(
+    data: AssignmentData, size: int, limit: int, refuse: Callable[[str], ProblemError]
+) -> list[tuple[int, ...]]:
     """Singletons and the connected subsets (2 ≤ |S| ≤ ``size``) of the gating graph,
     sorted within each size; refused above ``limit`` while they grow."""
     ii, jj = data.pair_edges()
@@ -391,8 +412,10 @@ def block_log_prior(data: AssignmentData, group: tuple[int, ...], detected: bool
     as_instance("assignment.block_log_prior data", data, AssignmentData)
     group = _as_block("assignment.block_log_prior group", group, data.q)
     if not isinstance(detected, bool | np.bool_):
-        raise ProblemError(f"assignment.block_log_prior detected: expected True or False, got "
-                           f"{type(detected).__name__}")
+        raise ProblemError(
+            f"assignment.block_log_prior detected: expected True or False, got "
+            f"{type(detected).__name__}"
+        )
     if data.block_log_prior is not None:
         v = float(data.block_log_prior(tuple(group), bool(detected)))
         if not np.isfinite(v):
@@ -408,8 +431,7 @@ def block_log_prior(data: AssignmentData, group: tuple[int, ...], detected: bool
     return (len(group) - 1) * math.log(data.rho) + det
 
 
-def group_moments(data: AssignmentData, group: tuple[int, ...]
-                  ) -> tuple[FloatArray, FloatArray]:
+def group_moments(data: AssignmentData, group: tuple[int, ...]) -> tuple[FloatArray, FloatArray]:
     """The predicted return of a block: centroid Σ w_j m_j and its covariance Σ w_j² K_j
     (without the measurement noise); weights equal or the sensor's amplitudes."""
     idx = list(group)
@@ -424,40 +446,50 @@ def log_likelihoods(data: AssignmentData, groups: Sequence[tuple[int, ...]]) -> 
     N(x_i; Σ w_j m_j, Σ w_j² K_j + R_i) (5), R_i the measurement's own covariance."""
     as_instance("assignment.log_likelihoods data", data, AssignmentData)
     if isinstance(groups, str | bytes | dict) or not hasattr(groups, "__iter__"):
-        raise ProblemError(f"assignment.log_likelihoods groups: expected a list of blocks, got "
-                           f"{type(groups).__name__}")
-    groups = [_as_block(f"assignment.log_likelihoods groups[{c}]", g, data.q)
-              for c, g in enumerate(groups)]
+        raise ProblemError(
+            f"assignment.log_likelihoods groups: expected a list of blocks, got "
+            f"{type(groups).__name__}"
+        )
+    groups = [
+        _as_block(f"assignment.log_likelihoods groups[{c}]", g, data.q)
+        for c, g in enumerate(groups)
+    ]
     out = np.empty((data.n, len(groups)))
     if data.log_likelihood is not None:
         for c, g in enumerate(groups):
             try:
                 v = np.asarray(data.log_likelihood(data, tuple(g)), dtype=float)
             except (TypeError, ValueError) as exc:
-                raise ProblemError(f"log_likelihood: not a numeric array for block {g} "
-                                   f"({exc})") from None
+                raise ProblemError(
+                    f"log_likelihood: not a numeric array for block {g} ({exc})"
+                ) from None
             if v.shape != (data.n,) or np.any(np.isnan(v)) or np.any(v == np.inf):
-                raise ProblemError(f"log_likelihood: expected {data.n} finite log values "
-                                   f"(or −inf) for block {g}, got shape {v.shape}")
+                raise ProblemError(
+                    f"log_likelihood: expected {data.n} finite log values "
+                    f"(or −inf) for block {g}, got shape {v.shape}"
+                )
             out[:, c] = v
         return out
     if data.n * len(groups) > MAX_TABLE_ENTRIES:
-        raise ProblemError(f"assignment.log_likelihoods: the N × groups table is {data.n} × "
-                           f"{len(groups)} = {data.n * len(groups):.3g} entries, above "
-                           f"{MAX_TABLE_ENTRIES:.0e} ({MAX_TABLE_ENTRIES * 8 / 2**30:.2g} GiB); "
-                           f"solve computes only the gated entries, or pass fewer groups")
+        raise ProblemError(
+            f"assignment.log_likelihoods: the N × groups table is {data.n} × "
+            f"{len(groups)} = {data.n * len(groups):.3g} entries, above "
+            f"{MAX_TABLE_ENTRIES:.0e} ({MAX_TABLE_ENTRIES * 8 / 2**30:.2g} GiB); "
+            f"solve computes only the gated entries, or pass fewer groups"
+        )
     if data.n:
         d = data.means.shape[1]
         per_group = data.n * d * (d + 4) * 8 * (2 if data.per_measurement_cov else 1)
         step = max(1, min(_CHUNK, _WORK_BYTES // max(1, per_group)))
         for start in range(0, len(groups), step):
-            part = groups[start:start + step]
-            out[:, start:start + len(part)] = _default_loglik(data, part).T
+            part = groups[start : start + step]
+            out[:, start : start + len(part)] = _default_loglik(data, part).T
     return out
 
 
-def entry_log_likelihoods(data: AssignmentData, groups: Sequence[tuple[int, ...]],
-                          rows: np.ndarray, cols: np.ndarray) -> FloatArray:
+def entry_log_likelihoods(
+    data: AssignmentData, groups: Sequence[tuple[int, ...]], rows: np.ndarray, cols: np.ndarray
+) -> FloatArray:
     """ln φ_iS (5) of the entries (i = ``rows[k]``, S = ``groups[cols[k]]``) only, the
     default Gaussian model N(x_i; Σ w_j m_j, Σ w_j² K_j + R_i), batched in chunks of
     bounded work memory (the Cholesky factors of the entries' (d, d) covariances)."""
@@ -469,33 +501,38 @@ def entry_log_likelihoods(data: AssignmentData, groups: Sequence[tuple[int, ...]
     const = 0.5 * d * math.log(2 * math.pi)
     step = max(1, _WORK_BYTES // (8 * d * (d + 4) * 4))
     for a in range(0, len(rows), step):
-        r, c = rows[a:a + step], cols[a:a + step]
+        r, c = rows[a : a + step], cols[a : a + step]
         noise = data.meas_cov[r] if data.per_measurement_cov else data.meas_cov
         s2 = cov[c] + noise
         if d == 2:  # closed-form 2 × 2 (np.linalg's batched calls cost ~5x more, measured)
             det = s2[:, 0, 0] * s2[:, 1, 1] - s2[:, 0, 1] * s2[:, 1, 0]
             dx = data.measurements[r] - mean[c]
-            m2 = (s2[:, 1, 1] * dx[:, 0] ** 2 - (s2[:, 0, 1] + s2[:, 1, 0]) * dx[:, 0]
-                  * dx[:, 1] + s2[:, 0, 0] * dx[:, 1] ** 2) / det
-            out[a:a + step] = -0.5 * m2 - 0.5 * np.log(det) - const
+            m2 = (
+                s2[:, 1, 1] * dx[:, 0] ** 2
+                - (s2[:, 0, 1] + s2[:, 1, 0]) * dx[:, 0] * dx[:, 1]
+                + s2[:, 0, 0] * dx[:, 1] ** 2
+            ) / det
+            out[a : a + step] = -0.5 * m2 - 0.5 * np.log(det) - const
             continue
         chol = np.linalg.cholesky(s2)
         z = np.linalg.solve(chol, (data.measurements[r] - mean[c])[..., None])[..., 0]
         logdet = np.sum(np.log(np.diagonal(chol, axis1=-2, axis2=-1)), axis=-1)
-        out[a:a + step] = -0.5 * np.sum(z**2, axis=-1) - logdet - const
+        out[a : a + step] = -0.5 * np.sum(z**2, axis=-1) - logdet - const
     return out
 
 
-def group_arrays(data: AssignmentData, groups: Sequence[tuple[int, ...]]
-                 ) -> tuple[FloatArray, FloatArray]:
+def group_arrays(
+    data: AssignmentData, groups: Sequence[tuple[int, ...]]
+) -> tuple[FloatArray, FloatArray]:
     """Every group's centroid Σ w_j m_j (G, d) and Σ w_j² K_j (G, d, d) (as
     :func:`group_moments`), batched per group size with NumPy (no sparse matrix: its
     construction alone costs ~0.3 ms, measured, a tenth of a small scan's budget)."""
     d = data.means.shape[1]
     sizes = np.fromiter(map(len, groups), dtype=int, count=len(groups))
     mean, cov = np.empty((len(groups), d)), np.empty((len(groups), d, d))
-    amp = None if data.sensor is None or isinstance(data.sensor.weights, str) \
-        else data.sensor.weights
+    amp = (
+        None if data.sensor is None or isinstance(data.sensor.weights, str) else data.sensor.weights
+    )
     for s_ in sorted(set(sizes.tolist())):
         at = np.flatnonzero(sizes == s_)
         mem = np.array([groups[c] for c in at], dtype=int).reshape(len(at), s_)
@@ -521,8 +558,7 @@ _WORK_BYTES = 64 * 2**20
 _CHUNK = 2048
 
 
-def _group_matrix(data: AssignmentData, groups: Sequence[tuple[int, ...]]
-                  ) -> sps.csr_matrix:
+def _group_matrix(data: AssignmentData, groups: Sequence[tuple[int, ...]]) -> sps.csr_matrix:
     """The centroid weights as a sparse (len(groups), Q) matrix (row S: w_j on S's
     members)."""
     rows = np.repeat(np.arange(len(groups)), [len(g) for g in groups])
@@ -556,8 +592,12 @@ def _default_loglik(data: AssignmentData, groups: Sequence[tuple[int, ...]]) -> 
     return -0.5 * np.sum(z**2, axis=-1) - logdet - const
 
 
-def score(data: AssignmentData, partition: Partition, assignment: Sequence[int],
-          loglik: dict[tuple[int, ...], FloatArray] | None = None) -> float:
+def score(
+    data: AssignmentData,
+    partition: Partition,
+    assignment: Sequence[int],
+    loglik: dict[tuple[int, ...], FloatArray] | None = None,
+) -> float:
     """score(H) of a hypothesis: ``assignment[i]`` indexes ``partition`` or is −1."""
     as_instance("assignment.score data", data, AssignmentData)
     blocks = _as_partition("assignment.score partition", partition, data.q)
@@ -572,41 +612,52 @@ def score(data: AssignmentData, partition: Partition, assignment: Sequence[int],
         table = dict(zip(ub, log_likelihoods(data, [blocks[k] for k in ub]).T, strict=True))
         vals = [float(table[a[i]][i]) for i in rows]
     else:  # the default model on the assigned entries only
-        vals = entry_log_likelihoods(data, blocks, rows, np.array([a[i] for i in rows],
-                                                                  dtype=int)).tolist()
+        vals = entry_log_likelihoods(
+            data, blocks, rows, np.array([a[i] for i in rows], dtype=int)
+        ).tolist()
     return s + math.fsum(vals) - (data.n - len(rows)) * math.log(data.volume)
 
 
 def _as_block(name: str, group: Any, q: int) -> tuple[int, ...]:
     """``group`` as a non-empty tuple of distinct object indices in 0..Q−1 (a block)."""
-    if isinstance(group, tuple) and group and all(
+    if (
+        isinstance(group, tuple)
+        and group
+        and all(
             isinstance(j, int | np.integer) and not isinstance(j, bool) and 0 <= j < q
-            for j in group) and len(set(group)) == len(group):
+            for j in group
+        )
+        and len(set(group)) == len(group)
+    ):
         return group  # the fast path of the solvers' own calls
     if isinstance(group, str | bytes | dict) or not hasattr(group, "__iter__"):
-        raise ProblemError(f"{name}: expected a block (a tuple of object indices), got "
-                           f"{type(group).__name__}")
+        raise ProblemError(
+            f"{name}: expected a block (a tuple of object indices), got {type(group).__name__}"
+        )
     try:
         block = tuple(as_count(f"{name} entry", j, maximum=q - 1) for j in group)
     except TypeError:
         raise ProblemError(f"{name}: expected a block (a tuple of object indices)") from None
     if not block or len(set(block)) != len(block):
-        raise ProblemError(f"{name}: expected distinct object indices, at least one, got "
-                           f"{block}")
+        raise ProblemError(f"{name}: expected distinct object indices, at least one, got {block}")
     return block
 
 
 def _as_partition(name: str, partition: Any, q: int) -> Partition:
     """``partition`` as sorted tuples of object indices that cover 0..Q−1 exactly once."""
     try:
-        blocks = [tuple(sorted(as_count(f"{name} entry", j, maximum=q - 1) for j in b))
-                  for b in partition]
+        blocks = [
+            tuple(sorted(as_count(f"{name} entry", j, maximum=q - 1) for j in b)) for b in partition
+        ]
     except TypeError:
-        raise ProblemError(f"{name}: expected a list of blocks (lists of object "
-                           f"indices), got {type(partition).__name__}") from None
+        raise ProblemError(
+            f"{name}: expected a list of blocks (lists of object "
+            f"indices), got {type(partition).__name__}"
+        ) from None
     if any(not b for b in blocks) or sorted(j for b in blocks for j in b) != list(range(q)):
-        raise ProblemError(f"{name}: must cover every object 0..{q - 1} exactly once "
-                           f"with non-empty blocks")
+        raise ProblemError(
+            f"{name}: must cover every object 0..{q - 1} exactly once with non-empty blocks"
+        )
     return blocks
 
 
@@ -636,21 +687,30 @@ class AssignmentSolution(Solution):
     mip_gap: float | None = None
 
 
-def _canonical(partition: Sequence[Sequence[int]], assignment: Sequence[int]
-               ) -> tuple[Partition, np.ndarray]:
+def _canonical(
+    partition: Sequence[Sequence[int]], assignment: Sequence[int]
+) -> tuple[Partition, np.ndarray]:
     blocks = [tuple(sorted(b)) for b in partition]
     order = sorted(range(len(blocks)), key=lambda k: blocks[k])
     new_index = {old: new for new, old in enumerate(order)}
-    return [blocks[k] for k in order], np.array([new_index[k] if k >= 0 else -1
-                                                 for k in assignment], dtype=int)
+    return [blocks[k] for k in order], np.array(
+        [new_index[k] if k >= 0 else -1 for k in assignment], dtype=int
+    )
 
 
 # ----------------------------------------------------------------------------- re-check
-def _recheck(data: AssignmentData, groups: list[tuple[int, ...]], keep: np.ndarray,
-             x: FloatArray, a_eq: sps.csr_matrix, a_ub: sps.csr_matrix, b_ub: FloatArray,
-             solver_objective: float, exclude: Sequence[AssignmentSolution],
-             fixed: Partition | None) -> tuple[Partition, np.ndarray, float,
-                                               dict[str, float], str]:
+def _recheck(
+    data: AssignmentData,
+    groups: list[tuple[int, ...]],
+    keep: np.ndarray,
+    x: FloatArray,
+    a_eq: sps.csr_matrix,
+    a_ub: sps.csr_matrix,
+    b_ub: FloatArray,
+    solver_objective: float,
+    exclude: Sequence[AssignmentSolution],
+    fixed: Partition | None,
+) -> tuple[Partition, np.ndarray, float, dict[str, float], str]:
     """Re-check the solver's point against the original problem, in NumPy.
 
     Returns the rounded hypothesis, its recomputed score (13) and the residuals: the
@@ -663,8 +723,8 @@ def _recheck(data: AssignmentData, groups: list[tuple[int, ...]], keep: np.ndarr
     xr = np.round(x)
     res = {"integrality": float(np.max(np.abs(x - xr), initial=0.0))}
     eq = a_eq @ x - 1.0
-    res["exact_cover"] = float(np.max(np.abs(eq[:data.q]), initial=0.0))
-    res["one_source"] = float(np.max(np.abs(eq[data.q:]), initial=0.0))
+    res["exact_cover"] = float(np.max(np.abs(eq[: data.q]), initial=0.0))
+    res["one_source"] = float(np.max(np.abs(eq[data.q :]), initial=0.0))
     ub = a_ub @ x - b_ub
     res["block_capacity"] = float(np.max(np.maximum(ub[:n_g], 0.0), initial=0.0))
     res["no_good_cuts"] = float(np.max(np.maximum(ub[n_g:], 0.0), initial=0.0))
@@ -673,7 +733,7 @@ def _recheck(data: AssignmentData, groups: list[tuple[int, ...]], keep: np.ndarr
     where = {g: k for k, g in enumerate(part)}
     assign = np.full(data.n, -1)
     why = ""
-    for v, (i, c) in zip(xr[n_g:n_g + n_k], keep, strict=True):
+    for v, (i, c) in zip(xr[n_g : n_g + n_k], keep, strict=True):
         if v > 0.5:
             if groups[c] not in where or assign[i] >= 0:
                 why = "γ assigns a measurement twice or to a block that is off"
@@ -686,34 +746,46 @@ def _recheck(data: AssignmentData, groups: list[tuple[int, ...]], keep: np.ndarr
             s = score(data, part, assign)
         except ProblemError as exc:
             why = f"the rounded point is not a hypothesis ({exc})"
-    if not why and any(h.partition == part and list(h.assignment) == list(assign)
-                       for h in exclude):
+    if not why and any(h.partition == part and list(h.assignment) == list(assign) for h in exclude):
         why = "the solver returned an excluded hypothesis"
     if not why and fixed is not None and part != sorted(fixed):
         why = "the solver changed the fixed partition"
     if why or not np.isfinite(s):
         res["objective"] = math.inf
         return part, assign, s, res, why or "the recomputed score is not finite"
-    res["objective"] = (abs(solver_objective - s) / max(1.0, abs(s))
-                        if np.isfinite(solver_objective) else math.inf)
+    res["objective"] = (
+        abs(solver_objective - s) / max(1.0, abs(s)) if np.isfinite(solver_objective) else math.inf
+    )
     return part, assign, s, res, ""
 
 
 # ----------------------------------------------------------------------------- the gate
-def _finish_point(data: AssignmentData, groups: list[tuple[int, ...]], keep: np.ndarray,
-                  x: FloatArray, a_eq: sps.csr_matrix, a_ub: sps.csr_matrix,
-                  b_ub: FloatArray, solver_objective: float,
-                  exclude: Sequence[AssignmentSolution], fixed: Partition | None, *,
-                  common: dict[str, Any], gap_reached: float | None, gap: float,
-                  info: dict[str, Any]) -> AssignmentSolution:
+def _finish_point(
+    data: AssignmentData,
+    groups: list[tuple[int, ...]],
+    keep: np.ndarray,
+    x: FloatArray,
+    a_eq: sps.csr_matrix,
+    a_ub: sps.csr_matrix,
+    b_ub: FloatArray,
+    solver_objective: float,
+    exclude: Sequence[AssignmentSolution],
+    fixed: Partition | None,
+    *,
+    common: dict[str, Any],
+    gap_reached: float | None,
+    gap: float,
+    info: dict[str, Any],
+) -> AssignmentSolution:
     """End of the MILP solve for the solver's point ``x`` (``common``: the back-end's
     fields, status OK): :func:`_recheck`, then the one gate
     (:func:`optmodels.core.finish`) on its residuals; refused: the failure form (no
     hypothesis; the rounded one in ``info["rejected_partition"]``/``["rejected_assignment"]``).
     Accepted OPTIMAL with a reached MIP gap above VERIFY_TOL (relative to max(1, |score|))
     is OPTIMAL_INACCURATE: not proven optimal."""
-    part, assign, s, resid, why = _recheck(data, groups, keep, x, a_eq, a_ub, b_ub,
-                                           solver_objective, exclude, fixed)
+    part, assign, s, resid, why = _recheck(
+        data, groups, keep, x, a_eq, a_ub, b_ub, solver_objective, exclude, fixed
+    )
     fields = {k: v for k, v in common.items() if k not in ("status", "message")}
 
     def note(v: Verdict) -> str:
@@ -723,15 +795,29 @@ def _finish_point(data: AssignmentData, groups: list[tuple[int, ...]], keep: np.
 
     def reject(sol: AssignmentSolution) -> AssignmentSolution:
         rest = {k: v for k, v in fields.items() if k != "method"}
-        return failure(AssignmentSolution, sol.method, sol.message, status=sol.status,
-                       mip_gap=gap_reached, residuals=resid,
-                       info=dict(info, rejected_partition=part, rejected_assignment=assign),
-                       **rest)
+        return failure(
+            AssignmentSolution,
+            sol.method,
+            sol.message,
+            status=sol.status,
+            mip_gap=gap_reached,
+            residuals=resid,
+            info=dict(info, rejected_partition=part, rejected_assignment=assign),
+            **rest,
+        )
 
-    sol = AssignmentSolution(status=common["status"], objective=s, partition=part,
-                             assignment=assign, log_score=s, message=common["message"],
-                             mip_gap=gap_reached if gap_reached is not None else gap,
-                             residuals=resid, info=info, **fields)
+    sol = AssignmentSolution(
+        status=common["status"],
+        objective=s,
+        partition=part,
+        assignment=assign,
+        log_score=s,
+        message=common["message"],
+        mip_gap=gap_reached if gap_reached is not None else gap,
+        residuals=resid,
+        info=info,
+        **fields,
+    )
     sol = finish(sol, note=note, reject=reject)
     if sol.ok and gap_reached is not None and np.isfinite(gap_reached):
         # HiGHS' gap is relative to |incumbent|; judge it relative to max(1, |score|)

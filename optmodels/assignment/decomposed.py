@@ -80,8 +80,9 @@ def highspy_module() -> Any:
 
 
 # ----------------------------------------------------------------------------- gated gains
-def gated_entries(data: AssignmentData, groups: list[tuple[int, ...]], bonus: float
-                  ) -> tuple[np.ndarray, np.ndarray, FloatArray]:
+def gated_entries(
+    data: AssignmentData, groups: list[tuple[int, ...]], bonus: float
+) -> tuple[np.ndarray, np.ndarray, FloatArray]:
     """The (measurement, group) pairs that can carry a needed column γ_iS (module
     docstring, item 1) and their gains ln φ_iS + ``bonus``: (rows, cols, gain)."""
     n = data.n
@@ -100,12 +101,10 @@ def gated_entries(data: AssignmentData, groups: list[tuple[int, ...]], bonus: fl
         dist = np.linalg.norm(data.measurements[None, :, :] - mean[:, None, :], axis=2)
         cols, rows = np.nonzero(dist <= radius[:, None])
     else:
-        lists = cKDTree(data.measurements).query_ball_point(mean, radius,
-                                                            return_sorted=False)
+        lists = cKDTree(data.measurements).query_ball_point(mean, radius, return_sorted=False)
         lens = np.fromiter(map(len, lists), dtype=int, count=len(groups))
         cols = np.repeat(np.arange(len(groups)), lens)
-        rows = np.fromiter(itertools.chain.from_iterable(lists), dtype=int,
-                           count=int(lens.sum()))
+        rows = np.fromiter(itertools.chain.from_iterable(lists), dtype=int, count=int(lens.sum()))
     return rows, cols, entry_log_likelihoods(data, groups, rows, cols) + bonus
 
 
@@ -117,9 +116,15 @@ def _lookup(keys: np.ndarray, vals: FloatArray, want: np.ndarray) -> FloatArray:
     return np.where(hit, vals[pos] if len(keys) else 0.0, -np.inf)
 
 
-def prune_entries(data: AssignmentData, groups: list[tuple[int, ...]], p0: FloatArray,
-                  rows: np.ndarray, cols: np.ndarray, gain: FloatArray, bg: float
-                  ) -> tuple[np.ndarray, np.ndarray]:
+def prune_entries(
+    data: AssignmentData,
+    groups: list[tuple[int, ...]],
+    p0: FloatArray,
+    rows: np.ndarray,
+    cols: np.ndarray,
+    gain: FloatArray,
+    bg: float,
+) -> tuple[np.ndarray, np.ndarray]:
     """Pruning rules 1-3 (module docstring) on the gated entries: the kept groups (mask)
     and the kept entries (mask). Singletons are always kept (the cover needs them)."""
     n_g = len(groups)
@@ -134,8 +139,13 @@ def prune_entries(data: AssignmentData, groups: list[tuple[int, ...]], p0: Float
         cs = np.flatnonzero(sizes == size)
         members = np.array([groups[c] for c in cs], dtype=int)  # (G_s, s); singleton j is j
         split = p0[members].sum(axis=1)
-        rest = np.array([[index.get(tuple(np.delete(m, pos).tolist()), -1)
-                          for pos in range(size)] for m in members], dtype=int)
+        rest = np.array(
+            [
+                [index.get(tuple(np.delete(m, pos).tolist()), -1) for pos in range(size)]
+                for m in members
+            ],
+            dtype=int,
+        )
         local = np.full(n_g, -1)
         local[cs] = np.arange(len(cs))
         ent = np.flatnonzero(usable & (local[cols] >= 0))
@@ -151,8 +161,11 @@ def prune_entries(data: AssignmentData, groups: list[tuple[int, ...]], p0: Float
                 rr = rest[li, pos]
                 ok = rr >= 0
                 peel = np.full(len(ent), -np.inf)
-                peel[ok] = (p0[rr[ok]] + p0[members[li[ok], pos]]
-                            + _lookup(skeys, sgain, i[ok] * n_g + rr[ok]))
+                peel[ok] = (
+                    p0[rr[ok]]
+                    + p0[members[li[ok], pos]]
+                    + _lookup(skeys, sgain, i[ok] * n_g + rr[ok])
+                )
                 rhs = np.maximum(rhs, peel)
             usable[ent[lhs <= rhs]] = False
         has = np.zeros(n_g, dtype=bool)
@@ -167,22 +180,26 @@ class Rows:
     :func:`numpy.bincount` (what the re-check needs; building a scipy.sparse matrix costs
     ~0.3 ms each, measured, a tenth of a small scan's budget)."""
 
-    def __init__(self, r: np.ndarray, c: np.ndarray, v: FloatArray,
-                 shape: tuple[int, int]) -> None:
+    def __init__(self, r: np.ndarray, c: np.ndarray, v: FloatArray, shape: tuple[int, int]) -> None:
         self.r, self.c, self.v, self.shape = r, c, v, shape
 
     def __matmul__(self, x: FloatArray) -> FloatArray:
-        out: FloatArray = np.bincount(self.r, weights=self.v * x[self.c],
-                                      minlength=self.shape[0]).astype(float, copy=False)
+        out: FloatArray = np.bincount(
+            self.r, weights=self.v * x[self.c], minlength=self.shape[0]
+        ).astype(float, copy=False)
         return out
 
     def tocsr(self) -> sps.csr_matrix:
         return sps.csr_matrix((self.v, (self.r, self.c)), shape=self.shape)
 
 
-def sparse_model(data: AssignmentData, groups: list[tuple[int, ...]], p0: FloatArray,
-                 keep: np.ndarray, keep_gain: FloatArray
-                 ) -> tuple[FloatArray, Rows, Rows, FloatArray]:
+def sparse_model(
+    data: AssignmentData,
+    groups: list[tuple[int, ...]],
+    p0: FloatArray,
+    keep: np.ndarray,
+    keep_gain: FloatArray,
+) -> tuple[FloatArray, Rows, Rows, FloatArray]:
     """The MILP of :func:`~optmodels.assignment.milp._build_model` (no cuts) from sparse
     arrays: x = (z_S, γ_iS for ``keep`` (K, 2) = (i, group), γ_i0); c, A_eq, A_ub, b_ub
     (``Rows(...).tocsr()`` gives the scipy matrices)."""
@@ -190,15 +207,17 @@ def sparse_model(data: AssignmentData, groups: list[tuple[int, ...]], p0: FloatA
     c = np.concatenate([p0, keep_gain, np.full(n, -math.log(data.volume))])
     cols = n_g + n_k + n
     sizes = np.fromiter(map(len, groups), dtype=int, count=n_g)
-    member_r = np.fromiter(itertools.chain.from_iterable(groups), dtype=int,
-                           count=int(sizes.sum()))
+    member_r = np.fromiter(itertools.chain.from_iterable(groups), dtype=int, count=int(sizes.sum()))
     member_c = np.repeat(np.arange(n_g), sizes)
     rows = np.concatenate([member_r, q + keep[:, 0], q + np.arange(n)])
     colx = np.concatenate([member_c, n_g + np.arange(n_k), n_g + n_k + np.arange(n)])
     a_eq = Rows(rows, colx, np.ones(len(rows)), (q + n, cols))
-    a_ub = Rows(np.concatenate([np.arange(n_g), keep[:, 1]]),
-                np.concatenate([np.arange(n_g), n_g + np.arange(n_k)]),
-                np.concatenate([-np.ones(n_g), np.ones(n_k)]), (n_g, cols))
+    a_ub = Rows(
+        np.concatenate([np.arange(n_g), keep[:, 1]]),
+        np.concatenate([np.arange(n_g), n_g + np.arange(n_k)]),
+        np.concatenate([-np.ones(n_g), np.ones(n_k)]),
+        (n_g, cols),
+    )
     return c, a_eq, a_ub, np.zeros(n_g)
 
 
@@ -226,10 +245,18 @@ def _components(n_nodes: int, ea: np.ndarray, eb: np.ndarray) -> tuple[int, np.n
     return int(label.max(initial=-1)) + 1, label.reshape(-1)
 
 
-def _highs_solve(c: FloatArray, ar: np.ndarray, ac: np.ndarray, av: FloatArray,
-                 shape: tuple[int, int], lo: FloatArray, hi: FloatArray, gap: float,
-                 limit: float | None, verbose: bool
-                 ) -> tuple[Status, FloatArray | None, float, float | None, str, float]:
+def _highs_solve(
+    c: FloatArray,
+    ar: np.ndarray,
+    ac: np.ndarray,
+    av: FloatArray,
+    shape: tuple[int, int],
+    lo: FloatArray,
+    hi: FloatArray,
+    gap: float,
+    limit: float | None,
+    verbose: bool,
+) -> tuple[Status, FloatArray | None, float, float | None, str, float]:
     """max cᵀx, lo ≤ A x ≤ hi (A from the triplets ``ar``, ``ac``, ``av``), x binary, by
     HiGHS directly: status, x, objective, the MIP gap reached, HiGHS' message, seconds."""
     order = np.lexsort((ar, ac))  # column-wise
@@ -242,8 +269,9 @@ def _highs_solve(c: FloatArray, ar: np.ndarray, ac: np.ndarray, av: FloatArray,
     # 13-23 ms per run even for 10 binaries (a heuristic only: optimality is still proven
     # by the branch and bound). "threads" is not set: HiGHS' thread pool is global and a
     # run asking for another size than the pool's fails (seen after a CVXPY HiGHS solve)
-    for key, value in milp_options("HIGHS", gap, limit, verbose=verbose,
-                                   where="assignment.solve").items():
+    for key, value in milp_options(
+        "HIGHS", gap, limit, verbose=verbose, where="assignment.solve"
+    ).items():
         h.setOptionValue(key, value)
     h.setOptionValue("mip_heuristic_run_feasibility_jump", False)
     lp = hs.HighsLp()
@@ -267,18 +295,35 @@ def _highs_solve(c: FloatArray, ar: np.ndarray, ac: np.ndarray, av: FloatArray,
     gap_reached = float(info.mip_gap) if np.isfinite(info.mip_gap) else None
     if ms == hs.HighsModelStatus.kOptimal:
         x = np.asarray(h.getSolution().col_value, dtype=float)
-        return Status.OPTIMAL, x, float(info.objective_function_value), gap_reached, text, \
-            ts.elapsed
-    if ms in (hs.HighsModelStatus.kTimeLimit, hs.HighsModelStatus.kIterationLimit,
-              hs.HighsModelStatus.kSolutionLimit, hs.HighsModelStatus.kInterrupt):
+        return (
+            Status.OPTIMAL,
+            x,
+            float(info.objective_function_value),
+            gap_reached,
+            text,
+            ts.elapsed,
+        )
+    if ms in (
+        hs.HighsModelStatus.kTimeLimit,
+        hs.HighsModelStatus.kIterationLimit,
+        hs.HighsModelStatus.kSolutionLimit,
+        hs.HighsModelStatus.kInterrupt,
+    ):
         return Status.ITERATION_LIMIT, None, math.nan, gap_reached, text, ts.elapsed
     if ms == hs.HighsModelStatus.kInfeasible:
         return Status.INFEASIBLE, None, math.nan, gap_reached, text, ts.elapsed
     return Status.ERROR, None, math.nan, gap_reached, text, ts.elapsed
 
 
-def solve_decomposed(data: AssignmentData, groups: list[tuple[int, ...]], *, gap: float,
-                     limit: float | None, verbose: bool, where: str) -> AssignmentSolution:
+def solve_decomposed(
+    data: AssignmentData,
+    groups: list[tuple[int, ...]],
+    *,
+    gap: float,
+    limit: float | None,
+    verbose: bool,
+    where: str,
+) -> AssignmentSolution:
     """The MAP hypothesis over the candidate ``groups`` (module docstring), re-checked."""
     q, n = data.q, data.n
     bg = -math.log(data.volume)
@@ -299,10 +344,8 @@ def solve_decomposed(data: AssignmentData, groups: list[tuple[int, ...]], *, gap
         # components on objects 0..Q-1 and measurements Q..Q+N-1
         first = np.fromiter((g[0] for g in groups), dtype=int, count=n_g)
         merged = [g for g in groups if len(g) > 1]
-        ea = np.array([a for g in merged for a in g[:-1]] + (q + keep[:, 0]).tolist(),
-                      dtype=int)
-        eb = np.array([b for g in merged for b in g[1:]] + first[keep[:, 1]].tolist(),
-                      dtype=int)
+        ea = np.array([a for g in merged for a in g[:-1]] + (q + keep[:, 0]).tolist(), dtype=int)
+        eb = np.array([b for g in merged for b in g[1:]] + first[keep[:, 1]].tolist(), dtype=int)
         n_comp, label = _components(q + n, ea, eb)
         col_comp = np.concatenate([label[first], label[q + keep[:, 0]], label[q:]])
         n_obj = np.bincount(label[:q], minlength=n_comp)
@@ -310,12 +353,15 @@ def solve_decomposed(data: AssignmentData, groups: list[tuple[int, ...]], *, gap
         contended[label[[g[0] for g in merged]]] = True
     x = np.zeros(len(c))
     x[:q] = 1.0  # groups are sorted by size: the singletons come first, all on by default
-    x[n_g + n_k:] = 1.0  # every measurement on the background until given to a block
-    info: dict[str, Any] = {"candidate_groups": n_g, "assignment_variables": n_k,
-                            "components": int(n_comp), "contended_components":
-                            int(contended.sum()), "largest_component":
-                            int(np.bincount(label).max(initial=0)),
-                            "neglected_pair_bound": _neglected_bound(data)}
+    x[n_g + n_k :] = 1.0  # every measurement on the background until given to a block
+    info: dict[str, Any] = {
+        "candidate_groups": n_g,
+        "assignment_variables": n_k,
+        "components": int(n_comp),
+        "contended_components": int(contended.sum()),
+        "largest_component": int(np.bincount(label).max(initial=0)),
+        "neglected_pair_bound": _neglected_bound(data),
+    }
     with timed() as tc:
         # singleton-only components: one object -> its best column; several -> LSA
         single_col = keep[:, 1] < q
@@ -360,11 +406,14 @@ def solve_decomposed(data: AssignmentData, groups: list[tuple[int, ...]], *, gap
     if contended.any():
         sel_c = np.flatnonzero(contended[col_comp])
         if len(sel_c) > MAX_MILP_COLUMNS:
-            raise ProblemError(f"{where}: {len(sel_c)} binary columns in the contended "
-                               f"components, above the limit {MAX_MILP_COLUMNS:.0e}; lower "
-                               f"max_group_size")
-        row_on = np.concatenate([contended[label[:q]], contended[label[q:]],
-                                 contended[label[first]]])
+            raise ProblemError(
+                f"{where}: {len(sel_c)} binary columns in the contended "
+                f"components, above the limit {MAX_MILP_COLUMNS:.0e}; lower "
+                f"max_group_size"
+            )
+        row_on = np.concatenate(
+            [contended[label[:q]], contended[label[q:]], contended[label[first]]]
+        )
         new_row = np.cumsum(row_on) - 1
         new_col = np.full(len(c), -1)
         new_col[sel_c] = np.arange(len(sel_c))
@@ -372,31 +421,66 @@ def solve_decomposed(data: AssignmentData, groups: list[tuple[int, ...]], *, gap
         c_all = np.concatenate([a_eq.c, a_ub.c])
         v_all = np.concatenate([a_eq.v, a_ub.v])
         on = row_on[r_all] & (new_col[c_all] >= 0)
-        n_eq = int(row_on[:q + n].sum())
+        n_eq = int(row_on[: q + n].sum())
         n_rows = int(row_on.sum())
         lo = np.concatenate([np.ones(n_eq), np.full(n_rows - n_eq, -np.inf)])
-        hi = np.concatenate([np.ones(n_eq), b_ub[row_on[q + n:]]])
+        hi = np.concatenate([np.ones(n_eq), b_ub[row_on[q + n :]]])
         status, xs, obj, gap_reached, text, t_milp = _highs_solve(
-            c[sel_c], new_row[r_all[on]], new_col[c_all[on]], v_all[on],
-            (n_rows, len(sel_c)), lo, hi, gap, limit, verbose)
+            c[sel_c],
+            new_row[r_all[on]],
+            new_col[c_all[on]],
+            v_all[on],
+            (n_rows, len(sel_c)),
+            lo,
+            hi,
+            gap,
+            limit,
+            verbose,
+        )
         solve_t += t_milp
         msg = f"decomposed; HiGHS on {int(contended.sum())} contended components: {text}"
         info["milp_columns"] = len(sel_c)
         if xs is None:
             if gap_reached is not None:
                 msg += f"; MIP gap reached {gap_reached:.3g}"
-            return AssignmentSolution(status=status, objective=math.nan,
-                                      method="highs:decomposed", message=msg,
-                                      build_time=tb.elapsed, solve_time=solve_t,
-                                      mip_gap=gap_reached, info=info)
+            return AssignmentSolution(
+                status=status,
+                objective=math.nan,
+                method="highs:decomposed",
+                message=msg,
+                build_time=tb.elapsed,
+                solve_time=solve_t,
+                mip_gap=gap_reached,
+                info=info,
+            )
         rest = np.ones(len(c), dtype=bool)
         rest[sel_c] = False
         x[sel_c] = xs
         solver_obj = obj + float(c[rest] @ x[rest])
-    common = {"status": status, "method": "highs:decomposed", "build_time": tb.elapsed,
-              "solve_time": solve_t, "iterations": None, "message": msg}
-    return _finish_point(data, groups, keep, x, a_eq, a_ub, b_ub, solver_obj, (), None,
-                         common=common, gap_reached=gap_reached, gap=gap, info=info)
+    common = {
+        "status": status,
+        "method": "highs:decomposed",
+        "build_time": tb.elapsed,
+        "solve_time": solve_t,
+        "iterations": None,
+        "message": msg,
+    }
+    return _finish_point(
+        data,
+        groups,
+        keep,
+        x,
+        a_eq,
+        a_ub,
+        b_ub,
+        solver_obj,
+        (),
+        None,
+        common=common,
+        gap_reached=gap_reached,
+        gap=gap,
+        info=info,
+    )
 
 
 #: Contended components of at most this many objects (and at most ENUMERATE_VARIANTS
@@ -406,9 +490,14 @@ ENUMERATE_OBJECTS = 6
 ENUMERATE_VARIANTS = 64
 
 
-def _enumerate(groups: list[tuple[int, ...]], gi: np.ndarray, p0: FloatArray,
-               keep: np.ndarray, value: FloatArray, ei: np.ndarray
-               ) -> tuple[np.ndarray, np.ndarray] | None:
+def _enumerate(
+    groups: list[tuple[int, ...]],
+    gi: np.ndarray,
+    p0: FloatArray,
+    keep: np.ndarray,
+    value: FloatArray,
+    ei: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray] | None:
     """The best hypothesis of one component: every partition of its objects into its kept
     groups (exact covers), each scored by the linear assignment of its measurements to the
     blocks or the background (``value`` = gain − background > 0 per kept column); the
@@ -445,15 +534,16 @@ def _enumerate(groups: list[tuple[int, ...]], gi: np.ndarray, p0: FloatArray,
         chosen = np.zeros(0, dtype=int)
         if len(mine):
             mat = np.full((len(meas), len(part) + len(meas)), -1e300)
-            mat[:, len(part):] = 0.0
+            mat[:, len(part) :] = 0.0
             r_ = [mrow[int(keep[k, 0])] for k in mine]
             c_ = [col[int(keep[k, 1])] for k in mine]
             mat[r_, c_] = value[mine]
             rr, cc = linear_sum_assignment(mat, maximize=True)
-            pick = {(a, b) for a, b in zip(rr.tolist(), cc.tolist(), strict=True)
-                    if b < len(part)}
-            chosen = np.array([k for k, a, b in zip(mine.tolist(), r_, c_, strict=True)
-                               if (a, b) in pick], dtype=int)
+            pick = {(a, b) for a, b in zip(rr.tolist(), cc.tolist(), strict=True) if b < len(part)}
+            chosen = np.array(
+                [k for k, a, b in zip(mine.tolist(), r_, c_, strict=True) if (a, b) in pick],
+                dtype=int,
+            )
             total += float(value[chosen].sum())
         if best is None or total > best[0] + 1e-12 * max(1.0, abs(total)):
             best = (total, part, chosen)
@@ -474,12 +564,18 @@ def _lsa(pairs: np.ndarray, value: FloatArray, idx: np.ndarray) -> np.ndarray:
     mi, mj = np.unique(pairs[:, 0], return_inverse=True)
     oi, oj = np.unique(pairs[:, 1], return_inverse=True)
     mat = np.full((len(mi), len(oi) + len(mi)), -1e300)
-    mat[:, len(oi):] = 0.0
+    mat[:, len(oi) :] = 0.0
     mat[mj, oj] = value
     r, cc = linear_sum_assignment(mat, maximize=True)
     where = {(int(a), int(b)): int(k) for k, a, b in zip(idx, mj, oj, strict=True)}
-    return np.array([where[(int(a), int(b))] for a, b in zip(r, cc, strict=True)
-                     if b < len(oi) and (int(a), int(b)) in where], dtype=int)
+    return np.array(
+        [
+            where[(int(a), int(b))]
+            for a, b in zip(r, cc, strict=True)
+            if b < len(oi) and (int(a), int(b)) in where
+        ],
+        dtype=int,
+    )
 
 
 def _neglected_bound(data: AssignmentData) -> float:

@@ -47,8 +47,9 @@ def set_partitions(items: Sequence[int]) -> Iterator[Partition]:
     """
     name = "assignment.set_partitions items"
     if isinstance(items, str | bytes | dict) or not hasattr(items, "__iter__"):
-        raise ProblemError(f"{name}: expected a sequence of object indices, got "
-                           f"{type(items).__name__}")
+        raise ProblemError(
+            f"{name}: expected a sequence of object indices, got {type(items).__name__}"
+        )
     try:
         checked = [as_count(f"{name} entry", j, minimum=0) for j in items]
     except TypeError:
@@ -65,7 +66,7 @@ def _set_partitions(items: list[int]) -> Iterator[Partition]:
     first, rest = items[0], items[1:]
     for part in _set_partitions(rest):
         for k in range(len(part)):
-            yield [*part[:k], tuple(sorted((first, *part[k]))), *part[k + 1:]]
+            yield [*part[:k], tuple(sorted((first, *part[k]))), *part[k + 1 :]]
         yield [(first,), *part]
 
 
@@ -81,8 +82,10 @@ def _assignments_count(blocks: int, n: int) -> int:
 
 
 def _check_counts(where: str, q: Any, n: Any) -> tuple[int, int]:
-    return (as_count(f"{where} q", q, minimum=1, maximum=COUNT_LIMIT),
-            as_count(f"{where} n", n, minimum=0, maximum=COUNT_LIMIT))
+    return (
+        as_count(f"{where} q", q, minimum=1, maximum=COUNT_LIMIT),
+        as_count(f"{where} n", n, minimum=0, maximum=COUNT_LIMIT),
+    )
 
 
 def count_per_variant(q: int, n: int) -> dict[int, tuple[int, int]]:
@@ -131,8 +134,9 @@ def count_gated(gates: Sequence[Sequence[int]], *, new_target: bool = False) -> 
         raise ProblemError(f"{w}: expected a list of lists of target indices") from None
     size = math.prod(len(g) + 1 for g in gate_lists)
     if size > BRUTE_FORCE_LIMIT:
-        raise ProblemError(f"{w}: {size:.3g} joint choices to enumerate, above the limit "
-                           f"{BRUTE_FORCE_LIMIT:.0e}")
+        raise ProblemError(
+            f"{w}: {size:.3g} joint choices to enumerate, above the limit {BRUTE_FORCE_LIMIT:.0e}"
+        )
     extra = 2 if bool(new_target) else 1
     total = 0
     for choice in itertools.product(*[[*g, -1] for g in gate_lists]):
@@ -171,8 +175,9 @@ def _assignments(blocks: int, n: int) -> Iterator[tuple[int, ...]]:
     yield from rec(0, frozenset())
 
 
-def brute_force(data: AssignmentData, *,
-                max_hypotheses: int = BRUTE_FORCE_LIMIT) -> AssignmentSolution:
+def brute_force(
+    data: AssignmentData, *, max_hypotheses: int = BRUTE_FORCE_LIMIT
+) -> AssignmentSolution:
     """The paper's method (13)-(14): score every hypothesis, keep the best (ties: the
     first).
 
@@ -185,13 +190,17 @@ def brute_force(data: AssignmentData, *,
     """
     as_instance("assignment.brute_force data", data, AssignmentData)
     limit = as_count("assignment.brute_force max_hypotheses", max_hypotheses, minimum=1)
-    total = count_hypotheses(data.q, data.n) if data.q <= COUNT_LIMIT and \
-        data.n <= COUNT_LIMIT else math.inf
+    total = (
+        count_hypotheses(data.q, data.n)
+        if data.q <= COUNT_LIMIT and data.n <= COUNT_LIMIT
+        else math.inf
+    )
     if total > limit:
         raise ProblemError(
             f"assignment.brute_force: Q = {data.q}, N = {data.n} gives {float(total):.3g} "
             f"hypotheses, above max_hypotheses = {limit:.3g}; use assignment.solve (the "
-            f"same MAP hypothesis as one MILP) or assignment.k_best for several")
+            f"same MAP hypothesis as one MILP) or assignment.k_best for several"
+        )
     with timed() as tm:
         groups = candidate_groups(data)
         ll = dict(zip(groups, log_likelihoods(data, groups).T, strict=True))
@@ -203,11 +212,23 @@ def brute_force(data: AssignmentData, *,
             if best is None or s > best[0] + 1e-12:
                 best = (s, part, a)
     if best is None or not np.isfinite(best[0]):
-        return AssignmentSolution(status=Status.ERROR, objective=float("nan"),
-                                  method="brute_force", solve_time=tm.elapsed,
-                                  message="no hypothesis with a finite score",
-                                  info={"hypotheses": count})
+        return AssignmentSolution(
+            status=Status.ERROR,
+            objective=float("nan"),
+            method="brute_force",
+            solve_time=tm.elapsed,
+            message="no hypothesis with a finite score",
+            info={"hypotheses": count},
+        )
     part, assign = _canonical(best[1], best[2])
-    return AssignmentSolution(status=Status.OPTIMAL, objective=best[0], method="brute_force",
-                              solve_time=tm.elapsed, partition=part, assignment=assign,
-                              log_score=best[0], mip_gap=0.0, info={"hypotheses": count})
+    return AssignmentSolution(
+        status=Status.OPTIMAL,
+        objective=best[0],
+        method="brute_force",
+        solve_time=tm.elapsed,
+        partition=part,
+        assignment=assign,
+        log_score=best[0],
+        mip_gap=0.0,
+        info={"hypotheses": count},
+    )

@@ -75,8 +75,9 @@ class KBest:
 Hypothesis = tuple[tuple[tuple[int, ...], ...], tuple[int, ...]]
 
 
-def _neighbours(partition: Partition, assignment: Sequence[int],
-                allowed: set[tuple[int, ...]]) -> list[tuple[Partition, list[int]]]:
+def _neighbours(
+    partition: Partition, assignment: Sequence[int], allowed: set[tuple[int, ...]]
+) -> list[tuple[Partition, list[int]]]:
     """Hypotheses one change away from ``h``: a measurement moved to the background or to
     another block (its previous owner's measurement to the background), a merged block
     split into singletons (its measurement to the background or to one member), two
@@ -86,7 +87,7 @@ def _neighbours(partition: Partition, assignment: Sequence[int],
     out: list[tuple[Partition, list[int]]] = []
     for i, ki in enumerate(a):
         if ki >= 0:
-            out.append((part, [*a[:i], -1, *a[i + 1:]]))
+            out.append((part, [*a[:i], -1, *a[i + 1 :]]))
         for b in range(len(part)):
             if b != ki:
                 new = list(a)
@@ -124,8 +125,13 @@ def _neighbours(partition: Partition, assignment: Sequence[int],
     return out
 
 
-def _lower_bound(data: AssignmentData, first: AssignmentSolution, k: int,
-                 groups: list[tuple[int, ...]], ll: FloatArray) -> float:
+def _lower_bound(
+    data: AssignmentData,
+    first: AssignmentSolution,
+    k: int,
+    groups: list[tuple[int, ...]],
+    ll: FloatArray,
+) -> float:
     """A lower bound L on the k-th best score: the k-th best of k distinct feasible
     hypotheses (the MAP and its neighbours; rounds expanding the k best seen, at most
     :data:`_NEIGHBOUR_ROUNDS`, until the k-th stops rising), scored from the likelihood
@@ -151,8 +157,7 @@ def _lower_bound(data: AssignmentData, first: AssignmentSolution, k: int,
             total += prior[key]
         on = aa >= 0
         if on.any():
-            total += float(sum(table[p[int(b)]][i] for i, b in zip(rows[on], aa[on],
-                                                                   strict=True)))
+            total += float(sum(table[p[int(b)]][i] for i, b in zip(rows[on], aa[on], strict=True)))
         return total + bg * float(np.count_nonzero(~on))
 
     def add(part: Partition, a: Sequence[int]) -> None:
@@ -185,28 +190,45 @@ def _lower_bound(data: AssignmentData, first: AssignmentSolution, k: int,
     return min(exact, ranked[k - 1][0])
 
 
-def _lp_duals(c: FloatArray, a_eq: Any, a_ub: Any, b_ub: FloatArray
-              ) -> tuple[FloatArray, FloatArray] | None:
+def _lp_duals(
+    c: FloatArray, a_eq: Any, a_ub: Any, b_ub: FloatArray
+) -> tuple[FloatArray, FloatArray] | None:
     """A dual point (y, u ≥ 0) of the LP relaxation max c·x, A_eq x = 1, A_ub x ≤ b_ub,
     0 ≤ x ≤ 1 (HiGHS), or None."""
     try:
-        res = linprog(-c, A_ub=a_ub if a_ub.shape[0] else None,
-                      b_ub=b_ub if a_ub.shape[0] else None, A_eq=a_eq,
-                      b_eq=np.ones(a_eq.shape[0]), bounds=(0.0, 1.0), method=_LP_METHOD)
+        res = linprog(
+            -c,
+            A_ub=a_ub if a_ub.shape[0] else None,
+            b_ub=b_ub if a_ub.shape[0] else None,
+            A_eq=a_eq,
+            b_eq=np.ones(a_eq.shape[0]),
+            bounds=(0.0, 1.0),
+            method=_LP_METHOD,
+        )
     except (ValueError, ArithmeticError):  # no bound: nothing is removed
         return None
     if res.status != 0 or res.eqlin is None:
         return None
     y = -np.asarray(res.eqlin.marginals, dtype=float)
-    u = np.maximum(-np.asarray(res.ineqlin.marginals, dtype=float), 0.0) if \
-        a_ub.shape[0] else np.zeros(0)
+    u = (
+        np.maximum(-np.asarray(res.ineqlin.marginals, dtype=float), 0.0)
+        if a_ub.shape[0]
+        else np.zeros(0)
+    )
     if not (np.all(np.isfinite(y)) and np.all(np.isfinite(u))):
         return None
     return y, u
 
 
-def _column_bounds(c: FloatArray, a_eq: Any, a_ub: Any, b_ub: FloatArray,
-                   start: np.ndarray | None = None, *, rounds: int = 12) -> FloatArray | None:
+def _column_bounds(
+    c: FloatArray,
+    a_eq: Any,
+    a_ub: Any,
+    b_ub: FloatArray,
+    start: np.ndarray | None = None,
+    *,
+    rounds: int = 12,
+) -> FloatArray | None:
     """U_c ≥ the objective of every 0/1 point of the model with x_c = 1, from a dual
     point (y, u ≥ 0) of the LP relaxation: with r = c − A_eqᵀy − A_ubᵀu and
     D = Σy + u·b + Σ max(0, r), c·x ≤ D + min(0, r_c) for every x ∈ [0, 1] feasible with
@@ -288,7 +310,8 @@ def k_best(data: AssignmentData, k: int, *, solver: str = "HIGHS") -> KBest:
         raise ProblemError(
             f"{w}: {n_g + n_k + n} binary columns ({n_g} groups, {n_k} measurement-group "
             f"pairs), above the limit {MAX_MODEL_COLUMNS:.0e}; tighten group_gate or "
-            f"lower max_group_size")
+            f"lower max_group_size"
+        )
     first = solve(data, solver=key)
     if first.status is Status.INFEASIBLE:
         return _result(data, [])
@@ -300,14 +323,18 @@ def k_best(data: AssignmentData, k: int, *, solver: str = "HIGHS") -> KBest:
             # column generation from every z_S, the background and the γ_iS that beat
             # it (issue 18's case: one LP of 15 761 of the 61 439 columns, converged)
             bg = -math.log(data.volume)
-            start = np.concatenate([np.ones(n_g, dtype=bool),
-                                    gain[keep[:, 0], keep[:, 1]] > bg,
-                                    np.ones(n, dtype=bool)])
+            start = np.concatenate(
+                [
+                    np.ones(n_g, dtype=bool),
+                    gain[keep[:, 0], keep[:, 1]] > bg,
+                    np.ones(n, dtype=bool),
+                ]
+            )
             bound = _column_bounds(c, a_eq, a_ub, b_ub, start)
             if bound is not None:
                 ok = bound >= low - _BOUND_TOL * max(1.0, abs(low))
                 ok_g = ok[:n_g] | np.array([len(g) == 1 for g in groups], dtype=bool)
-                ok_k = ok[n_g:n_g + n_k] & ok_g[keep[:, 1]]
+                ok_k = ok[n_g : n_g + n_k] & ok_g[keep[:, 1]]
                 new_index = np.cumsum(ok_g) - 1
                 groups = [g for g, o in zip(groups, ok_g, strict=True) if o]
                 gain = gain[:, ok_g]
@@ -339,7 +366,10 @@ def _result(data: AssignmentData, found: list[AssignmentSolution]) -> KBest:
         neglected = 0.0
     else:  # in logs: the count may exceed the float range
         log_rest = math.inf if rest is None else math.log(rest)
-        log_mass = log_rest + float(scores[-1] - scores.max()) - math.log(
-            float(np.exp(scores - scores.max()).sum()))
+        log_mass = (
+            log_rest
+            + float(scores[-1] - scores.max())
+            - math.log(float(np.exp(scores - scores.max()).sum()))
+        )
         neglected = math.exp(log_mass) if log_mass < 700 else math.inf
     return KBest(found, beta, neglected)

@@ -36,8 +36,8 @@ def linear_assignment(data: AssignmentData) -> AssignmentSolution:
         q, n = data.q, data.n
         singles = [(j,) for j in range(q)]
         gain = log_likelihoods(data, singles) + np.array(
-            [block_log_prior(data, g, True) - block_log_prior(data, g, False)
-             for g in singles])
+            [block_log_prior(data, g, True) - block_log_prior(data, g, False) for g in singles]
+        )
         mat = np.full((n, q + n), -np.inf)  # -inf: forbidden (scipy's convention)
         mat[:, :q] = gain
         mat[np.arange(n), q + np.arange(n)] = -math.log(data.volume)
@@ -46,15 +46,30 @@ def linear_assignment(data: AssignmentData) -> AssignmentSolution:
         for r, c in zip(rows, cols, strict=True):
             if c < q:
                 assign[r] = c
-        total = float(mat[rows, cols].sum()) + sum(block_log_prior(data, g, False)
-                                                   for g in singles)
+        total = float(mat[rows, cols].sum()) + sum(block_log_prior(data, g, False) for g in singles)
     part, assign = _canonical(singles, assign)
     s = score(data, part, assign)
     res = {"objective": abs(total - s) / max(1.0, abs(s)) if np.isfinite(s) else math.inf}
-    sol = AssignmentSolution(status=Status.OPTIMAL, objective=s, method="linear_assignment",
-                             solve_time=tm.elapsed, partition=part, assignment=assign,
-                             log_score=s, mip_gap=0.0, residuals=res)
-    return finish(sol, note=lambda v: "", reject=lambda bad: failure(
-        AssignmentSolution, "linear_assignment", "the assignment's total gain and the "
-        "recomputed score disagree", status=bad.status, solve_time=tm.elapsed,
-        residuals=res))
+    sol = AssignmentSolution(
+        status=Status.OPTIMAL,
+        objective=s,
+        method="linear_assignment",
+        solve_time=tm.elapsed,
+        partition=part,
+        assignment=assign,
+        log_score=s,
+        mip_gap=0.0,
+        residuals=res,
+    )
+    return finish(
+        sol,
+        note=lambda v: "",
+        reject=lambda bad: failure(
+            AssignmentSolution,
+            "linear_assignment",
+            "the assignment's total gain and the recomputed score disagree",
+            status=bad.status,
+            solve_time=tm.elapsed,
+            residuals=res,
+        ),
+    )

@@ -66,8 +66,9 @@ MAX_MODEL_COLUMNS = 1_000_000
 
 
 # ----------------------------------------------------------------------------- MILP
-def _prune(data: AssignmentData, groups: list[tuple[int, ...]], gain: FloatArray,
-           usable: np.ndarray) -> tuple[list[tuple[int, ...]], FloatArray, np.ndarray]:
+def _prune(
+    data: AssignmentData, groups: list[tuple[int, ...]], gain: FloatArray, usable: np.ndarray
+) -> tuple[list[tuple[int, ...]], FloatArray, np.ndarray]:
     """Exact dominance pruning of merged groups (never removes a MAP hypothesis), for any
     prior that decomposes over blocks, with p0(S) = ``block_log_prior(S, undetected)``
     and the column gains gain_iS = ln φ_iS + p1(S) − p0(S) (whatever the likelihoods: one
@@ -100,8 +101,7 @@ def _prune(data: AssignmentData, groups: list[tuple[int, ...]], gain: FloatArray
         # 2'. peel one member j: S \ {j} keeps i, {j} undetected. S \ {j} is a candidate
         # too (subsets of a gated clique are cliques, sizes only shrink)
         for pos in range(size):
-            rest = np.array([index.get(tuple(np.delete(m, pos).tolist()), -1)
-                             for m in members])
+            rest = np.array([index.get(tuple(np.delete(m, pos).tolist()), -1) for m in members])
             ok = rest >= 0
             if ok.any():
                 rr = rest[ok]
@@ -112,10 +112,14 @@ def _prune(data: AssignmentData, groups: list[tuple[int, ...]], gain: FloatArray
     return [groups[c] for c in idx], gain[:, idx], usable[:, idx]
 
 
-def _build_model(data: AssignmentData, groups: list[tuple[int, ...]], gain: FloatArray,
-                 keep: np.ndarray, exclude: Sequence[AssignmentSolution],
-                 fixed: bool) -> tuple[FloatArray, sps.csr_matrix, sps.csr_matrix,
-                                       FloatArray]:
+def _build_model(
+    data: AssignmentData,
+    groups: list[tuple[int, ...]],
+    gain: FloatArray,
+    keep: np.ndarray,
+    exclude: Sequence[AssignmentSolution],
+    fixed: bool,
+) -> tuple[FloatArray, sps.csr_matrix, sps.csr_matrix, FloatArray]:
     """The MILP in one vector x = (z_S, γ_iS for the kept pairs, γ_i0): objective c and
     sparse constraints A_eq x = 1, A_ub x ≤ b_ub (every matrix has O(columns) nonzeros).
 
@@ -128,8 +132,7 @@ def _build_model(data: AssignmentData, groups: list[tuple[int, ...]], gain: Floa
     q, n, n_g, n_k = data.q, data.n, len(groups), len(keep)
     bg = -math.log(data.volume)
     g_cost = np.array([block_log_prior(data, g, False) for g in groups])
-    c = np.concatenate([g_cost, gain[keep[:, 0], keep[:, 1]] if n_k else [],
-                        np.full(n, bg)])
+    c = np.concatenate([g_cost, gain[keep[:, 0], keep[:, 1]] if n_k else [], np.full(n, bg)])
     cols = n_g + n_k + n
     member_r = [j for g in groups for j in g]
     member_c = [c_ for c_, g in enumerate(groups) for _ in g]
@@ -162,19 +165,31 @@ def _build_model(data: AssignmentData, groups: list[tuple[int, ...]], gain: Floa
         ub_v.append(np.ones(len(on)))
         b_ub.append(np.array([len(on) - 1.0]))
     b = np.concatenate(b_ub)
-    a_ub = sps.csr_matrix((np.concatenate(ub_v), (np.concatenate(ub_r).astype(int),
-                                                  np.concatenate(ub_c).astype(int))),
-                          shape=(len(b), cols))
+    a_ub = sps.csr_matrix(
+        (
+            np.concatenate(ub_v),
+            (np.concatenate(ub_r).astype(int), np.concatenate(ub_c).astype(int)),
+        ),
+        shape=(len(b), cols),
+    )
     if fixed:  # z_S = 1 for the given blocks (implied by the cover; stated for clarity)
         a_ub = sps.vstack([a_ub, -sps.eye(n_g, cols, format="csr")], format="csr")
         b = np.concatenate([b, -np.ones(n_g)])
     return c, a_eq, a_ub, b
 
 
-def solve(data: AssignmentData, *, solver: str = "HIGHS", mip_gap: float = 0.0,
-          time_limit: float | None = None, fixed_partition: Partition | None = None,
-          prune: bool = True, exclude: Sequence[AssignmentSolution] = (),
-          model: str = "auto", **options: Any) -> AssignmentSolution:
+def solve(
+    data: AssignmentData,
+    *,
+    solver: str = "HIGHS",
+    mip_gap: float = 0.0,
+    time_limit: float | None = None,
+    fixed_partition: Partition | None = None,
+    prune: bool = True,
+    exclude: Sequence[AssignmentSolution] = (),
+    model: str = "auto",
+    **options: Any,
+) -> AssignmentSolution:
     """The joint MAP hypothesis of (13)-(14) as one MILP (HiGHS by default): decomposed
     into the connected components of the model's graph (direct HiGHS,
     :mod:`~optmodels.assignment.decomposed`) or as one CVXPY model (the original form).
@@ -233,19 +248,35 @@ def solve(data: AssignmentData, *, solver: str = "HIGHS", mip_gap: float = 0.0,
     limit = None if time_limit is None else as_positive(f"{w} time_limit", time_limit)
     as_flag(f"{w} prune", prune)
     if isinstance(exclude, AssignmentSolution) or not all(
-            isinstance(h, AssignmentSolution) for h in exclude):
+        isinstance(h, AssignmentSolution) for h in exclude
+    ):
         raise ProblemError(f"{w} exclude: expected a sequence of AssignmentSolution")
     kind = as_choice(f"{w} model", model, ("auto", "decomposed", "cvxpy"))
-    direct_ok = (key == "HIGHS" and fixed_partition is None and not exclude and prune is True
-                 and not set(options) - {"verbose"} and data.log_likelihood is None
-                 and data.block_log_prior is None and highspy_module() is not None)
+    direct_ok = (
+        key == "HIGHS"
+        and fixed_partition is None
+        and not exclude
+        and prune is True
+        and not set(options) - {"verbose"}
+        and data.log_likelihood is None
+        and data.block_log_prior is None
+        and highspy_module() is not None
+    )
     if kind == "decomposed" and not direct_ok:
-        raise ProblemError(f"{w} model: 'decomposed' needs solver HIGHS, no "
-                           f"fixed_partition, exclude or solver options, prune=True and the "
-                           f"default likelihood and prior; use model='cvxpy'")
+        raise ProblemError(
+            f"{w} model: 'decomposed' needs solver HIGHS, no "
+            f"fixed_partition, exclude or solver options, prune=True and the "
+            f"default likelihood and prior; use model='cvxpy'"
+        )
     if kind != "cvxpy" and direct_ok:
-        return solve_decomposed(data, candidate_groups(data), gap=gap, limit=limit,
-                                verbose=bool(options.get("verbose", False)), where=w)
+        return solve_decomposed(
+            data,
+            candidate_groups(data),
+            gap=gap,
+            limit=limit,
+            verbose=bool(options.get("verbose", False)),
+            where=w,
+        )
     fixed = None
     if fixed_partition is not None:
         fixed = _as_partition(f"{w} fixed_partition", fixed_partition, data.q)
@@ -269,39 +300,54 @@ def solve(data: AssignmentData, *, solver: str = "HIGHS", mip_gap: float = 0.0,
                 f"{w}: {columns} binary columns ({len(groups)} groups, {len(keep)} "
                 f"measurement-group pairs), above the limit {MAX_MODEL_COLUMNS:.0e}"
                 + ("; prune=False keeps every pair" if not prune else "")
-                + "; tighten group_gate or lower max_group_size")
-    return _solve_model(w, data, groups, gain, keep, exclude, fixed, key, gap, limit,
-                        options, tb.elapsed)
+                + "; tighten group_gate or lower max_group_size"
+            )
+    return _solve_model(
+        w, data, groups, gain, keep, exclude, fixed, key, gap, limit, options, tb.elapsed
+    )
 
 
-def _gains(w: str, data: AssignmentData, groups: list[tuple[int, ...]]
-           ) -> tuple[FloatArray, FloatArray]:
+def _gains(
+    w: str, data: AssignmentData, groups: list[tuple[int, ...]]
+) -> tuple[FloatArray, FloatArray]:
     """The log-likelihoods (N, G) of the measurements on the groups and the gains ln φ +
     ln P(detected) − ln P(undetected) of the MILP's columns γ_iS, after the size guard
     :data:`MAX_LIKELIHOOD_ENTRIES`."""
     n = data.n
     if n * len(groups) > MAX_LIKELIHOOD_ENTRIES:
-        raise ProblemError(f"{w}: N × candidate groups = {n} × {len(groups)} likelihoods, "
-                           f"above the limit {MAX_LIKELIHOOD_ENTRIES:.0e}; tighten "
-                           f"group_gate or lower max_group_size")
+        raise ProblemError(
+            f"{w}: N × candidate groups = {n} × {len(groups)} likelihoods, "
+            f"above the limit {MAX_LIKELIHOOD_ENTRIES:.0e}; tighten "
+            f"group_gate or lower max_group_size"
+        )
     ll = log_likelihoods(data, groups)
-    bonus = np.array([block_log_prior(data, g, True) - block_log_prior(data, g, False)
-                      for g in groups])
+    bonus = np.array(
+        [block_log_prior(data, g, True) - block_log_prior(data, g, False) for g in groups]
+    )
     return ll, ll + bonus
 
 
-def _solve_model(w: str, data: AssignmentData, groups: list[tuple[int, ...]],
-                 gain: FloatArray, keep: np.ndarray, exclude: Sequence[AssignmentSolution],
-                 fixed: Partition | None, key: str, gap: float, limit: float | None,
-                 options: dict[str, Any], build_time: float) -> AssignmentSolution:
+def _solve_model(
+    w: str,
+    data: AssignmentData,
+    groups: list[tuple[int, ...]],
+    gain: FloatArray,
+    keep: np.ndarray,
+    exclude: Sequence[AssignmentSolution],
+    fixed: Partition | None,
+    key: str,
+    gap: float,
+    limit: float | None,
+    options: dict[str, Any],
+    build_time: float,
+) -> AssignmentSolution:
     """The MILP on the columns ``groups``/``keep`` (with the no-good cuts of ``exclude``),
     solved by ``key`` and ended by the NumPy re-check and the status gate
     (:func:`~optmodels.assignment.data._finish_point`); ``build_time`` is the caller's
     share of the model building."""
     q, n = data.q, data.n
     with timed() as tb:
-        c, a_eq, a_ub, b_ub = _build_model(data, groups, gain, keep, exclude,
-                                           fixed is not None)
+        c, a_eq, a_ub, b_ub = _build_model(data, groups, gain, keep, exclude, fixed is not None)
         x = cp.Variable(len(c), boolean=True)
         cons = [a_eq @ x == np.ones(q + n)]
         if a_ub.shape[0]:
@@ -320,9 +366,23 @@ def _solve_model(w: str, data: AssignmentData, groups: list[tuple[int, ...]],
             msg += f"; MIP gap reached {gap_reached:.3g}"
         if res.status.ok:  # OK without a point: not a solution
             common["status"] = Status.ERROR
-        return AssignmentSolution(objective=float("nan"), message=msg, mip_gap=gap_reached,
-                                  info=info, **common)
+        return AssignmentSolution(
+            objective=float("nan"), message=msg, mip_gap=gap_reached, info=info, **common
+        )
     xv = np.asarray(x.value, dtype=float).reshape(-1)
-    return _finish_point(data, groups, keep, xv, a_eq, a_ub, b_ub, float(res.objective),
-                         exclude, fixed, common=common, gap_reached=gap_reached,
-                         gap=gap, info=info)
+    return _finish_point(
+        data,
+        groups,
+        keep,
+        xv,
+        a_eq,
+        a_ub,
+        b_ub,
+        float(res.objective),
+        exclude,
+        fixed,
+        common=common,
+        gap_reached=gap_reached,
+        gap=gap,
+        info=info,
+    )

@@ -106,8 +106,9 @@ def _chunks(total: int, row_bytes: int) -> list[slice]:
     return [slice(a, min(total, a + step)) for a in range(0, total, step)]
 
 
-def _interval_prob(c_lo: FloatArray, c_hi: FloatArray, mu: FloatArray,
-                   sd: FloatArray) -> FloatArray:
+def _interval_prob(
+    c_lo: FloatArray, c_hi: FloatArray, mu: FloatArray, sd: FloatArray
+) -> FloatArray:
     """P(c_lo < z < c_hi) for z ~ N(mu, sd²), without cancellation in either tail."""
     a, b = (c_lo - mu) / sd, (c_hi - mu) / sd
     upper = a > 0  # both in the upper tail: use the mirrored lower tail
@@ -136,7 +137,8 @@ def _box_probability(mu: FloatArray, cov: FloatArray, half: FloatArray) -> Float
     mid, rad = 0.5 * (lo + hi), 0.5 * np.where(ok, hi - lo, 0.0)
     t = mid[:, None] + rad[:, None] * _GL_X[None, :]
     dens = np.exp(-0.5 * ((t - mo[:, None]) / so[:, None]) ** 2) / (
-        so[:, None] * math.sqrt(2 * math.pi))
+        so[:, None] * math.sqrt(2 * math.pi)
+    )
     cmean = mi[:, None] + (rho * si / so)[:, None] * (t - mo[:, None])
     csd = cond[rows, inner][:, None]
     inside = _interval_prob(-hi_[:, None], hi_[:, None], cmean, csd)
@@ -162,10 +164,12 @@ def _ball_probability(nu: FloatArray, sd: FloatArray, c: FloatArray) -> FloatArr
     z = c[..., None] * np.sin(theta)
     jac = c[..., None] * np.cos(theta)
     dens = np.exp(-0.5 * ((z - m0[..., None]) / s0[..., None]) ** 2) / (
-        s0[..., None] * math.sqrt(2 * math.pi))
+        s0[..., None] * math.sqrt(2 * math.pi)
+    )
     p, m = c.shape
-    inner = _ball_probability(nu[:, 1:], sd[:, 1:], (c[..., None] * np.cos(theta)).reshape(
-        p, m * _NODES)).reshape(p, m, _NODES)
+    inner = _ball_probability(
+        nu[:, 1:], sd[:, 1:], (c[..., None] * np.cos(theta)).reshape(p, m * _NODES)
+    ).reshape(p, m, _NODES)
     out = rad * np.sum(_GL_W * dens * jac * inner, axis=-1)
     return np.where(ok, out, 0.0).clip(0.0, 1.0)
 
@@ -181,8 +185,9 @@ def cartesian_to_polar(points: FloatArray, site: FloatArray) -> FloatArray:
     """
     pts = as_finite_array("assignment.cartesian_to_polar points", points, ndim=2)
     if pts.shape[1] < 2:
-        raise ProblemError(f"assignment.cartesian_to_polar points: expected (N, d ≥ 2), got "
-                           f"{pts.shape}")
+        raise ProblemError(
+            f"assignment.cartesian_to_polar points: expected (N, d ≥ 2), got {pts.shape}"
+        )
     s = as_finite_array("assignment.cartesian_to_polar site", site, shape=(pts.shape[1],))
     return _cartesian_to_polar(pts, s)
 
@@ -216,9 +221,14 @@ def _polar_jacobian(points: FloatArray, site: FloatArray) -> FloatArray:
     return jac
 
 
-def polar_measurement_covs(measurements: Any, site: Any, sigma_range: Any,
-                           sigma_azimuth: Any, *, coordinates: str = "cartesian"
-                           ) -> FloatArray:
+def polar_measurement_covs(
+    measurements: Any,
+    site: Any,
+    sigma_range: Any,
+    sigma_azimuth: Any,
+    *,
+    coordinates: str = "cartesian",
+) -> FloatArray:
     """Cartesian covariances R_i (N, 2, 2) of 2-D polar measurements, each converted with
     its own Jacobian: R_i = G_i diag(σ_r², σ_az²) G_iᵀ, G_i = ∂(x, y)/∂(r, az) =
     [[cos az, −r sin az], [sin az, r cos az]] at the measurement (first-order; the
@@ -246,8 +256,10 @@ def polar_measurement_covs(measurements: Any, site: Any, sigma_range: Any,
     sr = as_positive(f"{w} sigma_range (m)", sigma_range)
     sa = as_positive(f"{w} sigma_azimuth (rad)", sigma_azimuth)
     if sa > 0.5:  # ~29°: no radar's angle noise; found by review (10 "rad" accepted)
-        raise ProblemError(f"{w} sigma_azimuth (rad): {sa:g} rad is {np.rad2deg(sa):.3g}°, "
-                           "not an angle noise (degrees given as radians?)")
+        raise ProblemError(
+            f"{w} sigma_azimuth (rad): {sa:g} rad is {np.rad2deg(sa):.3g}°, "
+            "not an angle noise (degrees given as radians?)"
+        )
     if kind == "cartesian":
         pol = _cartesian_to_polar(meas, s)
     else:
@@ -255,8 +267,9 @@ def polar_measurement_covs(measurements: Any, site: Any, sigma_range: Any,
         if np.any(pol[:, 0] < 0):
             raise ProblemError(f"{w} measurements: a negative range")
     if np.any(pol[:, 0] <= 0):
-        raise ProblemError(f"{w} measurements: a measurement at the sensor's site (range 0: "
-                           f"no azimuth)")
+        raise ProblemError(
+            f"{w} measurements: a measurement at the sensor's site (range 0: no azimuth)"
+        )
     r, az = pol[:, 0], pol[:, 1]
     g = np.empty((len(r), 2, 2))
     g[:, 0, 0], g[:, 0, 1] = np.cos(az), -r * np.sin(az)
@@ -286,13 +299,18 @@ class Resolution:
         per-object amplitudes (w_j = a_j / Σ_{k∈S} a_k).
     """
 
-    def __init__(self, range: Any = None, azimuth: Any = None, site: Any = None,
-                 ellipse: Any = None, weights: Any = "equal") -> None:
+    def __init__(
+        self,
+        range: Any = None,
+        azimuth: Any = None,
+        site: Any = None,
+        ellipse: Any = None,
+        weights: Any = "equal",
+    ) -> None:
         w = "assignment.Resolution"
         polar = range is not None or azimuth is not None
         if polar and ellipse is not None:
-            raise ProblemError(f"{w}: give range and azimuth (a polar cell) or ellipse, "
-                               f"not both")
+            raise ProblemError(f"{w}: give range and azimuth (a polar cell) or ellipse, not both")
         if not polar and ellipse is None:
             raise ProblemError(f"{w}: give range and azimuth (a polar cell) or ellipse")
         self.range: float | None = None
@@ -305,17 +323,19 @@ class Resolution:
             self.range = as_positive(f"{w} range (m)", range)
             self.azimuth = as_positive(f"{w} azimuth (rad)", azimuth)
             if self.azimuth > math.pi:
-                raise ProblemError(f"{w} azimuth (rad): expected at most π, got "
-                                   f"{self.azimuth:g} (degrees given as radians?)")
+                raise ProblemError(
+                    f"{w} azimuth (rad): expected at most π, got "
+                    f"{self.azimuth:g} (degrees given as radians?)"
+                )
             if site is not None:
                 self.site = as_finite_array(f"{w} site (m)", site, ndim=1)
                 if self.site.shape[0] < 2:
-                    raise ProblemError(f"{w} site (m): expected (d,) with d ≥ 2, got "
-                                       f"{self.site.shape}")
+                    raise ProblemError(
+                        f"{w} site (m): expected (d,) with d ≥ 2, got {self.site.shape}"
+                    )
         else:
             if site is not None:
-                raise ProblemError(f"{w} site: only for a polar cell (an ellipse is "
-                                   f"Cartesian)")
+                raise ProblemError(f"{w} site: only for a polar cell (an ellipse is Cartesian)")
             self.ellipse = as_finite_array(f"{w} ellipse (m²)", ellipse, ndim=2)
             check_spd(f"{w} ellipse (m²)", self.ellipse)
         if isinstance(weights, str):
@@ -330,8 +350,10 @@ class Resolution:
         if self.ellipse is not None:
             return f"Resolution(ellipse={self.ellipse.tolist()}, weights={self._wtext()})"
         site = None if self.site is None else self.site.tolist()
-        return (f"Resolution(range={self.range}, azimuth={self.azimuth}, site={site}, "
-                f"weights={self._wtext()})")
+        return (
+            f"Resolution(range={self.range}, azimuth={self.azimuth}, site={site}, "
+            f"weights={self._wtext()})"
+        )
 
     def _wtext(self) -> str:
         return "'equal'" if isinstance(self.weights, str) else str(self.weights.tolist())
@@ -346,14 +368,18 @@ class Resolution:
             if d < 2:
                 raise ProblemError(f"{where}: a polar resolution cell needs d ≥ 2, got d = {d}")
             if self.site is not None and self.site.shape != (d,):
-                raise ProblemError(f"{where}: site (m) has shape {self.site.shape}, the "
-                                   f"scene d = {d}")
+                raise ProblemError(
+                    f"{where}: site (m) has shape {self.site.shape}, the scene d = {d}"
+                )
         elif self.ellipse is not None and self.ellipse.shape != (d, d):
-            raise ProblemError(f"{where}: ellipse (m²) has shape {self.ellipse.shape}, the "
-                               f"scene d = {d}")
+            raise ProblemError(
+                f"{where}: ellipse (m²) has shape {self.ellipse.shape}, the scene d = {d}"
+            )
         if q is not None and not isinstance(self.weights, str) and self.weights.shape != (q,):
-            raise ProblemError(f"{where}: weights has {self.weights.shape[0]} amplitudes, "
-                               f"expected one per object ({q})")
+            raise ProblemError(
+                f"{where}: weights has {self.weights.shape[0]} amplitudes, "
+                f"expected one per object ({q})"
+            )
 
     def centroid_weights(self, group: tuple[int, ...]) -> FloatArray:
         """The centroid weights w_j (summing to 1) of the group's members."""
@@ -376,7 +402,8 @@ class Resolution:
                 f"{w}: the dense (Q, Q) table for Q = {q} needs {q * q * 8 / 2**30:.3g} "
                 f"GiB (limit {MAX_PAIR_TABLE_BYTES / 2**30:.3g} GiB); use "
                 f"Resolution.gated_pairs (the pairs that can be unresolved, as "
-                f"AssignmentData does)")
+                f"AssignmentData does)"
+            )
         out = np.eye(q)
         if q < 2:
             return out
@@ -386,24 +413,23 @@ class Resolution:
         out[ii, jj] = out[jj, ii] = u
         return out
 
-    def _frame(self, m: FloatArray, k: FloatArray, w: str
-               ) -> tuple[FloatArray, FloatArray]:
+    def _frame(self, m: FloatArray, k: FloatArray, w: str) -> tuple[FloatArray, FloatArray]:
         """The objects in the cell's frame: polar (range, azimuth) and J K Jᵀ, or the
         whitened positions E^{-1/2} m and E^{-1/2} K E^{-1/2}."""
         d = m.shape[1]
         if self.polar:
             site = np.zeros(d) if self.site is None else self.site
             if np.any(np.linalg.norm(m - site, axis=1) <= 0):
-                raise ProblemError(f"{w} means: a prediction at the sensor's site (no "
-                                   f"azimuth)")
+                raise ProblemError(f"{w} means: a prediction at the sensor's site (no azimuth)")
             jac = _polar_jacobian(m, site)
             return _cartesian_to_polar(m, site), jac @ k @ jac.transpose(0, 2, 1)
         ew, ev = np.linalg.eigh(self.ellipse)
         white = ev @ np.diag(ew**-0.5) @ ev.T  # E^{-1/2}
         return m @ white.T, white @ k @ white.T
 
-    def _pair_u(self, pos: FloatArray, kk: FloatArray, ii: FloatArray,
-                jj: FloatArray) -> FloatArray:
+    def _pair_u(
+        self, pos: FloatArray, kk: FloatArray, ii: FloatArray, jj: FloatArray
+    ) -> FloatArray:
         """The quadrature u_ij of the pairs (ii, jj) in the frame of :meth:`_frame`,
         chunked (:data:`QUADRATURE_BYTES` of work arrays per batch), clipped."""
         u = np.empty(len(ii))
@@ -440,14 +466,16 @@ class Resolution:
         pos, kk = self._frame(m, k, w)
         return self._bounds(pos, kk, np.asarray(ii, dtype=int), np.asarray(jj, dtype=int))
 
-    def _bounds(self, pos: FloatArray, kk: FloatArray, ii: np.ndarray,
-                jj: np.ndarray) -> FloatArray:
+    def _bounds(
+        self, pos: FloatArray, kk: FloatArray, ii: np.ndarray, jj: np.ndarray
+    ) -> FloatArray:
         d = pos.shape[1]
         if self.polar:
             mu = pos[ii] - pos[jj]
             mu[:, 1] = (mu[:, 1] + math.pi) % (2 * math.pi) - math.pi
-            sd = np.sqrt(np.stack([kk[ii, 0, 0] + kk[jj, 0, 0],
-                                   kk[ii, 1, 1] + kk[jj, 1, 1]], axis=1))
+            sd = np.sqrt(
+                np.stack([kk[ii, 0, 0] + kk[jj, 0, 0], kk[ii, 1, 1] + kk[jj, 1, 1]], axis=1)
+            )
             half = np.array([self.range, self.azimuth])
             return ndtr((half - np.abs(mu)) / sd).min(axis=1)
         lam = np.linalg.eigvalsh(kk)[:, -1]
@@ -455,8 +483,9 @@ class Resolution:
         out = chi2.sf(gap**2 / (lam[ii] + lam[jj]), d)
         return np.where(gap > 0, out, 1.0)
 
-    def gated_pairs(self, means: Any, covs: Any, *, neglect: float = PAIR_NEGLECT
-                    ) -> tuple[np.ndarray, np.ndarray, FloatArray]:
+    def gated_pairs(
+        self, means: Any, covs: Any, *, neglect: float = PAIR_NEGLECT
+    ) -> tuple[np.ndarray, np.ndarray, FloatArray]:
         """The pairs that can be unresolved, found without visiting all Q(Q − 1)/2: the
         pairs (i < j) whose bound :meth:`pair_bounds` exceeds ``neglect``, with their
         quadrature u_ij (as :meth:`pair_probabilities`); every other pair has
@@ -487,8 +516,9 @@ class Resolution:
             raise ProblemError(f"{w} neglect: expected a probability in (0, 0.5), got {eps}")
         return self._gated_pairs(w, m, k, eps)
 
-    def _gated_pairs(self, w: str, m: FloatArray, k: FloatArray, eps: float
-                     ) -> tuple[np.ndarray, np.ndarray, FloatArray]:
+    def _gated_pairs(
+        self, w: str, m: FloatArray, k: FloatArray, eps: float
+    ) -> tuple[np.ndarray, np.ndarray, FloatArray]:
         """:meth:`gated_pairs` on checked arrays."""
         q, d = m.shape
         empty = np.zeros(0, dtype=int)
@@ -530,8 +560,7 @@ class Resolution:
         one merged return: 1 for k = 1, u_12 for a pair (the mass of the predicted
         difference on the cell), for k ≥ 3 the probability that they form one chain of
         unresolved pairs, pairs independent (:func:`connected_probability`)."""
-        m = as_finite_array("assignment.Resolution.unresolved_probability means", means,
-                            ndim=2)
+        m = as_finite_array("assignment.Resolution.unresolved_probability means", means, ndim=2)
         u = self.pair_probabilities(m, covs)
         group = tuple(range(m.shape[0]))
         return connected_probability(u, group)
@@ -596,8 +625,9 @@ def _connected_subsets(k: int) -> tuple[np.ndarray, list[tuple[int, int]]]:
     return _CONNECTED_SUBSETS[k]
 
 
-def connected_probability(u: FloatArray, group: tuple[int, ...],
-                          memo: dict[Any, float] | None = None) -> float:
+def connected_probability(
+    u: FloatArray, group: tuple[int, ...], memo: dict[Any, float] | None = None
+) -> float:
     """P_conn(S): the probability that the members of S form one chain of unresolved
     pairs (the random graph on S with independent edges u_ij is connected).
 
@@ -610,8 +640,7 @@ def connected_probability(u: FloatArray, group: tuple[int, ...],
     return math.exp(_log_connected(u, tuple(group), {} if memo is None else memo))
 
 
-def _log_connected(u: FloatArray, group: tuple[int, ...],
-                   memo: dict[Any, float]) -> float:
+def _log_connected(u: FloatArray, group: tuple[int, ...], memo: dict[Any, float]) -> float:
     """ln P_conn(S) (:func:`connected_probability`); ``memo`` maps the members' bit mask
     (Σ 2^j) to the value."""
     k = len(group)
@@ -634,14 +663,18 @@ def _log_connected(u: FloatArray, group: tuple[int, ...],
         np.fill_diagonal(sub, 0.0)
         lg = np.log1p(-sub)
         masks = np.arange(2 ** (k - 1) - 1)  # the other members' subsets, not the full one
-        inside = np.column_stack([np.ones(len(masks), dtype=bool),
-                                  (masks[:, None] >> np.arange(k - 1)) & 1]).astype(bool)
+        inside = np.column_stack(
+            [np.ones(len(masks), dtype=bool), (masks[:, None] >> np.arange(k - 1)) & 1]
+        ).astype(bool)
         cut = np.einsum("mi,ij,mj->m", inside.astype(float), lg, (~inside).astype(float))
         bits = [1 << int(j) for j in idx]
         keys = (inside.astype(object) @ np.array(bits, dtype=object)).tolist()
-        parts = np.array([memo[m] if m in memo else _log_connected(
-            u, tuple(int(x) for x in idx[row]), memo) for m, row in zip(keys, inside,
-                                                                         strict=True)])
+        parts = np.array(
+            [
+                memo[m] if m in memo else _log_connected(u, tuple(int(x) for x in idx[row]), memo)
+                for m, row in zip(keys, inside, strict=True)
+            ]
+        )
         rec = -math.expm1(float(np.logaddexp.reduce(parts + cut)))
         low = _log_max_tree(u, group)
         if rec > _CANCEL_MARGIN * 1e-16 * 2.0**k:
@@ -652,8 +685,9 @@ def _log_connected(u: FloatArray, group: tuple[int, ...],
     return out
 
 
-def log_group_weight(u: FloatArray, group: tuple[int, ...],
-                     memo: dict[Any, float] | None = None) -> float:
+def log_group_weight(
+    u: FloatArray, group: tuple[int, ...], memo: dict[Any, float] | None = None
+) -> float:
     """ln w(S) = ln P_conn(S) − Σ_{i<j∈S} ln(1 − u_ij): the block's share of ln P(π)
     (module docstring); 0 for a singleton, ln(u_ij/(1 − u_ij)) for a pair."""
     if len(group) == 1:
@@ -661,5 +695,4 @@ def log_group_weight(u: FloatArray, group: tuple[int, ...],
     if len(group) == 2:
         v = u[group[0], group[1]]
         return float(math.log(v) - math.log1p(-v))
-    return _log_connected(u, tuple(group), {} if memo is None else memo) - log_not_merged(
-        u, group)
+    return _log_connected(u, tuple(group), {} if memo is None else memo) - log_not_merged(u, group)

@@ -62,8 +62,13 @@ from optmodels.core import (
     check_spd,
 )
 
-__all__ = ["SoftMarginals", "chi2_gate_probability", "effective_gate", "reduce_mixture",
-           "soft_marginals"]
+__all__ = [
+    "SoftMarginals",
+    "chi2_gate_probability",
+    "effective_gate",
+    "reduce_mixture",
+    "soft_marginals",
+]
 
 #: A cluster with more hypotheses than this is not enumerated (k-best instead).
 MAX_ENUMERATED = 20_000
@@ -98,8 +103,7 @@ class SoftMarginals:
 
     @property
     def bound(self) -> float:
-        eps = max((e / (1.0 + e) if np.isfinite(e) else 1.0 for e in self.neglected),
-                  default=0.0)
+        eps = max((e / (1.0 + e) if np.isfinite(e) else 1.0 for e in self.neglected), default=0.0)
         p = self.pruned_bound
         return eps + (p / (1.0 - p) if p < 1.0 else math.inf)
 
@@ -112,8 +116,9 @@ class SoftMarginals:
         return float(sum(v for (s, _), v in self.beta[j].items() if len(s) > 1))
 
 
-def effective_gate(innovation_cov: FloatArray, pd: float, clutter_density: float,
-                   prob_gate: float = 1.0) -> float:
+def effective_gate(
+    innovation_cov: FloatArray, pd: float, clutter_density: float, prob_gate: float = 1.0
+) -> float:
     """The Mahalanobis distance d* at which a lone measurement's association probability
     is 1/2 (the soft gate): P_D N(z; ẑ, S)/λ = 1 − P_D P_G, i.e.
 
@@ -137,8 +142,13 @@ def effective_gate(innovation_cov: FloatArray, pd: float, clutter_density: float
     d = s.shape[0]
     check_spd("assignment.effective_gate innovation_cov", s)
     logdet = float(np.linalg.slogdet(s)[1])
-    v = 2.0 * (math.log(pd) - math.log1p(-pd * pg) - math.log(lam)
-               - 0.5 * d * math.log(2 * math.pi) - 0.5 * logdet)
+    v = 2.0 * (
+        math.log(pd)
+        - math.log1p(-pd * pg)
+        - math.log(lam)
+        - 0.5 * d * math.log(2 * math.pi)
+        - 0.5 * logdet
+    )
     return math.sqrt(max(v, 0.0))
 
 
@@ -147,8 +157,9 @@ def chi2_gate_probability(gate: float, d: int) -> float:
     return float(gammainc(0.5 * d, 0.5 * float(gate) ** 2))
 
 
-def reduce_mixture(weights: FloatArray, means: FloatArray, covs: FloatArray
-                   ) -> tuple[FloatArray, FloatArray]:
+def reduce_mixture(
+    weights: FloatArray, means: FloatArray, covs: FloatArray
+) -> tuple[FloatArray, FloatArray]:
     """Moment-matched single Gaussian of a mixture (JPDA's reduction; Stone Soup's
     ``gm_reduce_single``): weights (M,) ≥ 0, means (M, n), covs (M, n, n) →
     mean Σ w_m x_m, covariance Σ w_m (P_m + (x_m − x̄)(x_m − x̄)ᵀ), w normalised."""
@@ -161,8 +172,7 @@ def reduce_mixture(weights: FloatArray, means: FloatArray, covs: FloatArray
     w = w / w.sum()
     mean = w @ x
     dx = x - mean
-    cov = np.einsum("m,mab->ab", w, p) + np.einsum(
-        "m,ma,mb->ab", w, dx, dx)
+    cov = np.einsum("m,mab->ab", w, p) + np.einsum("m,ma,mb->ab", w, dx, dx)
     return mean, 0.5 * (cov + cov.T)
 
 
@@ -171,13 +181,13 @@ def _mahalanobis2(data: AssignmentData, groups: Sequence[Block]) -> FloatArray:
     Σ w_j² K_j + R_i."""
     n, d = data.n, data.means.shape[1]
     out = np.empty((n, len(groups)))
-    r = data.meas_cov if data.per_measurement_cov else np.broadcast_to(data.meas_cov,
-                                                                       (n, d, d))
+    r = data.meas_cov if data.per_measurement_cov else np.broadcast_to(data.meas_cov, (n, d, d))
     for c, g in enumerate(groups):
         m, k = group_moments(data, g)
         diff = data.measurements - m
-        out[:, c] = np.einsum("na,na->n", diff, np.linalg.solve(k[None] + r,
-                                                                diff[..., None])[..., 0])
+        out[:, c] = np.einsum(
+            "na,na->n", diff, np.linalg.solve(k[None] + r, diff[..., None])[..., 0]
+        )
     return out
 
 
@@ -197,10 +207,16 @@ class _Union:
             self.p[max(ra, rb)] = min(ra, rb)
 
 
-def soft_marginals(data: AssignmentData, *, gate: float | None = None,
-                   prob_gate: float = 1.0, prune: float = 1e-14,
-                   max_enumerated: int = MAX_ENUMERATED, k: int = 100,
-                   solver: str = "HIGHS") -> SoftMarginals:
+def soft_marginals(
+    data: AssignmentData,
+    *,
+    gate: float | None = None,
+    prob_gate: float = 1.0,
+    prune: float = 1e-14,
+    max_enumerated: int = MAX_ENUMERATED,
+    k: int = 100,
+    solver: str = "HIGHS",
+) -> SoftMarginals:
     """Marginal association probabilities per object (module docstring).
 
     Parameters
@@ -234,8 +250,10 @@ def soft_marginals(data: AssignmentData, *, gate: float | None = None,
     max_enumerated = as_count(f"{w} max_enumerated", max_enumerated, minimum=1)
     k = as_count(f"{w} k", k, minimum=1)
     if data.block_log_prior is not None and pg < 1.0:
-        raise ProblemError(f"{w} prob_gate: with your own block_log_prior give "
-                           f"prob_gate = 1 (put the gate into the prior)")
+        raise ProblemError(
+            f"{w} prob_gate: with your own block_log_prior give "
+            f"prob_gate = 1 (put the gate into the prior)"
+        )
     q, n = data.q, data.n
     groups = candidate_groups(data, model_gate=False)  # its own pruning bounds every group
     ll = log_likelihoods(data, groups) if n else np.zeros((0, len(groups)))
@@ -286,16 +304,29 @@ def soft_marginals(data: AssignmentData, *, gate: float | None = None,
         cols = g_of[ci]
         meas = tuple(int(i) for i in np.flatnonzero(usable[:, cols].any(axis=1)))
         meas_of.append(meas)
-        hyps = _enumerate(objs, [groups[c] for c in cols], p0[cols],
-                          [[(int(i), float(a[i, c])) for i in np.flatnonzero(usable[:, c])]
-                           for c in cols], max_enumerated)
+        hyps = _enumerate(
+            objs,
+            [groups[c] for c in cols],
+            p0[cols],
+            [[(int(i), float(a[i, c])) for i in np.flatnonzero(usable[:, c])] for c in cols],
+            max_enumerated,
+        )
         if hyps is not None:
             methods.append("single" if len(objs) == 1 else "enumeration")
             eps = 0.0
         else:
-            hyps, eps = _k_best_cluster(data, objs, meas, [groups[c] for c in cols],
-                                        p0[cols], p1[cols], ll[:, cols], usable[:, cols],
-                                        k, solver)
+            hyps, eps = _k_best_cluster(
+                data,
+                objs,
+                meas,
+                [groups[c] for c in cols],
+                p0[cols],
+                p1[cols],
+                ll[:, cols],
+                usable[:, cols],
+                k,
+                solver,
+            )
             methods.append("k_best")
         lw = np.array([h[0] for h in hyps])
         wt = np.exp(lw - lw.max())
@@ -306,15 +337,32 @@ def soft_marginals(data: AssignmentData, *, gate: float | None = None,
                     beta[j][(s, i)] = beta[j].get((s, i), 0.0) + float(wh)
         counts.append(len(hyps))
         neglected.append(eps)
-    return SoftMarginals(beta, clusters, cluster_of, meas_of, methods, counts, neglected,
-                         pruned, gate, pg, {"candidate_groups": float(len(groups)),
-                                            "kept_groups": float(keep_g.sum()),
-                                            "pairs": float(usable.sum())})
+    return SoftMarginals(
+        beta,
+        clusters,
+        cluster_of,
+        meas_of,
+        methods,
+        counts,
+        neglected,
+        pruned,
+        gate,
+        pg,
+        {
+            "candidate_groups": float(len(groups)),
+            "kept_groups": float(keep_g.sum()),
+            "pairs": float(usable.sum()),
+        },
+    )
 
 
-def _enumerate(objs: tuple[int, ...], groups: list[Block], p0: FloatArray,
-               pairs: list[list[tuple[int, float]]], limit: int
-               ) -> list[tuple[float, list[tuple[Block, int]]]] | None:
+def _enumerate(
+    objs: tuple[int, ...],
+    groups: list[Block],
+    p0: FloatArray,
+    pairs: list[list[tuple[int, float]]],
+    limit: int,
+) -> list[tuple[float, list[tuple[Block, int]]]] | None:
     """Every hypothesis of one cluster: (log weight, [(block, measurement or −1)]), the
     log weight Σ_S [p0(S) + a_iS if detected by i]; None beyond ``limit`` hypotheses."""
     by_first: dict[int, list[int]] = {}
@@ -323,8 +371,13 @@ def _enumerate(objs: tuple[int, ...], groups: list[Block], p0: FloatArray,
     order = list(objs)
     out: list[tuple[float, list[tuple[Block, int]]]] = []
 
-    def rec(pos: int, covered: frozenset[int], used: frozenset[int], lw: float,
-            blocks: list[tuple[Block, int]]) -> bool:
+    def rec(
+        pos: int,
+        covered: frozenset[int],
+        used: frozenset[int],
+        lw: float,
+        blocks: list[tuple[Block, int]],
+    ) -> bool:
         while pos < len(order) and order[pos] in covered:
             pos += 1
         if pos == len(order):
@@ -352,10 +405,18 @@ def _enumerate(objs: tuple[int, ...], groups: list[Block], p0: FloatArray,
     return out if rec(0, frozenset(), frozenset(), 0.0, []) else None
 
 
-def _k_best_cluster(data: AssignmentData, objs: tuple[int, ...], meas: tuple[int, ...],
-                    groups: list[Block], p0: FloatArray, p1: FloatArray, ll: FloatArray,
-                    usable: np.ndarray, k: int, solver: str
-                    ) -> tuple[list[tuple[float, list[tuple[Block, int]]]], float]:
+def _k_best_cluster(
+    data: AssignmentData,
+    objs: tuple[int, ...],
+    meas: tuple[int, ...],
+    groups: list[Block],
+    p0: FloatArray,
+    p1: FloatArray,
+    ll: FloatArray,
+    usable: np.ndarray,
+    k: int,
+    solver: str,
+) -> tuple[list[tuple[float, list[tuple[Block, int]]]], float]:
     """The k best hypotheses of one cluster (:func:`~optmodels.assignment.kbest.k_best`
     on the cluster's sub-problem: its objects and usable measurements, the kept groups
     with their priors, the other groups impossible) and the bound on the neglected mass."""
@@ -377,10 +438,18 @@ def _k_best_cluster(data: AssignmentData, objs: tuple[int, ...], meas: tuple[int
         return float(p1[c] if detected else p0[c])
 
     rc = data.meas_cov[mrows] if data.per_measurement_cov else data.meas_cov
-    sub = AssignmentData(data.means[list(objs)], data.covs[list(objs)],
-                         data.measurements[mrows], rc, volume=data.volume, pd=data.pd,
-                         rho=1.0, max_group_size=max(len(g) for g in groups),
-                         log_likelihood=lik, block_log_prior=prior)
+    sub = AssignmentData(
+        data.means[list(objs)],
+        data.covs[list(objs)],
+        data.measurements[mrows],
+        rc,
+        volume=data.volume,
+        pd=data.pd,
+        rho=1.0,
+        max_group_size=max(len(g) for g in groups),
+        log_likelihood=lik,
+        block_log_prior=prior,
+    )
     kb = k_best(sub, k, solver=solver)
     out = []
     for h in kb.hypotheses:

@@ -22,8 +22,9 @@ __all__ = ["MILP_SOLVERS"]
 _silence_highs_banner = silence_highs_banner
 
 
-def _solver_options(where: str, solver: str, mip_gap: float, time_limit: float | None,
-                    verbose: bool) -> dict[str, Any]:
+def _solver_options(
+    where: str, solver: str, mip_gap: float, time_limit: float | None, verbose: bool
+) -> dict[str, Any]:
     """Each MILP solver's own names for the relative gap and the time limit (s):
     :func:`optmodels.backends.profiles.milp_options`."""
     return milp_options(solver, mip_gap, time_limit, verbose=verbose, where=where)

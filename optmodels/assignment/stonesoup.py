@@ -92,19 +92,24 @@ try:  # optional dependency: the module imports, the associator needs Stone Soup
     from stonesoup.types.detection import Detection, MissedDetection
     from stonesoup.types.hypothesis import SingleHypothesis
 except ImportError as _exc:  # pragma: no cover - exercised only without Stone Soup
-    raise ImportError("optmodels.assignment.stonesoup needs Stone Soup: "
-                      "pip install 'optmodels[peers]' (stonesoup)") from _exc
+    raise ImportError(
+        "optmodels.assignment.stonesoup needs Stone Soup: "
+        "pip install 'optmodels[peers]' (stonesoup)"
+    ) from _exc
 
-__all__ = ["MergedDetection", "MergedMeasurementAssociator", "cell_covariance",
-           "merged_update_inputs"]
+__all__ = [
+    "MergedDetection",
+    "MergedMeasurementAssociator",
+    "cell_covariance",
+    "merged_update_inputs",
+]
 
 _W = "assignment.MergedMeasurementAssociator"
 
 
 def _number(value: Any, name: str) -> float:
     """A real number from a Stone Soup property (ProblemError naming it otherwise)."""
-    if isinstance(value, bool) or not isinstance(value, int | float | np.integer |
-                                                 np.floating):
+    if isinstance(value, bool) or not isinstance(value, int | float | np.integer | np.floating):
         raise ProblemError(f"{_W} {name}: expected a number, got {value!r}")
     return float(value)
 
@@ -120,17 +125,24 @@ class MergedDetection(Detection):
     weight: float = Property(default=0.5, doc="This member's centroid weight w_i")
 
     def __eq__(self, other: object) -> bool:
-        return (other is self or other is self.merged_from
-                or getattr(other, "merged_from", None) is self.merged_from)
+        return (
+            other is self
+            or other is self.merged_from
+            or getattr(other, "merged_from", None) is self.merged_from
+        )
 
     def __hash__(self) -> int:
         return hash(self.merged_from)
 
 
-def merged_update_inputs(z: FloatArray, pred_meas: FloatArray, hpht: FloatArray,
-                         noise: FloatArray, weights: FloatArray,
-                         cell_cov: FloatArray | None = None
-                         ) -> tuple[FloatArray, FloatArray]:
+def merged_update_inputs(
+    z: FloatArray,
+    pred_meas: FloatArray,
+    hpht: FloatArray,
+    noise: FloatArray,
+    weights: FloatArray,
+    cell_cov: FloatArray | None = None,
+) -> tuple[FloatArray, FloatArray]:
     """Pseudo-measurements z'_i and noises R'_i by which each member of a merged group is
     updated (module docstring): the exact marginal of the joint linear update.
 
@@ -174,15 +186,15 @@ def merged_update_inputs(z: FloatArray, pred_meas: FloatArray, hpht: FloatArray,
     base = np.zeros((kk * d, kk * d))
     base[:d, :d] = noise
     for r in range(1, kk):
-        base[r * d:(r + 1) * d, r * d:(r + 1) * d] = cell_cov
+        base[r * d : (r + 1) * d, r * d : (r + 1) * d] = cell_cov
     eye = np.eye(d)
     zs, rs = np.empty((kk, d)), np.empty((kk, d, d))
     for i in range(kk):
-        a_i = np.kron(coef[:, i:i + 1], eye)  # (k d, d)
+        a_i = np.kron(coef[:, i : i + 1], eye)  # (k d, d)
         n_i, mean_o = base.copy(), np.zeros(kk * d)
         for j in range(kk):
             if j != i:
-                b_j = np.kron(coef[:, j:j + 1], eye)
+                b_j = np.kron(coef[:, j : j + 1], eye)
                 n_i += b_j @ hpht[j] @ b_j.T
                 mean_o += b_j @ m[j]
         ni_a = np.linalg.solve(n_i, a_i)
@@ -235,8 +247,10 @@ def _inflated(model: Any, noise: FloatArray) -> Any:
     try:
         m.noise_covar = CovarianceMatrix(noise)
     except AttributeError:
-        raise ProblemError(f"{_W}: the measurement model {type(model).__name__} has no "
-                           f"noise_covar to inflate for a merged detection") from None
+        raise ProblemError(
+            f"{_W}: the measurement model {type(model).__name__} has no "
+            f"noise_covar to inflate for a merged detection"
+        ) from None
     return m
 
 
@@ -253,76 +267,95 @@ class MergedMeasurementAssociator(DataAssociator):
 
     hypothesiser: Hypothesiser = Property(
         doc="Its predictor predicts each track; its updater predicts the measurements "
-            "(a DistanceHypothesiser or PDAHypothesiser, as for Stone Soup's associators)")
+        "(a DistanceHypothesiser or PDAHypothesiser, as for Stone Soup's associators)"
+    )
     prob_detect: float = Property(
-        default=None, doc="P_D in (0, 1); default: the hypothesiser's prob_detect, else 0.9")
+        default=None, doc="P_D in (0, 1); default: the hypothesiser's prob_detect, else 0.9"
+    )
     clutter_density: float = Property(
         default=None,
         doc="Clutter spatial density λ per unit of measurement space (m⁻² for a 2-D "
-            "Cartesian position); default: the hypothesiser's clutter_spatial_density")
+        "Cartesian position); default: the hypothesiser's clutter_spatial_density",
+    )
     resolution: Any = Property(
         default=None,
         doc="The sensor's resolution (optmodels.assignment.sensor.Resolution), passed to "
-            "AssignmentData(sensor=...): the unresolved prior of a group from its members' "
-            "predicted separation and uncertainty; None: the paper's constant merge prior "
-            "rho. Its cell must be in the measurement space (e.g. Cartesian positions "
-            "with the radar's site)")
+        "AssignmentData(sensor=...): the unresolved prior of a group from its members' "
+        "predicted separation and uncertainty; None: the paper's constant merge prior "
+        "rho. Its cell must be in the measurement space (e.g. Cartesian positions "
+        "with the radar's site)",
+    )
     rho: float = Property(default=0.3, doc="Merge prior ρ in (0, 1] (used without resolution)")
-    merges: bool = Property(default=True,
-                            doc="False: resolved-only MAP (no unresolved groups)")
+    merges: bool = Property(default=True, doc="False: resolved-only MAP (no unresolved groups)")
     cell_information: bool = Property(
-        default=True, doc="With a resolution: also use that the members of a merged "
-                          "group lie in one cell (differences ~ N(0, C), "
-                          ":func:`cell_covariance`) in their update")
+        default=True,
+        doc="With a resolution: also use that the members of a merged "
+        "group lie in one cell (differences ~ N(0, C), "
+        ":func:`cell_covariance`) in their update",
+    )
     information_split: bool = Property(
-        default=True, doc="Multiply each member's R'_i by the group size k (the merged "
-                           "detection's information shared among its k tracks; a "
-                           "conservative guard against re-counting it scan after scan "
-                           "when the members' cross-covariances are dropped)")
+        default=True,
+        doc="Multiply each member's R'_i by the group size k (the merged "
+        "detection's information shared among its k tracks; a "
+        "conservative guard against re-counting it scan after scan "
+        "when the members' cross-covariances are dropped)",
+    )
     max_group_size: int = Property(
-        default=None, doc="Largest unresolved group considered (default, as in the API: "
-                          "any size; with a resolution the groups are the connected "
-                          "subsets of the sensor's gating graph)")
+        default=None,
+        doc="Largest unresolved group considered (default, as in the API: "
+        "any size; with a resolution the groups are the connected "
+        "subsets of the sensor's gating graph)",
+    )
     group_gate: float = Property(
-        default=None, doc="Members of a candidate group pairwise within this Mahalanobis "
-                          "distance of each other's predicted measurements (default, as in "
-                          "the API: no gate; with a resolution the gate follows from the "
-                          "resolution model)")
+        default=None,
+        doc="Members of a candidate group pairwise within this Mahalanobis "
+        "distance of each other's predicted measurements (default, as in "
+        "the API: no gate; with a resolution the gate follows from the "
+        "resolution model)",
+    )
 
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         super().__init__(*args, **kwargs)
         h = self.hypothesiser
         for part in ("predictor", "updater"):
             if getattr(h, part, None) is None:
-                raise ProblemError(f"{_W} hypothesiser: needs a {part} (e.g. a "
-                                   f"DistanceHypothesiser or PDAHypothesiser), got "
-                                   f"{type(h).__name__}")
-        pd = self.prob_detect if self.prob_detect is not None else getattr(
-            h, "prob_detect", 0.9)
-        self.prob_detect = as_probability(f"{_W} prob_detect", _number(pd, "prob_detect"),
-                                          low_open=True, high_open=True)
-        lam = self.clutter_density if self.clutter_density is not None else getattr(
-            h, "clutter_spatial_density", None)
+                raise ProblemError(
+                    f"{_W} hypothesiser: needs a {part} (e.g. a "
+                    f"DistanceHypothesiser or PDAHypothesiser), got "
+                    f"{type(h).__name__}"
+                )
+        pd = self.prob_detect if self.prob_detect is not None else getattr(h, "prob_detect", 0.9)
+        self.prob_detect = as_probability(
+            f"{_W} prob_detect", _number(pd, "prob_detect"), low_open=True, high_open=True
+        )
+        lam = (
+            self.clutter_density
+            if self.clutter_density is not None
+            else getattr(h, "clutter_spatial_density", None)
+        )
         if lam is None:
-            raise ProblemError(f"{_W} clutter_density: required (the hypothesiser "
-                               f"{type(h).__name__} has no clutter_spatial_density)")
-        self.clutter_density = as_positive(f"{_W} clutter_density",
-                                           _number(lam, "clutter_density"))
+            raise ProblemError(
+                f"{_W} clutter_density: required (the hypothesiser "
+                f"{type(h).__name__} has no clutter_spatial_density)"
+            )
+        self.clutter_density = as_positive(f"{_W} clutter_density", _number(lam, "clutter_density"))
         self.rho = as_probability(f"{_W} rho", self.rho, low_open=True)
         for flag in ("merges", "cell_information", "information_split"):
             if not isinstance(getattr(self, flag), bool | np.bool_):
-                raise ProblemError(f"{_W} {flag}: expected True or False, got "
-                                   f"{getattr(self, flag)!r}")
+                raise ProblemError(
+                    f"{_W} {flag}: expected True or False, got {getattr(self, flag)!r}"
+                )
         if self.max_group_size is not None:
-            self.max_group_size = as_count(f"{_W} max_group_size", self.max_group_size,
-                                           minimum=1)
+            self.max_group_size = as_count(f"{_W} max_group_size", self.max_group_size, minimum=1)
         if self.group_gate is not None:
             self.group_gate = as_positive(f"{_W} group_gate", self.group_gate, allow_inf=True)
         if self.resolution is not None:
             as_instance(f"{_W} resolution", self.resolution, Resolution)
             if not isinstance(self.resolution.weights, str):
-                raise ProblemError(f"{_W} resolution: per-object amplitude weights cannot "
-                                   f"follow Stone Soup tracks (a set); use weights='equal'")
+                raise ProblemError(
+                    f"{_W} resolution: per-object amplitude weights cannot "
+                    f"follow Stone Soup tracks (a set); use weights='equal'"
+                )
         self.last_solution: AssignmentSolution | None = None
         self.last_groups: list[tuple[Any, ...]] = []
         self.last_tracks: list[Any] = []
@@ -332,8 +365,9 @@ class MergedMeasurementAssociator(DataAssociator):
         model = getattr(detection, "measurement_model", None)
         return model if model is not None else self.hypothesiser.updater.measurement_model
 
-    def predict_measurements(self, tracks: list[Any], dets: list[Any], timestamp: Any,
-                             **kwargs: Any) -> tuple[list[Any], FloatArray, FloatArray]:
+    def predict_measurements(
+        self, tracks: list[Any], dets: list[Any], timestamp: Any, **kwargs: Any
+    ) -> tuple[list[Any], FloatArray, FloatArray]:
         """Each track predicted to ``timestamp`` and its predicted measurement without noise
         (the first detection's measurement model, else the updater's): the predictions,
         their means (Q, d) and symmetrised covariances (Q, d, d)."""
@@ -344,28 +378,38 @@ class MergedMeasurementAssociator(DataAssociator):
         for tr in tracks:
             p = pred.predict(tr, timestamp=timestamp, **kwargs)
             preds.append(p)
-            mpreds.append(upd.predict_measurement(p, measurement_model=model0,
-                                                  measurement_noise=False))
+            mpreds.append(
+                upd.predict_measurement(p, measurement_model=model0, measurement_noise=False)
+            )
         means = np.array([np.asarray(m.state_vector, dtype=float).ravel() for m in mpreds])
         covs = np.array([np.asarray(m.covar, dtype=float) for m in mpreds])
         return preds, means, 0.5 * (covs + np.swapaxes(covs, 1, 2))
 
-    def _data(self, means: FloatArray, covs: FloatArray, z: FloatArray,
-              noises: FloatArray) -> AssignmentData:
+    def _data(
+        self, means: FloatArray, covs: FloatArray, z: FloatArray, noises: FloatArray
+    ) -> AssignmentData:
         """The AssignmentData of one scan (per-measurement noises R_i (N, d, d))."""
         d = means.shape[1]
         sensor = self.resolution if self.merges else None
         return AssignmentData(
-            means, covs, z, noises if len(noises) else np.eye(d),
-            volume=1.0 / float(self.clutter_density), pd=float(self.prob_detect),
-            rho=None if sensor is not None else float(self.rho), sensor=sensor,
+            means,
+            covs,
+            z,
+            noises if len(noises) else np.eye(d),
+            volume=1.0 / float(self.clutter_density),
+            pd=float(self.prob_detect),
+            rho=None if sensor is not None else float(self.rho),
+            sensor=sensor,
             max_group_size=(None if self.max_group_size is None else int(self.max_group_size))
-            if self.merges else 1,
-            group_gate=self.group_gate if self.merges else None)
+            if self.merges
+            else 1,
+            group_gate=self.group_gate if self.merges else None,
+        )
 
     # ------------------------------------------------------------------ associate
-    def associate(self, tracks: Any, detections: Any, timestamp: Any,
-                  **kwargs: Any) -> Mapping[Any, Any]:
+    def associate(
+        self, tracks: Any, detections: Any, timestamp: Any, **kwargs: Any
+    ) -> Mapping[Any, Any]:
         """Associate ``tracks`` and ``detections`` at ``timestamp`` by the MAP hypothesis.
 
         Returns
@@ -383,12 +427,16 @@ class MergedMeasurementAssociator(DataAssociator):
         dets = list(detections)
         self.last_solution, self.last_groups, self.last_tracks = None, [], tracks
         if timestamp is None:
-            raise ProblemError(f"{_W}.associate timestamp: required (the scan time the "
-                               f"tracks are predicted to), got None")
+            raise ProblemError(
+                f"{_W}.associate timestamp: required (the scan time the "
+                f"tracks are predicted to), got None"
+            )
         for k, dt in enumerate(dets):
             if not isinstance(dt, Detection):
-                raise ProblemError(f"{_W}.associate detections[{k}]: expected a Stone Soup "
-                                   f"Detection, got {type(dt).__name__}")
+                raise ProblemError(
+                    f"{_W}.associate detections[{k}]: expected a Stone Soup "
+                    f"Detection, got {type(dt).__name__}"
+                )
             if dt.timestamp is None:
                 raise ProblemError(f"{_W}.associate detections[{k}]: has no timestamp")
         if not tracks:
@@ -402,27 +450,31 @@ class MergedMeasurementAssociator(DataAssociator):
                 v = np.asarray(dt.state_vector, dtype=float).ravel()
                 r = np.asarray(self._model(dt).covar(), dtype=float)
             except (TypeError, ValueError) as exc:
-                raise ProblemError(f"{_W}.associate detections[{k}]: not numeric "
-                                   f"({exc})") from None
+                raise ProblemError(f"{_W}.associate detections[{k}]: not numeric ({exc})") from None
             if v.shape != (d,) or r.shape != (d, d):
-                raise ProblemError(f"{_W}.associate detections[{k}]: dimension "
-                                   f"{v.shape[0]} (noise {r.shape}), the tracks' predicted "
-                                   f"measurements have {d}: detections of mixed dimension")
+                raise ProblemError(
+                    f"{_W}.associate detections[{k}]: dimension "
+                    f"{v.shape[0]} (noise {r.shape}), the tracks' predicted "
+                    f"measurements have {d}: detections of mixed dimension"
+                )
             z[k], noises[k] = v, r
         z = as_finite_array(f"{_W} detections", z, shape=(len(dets), d))
-        missed = {tr: SingleHypothesis(p, MissedDetection(timestamp=timestamp),
-                                       measurement_prediction=None)
-                  for tr, p in zip(tracks, preds, strict=True)}
+        missed = {
+            tr: SingleHypothesis(
+                p, MissedDetection(timestamp=timestamp), measurement_prediction=None
+            )
+            for tr, p in zip(tracks, preds, strict=True)
+        }
         if not dets:
             return missed
         sol = _map_solve(self._data(means, covs, z, noises))
         if not sol.ok:
             if sol.status.name == "OPTIMAL_INACCURATE" and sol.partition:
-                warnings.warn(f"{_W}: MAP not proven optimal ({sol.message})",
-                              RuntimeWarning, stacklevel=2)
+                warnings.warn(
+                    f"{_W}: MAP not proven optimal ({sol.message})", RuntimeWarning, stacklevel=2
+                )
             else:
-                raise ProblemError(f"{_W}: the MAP solve failed ({sol.status.name}: "
-                                   f"{sol.message})")
+                raise ProblemError(f"{_W}: the MAP solve failed ({sol.status.name}: {sol.message})")
         self.last_solution = sol
         out: dict[Any, Any] = dict(missed)
         for i, k in enumerate(sol.assignment):
@@ -439,17 +491,20 @@ class MergedMeasurementAssociator(DataAssociator):
             cell = None
             if self.cell_information and self.resolution is not None:
                 cell = cell_covariance(self.resolution, w @ means[members])
-                members = [members[b] for b in _chain_order(self.resolution,
-                                                            means[members])]
-            zs, rs = merged_update_inputs(z[i], means[members], covs[members], noises[i], w,
-                                          cell)
+                members = [members[b] for b in _chain_order(self.resolution, means[members])]
+            zs, rs = merged_update_inputs(z[i], means[members], covs[members], noises[i], w, cell)
             if self.information_split:
                 rs = rs * len(members)
             model = self._model(det)
             for b, j in enumerate(members):
-                md = MergedDetection(StateVector(zs[b]), timestamp=det.timestamp,
-                                     measurement_model=_inflated(model, rs[b]),
-                                     metadata=dict(det.metadata), merged_from=det,
-                                     group_size=len(members), weight=float(w[b]))
+                md = MergedDetection(
+                    StateVector(zs[b]),
+                    timestamp=det.timestamp,
+                    measurement_model=_inflated(model, rs[b]),
+                    metadata=dict(det.metadata),
+                    merged_from=det,
+                    group_size=len(members),
+                    weight=float(w[b]),
+                )
                 out[tracks[j]] = SingleHypothesis(preds[j], md)
         return out

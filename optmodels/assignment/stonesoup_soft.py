@@ -70,8 +70,10 @@ try:
     from stonesoup.types.multihypothesis import MultipleHypothesis
     from stonesoup.types.numeric import Probability
 except ImportError as _exc:  # pragma: no cover - exercised only without Stone Soup
-    raise ImportError("optmodels.assignment.stonesoup_soft needs Stone Soup: "
-                      "pip install 'optmodels[peers]' (stonesoup)") from _exc
+    raise ImportError(
+        "optmodels.assignment.stonesoup_soft needs Stone Soup: "
+        "pip install 'optmodels[peers]' (stonesoup)"
+    ) from _exc
 
 __all__ = ["SoftMergedAssociator"]
 
@@ -97,8 +99,10 @@ def _with_noise(model: Any, noise: np.ndarray) -> Any:
     try:
         m.noise_covar = CovarianceMatrix(noise)
     except AttributeError:
-        raise ProblemError(f"{_W}: the measurement model {type(model).__name__} has no "
-                           f"noise_covar to inflate for a merged detection") from None
+        raise ProblemError(
+            f"{_W}: the measurement model {type(model).__name__} has no "
+            f"noise_covar to inflate for a merged detection"
+        ) from None
     return m
 
 
@@ -110,18 +114,25 @@ class SoftMergedAssociator(MergedMeasurementAssociator):
 
     max_group_size: int = Property(default=3, doc="Largest unresolved group considered")
     group_gate: float = Property(
-        default=10.0, doc="Members of a candidate group pairwise within this Mahalanobis "
-                          "distance of each other's predicted measurements (None: no gate)")
+        default=10.0,
+        doc="Members of a candidate group pairwise within this Mahalanobis "
+        "distance of each other's predicted measurements (None: no gate)",
+    )
     gate: float = Property(
-        default=None, doc="Hard gate, Mahalanobis distance of a detection to a block's "
-                          "predicted return; None: the hypothesiser's (PDAHypothesiser: "
-                          "√χ²_d(prob_gate), none with include_all; else none)")
+        default=None,
+        doc="Hard gate, Mahalanobis distance of a detection to a block's "
+        "predicted return; None: the hypothesiser's (PDAHypothesiser: "
+        "√χ²_d(prob_gate), none with include_all; else none)",
+    )
     prob_gate: float = Property(
-        default=None, doc="P_G: an undetected block has the prior 1 − P_D P_G; None: the "
-                          "hypothesiser's prob_gate, else P(χ²_d ≤ gate²), else 1")
+        default=None,
+        doc="P_G: an undetected block has the prior 1 − P_D P_G; None: the "
+        "hypothesiser's prob_gate, else P(χ²_d ≤ gate²), else 1",
+    )
     prune: float = Property(default=1e-14, doc="soft_marginals' prune bound")
-    max_enumerated: int = Property(default=MAX_ENUMERATED,
-                                   doc="Enumerate clusters up to this many hypotheses")
+    max_enumerated: int = Property(
+        default=MAX_ENUMERATED, doc="Enumerate clusters up to this many hypotheses"
+    )
     k: int = Property(default=100, doc="k best per cluster beyond max_enumerated")
 
     def __init__(self, *args: Any, **kwargs: Any) -> None:
@@ -129,11 +140,9 @@ class SoftMergedAssociator(MergedMeasurementAssociator):
         if self.gate is not None:
             self.gate = as_positive(f"{_W} gate", self.gate, allow_inf=True)
         if self.prob_gate is not None:
-            self.prob_gate = as_probability(f"{_W} prob_gate", float(self.prob_gate),
-                                            low_open=True)
+            self.prob_gate = as_probability(f"{_W} prob_gate", float(self.prob_gate), low_open=True)
         self.prune = float(as_probability(f"{_W} prune", self.prune))
-        self.max_enumerated = as_count(f"{_W} max_enumerated", self.max_enumerated,
-                                       minimum=1)
+        self.max_enumerated = as_count(f"{_W} max_enumerated", self.max_enumerated, minimum=1)
         self.k = as_count(f"{_W} k", self.k, minimum=1)
         self.last_marginals: SoftMarginals | None = None
 
@@ -160,8 +169,9 @@ class SoftMergedAssociator(MergedMeasurementAssociator):
                 pg = 1.0
         return gate, pg
 
-    def associate(self, tracks: Any, detections: Any, timestamp: Any,
-                  **kwargs: Any) -> Mapping[Any, Any]:
+    def associate(
+        self, tracks: Any, detections: Any, timestamp: Any, **kwargs: Any
+    ) -> Mapping[Any, Any]:
         """``{track: MultipleHypothesis}`` (normalised, the miss first) for ``tracks`` and
         ``detections`` at ``timestamp`` (module docstring)."""
         tracks = list(tracks)
@@ -173,23 +183,47 @@ class SoftMergedAssociator(MergedMeasurementAssociator):
         preds, means, covs = self.predict_measurements(tracks, dets, timestamp, **kwargs)
         d = means.shape[1]
         if not dets:
-            return {tr: MultipleHypothesis([SingleProbabilityHypothesis(
-                p, MissedDetection(timestamp=timestamp), probability=Probability(1.0))],
-                True, 1) for tr, p in zip(tracks, preds, strict=True)}
-        z = np.array([np.asarray(dt.state_vector, dtype=float).ravel() for dt in dets]
-                     ).reshape(len(dets), d)
+            return {
+                tr: MultipleHypothesis(
+                    [
+                        SingleProbabilityHypothesis(
+                            p, MissedDetection(timestamp=timestamp), probability=Probability(1.0)
+                        )
+                    ],
+                    True,
+                    1,
+                )
+                for tr, p in zip(tracks, preds, strict=True)
+            }
+        z = np.array([np.asarray(dt.state_vector, dtype=float).ravel() for dt in dets]).reshape(
+            len(dets), d
+        )
         z = as_finite_array(f"{_W} detections", z, shape=(len(dets), d))
-        noises = np.array([np.asarray(self._meas_model(dt).covar(), dtype=float) for dt in dets]
-                          ).reshape(len(dets), d, d)
+        noises = np.array(
+            [np.asarray(self._meas_model(dt).covar(), dtype=float) for dt in dets]
+        ).reshape(len(dets), d, d)
         sensor = self.resolution if self.merges else None
         data = AssignmentData(
-            means, covs, z, noises, volume=1.0 / float(self.clutter_density),
-            pd=float(self.prob_detect), rho=None if sensor is not None else float(self.rho),
-            sensor=sensor, max_group_size=int(self.max_group_size) if self.merges else 1,
-            group_gate=self.group_gate if self.merges else None)
+            means,
+            covs,
+            z,
+            noises,
+            volume=1.0 / float(self.clutter_density),
+            pd=float(self.prob_detect),
+            rho=None if sensor is not None else float(self.rho),
+            sensor=sensor,
+            max_group_size=int(self.max_group_size) if self.merges else 1,
+            group_gate=self.group_gate if self.merges else None,
+        )
         gate, pg = self.gate_parameters(d)
-        marg = soft_marginals(data, gate=gate, prob_gate=pg, prune=self.prune,
-                              max_enumerated=self.max_enumerated, k=self.k)
+        marg = soft_marginals(
+            data,
+            gate=gate,
+            prob_gate=pg,
+            prune=self.prune,
+            max_enumerated=self.max_enumerated,
+            k=self.k,
+        )
         self.last_marginals = marg
         # one pseudo-detection per member of every merged (S, i) with mass
         merged: dict[tuple[tuple[int, ...], int], dict[int, MergedDetection]] = {}
@@ -200,21 +234,29 @@ class SoftMergedAssociator(MergedMeasurementAssociator):
         out: dict[Any, Any] = {}
         for j, tr in enumerate(tracks):
             miss = marg.miss(j)
-            hyps = [SingleProbabilityHypothesis(
-                preds[j], MissedDetection(timestamp=timestamp),
-                probability=Probability(miss))]
+            hyps = [
+                SingleProbabilityHypothesis(
+                    preds[j], MissedDetection(timestamp=timestamp), probability=Probability(miss)
+                )
+            ]
             for (s, i), b in sorted(marg.beta[j].items(), key=lambda x: (x[0][1], x[0][0])):
                 if i < 0:
                     continue
                 det = dets[i] if len(s) == 1 else merged[(s, i)][j]
-                hyps.append(SingleProbabilityHypothesis(preds[j], det,
-                                                        probability=Probability(b)))
+                hyps.append(SingleProbabilityHypothesis(preds[j], det, probability=Probability(b)))
             out[tr] = MultipleHypothesis(hyps, True, 1)
         return out
 
-    def _merged(self, s: tuple[int, ...], i: int, det: Any, means: np.ndarray,
-                covs: np.ndarray, z: np.ndarray, noises: np.ndarray
-                ) -> dict[int, MergedDetection]:
+    def _merged(
+        self,
+        s: tuple[int, ...],
+        i: int,
+        det: Any,
+        means: np.ndarray,
+        covs: np.ndarray,
+        z: np.ndarray,
+        noises: np.ndarray,
+    ) -> dict[int, MergedDetection]:
         """The members' pseudo-detections of detection ``i`` from the merged block ``s``
         (the MAP associator's centroid update: cell information, information split)."""
         members = list(s)
@@ -223,13 +265,19 @@ class SoftMergedAssociator(MergedMeasurementAssociator):
         if self.cell_information and self.resolution is not None:
             cell = cell_covariance(self.resolution, w @ means[members])
             members = [members[b] for b in _chain(self.resolution, means[members])]
-        zs, rs = merged_update_inputs(z[i], means[members], covs[members], noises[i], w,
-                                      cell)
+        zs, rs = merged_update_inputs(z[i], means[members], covs[members], noises[i], w, cell)
         if self.information_split:
             rs = rs * len(members)
         model = self._meas_model(det)
-        return {j: MergedDetection(StateVector(zs[b]), timestamp=det.timestamp,
-                                   measurement_model=_with_noise(model, rs[b]),
-                                   metadata=dict(det.metadata), merged_from=det,
-                                   group_size=len(members), weight=float(w[b]))
-                for b, j in enumerate(members)}
+        return {
+            j: MergedDetection(
+                StateVector(zs[b]),
+                timestamp=det.timestamp,
+                measurement_model=_with_noise(model, rs[b]),
+                metadata=dict(det.metadata),
+                merged_from=det,
+                group_size=len(members),
+                weight=float(w[b]),
+            )
+            for b, j in enumerate(members)
+        }

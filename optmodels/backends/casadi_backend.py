@@ -33,26 +33,60 @@ import numpy as np
 from optmodels.backends.common import BackendResult, last_line, probe_in_child, quiet_fds
 from optmodels.core import VERIFY_TOL, ProblemError, SolverNotAvailable, Status
 
-__all__ = ["IPOPT_STATUS", "NLP_CACHE", "NLP_PLUGINS", "NLP_PLUGIN_DEFAULTS", "SQP_STATUS",
-           "UNIFIED_STATUS", "BuiltNlp", "NlpCache", "accept_precision_limit", "build_nlpsol",
-           "cached_nlpsol", "check_options", "nlp_plugins", "nlp_status", "probe_nlp_plugins",
-           "run_nlpsol"]
+__all__ = [
+    "IPOPT_STATUS",
+    "NLP_CACHE",
+    "NLP_PLUGINS",
+    "NLP_PLUGIN_DEFAULTS",
+    "SQP_STATUS",
+    "UNIFIED_STATUS",
+    "BuiltNlp",
+    "NlpCache",
+    "accept_precision_limit",
+    "build_nlpsol",
+    "cached_nlpsol",
+    "check_options",
+    "nlp_plugins",
+    "nlp_status",
+    "probe_nlp_plugins",
+    "run_nlpsol",
+]
 
 #: CasADi NLP plugins the comparison tries, in report order (commercial ones left out).
 NLP_PLUGINS = ("ipopt", "sqpmethod", "feasiblesqpmethod", "blocksqp", "fatrop")
-_QRQP_QUIET = {"print_iter": False, "print_header": False, "print_info": False,
-               "error_on_fail": False}
+_QRQP_QUIET = {
+    "print_iter": False,
+    "print_header": False,
+    "print_info": False,
+    "error_on_fail": False,
+}
 #: Quiet defaults per plugin; sqpmethod and feasiblesqpmethod use CasADi's own qrqp QP
 #: solver (no third-party library involved).
 NLP_PLUGIN_DEFAULTS: dict[str, dict[str, Any]] = {
-    "sqpmethod": {"qpsol": "qrqp", "qpsol_options": _QRQP_QUIET, "print_header": False,
-                  "print_iteration": False, "print_status": False, "max_iter": 200,
-                  "error_on_fail": False},
-    "feasiblesqpmethod": {"qpsol": "qrqp", "qpsol_options": _QRQP_QUIET,
-                          "print_header": False, "print_iteration": False,
-                          "print_status": False, "max_iter": 200, "error_on_fail": False},
-    "blocksqp": {"print_header": False, "print_iteration": False, "print_maxit_reached":
-                 False, "error_on_fail": False},
+    "sqpmethod": {
+        "qpsol": "qrqp",
+        "qpsol_options": _QRQP_QUIET,
+        "print_header": False,
+        "print_iteration": False,
+        "print_status": False,
+        "max_iter": 200,
+        "error_on_fail": False,
+    },
+    "feasiblesqpmethod": {
+        "qpsol": "qrqp",
+        "qpsol_options": _QRQP_QUIET,
+        "print_header": False,
+        "print_iteration": False,
+        "print_status": False,
+        "max_iter": 200,
+        "error_on_fail": False,
+    },
+    "blocksqp": {
+        "print_header": False,
+        "print_iteration": False,
+        "print_maxit_reached": False,
+        "error_on_fail": False,
+    },
     "fatrop": {"fatrop": {"print_level": 0}, "error_on_fail": False},
 }
 
@@ -91,6 +125,7 @@ def probe_nlp_plugins() -> dict[str, str]:
 def nlp_plugins() -> tuple[str, ...]:
     """The plugins of :data:`NLP_PLUGINS` that load and pass :func:`probe_nlp_plugins`."""
     return tuple(p for p, v in probe_nlp_plugins().items() if v == "ok")
+
 
 IPOPT_STATUS: dict[str, Status] = {
     "Solve_Succeeded": Status.OPTIMAL,
@@ -139,7 +174,9 @@ UNIFIED_STATUS: dict[str, Status] = {
 }
 
 _PLUGIN_STATUS: dict[str, dict[str, Status]] = {
-    "ipopt": IPOPT_STATUS, "sqpmethod": SQP_STATUS, "feasiblesqpmethod": SQP_STATUS,
+    "ipopt": IPOPT_STATUS,
+    "sqpmethod": SQP_STATUS,
+    "feasiblesqpmethod": SQP_STATUS,
 }
 
 
@@ -160,6 +197,7 @@ def nlp_status(plugin: str, stats: dict[str, Any]) -> Status:
     if status == Status.OPTIMAL and not stats.get("success", False):
         return Status.ERROR
     return status
+
 
 #: IPOPT defaults used by optmodels: quiet, and tight enough that the original-form
 #: residuals come out at round-off level on problems scaled to O(1). (1e-12 was tried:
@@ -183,7 +221,10 @@ class BuiltNlp:
 
 
 def build_nlpsol(
-    nlp: dict[str, Any], *, plugin: str = "ipopt", options: dict[str, Any] | None = None,
+    nlp: dict[str, Any],
+    *,
+    plugin: str = "ipopt",
+    options: dict[str, Any] | None = None,
     derivatives: dict[str, ca.Function] | None = None,
 ) -> BuiltNlp:
     """Build ``ca.nlpsol`` for ``nlp`` (keys x, f, g, p) with quiet defaults.
@@ -263,26 +304,38 @@ class NlpCache:
 NLP_CACHE = NlpCache()
 
 
-def cached_nlpsol(namespace: str, key: tuple[Any, ...], make_nlp: Callable[[], dict[str, Any]],
-                  *, plugin: str = "ipopt", options: dict[str, Any] | None = None,
-                  derivatives: Callable[[], dict[str, ca.Function]] | None = None,
-                  ) -> tuple[BuiltNlp, bool]:
+def cached_nlpsol(
+    namespace: str,
+    key: tuple[Any, ...],
+    make_nlp: Callable[[], dict[str, Any]],
+    *,
+    plugin: str = "ipopt",
+    options: dict[str, Any] | None = None,
+    derivatives: Callable[[], dict[str, ca.Function]] | None = None,
+) -> tuple[BuiltNlp, bool]:
     """:func:`build_nlpsol` of ``make_nlp()`` once per (``namespace``, ``key``, plugin,
     options) in :data:`NLP_CACHE`; returns the built NLP and whether this call built it.
     ``derivatives()`` (called only when building) gives :func:`build_nlpsol`'s
     ``derivatives``; they must be determined by ``key`` and ``plugin``."""
     full = (namespace, *key, plugin, repr(sorted((options or {}).items())))
-    return NLP_CACHE.get(full, lambda: build_nlpsol(
-        make_nlp(), plugin=plugin, options=options,
-        derivatives=derivatives() if derivatives is not None else None))
+    return NLP_CACHE.get(
+        full,
+        lambda: build_nlpsol(
+            make_nlp(),
+            plugin=plugin,
+            options=options,
+            derivatives=derivatives() if derivatives is not None else None,
+        ),
+    )
 
 
 #: IPOPT's (and the SQP methods') return status at their precision limit.
 PRECISION_LIMIT = "Search_Direction_Becomes_Too_Small"
 
 
-def accept_precision_limit(status: Status, message: str, verified: float, note: str,
-                           tol: float = VERIFY_TOL) -> tuple[Status, str]:
+def accept_precision_limit(
+    status: Status, message: str, verified: float, note: str, tol: float = VERIFY_TOL
+) -> tuple[Status, str]:
     """IPOPT stopped at its precision limit (:data:`PRECISION_LIMIT`, an ERROR in the
     tables): the point is accepted as OPTIMAL_INACCURATE only if the problem's own NumPy
     check ``verified`` (e.g. the Newton step to the stationary point) is at most ``tol``
@@ -297,8 +350,10 @@ def _check_plugin(plugin: Any) -> str:
     if not isinstance(plugin, str):
         raise ProblemError(f"plugin: expected a CasADi NLP plugin name (str), got {plugin!r}")
     if not ca.has_nlpsol(plugin):
-        raise SolverNotAvailable(f"plugin: CasADi NLP plugin {plugin!r} does not load here "
-                                 f"(plugins tried by optmodels: {', '.join(NLP_PLUGINS)})")
+        raise SolverNotAvailable(
+            f"plugin: CasADi NLP plugin {plugin!r} does not load here "
+            f"(plugins tried by optmodels: {', '.join(NLP_PLUGINS)})"
+        )
     return plugin
 
 
@@ -307,8 +362,9 @@ def check_options(options: Any) -> dict[str, Any]:
     if options is None:
         return {}
     if not isinstance(options, dict):
-        raise ProblemError(f"options: expected a dict of solver options, got "
-                           f"{type(options).__name__}")
+        raise ProblemError(
+            f"options: expected a dict of solver options, got {type(options).__name__}"
+        )
     bad = [k for k in options if not isinstance(k, str)]
     if bad:
         raise ProblemError(f"options: option names must be strings, got {bad[0]!r}")
@@ -350,16 +406,25 @@ def _option_error(plugin: str, user: dict[str, Any], exc: RuntimeError) -> Probl
     for key, value in user.items():
         why = _probe_options(plugin, {key: value})
         if why is not None:
-            return ProblemError(f"options[{key!r}] = {value!r}: rejected by the CasADi "
-                                f"{plugin} plugin ({last_line(why)})")
+            return ProblemError(
+                f"options[{key!r}] = {value!r}: rejected by the CasADi "
+                f"{plugin} plugin ({last_line(why)})"
+            )
     what = f"options {user!r}" if user else "its defaults"
-    return ProblemError(f"CasADi {plugin} plugin could not be built with {what} "
-                        f"({last_line(str(exc))})")
+    return ProblemError(
+        f"CasADi {plugin} plugin could not be built with {what} ({last_line(str(exc))})"
+    )
 
 
 def run_nlpsol(
-    built: BuiltNlp, *, x0: np.ndarray, p: np.ndarray, lbg: Any = 0.0, ubg: Any = 0.0,
-    lbx: Any = -np.inf, ubx: Any = np.inf,
+    built: BuiltNlp,
+    *,
+    x0: np.ndarray,
+    p: np.ndarray,
+    lbg: Any = 0.0,
+    ubg: Any = 0.0,
+    lbx: Any = -np.inf,
+    ubx: Any = np.inf,
 ) -> tuple[BackendResult, np.ndarray]:
     """Solve once from ``x0`` with parameters ``p``.
 

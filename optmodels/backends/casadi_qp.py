@@ -44,8 +44,7 @@ __all__ = [
 PREFIX = "CASADI_"
 #: CasADi conic plugins tried, in report order (commercial ones are left out: they need a
 #: licence and their libraries, and CasADi prints a warning for each that does not load).
-CANDIDATE_PLUGINS = ("osqp", "qpoases", "highs", "qrqp", "proxqp", "daqp", "hpipm",
-                     "superscs")
+CANDIDATE_PLUGINS = ("osqp", "qpoases", "highs", "qrqp", "proxqp", "daqp", "hpipm", "superscs")
 #: Quiet options per plugin (each plugin rejects options it does not know).
 _QUIET: dict[str, dict[str, Any]] = {
     "osqp": {"osqp": {"verbose": False}},
@@ -62,7 +61,7 @@ _QUIET: dict[str, dict[str, Any]] = {
 def plugin_of(name: str) -> str | None:
     """``"CASADI_OSQP"`` → ``"osqp"``; None for a name without the prefix."""
     up = name.upper()
-    return up[len(PREFIX):].lower() if up.startswith(PREFIX) else None
+    return up[len(PREFIX) :].lower() if up.startswith(PREFIX) else None
 
 
 def _csc_to_dm(m: sp.sparray | sp.spmatrix) -> ca.DM:
@@ -72,8 +71,15 @@ def _csc_to_dm(m: sp.sparray | sp.spmatrix) -> ca.DM:
     return ca.DM(sparsity, c.data.astype(float))
 
 
-def _solve_qp(plugin: str, p: Any, q: np.ndarray, a: Any, lba: np.ndarray, uba: np.ndarray,
-              options: dict[str, Any]) -> tuple[dict[str, Any], dict[str, Any], float]:
+def _solve_qp(
+    plugin: str,
+    p: Any,
+    q: np.ndarray,
+    a: Any,
+    lba: np.ndarray,
+    uba: np.ndarray,
+    options: dict[str, Any],
+) -> tuple[dict[str, Any], dict[str, Any], float]:
     """Build and call ``casadi.conic``; returns outputs, stats and the call's seconds."""
     n = q.size
     h = _csc_to_dm(sp.csc_matrix(p) if p is not None else sp.csc_matrix((n, n)))
@@ -94,18 +100,27 @@ def _solve_qp(plugin: str, p: Any, q: np.ndarray, a: Any, lba: np.ndarray, uba: 
     return out, solver.stats(), wall
 
 
-def _option_error(plugin: str, options: dict[str, Any], sparsity: dict[str, Any],
-                  exc: RuntimeError) -> ProblemError:
+def _option_error(
+    plugin: str, options: dict[str, Any], sparsity: dict[str, Any], exc: RuntimeError
+) -> ProblemError:
     """Name the option ``ca.conic`` refused (each user option alone in a probe build)."""
     for key, value in options.items():
         try:
-            ca.conic("optmodels_probe", plugin, sparsity,
-                     {**_QUIET.get(plugin, {}), "error_on_fail": False, key: value})
+            ca.conic(
+                "optmodels_probe",
+                plugin,
+                sparsity,
+                {**_QUIET.get(plugin, {}), "error_on_fail": False, key: value},
+            )
         except RuntimeError as one:
-            return ProblemError(f"solver option {key!r} = {value!r}: rejected by the CasADi "
-                                f"conic plugin {plugin} ({last_line(str(one))})")
-    return ProblemError(f"CasADi conic plugin {plugin} could not be built with options "
-                        f"{options!r} ({last_line(str(exc))})")
+            return ProblemError(
+                f"solver option {key!r} = {value!r}: rejected by the CasADi "
+                f"conic plugin {plugin} ({last_line(str(one))})"
+            )
+    return ProblemError(
+        f"CasADi conic plugin {plugin} could not be built with options "
+        f"{options!r} ({last_line(str(exc))})"
+    )
 
 
 class CasadiConic(QpSolver):  # type: ignore[misc]  # (CVXPY is not analysed)
@@ -135,8 +150,7 @@ class CasadiConic(QpSolver):  # type: ignore[misc]  # (CVXPY is not analysed)
         return PREFIX + self.plugin.upper()
 
     def cite(self, data: Any) -> str:
-        return "CasADi (Andersson et al., Math. Prog. Comp. 11, 2019), conic plugin " \
-            + self.plugin
+        return "CasADi (Andersson et al., Math. Prog. Comp. 11, 2019), conic plugin " + self.plugin
 
     def import_solver(self) -> None:
         if self.plugin in EXCLUDED:
@@ -144,13 +158,20 @@ class CasadiConic(QpSolver):  # type: ignore[misc]  # (CVXPY is not analysed)
         if not ca.has_conic(self.plugin):
             raise ImportError(f"CasADi conic plugin {self.plugin!r} does not load")
 
-    def solve_via_data(self, data: dict[str, Any], warm_start: bool, verbose: bool,
-                       solver_opts: dict[str, Any], solver_cache: Any = None) -> Any:
+    def solve_via_data(
+        self,
+        data: dict[str, Any],
+        warm_start: bool,
+        verbose: bool,
+        solver_opts: dict[str, Any],
+        solver_cache: Any = None,
+    ) -> Any:
         a = sp.vstack([data[s.A], data[s.F]]).tocsc()
         lba = np.concatenate([data[s.B], np.full(data[s.G].shape, -np.inf)])
         uba = np.concatenate([data[s.B], data[s.G]])
-        out, stats, wall = _solve_qp(self.plugin, data[s.P], np.asarray(data[s.Q], float),
-                                     a, lba, uba, dict(solver_opts))
+        out, stats, wall = _solve_qp(
+            self.plugin, data[s.P], np.asarray(data[s.Q], float), a, lba, uba, dict(solver_opts)
+        )
         return {"out": out, "stats": stats, "wall": wall}
 
     def invert(self, solution: dict[str, Any], inverse_data: dict[str, Any]) -> Solution:
@@ -168,10 +189,12 @@ class CasadiConic(QpSolver):  # type: ignore[misc]  # (CVXPY is not analysed)
         # CasADi's λ_a (∇f + Aᵀλ = 0) has CVXPY's sign convention for these rows as is.
         lam = np.asarray(out["lam_a"], dtype=float).ravel()
         n_eq = inverse_data[self.DIMS].zero
-        duals = utilities.get_dual_values(lam[:n_eq], utilities.extract_dual_value,
-                                          inverse_data[self.EQ_CONSTR])
-        duals |= utilities.get_dual_values(lam[n_eq:], utilities.extract_dual_value,
-                                           inverse_data[self.NEQ_CONSTR])
+        duals = utilities.get_dual_values(
+            lam[:n_eq], utilities.extract_dual_value, inverse_data[self.EQ_CONSTR]
+        )
+        duals |= utilities.get_dual_values(
+            lam[n_eq:], utilities.extract_dual_value, inverse_data[self.NEQ_CONSTR]
+        )
         return Solution(s.OPTIMAL, opt_val, primal, duals, attr)
 
 
@@ -194,8 +217,8 @@ CONIC_STATUS: dict[str, str] = {
 #: Plugins left out on purpose, with the reason (shown in the comparison report).
 EXCLUDED: dict[str, str] = {
     "highs": "CasADi's libhighs and highspy's (CVXPY's HIGHS interface) in one process "
-             "crash ('corrupted double-linked list', seen here with casadi 3.8.2 and highspy); "
-             "HiGHS is compared through CVXPY instead",
+    "crash ('corrupted double-linked list', seen here with casadi 3.8.2 and highspy); "
+    "HiGHS is compared through CVXPY instead",
 }
 
 _PROBE = r"""

@@ -37,8 +37,7 @@ class BackendResult:
         }
 
 
-def probe_in_child(script: str, names: Sequence[str], timeout: float = 120.0
-                   ) -> dict[str, str]:
+def probe_in_child(script: str, names: Sequence[str], timeout: float = 120.0) -> dict[str, str]:
     """Run ``script`` (Python source that takes plugin names as ``sys.argv[1:]`` and prints
     ``"<name> <verdict>"`` per name, flushing each line) in a child interpreter.
 
@@ -53,8 +52,13 @@ def probe_in_child(script: str, names: Sequence[str], timeout: float = 120.0
     res: dict[str, str] = {}
     while todo:
         try:
-            proc = subprocess.run([sys.executable, "-c", script, *todo], capture_output=True,
-                                  text=True, timeout=timeout, check=False)
+            proc = subprocess.run(
+                [sys.executable, "-c", script, *todo],
+                capture_output=True,
+                text=True,
+                timeout=timeout,
+                check=False,
+            )
         except subprocess.TimeoutExpired:
             res[todo.pop(0)] = f"probe timed out after {timeout:g} s"
             continue

@@ -35,8 +35,16 @@ from optmodels.backends.common import BackendResult, quiet_fds
 from optmodels.backends.profiles import milp_options as milp_options
 from optmodels.core import OptModelsError, ProblemError, SolverNotAvailable, Status
 
-__all__ = ["CVXPY_STATUS", "MILP_SOLVERS", "as_milp_solver", "available_solvers",
-           "milp_options", "require_solver", "silence_highs_banner", "solve_problem"]
+__all__ = [
+    "CVXPY_STATUS",
+    "MILP_SOLVERS",
+    "as_milp_solver",
+    "available_solvers",
+    "milp_options",
+    "require_solver",
+    "silence_highs_banner",
+    "solve_problem",
+]
 
 CVXPY_STATUS: dict[str, Status] = {
     cp.OPTIMAL: Status.OPTIMAL,
@@ -51,8 +59,10 @@ CVXPY_STATUS: dict[str, Status] = {
 }
 
 #: The statuses mapped to ERROR because the solver's claim has no certificate.
-UNCERTIFIED: dict[str, str] = {cp.INFEASIBLE_INACCURATE: "infeasible",
-                               cp.UNBOUNDED_INACCURATE: "unbounded"}
+UNCERTIFIED: dict[str, str] = {
+    cp.INFEASIBLE_INACCURATE: "infeasible",
+    cp.UNBOUNDED_INACCURATE: "unbounded",
+}
 
 #: pip package that provides each CVXPY solver interface, for the install hint.
 PIP_NAMES: dict[str, str] = {
@@ -87,16 +97,19 @@ def require_solver(name: str) -> str:
     (:class:`optmodels.backends.casadi_qp.CasadiConic`): QPs only.
     """
     if not isinstance(name, str):
-        raise ProblemError(f"solver: expected a solver name (str), got {type(name).__name__} "
-                           f"{name!r:.60}")
+        raise ProblemError(
+            f"solver: expected a solver name (str), got {type(name).__name__} {name!r:.60}"
+        )
     key = name.upper()
     plugin = plugin_of(key)
     if plugin is not None:
         if plugin not in casadi_qp_plugins():
             why = probe_plugins().get(plugin, "not a CasADi conic plugin tried here")
-            raise SolverNotAvailable(f"{key!r}: CasADi conic plugin {plugin!r} is not usable "
-                                     f"here ({why}); usable: "
-                                     f"{', '.join(casadi_qp_plugins()) or 'none'}")
+            raise SolverNotAvailable(
+                f"{key!r}: CasADi conic plugin {plugin!r} is not usable "
+                f"here ({why}); usable: "
+                f"{', '.join(casadi_qp_plugins()) or 'none'}"
+            )
         return key
     if key not in available_solvers():
         hint = PIP_NAMES.get(key, key.lower())
@@ -115,8 +128,10 @@ def as_milp_solver(where: str, solver: Any) -> str:
     key = solver.upper()
     if key not in MILP_SOLVERS:
         installed = [s for s in MILP_SOLVERS if s in available_solvers()]
-        raise ProblemError(f"{where} solver: {solver!r} does not solve integer programs; "
-                           f"use a MILP solver ({', '.join(installed)} installed here)")
+        raise ProblemError(
+            f"{where} solver: {solver!r} does not solve integer programs; "
+            f"use a MILP solver ({', '.join(installed)} installed here)"
+        )
     return key
 
 
@@ -175,8 +190,14 @@ def solve_problem(
             problem.solve(solver=target, verbose=verbose, **options)
     except OptModelsError:
         raise
-    except (cp.error.SolverError, ValueError, ArithmeticError, TypeError, RuntimeError,
-            Warning) as exc:
+    except (
+        cp.error.SolverError,
+        ValueError,
+        ArithmeticError,
+        TypeError,
+        RuntimeError,
+        Warning,
+    ) as exc:
         # SolverError: CVXPY's own; ValueError/ArithmeticError: raised by a solver's Python
         # interface on a problem it cannot take (e.g. SCS with no constraint rows). The
         # inputs were validated before, so this is the solver's failure, reported as such --
@@ -184,8 +205,10 @@ def solve_problem(
         # TypeError; OSQP: SolverError; HiGHS: ValueError; CasADi plugins: RuntimeError).
         bad = _rejected_options(exc, options)
         if bad:
-            raise ProblemError(f"solver {name}: option {', '.join(map(repr, bad))} rejected "
-                               f"by the solver ({_short(exc)})") from None
+            raise ProblemError(
+                f"solver {name}: option {', '.join(map(repr, bad))} rejected "
+                f"by the solver ({_short(exc)})"
+            ) from None
         wall = time.perf_counter() - t0
         return BackendResult(
             status=Status.ERROR,
@@ -206,9 +229,11 @@ def solve_problem(
     status = CVXPY_STATUS.get(raw, Status.ERROR)
     message = raw
     if raw in UNCERTIFIED:
-        message = (f"{raw}: the solver claimed the problem {UNCERTIFIED[raw]} without a "
-                   "certificate (stopped before it converged); not reported as "
-                   f"{UNCERTIFIED[raw]}")
+        message = (
+            f"{raw}: the solver claimed the problem {UNCERTIFIED[raw]} without a "
+            "certificate (stopped before it converged); not reported as "
+            f"{UNCERTIFIED[raw]}"
+        )
     value = problem.value
     objective = float(value) if value is not None and status.ok else float("nan")
     return BackendResult(
@@ -225,7 +250,7 @@ def solve_problem(
 
 def _short(exc: BaseException, limit: int = 300) -> str:
     text = " ".join(str(exc).split())
-    return text if len(text) <= limit else text[:limit - 3] + "..."
+    return text if len(text) <= limit else text[: limit - 3] + "..."
 
 
 def _rejected_options(exc: BaseException, options: dict[str, Any]) -> list[str]:
@@ -235,12 +260,14 @@ def _rejected_options(exc: BaseException, options: dict[str, Any]) -> list[str]:
     if not options:
         return []
     text = str(exc)
-    named = [k for k in options if re.search(rf"(?<![A-Za-z0-9_]){re.escape(k)}(?![A-Za-z0-9_])",
-                                             text)]
+    named = [
+        k for k in options if re.search(rf"(?<![A-Za-z0-9_]){re.escape(k)}(?![A-Za-z0-9_])", text)
+    ]
     if named:
         return named
-    if isinstance(exc, TypeError) or re.search(r"option|setting|keyword|argument", text,
-                                                re.IGNORECASE):
+    if isinstance(exc, TypeError) or re.search(
+        r"option|setting|keyword|argument", text, re.IGNORECASE
+    ):
         return list(options)
     return []
 

@@ -65,8 +65,13 @@ _OSQP_LSQ = {"eps_abs": 1e-6, "eps_rel": 1e-6, "polishing": True, "max_iter": 20
 # eps 1e-6 (was 1e-9): on the bias-field box case OSQP at 1e-9 hit the 5 s limit where
 # 1e-6 reaches the same 5e-10 error in 4.9 s (issue 27); the polish (a KKT solve on the
 # active set, refined 50 times) is what lands on the target, not ADMM's own eps
-_OSQP_QP = {"eps_abs": 1e-6, "eps_rel": 1e-6, "polishing": True, "polish_refine_iter": 50,
-            "max_iter": 200_000}
+_OSQP_QP = {
+    "eps_abs": 1e-6,
+    "eps_rel": 1e-6,
+    "polishing": True,
+    "polish_refine_iter": 50,
+    "max_iter": 200_000,
+}
 
 # HiGHS' QP solver adds a Hessian regularisation of 1e-7 by default: on the trajectories
 # and bias-field QPs that left solution errors 1e-5..7e-4 and stationarity 2e-6..1e-5
@@ -120,8 +125,12 @@ DEFAULTS: dict[str, dict[str, dict[str, Any]]] = {
         "SCS": _SCS,
         # Clarabel's default gap 1e-8 leaves ~2e-6 relative errors in a box-bound φ of the
         # reduced problem; 1e-10 brings them to ~3e-8 for one more iteration
-        "CLARABEL": {"tol_gap_abs": 1e-10, "tol_gap_rel": 1e-10, "tol_feas": 1e-10,
-                     "tol_ktratio": 1e-8},
+        "CLARABEL": {
+            "tol_gap_abs": 1e-10,
+            "tol_gap_rel": 1e-10,
+            "tol_feas": 1e-10,
+            "tol_ktratio": 1e-8,
+        },
         # PROXQP at its defaults: errors 1e-4 to 8e-3 on the bias-field QPs (issue 27)
         "CASADI_PROXQP": {"proxqp": {"eps_abs": 1e-9}},
         "HIGHS": _HIGHS_QP,
@@ -139,14 +148,25 @@ PROBLEM_CLASSES: tuple[str, ...] = tuple(DEFAULTS)
 
 #: High-accuracy options per solver (the ``high`` profile), over the class defaults.
 HIGH_OPTIONS: dict[str, dict[str, Any]] = {
-    "CLARABEL": {"tol_gap_abs": 1e-12, "tol_gap_rel": 1e-12, "tol_feas": 1e-12,
-                 "tol_ktratio": 1e-10},
+    "CLARABEL": {
+        "tol_gap_abs": 1e-12,
+        "tol_gap_rel": 1e-12,
+        "tol_feas": 1e-12,
+        "tol_ktratio": 1e-10,
+    },
     "OSQP": {"eps_abs": 1e-10, "eps_rel": 1e-10, "max_iter": 200_000, "polishing": True},
     "SCS": {"eps_abs": 1e-10, "eps_rel": 1e-10, "max_iters": 200_000},
     "HIGHS": {"primal_feasibility_tolerance": 1e-10, "dual_feasibility_tolerance": 1e-10},
     # the same tightening as OSQP's (merged into the class default's nested dict)
-    "CASADI_OSQP": {"osqp": {"eps_abs": 1e-10, "eps_rel": 1e-10, "max_iter": 200_000,
-                             "polish": True, "verbose": False}},
+    "CASADI_OSQP": {
+        "osqp": {
+            "eps_abs": 1e-10,
+            "eps_rel": 1e-10,
+            "max_iter": 200_000,
+            "polish": True,
+            "verbose": False,
+        }
+    },
     "CASADI_PROXQP": {"proxqp": {"eps_abs": 1e-10}},
     "ipopt": {"tol": 1e-12, "constr_viol_tol": 1e-12},
     "sqpmethod": {"tol_pr": 1e-12, "tol_du": 1e-12},
@@ -172,8 +192,9 @@ def defaults(problem_class: str, solver: str) -> dict[str, Any]:
     """The default options of ``solver`` (any case for CVXPY names) on ``problem_class``;
     empty for a solver without defaults there (its own defaults apply)."""
     if problem_class not in DEFAULTS:
-        raise ProblemError(f"problem class: expected one of {', '.join(PROBLEM_CLASSES)}, "
-                           f"got {problem_class!r}")
+        raise ProblemError(
+            f"problem class: expected one of {', '.join(PROBLEM_CLASSES)}, got {problem_class!r}"
+        )
     return _copy(DEFAULTS[problem_class].get(solver.upper(), {}))
 
 
@@ -181,14 +202,16 @@ def profile_options(profile: str, solver: str) -> dict[str, Any]:
     """What the settings ``profile`` adds for ``solver`` (upper case for CVXPY names,
     lower case for CasADi NLP plugins, as :data:`HIGH_OPTIONS` keys them)."""
     if profile not in PROFILES:
-        raise ProblemError(f"profile: expected one of {', '.join(sorted(PROFILES))}, "
-                           f"got {profile!r}")
+        raise ProblemError(
+            f"profile: expected one of {', '.join(sorted(PROFILES))}, got {profile!r}"
+        )
     table = PROFILES[profile]
     return _copy(table.get(solver, table.get(solver.upper(), {})))
 
 
-def solver_options(problem_class: str, solver: str, user: dict[str, Any] | None = None, *,
-                   profile: str = "default") -> dict[str, Any]:
+def solver_options(
+    problem_class: str, solver: str, user: dict[str, Any] | None = None, *, profile: str = "default"
+) -> dict[str, Any]:
     """The options that reach ``solver``: class defaults, then the profile's, then the
     caller's ``user`` options (each later one wins, key by key; a nested dictionary of a
     CasADi plugin's options key by key within it)."""
@@ -198,13 +221,18 @@ def solver_options(problem_class: str, solver: str, user: dict[str, Any] | None 
             # a CasADi plugin's nested option dictionary is merged key by key too, so
             # that the profile tightens the class default's options without dropping
             # the others (e.g. OSQP's polish_refine_iter)
-            out[k] = ({**out[k], **v} if isinstance(v, dict) and isinstance(out.get(k), dict)
-                      else v)
+            out[k] = {**out[k], **v} if isinstance(v, dict) and isinstance(out.get(k), dict) else v
     return out
 
 
-def milp_options(solver: str, mip_gap: float, time_limit: float | None, *,
-                 verbose: bool = False, where: str = "solver") -> dict[str, Any]:
+def milp_options(
+    solver: str,
+    mip_gap: float,
+    time_limit: float | None,
+    *,
+    verbose: bool = False,
+    where: str = "solver",
+) -> dict[str, Any]:
     """Each MILP solver's own names for the relative gap and the time limit (s).
 
     HIGHS, SCIPY (``scipy.optimize.milp``, HiGHS inside) and SCIP; any other solver takes
@@ -217,9 +245,12 @@ def milp_options(solver: str, mip_gap: float, time_limit: float | None, *,
         # is the bottleneck (Q = 200, pairs allowed: 54 s of presolve, then 3 s of branch
         # and bound; 5 s in all without it), and the root LP is already tight; pass
         # presolve="on" to restore it
-        opts: dict[str, Any] = {"mip_rel_gap": mip_gap,
-                                "mip_abs_gap": 1e-12 if mip_gap == 0 else 1e-6,
-                                "output_flag": verbose, "presolve": "off"}
+        opts: dict[str, Any] = {
+            "mip_rel_gap": mip_gap,
+            "mip_abs_gap": 1e-12 if mip_gap == 0 else 1e-6,
+            "output_flag": verbose,
+            "presolve": "off",
+        }
         if time_limit is not None:
             opts["time_limit"] = time_limit
         return opts
@@ -234,6 +265,8 @@ def milp_options(solver: str, mip_gap: float, time_limit: float | None, *,
             params["limits/time"] = time_limit
         return {"scip_params": params}
     if time_limit is not None or mip_gap != 0:
-        raise ProblemError(f"{where} solver: time_limit and mip_gap are passed to HIGHS, "
-                           f"SCIPY and SCIP only; give {solver}'s own options instead")
+        raise ProblemError(
+            f"{where} solver: time_limit and mip_gap are passed to HIGHS, "
+            f"SCIPY and SCIP only; give {solver}'s own options instead"
+        )
     return {}

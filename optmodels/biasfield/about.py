@@ -8,6 +8,11 @@ PROBLEM = {
     "title": "Radar bias fields: the smoothest field on the uncertainty sets (Bedin)",
     "original": "(8)-(10)",
     "closed_form": "(11)",
-    "api": {"data": "FieldData", "residuals": ("selection.objective", "selection.kkt_residuals"),
-            "solve": "solve", "closed_form": "closed_form", "estimate": "field"},
+    "api": {
+        "data": "FieldData",
+        "residuals": ("selection.objective", "selection.kkt_residuals"),
+        "solve": "solve",
+        "closed_form": "closed_form",
+        "estimate": "field",
+    },
 }

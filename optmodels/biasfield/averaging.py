@@ -27,9 +27,20 @@ from optmodels.biasfield.data import PlotTable, RadarSet
 from optmodels.biasfield.tracks import TrackFit
 from optmodels.core import FloatArray, ProblemError
 
-__all__ = ["MAX_UNION_RADARS", "CellSums", "Samples", "accumulate", "average_cells",
-           "choose_subsets", "height_interpolants", "no_samples_message", "object_samples",
-           "progress_bar", "sample_cells", "scan_intervals"]
+__all__ = [
+    "MAX_UNION_RADARS",
+    "CellSums",
+    "Samples",
+    "accumulate",
+    "average_cells",
+    "choose_subsets",
+    "height_interpolants",
+    "no_samples_message",
+    "object_samples",
+    "progress_bar",
+    "sample_cells",
+    "scan_intervals",
+]
 
 
 def scan_intervals(plots: PlotTable, m: int) -> FloatArray:
@@ -51,27 +62,36 @@ def scan_intervals(plots: PlotTable, m: int) -> FloatArray:
     return out
 
 
-def no_samples_message(fn: str, plots: PlotTable, fits: list[TrackFit],
-                        knot_spacing: float, union: bool, m: int) -> str:
+def no_samples_message(
+    fn: str, plots: PlotTable, fits: list[TrackFit], knot_spacing: float, union: bool, m: int
+) -> str:
     """Why no sampling instant was found: a knot spacing shorter than the scans (every
     track split at each plot, no fit), no fit at all, or the geometry (no object seen by
     all m radars / by two radars at the same time)."""
     scans = scan_intervals(plots, m)
     longest = float(np.nanmax(scans)) if np.isfinite(scans).any() else float("nan")
     if np.isfinite(longest) and knot_spacing < 1.5 * longest:
-        return (f"{fn} knot_spacing: {knot_spacing:g} s is not longer than the radars' scan "
-                f"intervals (median per radar {np.round(scans, 1).tolist()} s): the track "
-                "fits split a track at every silence longer than the knot spacing and "
-                f"keep {len(fits)} fits; give at least 2 × the longest scan interval "
-                f"(e.g. {2 * longest:.0f} s; 20 s for 4-10 s scans)")
+        return (
+            f"{fn} knot_spacing: {knot_spacing:g} s is not longer than the radars' scan "
+            f"intervals (median per radar {np.round(scans, 1).tolist()} s): the track "
+            "fits split a track at every silence longer than the knot spacing and "
+            f"keep {len(fits)} fits; give at least 2 × the longest scan interval "
+            f"(e.g. {2 * longest:.0f} s; 20 s for 4-10 s scans)"
+        )
     if not fits:
-        return (f"{fn} plots: no track could be fitted (too few plots per track for the "
-                f"polyline of knot spacing {knot_spacing:g} s); no cell can be formed")
+        return (
+            f"{fn} plots: no track could be fitted (too few plots per track for the "
+            f"polyline of knot spacing {knot_spacing:g} s); no cell can be formed"
+        )
     if union:
-        return ("plots: no object is seen by two radars at the same time (after the "
-                "track fits); no cell can be formed")
-    return ("plots: no object is seen by all m radars at the same time; no cell can be "
-            "formed (coverage='union' forms cells wherever two radars overlap)")
+        return (
+            "plots: no object is seen by two radars at the same time (after the "
+            "track fits); no cell can be formed"
+        )
+    return (
+        "plots: no object is seen by all m radars at the same time; no cell can be "
+        "formed (coverage='union' forms cells wherever two radars overlap)"
+    )
 
 
 #: Most radars of ``build_field_data(coverage="union")`` (one bit of a uint64 each).
@@ -93,12 +113,12 @@ def progress_bar(items: list[Any], progress: bool, desc: str) -> Any:
         from tqdm import tqdm
     except ImportError:  # pragma: no cover - tqdm is a dependency of the bench extra
         return items
-    return tqdm(items, desc=desc, file=sys.stderr, disable=not sys.stderr.isatty(),
-                leave=False)
+    return tqdm(items, desc=desc, file=sys.stderr, disable=not sys.stderr.isatty(), leave=False)
 
 
-def object_samples(per_radar: list[list[TrackFit]], sample_step: float, union: bool
-                    ) -> Samples | None:
+def object_samples(
+    per_radar: list[list[TrackFit]], sample_step: float, union: bool
+) -> Samples | None:
     """The sampling instants of one object (``sample_step`` s apart): inside the common
     span of all m radars' fits (``union`` False, the paper's case), or wherever two radars
     or more have a fit (``union``); None if there is none."""
@@ -137,8 +157,9 @@ def object_samples(per_radar: list[list[TrackFit]], sample_step: float, union: b
     return t, present, pidx, pos, bits
 
 
-def sample_cells(pos: FloatArray, tree: cKDTree, cell_radius: float, radars: RadarSet,
-                  exclude_radius: float) -> tuple[np.ndarray, np.ndarray]:
+def sample_cells(
+    pos: FloatArray, tree: cKDTree, cell_radius: float, radars: RadarSet, exclude_radius: float
+) -> tuple[np.ndarray, np.ndarray]:
     """Each sample's nearest cell and the samples that count (within ``cell_radius`` of
     it and farther than ``exclude_radius`` from every radar)."""
     dist, cell = tree.query(pos)
@@ -146,10 +167,17 @@ def sample_cells(pos: FloatArray, tree: cKDTree, cell_radius: float, radars: Rad
     return cell, np.flatnonzero((dist <= cell_radius) & (near > exclude_radius))
 
 
-def choose_subsets(objects: list[list[list[TrackFit]]], sample_step: float,
-                    tree: cKDTree, cell_radius: float, radars: RadarSet,
-                    exclude_radius: float, k0: int, share: float, progress: bool
-                    ) -> np.ndarray:
+def choose_subsets(
+    objects: list[list[list[TrackFit]]],
+    sample_step: float,
+    tree: cKDTree,
+    cell_radius: float,
+    radars: RadarSet,
+    exclude_radius: float,
+    k0: int,
+    share: float,
+    progress: bool,
+) -> np.ndarray:
     """Per cell the radar set S_k (bits): among the radar sets of its samples, the largest
     contained in the sets of ≥ ``share`` of the samples (ties: the most samples); 0 for a
     cell without samples."""
@@ -182,13 +210,24 @@ def choose_subsets(objects: list[list[list[TrackFit]]], sample_step: float,
     return subset
 
 
-def accumulate(smp: Samples, per_radar: list[list[TrackFit]], tree: cKDTree,
-                cell_radius: float, radars: RadarSet, exclude_radius: float,
-                sample_step: float, plot_times: FloatArray,
-                height_of: dict[int, tuple[FloatArray, FloatArray]],
-                subset: np.ndarray | None, sum_xi: FloatArray, sum_cov: FloatArray,
-                sum_h: FloatArray, n_obj: np.ndarray, n_smp: np.ndarray,
-                n_plt: np.ndarray) -> None:
+def accumulate(
+    smp: Samples,
+    per_radar: list[list[TrackFit]],
+    tree: cKDTree,
+    cell_radius: float,
+    radars: RadarSet,
+    exclude_radius: float,
+    sample_step: float,
+    plot_times: FloatArray,
+    height_of: dict[int, tuple[FloatArray, FloatArray]],
+    subset: np.ndarray | None,
+    sum_xi: FloatArray,
+    sum_cov: FloatArray,
+    sum_h: FloatArray,
+    n_obj: np.ndarray,
+    n_smp: np.ndarray,
+    n_plt: np.ndarray,
+) -> None:
     """One object's share of the averages (6)-(7), added in place to the per-cell sums.
 
     The object's sampling instants (positions, each present radar's piece) are sorted by
@@ -244,8 +283,9 @@ def accumulate(smp: Samples, per_radar: list[list[TrackFit]], tree: cKDTree,
                 pt = np.sort(pt)
             lo = np.minimum.reduceat(ts, starts)
             hi = np.maximum.reduceat(ts, starts) + sample_step
-            n_plt[kk] += (np.searchsorted(pt, hi, side="right")
-                          - np.searchsorted(pt, lo, side="left"))
+            n_plt[kk] += np.searchsorted(pt, hi, side="right") - np.searchsorted(
+                pt, lo, side="left"
+            )
 
 
 def height_interpolants(plots: PlotTable) -> dict[int, tuple[FloatArray, FloatArray]]:
@@ -253,16 +293,20 @@ def height_interpolants(plots: PlotTable) -> dict[int, tuple[FloatArray, FloatAr
     by time, for np.interp (the target's height as ADS-B or a corrected flight level gives
     it, the same for every radar)."""
     if plots.height is None:
-        raise ProblemError("biasfield.build_field_data plots: a 3-D radar set needs the "
-                           "target heights (PlotTable height)")
+        raise ProblemError(
+            "biasfield.build_field_data plots: a 3-D radar set needs the "
+            "target heights (PlotTable height)"
+        )
     ok = ~np.isnan(plots.height) & (plots.object >= 0)
     obj, t, h = plots.object[ok], plots.time[ok], plots.height[ok]
     order = np.lexsort((t, obj))
     obj, t, h = obj[order], t[order], h[order]
     cuts = np.flatnonzero(np.diff(obj)) + 1
-    return {int(o[0]): (tt, hh) for o, tt, hh in zip(np.split(obj, cuts), np.split(t, cuts),
-                                                      np.split(h, cuts), strict=True)
-            if o.size}
+    return {
+        int(o[0]): (tt, hh)
+        for o, tt, hh in zip(np.split(obj, cuts), np.split(t, cuts), np.split(h, cuts), strict=True)
+        if o.size
+    }
 
 
 @dataclass
@@ -280,22 +324,53 @@ class CellSums:
 
     @classmethod
     def zeros(cls, k: int, m: int) -> CellSums:
-        return cls(np.zeros((k, m, 2)), np.zeros((k, m, 2, 2)), np.zeros(k),
-                   np.zeros(k, dtype=int), np.zeros(k, dtype=int), np.zeros(k, dtype=int))
+        return cls(
+            np.zeros((k, m, 2)),
+            np.zeros((k, m, 2, 2)),
+            np.zeros(k),
+            np.zeros(k, dtype=int),
+            np.zeros(k, dtype=int),
+            np.zeros(k, dtype=int),
+        )
 
 
-def average_cells(objects: list[list[list[TrackFit]]], *, k: int, tree: cKDTree,
-                  cell_radius: float, radars: RadarSet, exclude_radius: float,
-                  sample_step: float, union: bool, plot_times: FloatArray,
-                  height_of: dict[int, tuple[FloatArray, FloatArray]],
-                  subset: np.ndarray | None, progress: bool) -> CellSums:
+def average_cells(
+    objects: list[list[list[TrackFit]]],
+    *,
+    k: int,
+    tree: cKDTree,
+    cell_radius: float,
+    radars: RadarSet,
+    exclude_radius: float,
+    sample_step: float,
+    union: bool,
+    plot_times: FloatArray,
+    height_of: dict[int, tuple[FloatArray, FloatArray]],
+    subset: np.ndarray | None,
+    progress: bool,
+) -> CellSums:
     """The sums of (6)-(7) over the ``k`` cells: :func:`accumulate` for each object
     (``objects``: per object its fits per radar, sorted by time)."""
     sums = CellSums.zeros(k, radars.m)
     for per_radar in progress_bar(objects, progress, "field data: averaging"):
         smp = object_samples(per_radar, sample_step, union)
         assert smp is not None
-        accumulate(smp, per_radar, tree, cell_radius, radars, exclude_radius,
-                   sample_step, plot_times, height_of, subset,
-                   sums.xi, sums.cov, sums.height, sums.objects, sums.samples, sums.plots)
+        accumulate(
+            smp,
+            per_radar,
+            tree,
+            cell_radius,
+            radars,
+            exclude_radius,
+            sample_step,
+            plot_times,
+            height_of,
+            subset,
+            sums.xi,
+            sums.cov,
+            sums.height,
+            sums.objects,
+            sums.samples,
+            sums.plots,
+        )
     return sums

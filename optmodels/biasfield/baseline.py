@@ -61,9 +61,14 @@ class BaselineResult:
         return self.chi2 / self.dof
 
 
-def azimuth_bias_baseline(plots: PlotTable, radars: RadarSet, *,
-                          objects: Sequence[int] | None = None, knot_spacing: float = 20.0,
-                          max_gap: float | None = None) -> BaselineResult:
+def azimuth_bias_baseline(
+    plots: PlotTable,
+    radars: RadarSet,
+    *,
+    objects: Sequence[int] | None = None,
+    knot_spacing: float = 20.0,
+    max_gap: float | None = None,
+) -> BaselineResult:
     """GLS estimate of a constant azimuth bias per radar, (2)-(4), from the plots of
     ``objects`` (default: all with an id) that are seen by at least two radars.
     ``knot_spacing`` and ``max_gap`` (default: ``knot_spacing``) in seconds."""
@@ -73,8 +78,9 @@ def azimuth_bias_baseline(plots: PlotTable, radars: RadarSet, *,
     if objects is not None:
         obj = np.asarray(objects)
         if obj.ndim != 1 or (obj.size and not np.issubdtype(obj.dtype, np.integer)):
-            raise ProblemError(f"{fn} objects: expected a list of integer object ids, got "
-                               f"{obj.dtype} {obj.shape}")
+            raise ProblemError(
+                f"{fn} objects: expected a list of integer object ids, got {obj.dtype} {obj.shape}"
+            )
     check_tables(fn, plots, radars)
     plots.check(radars)
     m = radars.m
@@ -87,8 +93,12 @@ def azimuth_bias_baseline(plots: PlotTable, radars: RadarSet, *,
         h_i = None if h_all is None else h_all[sel]
         vinv_all[sel] = np.linalg.inv(radars.cartesian_cov(i, z_all[sel], height=h_i))
         if radars.is_3d:  # ∂z/∂α at fixed slant range and height (exact)
-            dcol[sel] = g3.plane_jacobian(z_all[sel], h_i, radars.geodetic[i],  # type: ignore
-                                          radars.origin)[:, :, 1]
+            dcol[sel] = g3.plane_jacobian(
+                z_all[sel],
+                h_i,
+                radars.geodetic[i],  # type: ignore
+                radars.origin,
+            )[:, :, 1]
         else:
             pol = to_polar(z_all[sel], radars.sites[i])
             dcol[sel] = pol[:, :1] * np.column_stack([np.cos(pol[:, 1]), -np.sin(pol[:, 1])])
@@ -131,8 +141,9 @@ def azimuth_bias_baseline(plots: PlotTable, radars: RadarSet, *,
         cov = linalg.inv(s_mat)
         est = cov @ s_rhs
     except linalg.LinAlgError as exc:
-        raise ProblemError(f"plots: the azimuth biases are not identifiable from these "
-                           f"trajectories ({exc})") from None
+        raise ProblemError(
+            f"plots: the azimuth biases are not identifiable from these trajectories ({exc})"
+        ) from None
     chi2 = 0.0
     n_par = m
     used = 0
@@ -144,5 +155,14 @@ def azimuth_bias_baseline(plots: PlotTable, radars: RadarSet, *,
         used += rows.size
     dof = 2 * used - n_par
     cov = 0.5 * (cov + cov.T)
-    return BaselineResult(est, np.sqrt(np.diag(cov)), cov, chi2, dof,
-                          float(stats.chi2.sf(chi2, dof)), len(ids), used, dropped)
+    return BaselineResult(
+        est,
+        np.sqrt(np.diag(cov)),
+        cov,
+        chi2,
+        dof,
+        float(stats.chi2.sf(chi2, dof)),
+        len(ids),
+        used,
+        dropped,
+    )

@@ -58,13 +58,27 @@ from optmodels.core import (
     as_positive,
 )
 
-__all__ = ["MAX_SYNTHETIC_CELLS", "MAX_UNION_RADARS", "Diagnostics", "FieldData",
-           "build_field_data", "laplacian", "neighbours", "place_centers",
-           "synthetic_field_data", "uncertainty_sets"]
+__all__ = [
+    "MAX_SYNTHETIC_CELLS",
+    "MAX_UNION_RADARS",
+    "Diagnostics",
+    "FieldData",
+    "build_field_data",
+    "laplacian",
+    "neighbours",
+    "place_centers",
+    "synthetic_field_data",
+    "uncertainty_sets",
+]
 
 
-def place_centers(points: ArrayLike, count: int, *, method: Literal["kmeans", "grid"] = "kmeans",
-                  seed: int | np.random.Generator = 0) -> FloatArray:
+def place_centers(
+    points: ArrayLike,
+    count: int,
+    *,
+    method: Literal["kmeans", "grid"] = "kmeans",
+    seed: int | np.random.Generator = 0,
+) -> FloatArray:
     """Cell centres: k-means of ``points`` (traffic concentrations) or a square grid of about
     ``count`` nodes over their bounding box.
 
@@ -83,8 +97,9 @@ def place_centers(points: ArrayLike, count: int, *, method: Literal["kmeans", "g
     count = as_count(f"{fn} count", count, minimum=2)
     method = as_choice(f"{fn} method", method, ("kmeans", "grid"))  # type: ignore[assignment]
     if pts.shape[0] < count:
-        raise ProblemError(f"{fn} count: need 2 ≤ count ≤ number of points ({pts.shape[0]}), "
-                           f"got {count}")
+        raise ProblemError(
+            f"{fn} count: need 2 ≤ count ≤ number of points ({pts.shape[0]}), got {count}"
+        )
     if not isinstance(seed, np.random.Generator):
         seed = as_count(f"{fn} seed", seed)
     if method == "kmeans":
@@ -133,14 +148,26 @@ class Diagnostics:
     #: wall seconds of the stages: ``fits``, ``samples``, ``centres``, ``averaging``
     timings: dict[str, float] = field(default_factory=dict)
 
-def build_field_data(plots: PlotTable, radars: RadarSet, *, cells: int | ArrayLike = 50,
-                     cell_radius: float | None = None, knot_spacing: float = 20.0,
-                     sample_step: float = 5.0, neighbour_method: Literal[
-                         "delaunay", "radius"] = "delaunay", neighbour_radius: float | None = None,
-                     P: ArrayLike | None = None, exclude_radius: float = 20e3, seed: int = 0,
-                     scheduler: Any = None, positions: ArrayLike | None = None,
-                     coverage: Literal["all", "union"] = "all", subset_share: float = 0.5,
-                     progress: bool = False) -> tuple[FieldData, Diagnostics]:
+
+def build_field_data(
+    plots: PlotTable,
+    radars: RadarSet,
+    *,
+    cells: int | ArrayLike = 50,
+    cell_radius: float | None = None,
+    knot_spacing: float = 20.0,
+    sample_step: float = 5.0,
+    neighbour_method: Literal["delaunay", "radius"] = "delaunay",
+    neighbour_radius: float | None = None,
+    P: ArrayLike | None = None,
+    exclude_radius: float = 20e3,
+    seed: int = 0,
+    scheduler: Any = None,
+    positions: ArrayLike | None = None,
+    coverage: Literal["all", "union"] = "all",
+    subset_share: float = 0.5,
+    progress: bool = False,
+) -> tuple[FieldData, Diagnostics]:
     """Plots → :class:`FieldData`: track fits (3), cells, averaging (6)-(7), neighbours.
 
     ``cells``: a number of k-means centres, or the centres (K, 2) themselves.
@@ -176,11 +203,23 @@ def build_field_data(plots: PlotTable, radars: RadarSet, *, cells: int | ArrayLi
     ``knot_spacing``, ``sample_step`` in seconds.
     """
     fn = "biasfield.build_field_data"
-    s = _settings(fn, plots, radars, cells=cells, cell_radius=cell_radius,
-                  knot_spacing=knot_spacing, sample_step=sample_step,
-                  neighbour_method=neighbour_method, neighbour_radius=neighbour_radius, P=P,
-                  exclude_radius=exclude_radius, seed=seed, coverage=coverage,
-                  subset_share=subset_share, progress=progress)
+    s = _settings(
+        fn,
+        plots,
+        radars,
+        cells=cells,
+        cell_radius=cell_radius,
+        knot_spacing=knot_spacing,
+        sample_step=sample_step,
+        neighbour_method=neighbour_method,
+        neighbour_radius=neighbour_radius,
+        P=P,
+        exclude_radius=exclude_radius,
+        seed=seed,
+        coverage=coverage,
+        subset_share=subset_share,
+        progress=progress,
+    )
     extra: dict[str, Any] = {} if scheduler is None else {"scheduler": scheduler}
     if positions is not None:
         extra["positions"] = positions
@@ -191,8 +230,7 @@ def build_field_data(plots: PlotTable, radars: RadarSet, *, cells: int | ArrayLi
     clock = _lap(diag, "fits", clock)
     kept, all_pos = _sampled_objects(fits, radars.m, s)
     if not kept:
-        raise ProblemError(no_samples_message(fn, plots, fits, s.knot_spacing, s.union,
-                                              radars.m))
+        raise ProblemError(no_samples_message(fn, plots, fits, s.knot_spacing, s.union, radars.m))
     clock = _lap(diag, "samples", clock)
     centers = _centres(fn, s, all_pos)
     del all_pos
@@ -202,12 +240,35 @@ def build_field_data(plots: PlotTable, radars: RadarSet, *, cells: int | ArrayLi
     if radius is None:
         radius = 1.5 * float(np.median(tree.query(centers, k=2)[0][:, 1]))
     k0 = centers.shape[0]
-    subset = choose_subsets(kept, s.sample_step, tree, radius, radars, s.exclude_radius, k0,
-                            s.subset_share, s.progress) if s.union else None
-    sums = average_cells(kept, k=k0, tree=tree, cell_radius=radius, radars=radars,
-                         exclude_radius=s.exclude_radius, sample_step=s.sample_step,
-                         union=s.union, plot_times=plots.time, height_of=height_of,
-                         subset=subset, progress=s.progress)
+    subset = (
+        choose_subsets(
+            kept,
+            s.sample_step,
+            tree,
+            radius,
+            radars,
+            s.exclude_radius,
+            k0,
+            s.subset_share,
+            s.progress,
+        )
+        if s.union
+        else None
+    )
+    sums = average_cells(
+        kept,
+        k=k0,
+        tree=tree,
+        cell_radius=radius,
+        radars=radars,
+        exclude_radius=s.exclude_radius,
+        sample_step=s.sample_step,
+        union=s.union,
+        plot_times=plots.time,
+        height_of=height_of,
+        subset=subset,
+        progress=s.progress,
+    )
     _lap(diag, "averaging", clock)
     return _field_data(fn, sums, centers, subset, radars, s, diag), diag
 
@@ -230,10 +291,24 @@ class _Settings:
     progress: bool
 
 
-def _settings(fn: str, plots: PlotTable, radars: RadarSet, *, cells: Any, cell_radius: Any,
-              knot_spacing: Any, sample_step: Any, neighbour_method: Any,
-              neighbour_radius: Any, P: Any, exclude_radius: Any, seed: Any, coverage: Any,
-              subset_share: Any, progress: bool) -> _Settings:
+def _settings(
+    fn: str,
+    plots: PlotTable,
+    radars: RadarSet,
+    *,
+    cells: Any,
+    cell_radius: Any,
+    knot_spacing: Any,
+    sample_step: Any,
+    neighbour_method: Any,
+    neighbour_radius: Any,
+    P: Any,
+    exclude_radius: Any,
+    seed: Any,
+    coverage: Any,
+    subset_share: Any,
+    progress: bool,
+) -> _Settings:
     """Validate the arguments of :func:`build_field_data` (one ProblemError naming the
     argument)."""
     if np.ndim(cells) == 0:
@@ -242,29 +317,48 @@ def _settings(fn: str, plots: PlotTable, radars: RadarSet, *, cells: Any, cell_r
         cell_radius = as_positive(f"{fn} cell_radius (m)", cell_radius)
     knot_spacing = as_positive(f"{fn} knot_spacing (s)", knot_spacing)
     sample_step = as_positive(f"{fn} sample_step (s)", sample_step)
-    neighbour_method = as_choice(f"{fn} neighbour_method",  # type: ignore[assignment]
-                                 neighbour_method, ("delaunay", "radius"))
+    neighbour_method = as_choice(
+        f"{fn} neighbour_method",  # type: ignore[assignment]
+        neighbour_method,
+        ("delaunay", "radius"),
+    )
     if neighbour_method == "radius":
         neighbour_radius = as_positive(f"{fn} neighbour_radius (m)", neighbour_radius)
     exclude_radius = as_positive(f"{fn} exclude_radius (m)", exclude_radius, allow_zero=True)
     seed = as_count(f"{fn} seed", seed)
-    coverage = as_choice(f"{fn} coverage", coverage,  # type: ignore[assignment]
-                         ("all", "union"))
+    coverage = as_choice(
+        f"{fn} coverage",
+        coverage,  # type: ignore[assignment]
+        ("all", "union"),
+    )
     subset_share = as_positive(f"{fn} subset_share", subset_share)
     if subset_share > 1:
-        raise ProblemError(f"{fn} subset_share: expected a share in (0, 1], got "
-                           f"{subset_share}")
+        raise ProblemError(f"{fn} subset_share: expected a share in (0, 1], got {subset_share}")
     check_tables(fn, plots, radars)
     if coverage == "union" and radars.m > MAX_UNION_RADARS:
-        raise ProblemError(f"{fn} radars: coverage='union' handles up to {MAX_UNION_RADARS} "
-                           f"radars (one bit each), got {radars.m}")
-    return _Settings(cells, cell_radius, knot_spacing, sample_step, neighbour_method,
-                     neighbour_radius, P, exclude_radius, seed, coverage == "union",
-                     subset_share, bool(progress))
+        raise ProblemError(
+            f"{fn} radars: coverage='union' handles up to {MAX_UNION_RADARS} "
+            f"radars (one bit each), got {radars.m}"
+        )
+    return _Settings(
+        cells,
+        cell_radius,
+        knot_spacing,
+        sample_step,
+        neighbour_method,
+        neighbour_radius,
+        P,
+        exclude_radius,
+        seed,
+        coverage == "union",
+        subset_share,
+        bool(progress),
+    )
 
 
-def _sampled_objects(fits: list[TrackFit], m: int, s: _Settings
-                     ) -> tuple[list[list[list[TrackFit]]], list[FloatArray]]:
+def _sampled_objects(
+    fits: list[TrackFit], m: int, s: _Settings
+) -> tuple[list[list[list[TrackFit]]], list[FloatArray]]:
     """The objects with sampling instants (per object its fits per radar, sorted by time)
     and the positions of those instants: where all m radars (union: two or more) have a
     fit."""
@@ -274,8 +368,7 @@ def _sampled_objects(fits: list[TrackFit], m: int, s: _Settings
     for per_radar in by_obj.values():
         for pieces in per_radar:
             pieces.sort(key=lambda f: f.span[0])
-    objects = [p for p in by_obj.values()
-               if sum(1 for q in p if q) >= (2 if s.union else m)]
+    objects = [p for p in by_obj.values() if sum(1 for q in p if q) >= (2 if s.union else m)]
     all_pos = []
     kept = []
     for per_radar in progress_bar(objects, s.progress, "field data: samples"):
@@ -292,19 +385,29 @@ def _centres(fn: str, s: _Settings, all_pos: list[FloatArray]) -> FloatArray:
     if np.ndim(cells) == 0:
         pts = np.vstack(all_pos)
         if pts.shape[0] < int(cells):  # type: ignore[arg-type]
-            raise ProblemError(f"{fn} cells: {int(cells)} cells asked for but only "  # type: ignore
-                               f"{pts.shape[0]} sampling instants are shared by "
-                               f"{'two radars or more' if s.union else 'all radars'}")
+            raise ProblemError(
+                f"{fn} cells: {int(cells)} cells asked for but only "  # type: ignore
+                f"{pts.shape[0]} sampling instants are shared by "
+                f"{'two radars or more' if s.union else 'all radars'}"
+            )
         return place_centers(pts, int(cells), seed=s.seed)  # type: ignore[arg-type]
     centers = as_finite_array(f"{fn} cells", cells, ndim=2, max_abs=MAX_MAGNITUDE)
     if centers.shape[1] != 2 or centers.shape[0] < 2:
-        raise ProblemError(f"{fn} cells: expected (K, 2) centres (m) with K ≥ 2, got "
-                           f"{centers.shape}")
+        raise ProblemError(
+            f"{fn} cells: expected (K, 2) centres (m) with K ≥ 2, got {centers.shape}"
+        )
     return centers
 
 
-def _field_data(fn: str, sums: CellSums, centers: FloatArray, subset: np.ndarray | None,
-                radars: RadarSet, s: _Settings, diag: Diagnostics) -> FieldData:
+def _field_data(
+    fn: str,
+    sums: CellSums,
+    centers: FloatArray,
+    subset: np.ndarray | None,
+    radars: RadarSet,
+    s: _Settings,
+    diag: Diagnostics,
+) -> FieldData:
     """The sums → :class:`FieldData`: cells without an object dropped (a warning, counted
     in ``diag``), the averages (6)-(7), the subsets S_k, the neighbours, P and the 3-D
     geometry."""
@@ -313,8 +416,11 @@ def _field_data(fn: str, sums: CellSums, centers: FloatArray, subset: np.ndarray
     diag.dropped_cells = int(np.sum(~keep))
     who = "two radars or more" if s.union else "all radars"
     if diag.dropped_cells:
-        warnings.warn(f"build_field_data: {diag.dropped_cells} of {k0} cells hold no object "
-                      f"seen by {who} and were dropped", stacklevel=3)
+        warnings.warn(
+            f"build_field_data: {diag.dropped_cells} of {k0} cells hold no object "
+            f"seen by {who} and were dropped",
+            stacklevel=3,
+        )
     if keep.sum() < 2:
         raise ProblemError(f"cells: fewer than 2 cells hold objects seen by {who}")
     centers = centers[keep]
@@ -322,8 +428,9 @@ def _field_data(fn: str, sums: CellSums, centers: FloatArray, subset: np.ndarray
     seen = None
     if subset is not None:
         bits = subset[keep]
-        seen = ((bits[:, None] >> np.arange(m, dtype=np.uint64)[None, :]) & np.uint64(1)
-                ).astype(bool)
+        seen = ((bits[:, None] >> np.arange(m, dtype=np.uint64)[None, :]) & np.uint64(1)).astype(
+            bool
+        )
         if np.all(bits == np.uint64((1 << m) - 1)):
             seen = None  # every cell sees every radar: the paper's case
     xi = sums.xi[keep] / n_obj[:, None, None]
@@ -332,18 +439,25 @@ def _field_data(fn: str, sums: CellSums, centers: FloatArray, subset: np.ndarray
         w = seen.astype(float)
         mean_s = np.einsum("ki,kia->ka", w, xi) / w.sum(axis=1)[:, None]
         xi = np.where(seen[..., None], xi, mean_s[:, None, :])
-        eye = np.broadcast_to(np.eye(2) * float(np.median(xi_cov[seen][:, [0, 1], [0, 1]])),
-                              xi_cov.shape)
+        eye = np.broadcast_to(
+            np.eye(2) * float(np.median(xi_cov[seen][:, [0, 1], [0, 1]])), xi_cov.shape
+        )
         xi_cov = np.where(seen[..., None, None], xi_cov, eye)
     diag.samples_per_cell = sums.samples[keep]
     diag.plots_per_cell = sums.plots[keep]
     diag.objects_per_cell = n_obj
-    adj = neighbours(centers, method=s.neighbour_method,  # type: ignore[arg-type]
-                     radius=s.neighbour_radius)
+    adj = neighbours(
+        centers,
+        method=s.neighbour_method,  # type: ignore[arg-type]
+        radius=s.neighbour_radius,
+    )
     if s.P is None:
-        p = sparse.block_diag([np.diag([1 / radars.sigma_range[i] ** 2,
-                                        1 / radars.sigma_azimuth[i] ** 2])
-                               for i in range(m)]).toarray()
+        p = sparse.block_diag(
+            [
+                np.diag([1 / radars.sigma_range[i] ** 2, 1 / radars.sigma_azimuth[i] ** 2])
+                for i in range(m)
+            ]
+        ).toarray()
     else:
         p = as_finite_array(f"{fn} P", s.P, ndim=2, max_abs=MAX_MAGNITUDE)
     if not radars.is_3d:
@@ -354,8 +468,19 @@ def _field_data(fn: str, sums: CellSums, centers: FloatArray, subset: np.ndarray
     else:
         mean = np.einsum("ki,kia->ka", seen.astype(float), xi) / seen.sum(axis=1)[:, None]
     jac = np.stack([radars.polar_jacobian(i, mean, heights) for i in range(m)], axis=1)
-    return FieldData(radars.sites, centers, xi, adj, p, xi_cov, jac, heights,
-                     radars.geodetic, radars.origin, seen)
+    return FieldData(
+        radars.sites,
+        centers,
+        xi,
+        adj,
+        p,
+        xi_cov,
+        jac,
+        heights,
+        radars.geodetic,
+        radars.origin,
+        seen,
+    )
 
 
 def _lap(diag: Diagnostics, stage: str, since: float) -> float:

@@ -67,16 +67,31 @@ from optmodels.core import (
     as_positive,
 )
 
-__all__ = ["ADSB_LIMITS", "ADSB_SIGMA", "PLOT_LIMITS", "REASONS", "CleaningLimits",
-           "CleaningReport", "clean_plots", "clean_reports"]
+__all__ = [
+    "ADSB_LIMITS",
+    "ADSB_SIGMA",
+    "PLOT_LIMITS",
+    "REASONS",
+    "CleaningLimits",
+    "CleaningReport",
+    "clean_plots",
+    "clean_reports",
+]
 
 #: Per-axis position noise (m) assumed for ADS-B reports (GNSS positions; NACp ≥ 8 bounds
 #: the 95 % error by 93 m, real errors are a few metres).
 ADSB_SIGMA = 10.0
 
 #: The reasons a point is dropped, in the order the checks run.
-REASONS = ("no position (height)", "duplicate time", "impossible speed", "track jump",
-           "impossible acceleration", "ground traffic", "short segment")
+REASONS = (
+    "no position (height)",
+    "duplicate time",
+    "impossible speed",
+    "track jump",
+    "impossible acceleration",
+    "ground traffic",
+    "short segment",
+)
 
 _G0 = 9.80665
 
@@ -104,19 +119,29 @@ class CleaningLimits:
     def __post_init__(self) -> None:
         fn = "biasfield.CleaningLimits"
         for name in ("max_speed", "max_acceleration", "ground_window", "max_gap"):
-            object.__setattr__(self, name, as_positive(f"{fn} {name}", getattr(self, name),
-                                                       allow_inf=True))
-        object.__setattr__(self, "ground_speed", as_positive(
-            f"{fn} ground_speed (m/s)", self.ground_speed, allow_zero=True))
-        object.__setattr__(self, "noise_sigmas", as_positive(
-            f"{fn} noise_sigmas", self.noise_sigmas, allow_zero=True))
+            object.__setattr__(
+                self, name, as_positive(f"{fn} {name}", getattr(self, name), allow_inf=True)
+            )
+        object.__setattr__(
+            self,
+            "ground_speed",
+            as_positive(f"{fn} ground_speed (m/s)", self.ground_speed, allow_zero=True),
+        )
+        object.__setattr__(
+            self,
+            "noise_sigmas",
+            as_positive(f"{fn} noise_sigmas", self.noise_sigmas, allow_zero=True),
+        )
         if self.ground_ceiling is not None:
-            object.__setattr__(self, "ground_ceiling", as_number(
-                f"{fn} ground_ceiling (m)", self.ground_ceiling))
-        object.__setattr__(self, "min_points", as_count(f"{fn} min_points", self.min_points,
-                                                        minimum=1))
-        object.__setattr__(self, "glitch_run", as_count(f"{fn} glitch_run", self.glitch_run,
-                                                        minimum=1))
+            object.__setattr__(
+                self, "ground_ceiling", as_number(f"{fn} ground_ceiling (m)", self.ground_ceiling)
+            )
+        object.__setattr__(
+            self, "min_points", as_count(f"{fn} min_points", self.min_points, minimum=1)
+        )
+        object.__setattr__(
+            self, "glitch_run", as_count(f"{fn} glitch_run", self.glitch_run, minimum=1)
+        )
 
 
 #: Defaults for ADS-B reports (:func:`optmodels.biasfield.ingest.read_tracks`).
@@ -149,11 +174,18 @@ class CleaningReport:
     def to_dict(self, max_rows: int | None = None) -> dict[str, Any]:
         """JSON-ready: points, kept, segments, dropped counts by reason and the rows
         (at most ``max_rows`` per reason if given; ``rows_truncated`` says so)."""
-        rows = {r: v.tolist() if max_rows is None else v[:max_rows].tolist()
-                for r, v in self.rows.items() if v.size}
-        out: dict[str, Any] = {"points": self.points, "kept": self.points - self.total,
-                               "segments": self.segments, "dropped": self.counts,
-                               "rows": rows}
+        rows = {
+            r: v.tolist() if max_rows is None else v[:max_rows].tolist()
+            for r, v in self.rows.items()
+            if v.size
+        }
+        out: dict[str, Any] = {
+            "points": self.points,
+            "kept": self.points - self.total,
+            "segments": self.segments,
+            "dropped": self.counts,
+            "rows": rows,
+        }
         if max_rows is not None:
             out["rows_truncated"] = any(v.size > max_rows for v in self.rows.values())
         return out
@@ -163,20 +195,27 @@ class CleaningReport:
         self.points += other.points
         self.segments += other.segments
         for r, v in other.rows.items():
-            self.rows[r] = np.concatenate([self.rows.get(r, np.zeros(0, np.int64)),
-                                           v + offset])
+            self.rows[r] = np.concatenate([self.rows.get(r, np.zeros(0, np.int64)), v + offset])
 
 
-def _compatible(t: FloatArray, x: FloatArray, s: FloatArray, a: np.ndarray, b: np.ndarray,
-                lim: CleaningLimits) -> np.ndarray:
+def _compatible(
+    t: FloatArray, x: FloatArray, s: FloatArray, a: np.ndarray, b: np.ndarray, lim: CleaningLimits
+) -> np.ndarray:
     """Speed test between points a and b (index arrays)."""
     dist = np.linalg.norm(x[b] - x[a], axis=1)
     allow = lim.max_speed * np.abs(t[b] - t[a]) + lim.noise_sigmas * np.hypot(s[a], s[b])
     return np.asarray(dist <= allow)
 
 
-def _chains(idx: np.ndarray, t: FloatArray, x: FloatArray, s: FloatArray,
-            lim: CleaningLimits, on_jump: str, code: np.ndarray) -> list[np.ndarray]:
+def _chains(
+    idx: np.ndarray,
+    t: FloatArray,
+    x: FloatArray,
+    s: FloatArray,
+    lim: CleaningLimits,
+    on_jump: str,
+    code: np.ndarray,
+) -> list[np.ndarray]:
     """Speed check of one gap-free segment ``idx`` (sorted by time): drop glitches
     (code 1), resolve jumps (split, or drop with code 2); returns the kept segments."""
     if idx.size < 2:
@@ -207,8 +246,14 @@ def _chains(idx: np.ndarray, t: FloatArray, x: FloatArray, s: FloatArray,
     return [groups[best]]
 
 
-def _accel(idx: np.ndarray, t: FloatArray, x: FloatArray, s: FloatArray,
-           lim: CleaningLimits, code: np.ndarray) -> np.ndarray:
+def _accel(
+    idx: np.ndarray,
+    t: FloatArray,
+    x: FloatArray,
+    s: FloatArray,
+    lim: CleaningLimits,
+    code: np.ndarray,
+) -> np.ndarray:
     """Acceleration check of one segment: drop the worst point while any exceeds (code 3)."""
     keep = idx
     while keep.size >= 3:
@@ -217,8 +262,9 @@ def _accel(idx: np.ndarray, t: FloatArray, x: FloatArray, s: FloatArray,
         wa = d2 / (d1 + d2)
         wc = 1.0 - wa
         dev = np.linalg.norm(x[b] - wa[:, None] * x[a] - wc[:, None] * x[c], axis=1)
-        allow = (0.5 * lim.max_acceleration * d1 * d2
-                 + lim.noise_sigmas * np.sqrt(s[b] ** 2 + (wa * s[a]) ** 2 + (wc * s[c]) ** 2))
+        allow = 0.5 * lim.max_acceleration * d1 * d2 + lim.noise_sigmas * np.sqrt(
+            s[b] ** 2 + (wa * s[a]) ** 2 + (wc * s[c]) ** 2
+        )
         excess = dev - allow
         worst = int(np.argmax(excess))
         if excess[worst] <= 0:
@@ -228,16 +274,20 @@ def _accel(idx: np.ndarray, t: FloatArray, x: FloatArray, s: FloatArray,
     return keep
 
 
-def _ground(idx: np.ndarray, t: FloatArray, x: FloatArray, h: FloatArray | None,
-            lim: CleaningLimits) -> np.ndarray:
+def _ground(
+    idx: np.ndarray, t: FloatArray, x: FloatArray, h: FloatArray | None, lim: CleaningLimits
+) -> np.ndarray:
     """Boolean (len(idx),): ground traffic by the windowed speed (and the ceiling)."""
     if lim.ground_speed <= 0 or idx.size < 2:
         return np.zeros(idx.size, dtype=bool)
     tt, xx = t[idx], x[idx]
     half = 0.5 * lim.ground_window
     # the window centred on each point, moved inside the segment at its ends
-    c = np.clip(tt, tt[0] + half, tt[-1] - half) if tt[-1] - tt[0] > 2 * half else \
-        np.full(tt.size, 0.5 * (tt[0] + tt[-1]))
+    c = (
+        np.clip(tt, tt[0] + half, tt[-1] - half)
+        if tt[-1] - tt[0] > 2 * half
+        else np.full(tt.size, 0.5 * (tt[0] + tt[-1]))
+    )
     lo = np.searchsorted(tt, c - half, side="left")
     hi = np.searchsorted(tt, c + half, side="right") - 1
     span = tt[hi] - tt[lo]
@@ -252,8 +302,14 @@ def _ground(idx: np.ndarray, t: FloatArray, x: FloatArray, h: FloatArray | None,
     return np.asarray(slow)
 
 
-def _clean_sequence(t: FloatArray, x: FloatArray, s: FloatArray, h: FloatArray | None,
-                    lim: CleaningLimits, on_jump: str) -> tuple[np.ndarray, list[np.ndarray]]:
+def _clean_sequence(
+    t: FloatArray,
+    x: FloatArray,
+    s: FloatArray,
+    h: FloatArray | None,
+    lim: CleaningLimits,
+    on_jump: str,
+) -> tuple[np.ndarray, list[np.ndarray]]:
     """One object's points sorted by time → (reason code per point, 0 = kept;
     the kept segments as index arrays)."""
     n = t.size
@@ -280,9 +336,15 @@ def _clean_sequence(t: FloatArray, x: FloatArray, s: FloatArray, h: FloatArray |
     return code, out
 
 
-_CODE_REASON = {7: "no position (height)", 6: "duplicate time", 1: "impossible speed",
-                2: "track jump",
-                3: "impossible acceleration", 4: "ground traffic", 5: "short segment"}
+_CODE_REASON = {
+    7: "no position (height)",
+    6: "duplicate time",
+    1: "impossible speed",
+    2: "track jump",
+    3: "impossible acceleration",
+    4: "ground traffic",
+    5: "short segment",
+}
 
 
 def _group_rows(keys: np.ndarray, times: FloatArray) -> list[np.ndarray]:
@@ -300,10 +362,15 @@ def _report(n: int, codes: np.ndarray, segments: int) -> CleaningReport:
     return rep
 
 
-def clean_reports(objects: ArrayLike, times: ArrayLike, positions: ArrayLike, *,
-                  sigma: float | ArrayLike = ADSB_SIGMA, heights: ArrayLike | None = None,
-                  limits: CleaningLimits = ADSB_LIMITS
-                  ) -> tuple[np.ndarray, CleaningReport]:
+def clean_reports(
+    objects: ArrayLike,
+    times: ArrayLike,
+    positions: ArrayLike,
+    *,
+    sigma: float | ArrayLike = ADSB_SIGMA,
+    heights: ArrayLike | None = None,
+    limits: CleaningLimits = ADSB_LIMITS,
+) -> tuple[np.ndarray, CleaningReport]:
     """Clean aircraft reports (ADS-B): per object, gaps, impossible jumps, ground traffic.
 
     Parameters
@@ -336,13 +403,14 @@ def clean_reports(objects: ArrayLike, times: ArrayLike, positions: ArrayLike, *,
     n = t.size
     x = as_finite_array(f"{fn} positions (m)", positions, ndim=2, max_abs=MAX_MAGNITUDE)
     if x.shape[0] != n or x.shape[1] not in (2, 3):
-        raise ProblemError(f"{fn} positions (m): expected ({n}, 2) or ({n}, 3), got "
-                           f"{x.shape}")
-    s = np.broadcast_to(as_finite_array(f"{fn} sigma (m)", sigma, ndim=(0, 1)), (n,)) \
-        if np.ndim(sigma) == 0 or np.size(sigma) == n else None
+        raise ProblemError(f"{fn} positions (m): expected ({n}, 2) or ({n}, 3), got {x.shape}")
+    s = (
+        np.broadcast_to(as_finite_array(f"{fn} sigma (m)", sigma, ndim=(0, 1)), (n,))
+        if np.ndim(sigma) == 0 or np.size(sigma) == n
+        else None
+    )
     if s is None or np.any(s < 0):
-        raise ProblemError(f"{fn} sigma (m): expected one value ≥ 0 or {n}, got "
-                           f"{np.shape(sigma)}")
+        raise ProblemError(f"{fn} sigma (m): expected one value ≥ 0 or {n}, got {np.shape(sigma)}")
     obj = np.asarray(objects)
     if obj.shape != (n,):
         raise ProblemError(f"{fn} objects: expected {n} labels, got shape {obj.shape}")
@@ -358,8 +426,9 @@ def clean_reports(objects: ArrayLike, times: ArrayLike, positions: ArrayLike, *,
     segment = np.full(n, -1, dtype=np.int64)
     nseg = 0
     for rows in _group_rows(keys, t):
-        code, pieces = _clean_sequence(t[rows], x[rows], s[rows],
-                                       None if h is None else h[rows], lim, "split")
+        code, pieces = _clean_sequence(
+            t[rows], x[rows], s[rows], None if h is None else h[rows], lim, "split"
+        )
         codes[rows] = code
         for piece in pieces:
             segment[rows[piece]] = nseg
@@ -376,14 +445,18 @@ def plot_sigma(plots: PlotTable, radars: RadarSet, z: FloatArray | None = None) 
     for i in range(radars.m):
         sel = np.flatnonzero(plots.radar == i)
         if sel.size:
-            cov = (radars.cartesian_cov(i, z[sel]) if h is None
-                   else radars.cartesian_cov(i, z[sel], height=h[sel]))
+            cov = (
+                radars.cartesian_cov(i, z[sel])
+                if h is None
+                else radars.cartesian_cov(i, z[sel], height=h[sel])
+            )
             out[sel] = np.sqrt(np.linalg.eigvalsh(cov)[:, -1])
     return out
 
 
-def clean_plots(plots: PlotTable, radars: RadarSet, *, limits: CleaningLimits = PLOT_LIMITS
-                ) -> tuple[PlotTable, CleaningReport]:
+def clean_plots(
+    plots: PlotTable, radars: RadarSet, *, limits: CleaningLimits = PLOT_LIMITS
+) -> tuple[PlotTable, CleaningReport]:
     """Clean radar plots per (radar, object) before the track fits (3).
 
     Each radar's track of each object (``object ≥ 0``; unassigned plots are left for
@@ -429,8 +502,9 @@ def clean_plots(plots: PlotTable, radars: RadarSet, *, limits: CleaningLimits = 
         keys = plots.radar[known] * (int(plots.object.max()) + 1) + plots.object[known]
         for grp in _group_rows(keys, plots.time[known]):
             rows = known[grp]
-            code, pieces = _clean_sequence(plots.time[rows], z[rows], s[rows],
-                                           None if h is None else h[rows], lim, "drop")
+            code, pieces = _clean_sequence(
+                plots.time[rows], z[rows], s[rows], None if h is None else h[rows], lim, "drop"
+            )
             codes[rows] = code
             nseg += len(pieces)
     del z, s

@@ -54,22 +54,31 @@ def closed_form(data: FieldData) -> FieldSolution:
         try:
             lu = splinalg.splu(a)
         except RuntimeError as exc:  # exactly singular
-            raise ProblemError(f"biasfield.closed_form data: Φ1ᵀRΦ1 is singular ({exc}); the "
-                               "field is not identifiable on these cells") from None
+            raise ProblemError(
+                f"biasfield.closed_form data: Φ1ᵀRΦ1 is singular ({exc}); the "
+                "field is not identifiable on these cells"
+            ) from None
         with np.errstate(all="ignore"):
             eta = -lu.solve(b)
         phi = phi0 + phi1 @ eta
-    common = {"status": Status.OPTIMAL, "method": "closed_form", "solve_time": tm.elapsed,
-              "message": "(11), sign corrected"}
+    common = {
+        "status": Status.OPTIMAL,
+        "method": "closed_form",
+        "solve_time": tm.elapsed,
+        "message": "(11), sign corrected",
+    }
     if not (np.all(np.isfinite(phi)) and np.all(np.isfinite(eta))):
-        common.update(status=Status.ERROR, message="(11): the solve overflowed (non-finite "
-                      "field); Φ1ᵀRΦ1 is numerically singular")
+        common.update(
+            status=Status.ERROR,
+            message="(11): the solve overflowed (non-finite field); Φ1ᵀRΦ1 is numerically singular",
+        )
         return failed_solution(data, (phi0, phi1), common, None)
     sol = pack_solution(data, (phi0, phi1), phi, eta, common, None, None)
     sol.info["components"] = n_comp
     grad = phi1.T @ (r @ phi)
     sol.residuals["stationarity"] = float(np.max(np.abs(grad))) / max(
-        float(np.max(np.abs(b))), 1e-300)
+        float(np.max(np.abs(b))), 1e-300
+    )
     kappa = condition_number(a, lu)
     sol.info["condition"] = kappa
     sol.residuals["conditioning"] = conditioning_residual(kappa)

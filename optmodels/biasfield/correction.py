@@ -72,8 +72,9 @@ def seen_by_others(plots: PlotTable, window: float = 60.0) -> np.ndarray:
     return out
 
 
-def correct_plots(plots: PlotTable, radars: RadarSet, field: FieldMap, *,
-                  passes: int = 2, window: float = 60.0) -> Corrected:
+def correct_plots(
+    plots: PlotTable, radars: RadarSet, field: FieldMap, *, passes: int = 2, window: float = 60.0
+) -> Corrected:
     """Plots with the estimated bias removed: range − f_r(x), azimuth − f_α(x) for each
     plot of radar i, x its position on the common plane.
 
@@ -100,8 +101,11 @@ def correct_plots(plots: PlotTable, radars: RadarSet, field: FieldMap, *,
         b = field.at_radar(pos, plots.radar)  # (n, 2), each plot's own radar
         covered = np.all(np.isfinite(b), axis=1)
         bias = np.where(covered[:, None], b, 0.0)
-        out = replace(plots, range=np.abs(plots.range - bias[:, 0]),
-                      azimuth=wrap_angle(plots.azimuth - bias[:, 1]))
+        out = replace(
+            plots,
+            range=np.abs(plots.range - bias[:, 0]),
+            azimuth=wrap_angle(plots.azimuth - bias[:, 1]),
+        )
     reason = np.full(n, REASONS[0], dtype="<U18")
     if not covered.all():
         miss = ~covered

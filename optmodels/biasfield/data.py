@@ -57,8 +57,10 @@ class RadarSet:
         if self.geodetic is not None:
             geo = as_finite_array("biasfield.RadarSet geodetic", self.geodetic, ndim=2)
             if geo.shape[1] != 3:
-                raise ProblemError("biasfield.RadarSet geodetic: expected (m, 3) latitude "
-                                   f"(deg), longitude (deg), height (m), got {geo.shape}")
+                raise ProblemError(
+                    "biasfield.RadarSet geodetic: expected (m, 3) latitude "
+                    f"(deg), longitude (deg), height (m), got {geo.shape}"
+                )
             for j in range(geo.shape[0]):
                 g3.site_geodetic(f"biasfield.RadarSet geodetic[{j}]", geo[j])
             if self.origin is None:
@@ -69,19 +71,24 @@ class RadarSet:
             object.__setattr__(self, "origin", org)
             object.__setattr__(self, "sites", g3.common_plane(geo[:, 0], geo[:, 1], org))
         elif self.origin is not None:
-            object.__setattr__(self, "origin", g3.site_geodetic("biasfield.RadarSet origin",
-                                                                self.origin))
+            object.__setattr__(
+                self, "origin", g3.site_geodetic("biasfield.RadarSet origin", self.origin)
+            )
         if self.sites is None:
-            raise ProblemError("biasfield.RadarSet sites: give the sites (m, 2) East-North "
-                               "(m) or their geodetic positions (geodetic=)")
-        sites = as_finite_array("biasfield.RadarSet sites", self.sites, ndim=2,
-                                max_abs=MAX_MAGNITUDE)
+            raise ProblemError(
+                "biasfield.RadarSet sites: give the sites (m, 2) East-North "
+                "(m) or their geodetic positions (geodetic=)"
+            )
+        sites = as_finite_array(
+            "biasfield.RadarSet sites", self.sites, ndim=2, max_abs=MAX_MAGNITUDE
+        )
         if sites.shape[1] != 2:
             raise ProblemError(f"biasfield.RadarSet sites: expected (m, 2), got {sites.shape}")
         m = sites.shape[0]
         if m < 2:
-            raise ProblemError(f"biasfield.RadarSet sites: the bias field needs at least 2 "
-                               f"radars, got {m}")
+            raise ProblemError(
+                f"biasfield.RadarSet sites: the bias field needs at least 2 radars, got {m}"
+            )
         object.__setattr__(self, "sites", sites)
         for name in ("sigma_range", "sigma_azimuth", "max_range"):
             arg = f"biasfield.RadarSet {name}"
@@ -93,12 +100,15 @@ class RadarSet:
                 raise ProblemError(f"{arg}: need positive values, got {v}")
             object.__setattr__(self, name, v)
         if isinstance(self.names, str):
-            raise ProblemError(f"biasfield.RadarSet names: expected a sequence of {m} names, "
-                               f"got the string {self.names!r:.60}")
+            raise ProblemError(
+                f"biasfield.RadarSet names: expected a sequence of {m} names, "
+                f"got the string {self.names!r:.60}"
+            )
         names = tuple(str(n) for n in self.names) or tuple(f"R{i + 1}" for i in range(m))
         if len(names) != m or len(set(names)) != m or "" in names:
-            raise ProblemError(f"biasfield.RadarSet names: need {m} distinct non-empty names, "
-                               f"got {names}")
+            raise ProblemError(
+                f"biasfield.RadarSet names: need {m} distinct non-empty names, got {names}"
+            )
         object.__setattr__(self, "names", names)
         object.__setattr__(self, "ids", _as_ids(self.ids, m))
 
@@ -133,31 +143,31 @@ class RadarSet:
         i = as_count("biasfield.RadarSet.polar_cov i", i, maximum=self.m - 1)
         return np.diag([self.sigma_range[i] ** 2, self.sigma_azimuth[i] ** 2])
 
-    def polar_jacobian(self, i: int, x: ArrayLike, height: ArrayLike | None = None
-                       ) -> FloatArray:
+    def polar_jacobian(self, i: int, x: ArrayLike, height: ArrayLike | None = None) -> FloatArray:
         """∇p_i at plane positions x (..., 2) (m), (..., 2, 2): ∂(range, azimuth)/∂(E, N);
         in 3-D the exact Jacobian at fixed target ``height`` (..., ) (m above the
         ellipsoid), required there."""
         i = as_count("biasfield.RadarSet.polar_jacobian i", i, maximum=self.m - 1)
         pts = as_finite_array("biasfield.RadarSet.polar_jacobian x", x, max_abs=MAX_MAGNITUDE)
         if pts.shape[-1:] != (2,):
-            raise ProblemError("biasfield.RadarSet.polar_jacobian x: expected (..., 2), got "
-                               f"{pts.shape}")
+            raise ProblemError(
+                f"biasfield.RadarSet.polar_jacobian x: expected (..., 2), got {pts.shape}"
+            )
         if not self.is_3d:
             return polar_jacobian(pts, self.sites[i])  # type: ignore[index]
         h = _heights("biasfield.RadarSet.polar_jacobian height", height, pts.shape[:-1])
         return g3.polar_jacobian3d(pts, h, self.geodetic[i], self.origin)  # type: ignore[index]
 
-    def cartesian_cov(self, i: int, x: ArrayLike, height: ArrayLike | None = None
-                      ) -> FloatArray:
+    def cartesian_cov(self, i: int, x: ArrayLike, height: ArrayLike | None = None) -> FloatArray:
         """V_i(x) on the common plane, (..., 2, 2), to first order: ∇p_i⁻¹ V_i ∇p_i⁻ᵀ at
         x (..., 2) (m); a 3-D set needs the target ``height`` (...,) (m above the
         ellipsoid) and uses the exact Jacobian there."""
         i = as_count("biasfield.RadarSet.cartesian_cov i", i, maximum=self.m - 1)
         pts = as_finite_array("biasfield.RadarSet.cartesian_cov x", x, max_abs=MAX_MAGNITUDE)
         if pts.shape[-1:] != (2,):
-            raise ProblemError("biasfield.RadarSet.cartesian_cov x: expected (..., 2), got "
-                               f"{pts.shape}")
+            raise ProblemError(
+                f"biasfield.RadarSet.cartesian_cov x: expected (..., 2), got {pts.shape}"
+            )
         if self.is_3d:
             h = _heights("biasfield.RadarSet.cartesian_cov height", height, pts.shape[:-1])
             jac = g3.polar_jacobian3d(pts, h, self.geodetic[i], self.origin)  # type: ignore
@@ -191,10 +201,13 @@ def _as_ids(ids: Any, m: int) -> tuple[tuple[int, int], ...]:
         raise ProblemError(f"{arg}: expected {m} (SAC, SIC) pairs, got {ids!r:.80}") from exc
     if arr.size == 0:
         return ()
-    if arr.shape != (m, 2) or not (np.issubdtype(arr.dtype, np.integer) or (
-            np.issubdtype(arr.dtype, np.floating) and np.all(np.mod(arr, 1) == 0))):
-        raise ProblemError(f"{arg}: expected {m} (SAC, SIC) pairs of integers, got "
-                           f"{arr.dtype} {arr.shape}")
+    if arr.shape != (m, 2) or not (
+        np.issubdtype(arr.dtype, np.integer)
+        or (np.issubdtype(arr.dtype, np.floating) and np.all(np.mod(arr, 1) == 0))
+    ):
+        raise ProblemError(
+            f"{arg}: expected {m} (SAC, SIC) pairs of integers, got {arr.dtype} {arr.shape}"
+        )
     if arr.min() < 0 or arr.max() > 255:
         raise ProblemError(f"{arg}: SAC and SIC are integers 0-255, got {arr.tolist()}")
     out = tuple((int(a), int(b)) for a, b in arr)
@@ -206,8 +219,9 @@ def _as_ids(ids: Any, m: int) -> tuple[tuple[int, int], ...]:
 def _heights(name: str, height: ArrayLike | None, shape: tuple[int, ...]) -> FloatArray:
     """Target heights (m above the ellipsoid) broadcast to ``shape``; required, finite."""
     if height is None:
-        raise ProblemError(f"{name}: a 3-D radar set needs the target height (m above the "
-                           "WGS-84 ellipsoid)")
+        raise ProblemError(
+            f"{name}: a 3-D radar set needs the target height (m above the WGS-84 ellipsoid)"
+        )
     h = as_finite_array(name, height, max_abs=1e6)
     try:
         return np.broadcast_to(h, shape)
@@ -233,32 +247,39 @@ class PlotTable:
     def __post_init__(self) -> None:
         t = as_finite_array("biasfield.PlotTable time", self.time, ndim=1, max_abs=MAX_MAGNITUDE)
         n = t.shape[0]
-        r = as_finite_array("biasfield.PlotTable range", self.range, shape=(n,),
-                            max_abs=MAX_MAGNITUDE)
-        az = as_finite_array("biasfield.PlotTable azimuth", self.azimuth, shape=(n,),
-                             max_abs=MAX_MAGNITUDE)
+        r = as_finite_array(
+            "biasfield.PlotTable range", self.range, shape=(n,), max_abs=MAX_MAGNITUDE
+        )
+        az = as_finite_array(
+            "biasfield.PlotTable azimuth", self.azimuth, shape=(n,), max_abs=MAX_MAGNITUDE
+        )
         if np.any(r < 0):
-            raise ProblemError(f"biasfield.PlotTable range: {int(np.sum(r < 0))} negative "
-                               "ranges")
+            raise ProblemError(f"biasfield.PlotTable range: {int(np.sum(r < 0))} negative ranges")
         rad = np.asarray(self.radar)
         obj = np.asarray(self.object)
         for name, arr in (("radar", rad), ("object", obj)):
             if arr.shape != (n,) or not np.issubdtype(arr.dtype, np.integer):
-                raise ProblemError(f"biasfield.PlotTable {name}: expected {n} integers, got "
-                                   f"{arr.dtype} {arr.shape}")
+                raise ProblemError(
+                    f"biasfield.PlotTable {name}: expected {n} integers, got "
+                    f"{arr.dtype} {arr.shape}"
+                )
         if self.height is not None:
             try:
                 h = np.asarray(self.height, dtype=float)
             except (TypeError, ValueError) as exc:
-                raise ProblemError(f"biasfield.PlotTable height: not a numeric array ({exc})"
-                                   ) from None
+                raise ProblemError(
+                    f"biasfield.PlotTable height: not a numeric array ({exc})"
+                ) from None
             if h.shape != (n,):
-                raise ProblemError(f"biasfield.PlotTable height: expected {n} heights (m), "
-                                   f"got shape {h.shape}")
+                raise ProblemError(
+                    f"biasfield.PlotTable height: expected {n} heights (m), got shape {h.shape}"
+                )
             known = h[~np.isnan(h)]
             if np.any(~np.isfinite(known)) or np.any(np.abs(known) > 1e6):
-                raise ProblemError("biasfield.PlotTable height: heights must be finite "
-                                   "(within ±1000 km) or NaN for unknown")
+                raise ProblemError(
+                    "biasfield.PlotTable height: heights must be finite "
+                    "(within ±1000 km) or NaN for unknown"
+                )
             object.__setattr__(self, "height", h)
         object.__setattr__(self, "time", t)
         object.__setattr__(self, "range", r)
@@ -272,23 +293,31 @@ class PlotTable:
     def check(self, radars: RadarSet) -> None:
         """Radar ids exist and ranges are within each radar's ``max_range``."""
         if not isinstance(radars, RadarSet):
-            raise ProblemError(f"biasfield.PlotTable.check radars: expected a RadarSet, got "
-                               f"{type(radars).__name__}")
+            raise ProblemError(
+                f"biasfield.PlotTable.check radars: expected a RadarSet, got "
+                f"{type(radars).__name__}"
+            )
         bad = (self.radar < 0) | (self.radar >= radars.m)
         if bad.any():
-            raise ProblemError(f"radar: unknown radar index {int(self.radar[bad][0])} in "
-                               f"{int(bad.sum())} plots (radars 0..{radars.m - 1})")
+            raise ProblemError(
+                f"radar: unknown radar index {int(self.radar[bad][0])} in "
+                f"{int(bad.sum())} plots (radars 0..{radars.m - 1})"
+            )
         over = self.range > radars.max_range[self.radar]
         if over.any():
-            raise ProblemError(f"range: {int(over.sum())} plots beyond their radar's "
-                               "max_range (outside the valid range)")
+            raise ProblemError(
+                f"range: {int(over.sum())} plots beyond their radar's "
+                "max_range (outside the valid range)"
+            )
 
     def locatable(self, radars: RadarSet) -> np.ndarray:
         """(n,) booleans: plots whose plane position :meth:`cartesian` can compute (2-D:
         all; 3-D: a known height and a slant range that reaches it)."""
         if not isinstance(radars, RadarSet):
-            raise ProblemError(f"biasfield.PlotTable.locatable radars: expected a RadarSet, "
-                               f"got {type(radars).__name__}")
+            raise ProblemError(
+                f"biasfield.PlotTable.locatable radars: expected a RadarSet, "
+                f"got {type(radars).__name__}"
+            )
         if not radars.is_3d:
             return np.ones(len(self), dtype=bool)
         return np.all(np.isfinite(self._positions3d(radars)), axis=1)
@@ -299,8 +328,13 @@ class PlotTable:
         for i in range(radars.m):
             sel = (self.radar == i) & ~np.isnan(h)
             if sel.any():
-                _, _, e, n = g3.locate(radars.geodetic[i], self.range[sel],  # type: ignore
-                                       self.azimuth[sel], h[sel], radars.origin)
+                _, _, e, n = g3.locate(
+                    radars.geodetic[i],
+                    self.range[sel],  # type: ignore
+                    self.azimuth[sel],
+                    h[sel],
+                    radars.origin,
+                )
                 out[sel] = np.column_stack([e, n])
         return out
 
@@ -311,52 +345,73 @@ class PlotTable:
         a plot has no height or a slant range shorter than its height difference (select
         them out with :meth:`locatable`)."""
         if not isinstance(radars, RadarSet):
-            raise ProblemError(f"biasfield.PlotTable.cartesian radars: expected a RadarSet, "
-                               f"got {type(radars).__name__}")
+            raise ProblemError(
+                f"biasfield.PlotTable.cartesian radars: expected a RadarSet, "
+                f"got {type(radars).__name__}"
+            )
         bad = (self.radar < 0) | (self.radar >= radars.m)
         if bad.any():  # rows of no radar would be left uninitialised below
-            raise ProblemError(f"radar: unknown radar index {int(self.radar[bad][0])} in "
-                               f"{int(bad.sum())} plots (radars 0..{radars.m - 1})")
+            raise ProblemError(
+                f"radar: unknown radar index {int(self.radar[bad][0])} in "
+                f"{int(bad.sum())} plots (radars 0..{radars.m - 1})"
+            )
         if radars.is_3d:
             if self.height is None or np.isnan(self.height).any():
                 n_bad = len(self) if self.height is None else int(np.isnan(self.height).sum())
-                raise ProblemError(f"biasfield.PlotTable height: {n_bad} plots of a 3-D radar "
-                                   "set have no height (m above the ellipsoid); drop them "
-                                   "(PlotTable.locatable) or give their heights")
+                raise ProblemError(
+                    f"biasfield.PlotTable height: {n_bad} plots of a 3-D radar "
+                    "set have no height (m above the ellipsoid); drop them "
+                    "(PlotTable.locatable) or give their heights"
+                )
             out = self._positions3d(radars)
             miss = ~np.all(np.isfinite(out), axis=1)
             if miss.any():
-                raise ProblemError(f"range: {int(miss.sum())} plots have a slant range shorter "
-                                   "than the height difference to their radar (no position);"
-                                   " drop them (PlotTable.locatable)")
+                raise ProblemError(
+                    f"range: {int(miss.sum())} plots have a slant range shorter "
+                    "than the height difference to their radar (no position);"
+                    " drop them (PlotTable.locatable)"
+                )
             return out
         out = np.empty((len(self), 2))
         for i in range(radars.m):
             sel = self.radar == i
-            out[sel] = from_polar(np.column_stack([self.range[sel], self.azimuth[sel]]),
-                                  radars.sites[i])  # type: ignore[index]
+            out[sel] = from_polar(
+                np.column_stack([self.range[sel], self.azimuth[sel]]), radars.sites[i]
+            )  # type: ignore[index]
         return out
 
     def subset(self, mask: np.ndarray) -> PlotTable:
         """The rows selected by a boolean mask (n,) or an index array."""
         sel = np.asarray(mask)
         if sel.dtype == bool and sel.shape != (len(self),):
-            raise ProblemError(f"biasfield.PlotTable.subset mask: expected {len(self)} "
-                               f"booleans, got shape {sel.shape}")
+            raise ProblemError(
+                f"biasfield.PlotTable.subset mask: expected {len(self)} "
+                f"booleans, got shape {sel.shape}"
+            )
         if sel.dtype != bool and not np.issubdtype(sel.dtype, np.integer):
-            raise ProblemError("biasfield.PlotTable.subset mask: expected booleans or "
-                               f"indices, got {sel.dtype}")
-        return PlotTable(self.time[mask], self.radar[mask], self.range[mask],
-                         self.azimuth[mask], self.object[mask],
-                         None if self.height is None else self.height[mask])
+            raise ProblemError(
+                f"biasfield.PlotTable.subset mask: expected booleans or indices, got {sel.dtype}"
+            )
+        return PlotTable(
+            self.time[mask],
+            self.radar[mask],
+            self.range[mask],
+            self.azimuth[mask],
+            self.object[mask],
+            None if self.height is None else self.height[mask],
+        )
 
 
 def check_tables(where: str, plots: object, radars: object) -> None:
     """``plots`` a :class:`PlotTable` and ``radars`` a :class:`RadarSet`, or ProblemError
     naming ``where``'s argument."""
     if not isinstance(plots, PlotTable):
-        raise ProblemError(f"{where} plots: expected a PlotTable (see biasfield.read_plots), "
-                           f"got {type(plots).__name__}")
+        raise ProblemError(
+            f"{where} plots: expected a PlotTable (see biasfield.read_plots), "
+            f"got {type(plots).__name__}"
+        )
     if not isinstance(radars, RadarSet):
-        raise ProblemError(f"{where} radars: expected a RadarSet (see biasfield.read_radars), "
-                           f"got {type(radars).__name__}")
+        raise ProblemError(
+            f"{where} radars: expected a RadarSet (see biasfield.read_radars), "
+            f"got {type(radars).__name__}"
+        )

@@ -48,8 +48,15 @@ from optmodels.core import (
 )
 from optmodels.io import read_npz
 
-__all__ = ["MAX_SYNTHETIC_CELLS", "FieldData", "as_adjacency", "laplacian", "neighbours",
-           "synthetic_field_data", "uncertainty_sets"]
+__all__ = [
+    "MAX_SYNTHETIC_CELLS",
+    "FieldData",
+    "as_adjacency",
+    "laplacian",
+    "neighbours",
+    "synthetic_field_data",
+    "uncertainty_sets",
+]
 
 
 @dataclass
@@ -99,8 +106,10 @@ class FieldData:
         self.centers = as_finite_array("centers", self.centers, ndim=2, max_abs=MAX_MAGNITUDE)
         k = self.centers.shape[0]
         if k < 1:
-            raise ProblemError("biasfield.FieldData centers: no cell (K = 0); the field needs "
-                               "at least one cell centre")
+            raise ProblemError(
+                "biasfield.FieldData centers: no cell (K = 0); the field needs "
+                "at least one cell centre"
+            )
         self.xi = as_finite_array("xi", self.xi, shape=(k, m, 2), max_abs=MAX_MAGNITUDE)
         self.adjacency = as_adjacency(self.adjacency, k)
         if self.centers.shape[1] != 2:
@@ -110,8 +119,10 @@ class FieldData:
         if np.any(d2 <= 0):
             e = int(np.flatnonzero(d2 <= 0)[0])
             # found by the robustness sweep: a_ij = 1/‖x̌_i − x̌_j‖² divided by zero
-            raise ProblemError(f"centers: neighbours {upper.row[e]} and {upper.col[e]} "
-                               "coincide (a_ij = 1/‖x̌_i − x̌_j‖² is undefined); merge the cells")
+            raise ProblemError(
+                f"centers: neighbours {upper.row[e]} and {upper.col[e]} "
+                "coincide (a_ij = 1/‖x̌_i − x̌_j‖² is undefined); merge the cells"
+            )
         p = as_finite_array("P", self.P, ndim=2, max_abs=MAX_MAGNITUDE)
         if p.shape not in ((2, 2), (2 * m, 2 * m)):
             raise ProblemError(f"P: expected (2, 2) or ({2 * m}, {2 * m}), got {p.shape}")
@@ -120,8 +131,9 @@ class FieldData:
         check_spd("P", p)
         self.P = p
         if self.xi_cov is not None:
-            cov = as_finite_array("biasfield.FieldData xi_cov", self.xi_cov, shape=(k, m, 2, 2),
-                                  max_abs=MAX_MAGNITUDE)
+            cov = as_finite_array(
+                "biasfield.FieldData xi_cov", self.xi_cov, shape=(k, m, 2, 2), max_abs=MAX_MAGNITUDE
+            )
             # covariances of the averaged positions: symmetric positive definite (an
             # indefinite one was accepted before)
             check_spd_stack("biasfield.FieldData xi_cov", cov)
@@ -134,22 +146,28 @@ class FieldData:
             return
         arr = np.asarray(self.seen)
         if arr.shape != (k, m) or not (arr.dtype == bool or np.isin(arr, (0, 1)).all()):
-            raise ProblemError(f"biasfield.FieldData seen: expected a ({k}, {m}) boolean "
-                               f"array (radar i sees cell k), got shape {arr.shape}")
+            raise ProblemError(
+                f"biasfield.FieldData seen: expected a ({k}, {m}) boolean "
+                f"array (radar i sees cell k), got shape {arr.shape}"
+            )
         arr = arr.astype(bool)
         few = np.flatnonzero(arr.sum(axis=1) < 2)
         if few.size:
-            raise ProblemError(f"biasfield.FieldData seen: cells {few[:10].tolist()} are seen "
-                               "by fewer than 2 radars (a cell needs two radars to carry a "
-                               "set (10))")
+            raise ProblemError(
+                f"biasfield.FieldData seen: cells {few[:10].tolist()} are seen "
+                "by fewer than 2 radars (a cell needs two radars to carry a "
+                "set (10))"
+            )
         p = self.P
         if p.shape == (2 * m, 2 * m):
             off = p.copy()
             for i in range(m):
-                off[2 * i:2 * i + 2, 2 * i:2 * i + 2] = 0.0
+                off[2 * i : 2 * i + 2, 2 * i : 2 * i + 2] = 0.0
             if np.any(off != 0.0):
-                raise ProblemError("biasfield.FieldData P: with per-cell radar subsets (seen) "
-                                   "P must be block-diagonal per radar (2 × 2 blocks)")
+                raise ProblemError(
+                    "biasfield.FieldData P: with per-cell radar subsets (seen) "
+                    "P must be block-diagonal per radar (2 × 2 blocks)"
+                )
         self.seen = arr
 
     @property
@@ -161,20 +179,28 @@ class FieldData:
 
     def _check_geometry3d(self, k: int, m: int) -> None:
         if self.jacobians is not None:
-            jac = as_finite_array("biasfield.FieldData jacobians", self.jacobians,
-                                  shape=(k, m, 2, 2), max_abs=MAX_MAGNITUDE)
+            jac = as_finite_array(
+                "biasfield.FieldData jacobians",
+                self.jacobians,
+                shape=(k, m, 2, 2),
+                max_abs=MAX_MAGNITUDE,
+            )
             det = jac[..., 0, 0] * jac[..., 1, 1] - jac[..., 0, 1] * jac[..., 1, 0]
             scale = np.abs(jac).max(axis=(-1, -2)) ** 2
             if np.any(np.abs(det) <= 1e-12 * scale):
-                raise ProblemError("biasfield.FieldData jacobians: a singular ∇p_i (a cell "
-                                   "at a radar site?)")
+                raise ProblemError(
+                    "biasfield.FieldData jacobians: a singular ∇p_i (a cell at a radar site?)"
+                )
             self.jacobians = jac
         if self.heights is not None:
-            self.heights = as_finite_array("biasfield.FieldData heights", self.heights,
-                                           shape=(k,), max_abs=1e6)
+            self.heights = as_finite_array(
+                "biasfield.FieldData heights", self.heights, shape=(k,), max_abs=1e6
+            )
         if (self.geodetic is None) != (self.origin is None):
-            raise ProblemError("biasfield.FieldData geodetic: give both the geodetic sites "
-                               "and the origin, or neither")
+            raise ProblemError(
+                "biasfield.FieldData geodetic: give both the geodetic sites "
+                "and the origin, or neither"
+            )
         if self.geodetic is not None:
             geo = as_finite_array("biasfield.FieldData geodetic", self.geodetic, shape=(m, 3))
             for j in range(m):
@@ -182,8 +208,10 @@ class FieldData:
             self.geodetic = geo
             self.origin = g3.site_geodetic("biasfield.FieldData origin", self.origin)
             if self.heights is None:
-                raise ProblemError("biasfield.FieldData heights: the 3-D sets need the cell "
-                                   "heights (K,) with the geodetic sites")
+                raise ProblemError(
+                    "biasfield.FieldData heights: the 3-D sets need the cell "
+                    "heights (K,) with the geodetic sites"
+                )
 
     @property
     def is_3d(self) -> bool:
@@ -203,9 +231,13 @@ class FieldData:
         """Write an ``.npz`` (radars, centers, xi, edges (E, 2), P[, xi_cov]) onto exactly
         ``path``, atomically (:func:`optmodels.io.save_npz`)."""
         upper = sparse.triu(self.adjacency, k=1).tocoo()
-        arrays = {"radars": self.radars, "centers": self.centers, "xi": self.xi,
-                  "edges": np.column_stack([upper.row, upper.col]).astype(np.int64),
-                  "P": self.P}
+        arrays = {
+            "radars": self.radars,
+            "centers": self.centers,
+            "xi": self.xi,
+            "edges": np.column_stack([upper.row, upper.col]).astype(np.int64),
+            "P": self.P,
+        }
         for name in ("xi_cov", "jacobians", "heights", "geodetic", "origin", "seen"):
             if getattr(self, name) is not None:
                 arrays[name] = getattr(self, name)
@@ -221,15 +253,30 @@ class FieldData:
         ``xi_cov``, ``jacobians``, ``heights``, ``geodetic``, ``origin`` (files of the 2-D
         chain have none of these four), ``seen`` (per-cell radar subsets)."""
         if not isinstance(path, str | Path):
-            raise ProblemError(f"biasfield.FieldData.load path: expected a file name, got "
-                               f"{type(path).__name__}")
-        d = read_npz(path, what="FieldData .npz", required=("radars", "centers", "xi", "P"),
-                     one_of=("edges", "adjacency"))
+            raise ProblemError(
+                f"biasfield.FieldData.load path: expected a file name, got {type(path).__name__}"
+            )
+        d = read_npz(
+            path,
+            what="FieldData .npz",
+            required=("radars", "centers", "xi", "P"),
+            one_of=("edges", "adjacency"),
+        )
         adj = d["edges"] if "edges" in d else d["adjacency"]
         try:
-            return cls(d["radars"], d["centers"], d["xi"], adj, d["P"], d.get("xi_cov"),
-                       d.get("jacobians"), d.get("heights"), d.get("geodetic"),
-                       d.get("origin"), d.get("seen"))
+            return cls(
+                d["radars"],
+                d["centers"],
+                d["xi"],
+                adj,
+                d["P"],
+                d.get("xi_cov"),
+                d.get("jacobians"),
+                d.get("heights"),
+                d.get("geodetic"),
+                d.get("origin"),
+                d.get("seen"),
+            )
         except ProblemError as exc:
             raise ProblemError(f"{path}: {exc}") from None
 
@@ -240,8 +287,12 @@ def as_adjacency(adj: Any, k: int) -> sparse.csr_matrix:
         a = sparse.csr_matrix(adj)
     else:
         arr = np.asarray(adj)
-        if arr.ndim == 2 and arr.shape[1] == 2 and arr.shape != (k, k) and \
-                np.issubdtype(arr.dtype, np.integer):
+        if (
+            arr.ndim == 2
+            and arr.shape[1] == 2
+            and arr.shape != (k, k)
+            and np.issubdtype(arr.dtype, np.integer)
+        ):
             if arr.size and (arr.min() < 0 or arr.max() >= k):
                 raise ProblemError(f"adjacency: edge list refers to cells outside 0..{k - 1}")
             a = sparse.csr_matrix((np.ones(arr.shape[0]), (arr[:, 0], arr[:, 1])), shape=(k, k))
@@ -249,8 +300,7 @@ def as_adjacency(adj: Any, k: int) -> sparse.csr_matrix:
         else:
             a = sparse.csr_matrix(arr)
     if a.shape != (k, k):
-        raise ProblemError(f"adjacency: expected ({k}, {k}) or an (E, 2) edge list, got "
-                           f"{a.shape}")
+        raise ProblemError(f"adjacency: expected ({k}, {k}) or an (E, 2) edge list, got {a.shape}")
     a = (a != 0).astype(np.int8).tocsr()
     if (a != a.T).nnz:
         raise ProblemError("adjacency: not symmetric (c(x, y) must equal c(y, x))")
@@ -260,8 +310,12 @@ def as_adjacency(adj: Any, k: int) -> sparse.csr_matrix:
     return a
 
 
-def neighbours(centers: ArrayLike, *, method: Literal["delaunay", "radius"] = "delaunay",
-               radius: float | None = None) -> sparse.csr_matrix:
+def neighbours(
+    centers: ArrayLike,
+    *,
+    method: Literal["delaunay", "radius"] = "delaunay",
+    radius: float | None = None,
+) -> sparse.csr_matrix:
     """Symmetric 0/1 adjacency c(x, y) (sparse): Delaunay edges, or all pairs within
     ``radius``."""
     fn = "biasfield.neighbours"
@@ -277,15 +331,20 @@ def neighbours(centers: ArrayLike, *, method: Literal["delaunay", "radius"] = "d
             try:
                 simp = Delaunay(c).simplices
             except QhullError as exc:  # collinear / coincident centres
-                raise ProblemError(f"{fn} centers: no Delaunay triangulation (the centres are "
-                                   f"collinear or coincide: {str(exc).splitlines()[0]}); use "
-                                   "method='radius'") from None
+                raise ProblemError(
+                    f"{fn} centers: no Delaunay triangulation (the centres are "
+                    f"collinear or coincide: {str(exc).splitlines()[0]}); use "
+                    "method='radius'"
+                ) from None
             pairs = np.vstack([simp[:, [0, 1]], simp[:, [1, 2]], simp[:, [0, 2]]])
     else:
         r = as_positive(f"{fn} radius (m)", radius)
         pairs = cKDTree(c).query_pairs(r, output_type="ndarray")
-    return as_adjacency(np.asarray(pairs, dtype=np.int64).reshape(-1, 2), k) if k != 2 \
+    return (
+        as_adjacency(np.asarray(pairs, dtype=np.int64).reshape(-1, 2), k)
+        if k != 2
         else as_adjacency(np.array([[0, 1], [1, 0]]), 2)
+    )
 
 
 def laplacian(centers: ArrayLike, adjacency: ArrayLike) -> sparse.csr_matrix:
@@ -299,8 +358,9 @@ def laplacian(centers: ArrayLike, adjacency: ArrayLike) -> sparse.csr_matrix:
     return (sparse.diags(np.asarray(a.sum(axis=1)).ravel()) - a).tocsr()
 
 
-def uncertainty_sets(data: FieldData, *, space: Literal["polar", "cartesian"] = "polar"
-                     ) -> tuple[FloatArray, sparse.csr_matrix]:
+def uncertainty_sets(
+    data: FieldData, *, space: Literal["polar", "cartesian"] = "polar"
+) -> tuple[FloatArray, sparse.csr_matrix]:
     """(Φ0 (2mK,), Φ1 sparse (2mK, 2K)) of (10), ordered cell by cell, radar by radar,
     [range, azimuth]; azimuth differences wrapped. η_k = ξ̂_(k) − x_(k).
 
@@ -311,8 +371,11 @@ def uncertainty_sets(data: FieldData, *, space: Literal["polar", "cartesian"] = 
     k, and the rows of the radars outside S_k are zero in Φ⁰ and Φ¹ (their φ entries are
     0 and enter neither (9) nor (8)); with every radar in every S_k this is the paper's
     (10) exactly."""
-    space = as_choice("biasfield.uncertainty_sets space", space,  # type: ignore[assignment]
-                      ("polar", "cartesian"))
+    space = as_choice(
+        "biasfield.uncertainty_sets space",
+        space,  # type: ignore[assignment]
+        ("polar", "cartesian"),
+    )
     m, k = data.m, data.k
     if data.seen is None:
         mean = data.xi.mean(axis=1)  # ξ̂_(k)
@@ -333,9 +396,17 @@ def uncertainty_sets(data: FieldData, *, space: Literal["polar", "cartesian"] = 
             r1, a1 = g3.measure(data.geodetic[i], lat, lon, data.heights)
             r0, a0 = g3.measure(data.geodetic[i], lat0, lon0, data.heights)
             phi0[:, i] = np.column_stack([r1 - r0, wrap_angle(a1 - a0)])
-        jac = data.jacobians if data.jacobians is not None else np.stack(
-            [g3.polar_jacobian3d(mean, data.heights, data.geodetic[i], data.origin)
-             for i in range(m)], axis=1)
+        jac = (
+            data.jacobians
+            if data.jacobians is not None
+            else np.stack(
+                [
+                    g3.polar_jacobian3d(mean, data.heights, data.geodetic[i], data.origin)
+                    for i in range(m)
+                ],
+                axis=1,
+            )
+        )
     elif data.jacobians is not None:
         # only the Jacobians known: Φ0 linearised, ∇p_i(ξ̂_(k))(ξ̂_i(k) − ξ̂_(k))
         jac = data.jacobians
@@ -350,8 +421,9 @@ def uncertainty_sets(data: FieldData, *, space: Literal["polar", "cartesian"] = 
     return _mask_sets(data, phi0.reshape(-1), sparse.block_diag(blocks, format="csr"))
 
 
-def _mask_sets(data: FieldData, phi0: FloatArray, phi1: sparse.csr_matrix
-               ) -> tuple[FloatArray, sparse.csr_matrix]:
+def _mask_sets(
+    data: FieldData, phi0: FloatArray, phi1: sparse.csr_matrix
+) -> tuple[FloatArray, sparse.csr_matrix]:
     """Zero the rows of (Φ⁰, Φ¹) of the radars outside each cell's subset S_k."""
     if data.seen is None:
         return phi0, phi1
@@ -365,34 +437,51 @@ def _mask_sets(data: FieldData, phi0: FloatArray, phi1: sparse.csr_matrix
 MAX_SYNTHETIC_CELLS = 1_000_000
 
 
-def synthetic_field_data(seed: int | np.random.Generator, *, cells: int = 200,
-                         sites: ArrayLike | None = None, fields: list[Any] | None = None,
-                         region: float = 150e3, noise: float = 0.0,
-                         exclude_radius: float = 20e3) -> tuple[FieldData, FloatArray]:
+def synthetic_field_data(
+    seed: int | np.random.Generator,
+    *,
+    cells: int = 200,
+    sites: ArrayLike | None = None,
+    fields: list[Any] | None = None,
+    region: float = 150e3,
+    noise: float = 0.0,
+    exclude_radius: float = 20e3,
+) -> tuple[FieldData, FloatArray]:
     """FieldData without plots: K random cell centres (none within ``exclude_radius`` of a
     radar), true positions x_k at the centres, ξ_i(k) = x_k + s_i(x_k) (+ Gaussian noise of
     ``noise`` metres), Delaunay neighbours and P = diag(1/(50 m)², 1/(1 mrad)²) per radar.
     ``fields`` defaults to smooth random fields. Returns the data and the true field
     (K, m, 2) at the centres."""
     fn = "biasfield.synthetic_field_data"
-    rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(
-        as_count(f"{fn} seed", seed))
+    rng = (
+        seed
+        if isinstance(seed, np.random.Generator)
+        else np.random.default_rng(as_count(f"{fn} seed", seed))
+    )
     cells = as_count(f"{fn} cells", cells, minimum=3, maximum=MAX_SYNTHETIC_CELLS)
     region = as_positive(f"{fn} region (m)", region)
     noise = as_positive(f"{fn} noise (m)", noise, allow_zero=True)
     exclude_radius = as_positive(f"{fn} exclude_radius (m)", exclude_radius, allow_zero=True)
-    s = (np.array([[-90e3, -60e3], [100e3, -70e3], [80e3, 110e3], [-70e3, 90e3]])
-         if sites is None else as_finite_array(f"{fn} sites", sites, ndim=2,
-                                               max_abs=MAX_MAGNITUDE))
+    s = (
+        np.array([[-90e3, -60e3], [100e3, -70e3], [80e3, 110e3], [-70e3, 90e3]])
+        if sites is None
+        else as_finite_array(f"{fn} sites", sites, ndim=2, max_abs=MAX_MAGNITUDE)
+    )
     if s.shape[1] != 2 or s.shape[0] < 2:
         raise ProblemError(f"{fn} sites: expected (m, 2) with m ≥ 2, got {s.shape}")
     m = s.shape[0]
     if fields is not None and len(fields) != m:
-        raise ProblemError(f"{fn} fields: expected {m} fields (one per radar), got "
-                           f"{len(fields)}")
-    flist = fields or [BiasField.smooth(rng, center=np.zeros(2), scale=region,
-                                        range_amplitude=150.0, azimuth_amplitude=np.deg2rad(0.3))
-                       for _ in range(m)]
+        raise ProblemError(f"{fn} fields: expected {m} fields (one per radar), got {len(fields)}")
+    flist = fields or [
+        BiasField.smooth(
+            rng,
+            center=np.zeros(2),
+            scale=region,
+            range_amplitude=150.0,
+            azimuth_amplitude=np.deg2rad(0.3),
+        )
+        for _ in range(m)
+    ]
     pts: list[FloatArray] = []
     for _ in range(1000):
         cand = rng.uniform(-region, region, (2 * cells, 2))
@@ -401,8 +490,10 @@ def synthetic_field_data(seed: int | np.random.Generator, *, cells: int = 200,
         if sum(len(p) for p in pts) >= cells:
             break
     else:
-        raise ProblemError(f"{fn} exclude_radius: no room for cells in the region (±{region:g} "
-                           f"m) outside {exclude_radius:g} m of the radars")
+        raise ProblemError(
+            f"{fn} exclude_radius: no room for cells in the region (±{region:g} "
+            f"m) outside {exclude_radius:g} m of the radars"
+        )
     x = np.vstack(pts)[:cells]
     truth = np.stack([flist[i](x) for i in range(m)], axis=1)
     xi = np.stack([x + shift_from_bias(x, s[i], truth[:, i]) for i in range(m)], axis=1)

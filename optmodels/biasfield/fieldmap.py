@@ -51,8 +51,13 @@ class Triangles:
         good = np.abs(det) > 1e-12 * np.maximum(np.sum(a * a, axis=1), np.sum(b * b, axis=1))
         det = np.where(good, det, np.inf)
         # inverse of [[a_x, b_x], [a_y, b_y]]: rows give the first two barycentric weights
-        self.inv = np.stack([np.stack([b[:, 1], -b[:, 0]], axis=1),
-                             np.stack([-a[:, 1], a[:, 0]], axis=1)], axis=1) / det[:, None, None]
+        self.inv = (
+            np.stack(
+                [np.stack([b[:, 1], -b[:, 0]], axis=1), np.stack([-a[:, 1], a[:, 0]], axis=1)],
+                axis=1,
+            )
+            / det[:, None, None]
+        )
         self.origin = v[:, 2]
         self.simplices = simp
         self._finder: Any = None
@@ -118,22 +123,26 @@ class FieldMap:
     _own: Any = field(default=None, repr=False, compare=False)
 
     def __post_init__(self) -> None:
-        c = as_finite_array("biasfield.FieldMap centers (m)", self.centers, ndim=2,
-                            max_abs=MAX_MAGNITUDE)
+        c = as_finite_array(
+            "biasfield.FieldMap centers (m)", self.centers, ndim=2, max_abs=MAX_MAGNITUDE
+        )
         if c.shape[1] != 2 or c.shape[0] < 3:
-            raise ProblemError(f"biasfield.FieldMap centers (m): expected (K, 2) with K ≥ 3, "
-                               f"got {c.shape}")
-        f = as_finite_array("biasfield.FieldMap field", self.field, ndim=3,
-                            max_abs=MAX_MAGNITUDE)
+            raise ProblemError(
+                f"biasfield.FieldMap centers (m): expected (K, 2) with K ≥ 3, got {c.shape}"
+            )
+        f = as_finite_array("biasfield.FieldMap field", self.field, ndim=3, max_abs=MAX_MAGNITUDE)
         if f.shape[0] != c.shape[0] or f.shape[2] != 2:
-            raise ProblemError(f"biasfield.FieldMap field: expected ({c.shape[0]}, m, 2), got "
-                               f"{f.shape}")
+            raise ProblemError(
+                f"biasfield.FieldMap field: expected ({c.shape[0]}, m, 2), got {f.shape}"
+            )
         self._set_frame(f.shape[1])
         try:
             tri = Triangles(c)
         except QhullError as exc:
-            raise ProblemError("biasfield.FieldMap centers (m): the centres span no area "
-                               f"(collinear or repeated: {str(exc).splitlines()[0]})") from None
+            raise ProblemError(
+                "biasfield.FieldMap centers (m): the centres span no area "
+                f"(collinear or repeated: {str(exc).splitlines()[0]})"
+            ) from None
         tree = cKDTree(c)
         dmax = self.max_distance
         if not np.isfinite(dmax):
@@ -154,8 +163,9 @@ class FieldMap:
             return
         seen = np.asarray(self.seen)
         if seen.shape != f.shape[:2]:
-            raise ProblemError(f"biasfield.FieldMap seen: expected {f.shape[:2]} (cells, "
-                               f"radars), got {seen.shape}")
+            raise ProblemError(
+                f"biasfield.FieldMap seen: expected {f.shape[:2]} (cells, radars), got {seen.shape}"
+            )
         seen = seen.astype(bool)
         own: dict[int, Any] = {}
         for i in range(f.shape[1]):
@@ -179,11 +189,16 @@ class FieldMap:
             raise ProblemError(f"{fn} names: {len(names)} names for a field of {m} radars")
         object.__setattr__(self, "names", names)
         if self.sites is not None:
-            object.__setattr__(self, "sites", as_finite_array(
-                f"{fn} sites (m)", self.sites, shape=(m, 2), max_abs=MAX_MAGNITUDE))
+            object.__setattr__(
+                self,
+                "sites",
+                as_finite_array(f"{fn} sites (m)", self.sites, shape=(m, 2), max_abs=MAX_MAGNITUDE),
+            )
         if (self.geodetic is None) != (self.origin is None):
-            raise ProblemError(f"{fn} geodetic: give the geodetic sites and the origin "
-                               "together (a field of the 3-D chain) or neither")
+            raise ProblemError(
+                f"{fn} geodetic: give the geodetic sites and the origin "
+                "together (a field of the 3-D chain) or neither"
+            )
         chain = as_choice(f"{fn} chain", str(self.chain), ("", "2d", "3d"))
         if self.geodetic is not None and chain == "2d":
             raise ProblemError(f"{fn} chain: a field with geodetic sites is of the 3-D chain")
@@ -213,37 +228,48 @@ class FieldMap:
         more than 1 m. A field without a frame (e.g. ``FieldMap(centers, field)``) is only
         checked for the number of radars."""
         if self.m != radars.m:
-            raise ProblemError(f"{where} field: a field of {self.m} radars for {radars.m} "
-                               "radars")
+            raise ProblemError(f"{where} field: a field of {self.m} radars for {radars.m} radars")
         if self.names and tuple(radars.names) and tuple(radars.names) != self.names:
-            raise ProblemError(f"{where} field: estimated for radars {list(self.names)}, "
-                               f"given {list(radars.names)}")
+            raise ProblemError(
+                f"{where} field: estimated for radars {list(self.names)}, "
+                f"given {list(radars.names)}"
+            )
         tol = np.array([1e-7, 1e-7, 1.0])
         if self.is_3d:
             if not radars.is_3d:
-                raise ProblemError(f"{where} radars: the field comes from the exact 3-D chain "
-                                   "(geodetic sites, origin); give the radar set with "
-                                   "geodetic= and origin=")
+                raise ProblemError(
+                    f"{where} radars: the field comes from the exact 3-D chain "
+                    "(geodetic sites, origin); give the radar set with "
+                    "geodetic= and origin="
+                )
             assert self.geodetic is not None and self.origin is not None
             # the origin's height does not move the plane (East/North of a footprint in the
             # ENU frame of the origin do not depend on it): latitude and longitude only
             if np.any(np.abs(np.asarray(radars.origin)[:2] - self.origin[:2]) > 1e-7):
-                raise ProblemError(f"{where} radars: origin {np.asarray(radars.origin).tolist()}"
-                                   f" differs from the field's {self.origin.tolist()} (the "
-                                   "common plane of its cells)")
+                raise ProblemError(
+                    f"{where} radars: origin {np.asarray(radars.origin).tolist()}"
+                    f" differs from the field's {self.origin.tolist()} (the "
+                    "common plane of its cells)"
+                )
             bad = np.any(np.abs(np.asarray(radars.geodetic) - self.geodetic) > tol, axis=1)
             if bad.any():
-                raise ProblemError(f"{where} radars: sites {np.flatnonzero(bad).tolist()} "
-                                   "differ from those the field was estimated for")
+                raise ProblemError(
+                    f"{where} radars: sites {np.flatnonzero(bad).tolist()} "
+                    "differ from those the field was estimated for"
+                )
         elif self.sites is not None:
             if radars.is_3d and self.chain == "2d":
-                raise ProblemError(f"{where} radars: the field comes from the 2-D chain (flat "
-                                   "plane of the sites); a 3-D radar set measures slant "
-                                   "ranges in another frame")
+                raise ProblemError(
+                    f"{where} radars: the field comes from the 2-D chain (flat "
+                    "plane of the sites); a 3-D radar set measures slant "
+                    "ranges in another frame"
+                )
             bad = np.linalg.norm(np.asarray(radars.sites) - self.sites, axis=1) > 1.0
             if bad.any():  # (a 3-D set's sites: their East-North on its common plane)
-                raise ProblemError(f"{where} radars: sites {np.flatnonzero(bad).tolist()} "
-                                   "differ from those the field was estimated for")
+                raise ProblemError(
+                    f"{where} radars: sites {np.flatnonzero(bad).tolist()} "
+                    "differ from those the field was estimated for"
+                )
 
     def covered(self, points: ArrayLike) -> np.ndarray:
         """(n,) True where ``points`` (n, 2) (m, common plane) lie in the covered area:
@@ -266,8 +292,9 @@ class FieldMap:
         p = _points("biasfield.FieldMap.at_radar points (m)", points)
         r = np.broadcast_to(np.asarray(radar, dtype=np.int64), (p.shape[0],))
         if r.size and (r.min() < 0 or r.max() >= self.m):
-            raise ProblemError(f"biasfield.FieldMap.at_radar radar: indices outside "
-                               f"0..{self.m - 1}")
+            raise ProblemError(
+                f"biasfield.FieldMap.at_radar radar: indices outside 0..{self.m - 1}"
+            )
         out = np.full((p.shape[0], 2), np.nan)
         for i in np.unique(r):
             sel = np.flatnonzero(r == i)
@@ -277,16 +304,16 @@ class FieldMap:
     def _at_one(self, p: FloatArray, i: int) -> FloatArray:
         extend = self.seen is not None
         if i not in self._own:
-            return self._interp(p, self._tri, self._tree, self.field[:, i:i + 1],
-                                extend)[:, 0]
+            return self._interp(p, self._tri, self._tree, self.field[:, i : i + 1], extend)[:, 0]
         entry = self._own[i]
         if entry is None:
             return np.full((p.shape[0], 2), np.nan)
         idx, tri, tree = entry
-        return self._interp(p, tri, tree, self.field[idx, i:i + 1], extend)[:, 0]
+        return self._interp(p, tri, tree, self.field[idx, i : i + 1], extend)[:, 0]
 
-    def _interp(self, p: FloatArray, tri: Triangles, tree: cKDTree, values: FloatArray,
-                extend: bool = False) -> FloatArray:
+    def _interp(
+        self, p: FloatArray, tri: Triangles, tree: cKDTree, values: FloatArray, extend: bool = False
+    ) -> FloatArray:
         """P1 interpolant of ``values`` (K', q, 2) on ``tri``; NaN outside it or farther
         than ``max_distance`` from every node; a node's value bit for bit. ``extend``
         (maps with per-cell subsets): outside the triangulation but within
@@ -335,15 +362,25 @@ class FieldMap:
         extra: dict[str, np.ndarray] = {"chain": np.array(self.chain)}
         if self.names:
             extra["names"] = np.array(self.names, dtype=str)
-        for key, val in (("radars", self.sites), ("geodetic", self.geodetic),
-                         ("origin", self.origin), ("seen", self.seen)):
+        for key, val in (
+            ("radars", self.sites),
+            ("geodetic", self.geodetic),
+            ("origin", self.origin),
+            ("seen", self.seen),
+        ):
             if val is not None:
                 extra[key] = np.asarray(val)
         from optmodels.io import save_npz
 
         # atomic (optmodels.io.atomic_write): a kill part-way leaves the previous file
-        save_npz(path, name="biasfield.FieldMap.save path", centers=self.centers,
-                 field=self.field, max_distance=np.array(self.max_distance), **extra)
+        save_npz(
+            path,
+            name="biasfield.FieldMap.save path",
+            centers=self.centers,
+            field=self.field,
+            max_distance=np.array(self.max_distance),
+            **extra,
+        )
 
     @classmethod
     def load(cls, path: str | Path) -> FieldMap:
@@ -357,8 +394,17 @@ class FieldMap:
         names = tuple(str(v) for v in d["names"]) if "names" in d else ()
         chain = str(d["chain"]) if "chain" in d else ""
         try:
-            return cls(d["centers"], d["field"], dmax, names, d.get("radars"),
-                       d.get("geodetic"), d.get("origin"), chain, d.get("seen"))
+            return cls(
+                d["centers"],
+                d["field"],
+                dmax,
+                names,
+                d.get("radars"),
+                d.get("geodetic"),
+                d.get("origin"),
+                chain,
+                d.get("seen"),
+            )
         except ProblemError as exc:
             raise ProblemError(f"{path}: {exc}") from None
 
@@ -372,8 +418,13 @@ def _points(name: str, points: ArrayLike) -> FloatArray:
     return p
 
 
-def field_map(solution: Any, data: FieldData, *, max_distance: float | None = None,
-              names: tuple[str, ...] | list[str] = ()) -> FieldMap:
+def field_map(
+    solution: Any,
+    data: FieldData,
+    *,
+    max_distance: float | None = None,
+    names: tuple[str, ...] | list[str] = (),
+) -> FieldMap:
     """The :class:`FieldMap` of a solution (``solution.field`` (K, m, 2)) on the cells of
     ``data``, with the data's frame (sites; geodetic sites and origin in 3-D) and the
     radars' ``names`` if given. A solution without a field (status not OK) is refused."""
@@ -381,14 +432,28 @@ def field_map(solution: Any, data: FieldData, *, max_distance: float | None = No
     f = np.asarray(getattr(solution, "field", np.empty(0)), dtype=float)
     status = getattr(solution, "status", None)
     if status is not None and not status.ok:
-        raise ProblemError(f"biasfield.field_map solution: status {status.value} has no "
-                           "field to use")
+        raise ProblemError(
+            f"biasfield.field_map solution: status {status.value} has no field to use"
+        )
     if f.shape != (data.k, data.m, 2):
-        raise ProblemError(f"biasfield.field_map solution: field of shape {f.shape} does not "
-                           f"match the data's ({data.k}, {data.m}, 2)")
-    dmax = float("nan") if max_distance is None else as_positive(
-        "biasfield.field_map max_distance (m)", max_distance)
+        raise ProblemError(
+            f"biasfield.field_map solution: field of shape {f.shape} does not "
+            f"match the data's ({data.k}, {data.m}, 2)"
+        )
+    dmax = (
+        float("nan")
+        if max_distance is None
+        else as_positive("biasfield.field_map max_distance (m)", max_distance)
+    )
     three = data.geodetic is not None and data.origin is not None
-    return FieldMap(data.centers, f, dmax, tuple(names), data.radars,
-                    data.geodetic if three else None, data.origin if three else None,
-                    "3d" if three else "2d", data.seen)
+    return FieldMap(
+        data.centers,
+        f,
+        dmax,
+        tuple(names),
+        data.radars,
+        data.geodetic if three else None,
+        data.origin if three else None,
+        "3d" if three else "2d",
+        data.seen,
+    )

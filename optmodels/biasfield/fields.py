@@ -36,35 +36,45 @@ class BiasField:
     def __call__(self, x: ArrayLike) -> FloatArray:
         xx = as_finite_array("biasfield.BiasField x", x, max_abs=MAX_MAGNITUDE)
         if xx.ndim == 0 or xx.shape[-1] != 2:
-            raise ProblemError(f"biasfield.BiasField x: expected positions (..., 2) in m, got "
-                               f"shape {xx.shape}")
+            raise ProblemError(
+                f"biasfield.BiasField x: expected positions (..., 2) in m, got shape {xx.shape}"
+            )
         try:
             out = np.asarray(self.function(xx), dtype=float)
         except (TypeError, ValueError) as exc:
-            raise ProblemError(f"biasfield.BiasField function: failed on positions of shape "
-                               f"{xx.shape} ({exc})") from None
+            raise ProblemError(
+                f"biasfield.BiasField function: failed on positions of shape {xx.shape} ({exc})"
+            ) from None
         if out.shape != xx.shape:
-            raise ProblemError(f"biasfield.BiasField function: returned shape {out.shape} for "
-                               f"positions of shape {xx.shape}; expected the same shape "
-                               "([range, azimuth])")
+            raise ProblemError(
+                f"biasfield.BiasField function: returned shape {out.shape} for "
+                f"positions of shape {xx.shape}; expected the same shape "
+                "([range, azimuth])"
+            )
         if not np.all(np.isfinite(out)):
-            raise ProblemError(f"biasfield.BiasField function: non-finite bias "
-                               f"({self.description})")
+            raise ProblemError(
+                f"biasfield.BiasField function: non-finite bias ({self.description})"
+            )
         return out
 
     @classmethod
     def constant(cls, range_bias: float = 0.0, azimuth_bias: float = 0.0) -> BiasField:
         """The same bias everywhere: ``range_bias`` (m), ``azimuth_bias`` (rad); the
         parametric model (2) has range_bias = 0."""
-        b = np.array([as_number("biasfield.BiasField.constant range_bias (m)", range_bias),
-                      as_number("biasfield.BiasField.constant azimuth_bias (rad)",
-                                azimuth_bias)])
-        return cls(lambda x: np.broadcast_to(b, x.shape).copy(),
-                   f"constant ({b[0]:g} m, {b[1]:g} rad)")
+        b = np.array(
+            [
+                as_number("biasfield.BiasField.constant range_bias (m)", range_bias),
+                as_number("biasfield.BiasField.constant azimuth_bias (rad)", azimuth_bias),
+            ]
+        )
+        return cls(
+            lambda x: np.broadcast_to(b, x.shape).copy(), f"constant ({b[0]:g} m, {b[1]:g} rad)"
+        )
 
     @classmethod
-    def linear(cls, at_origin: ArrayLike, gradient: ArrayLike,
-               origin: ArrayLike = (0.0, 0.0)) -> BiasField:
+    def linear(
+        cls, at_origin: ArrayLike, gradient: ArrayLike, origin: ArrayLike = (0.0, 0.0)
+    ) -> BiasField:
         """f(x) = at_origin + gradient (x − origin); ``gradient`` (2, 2): rows are the
         gradients of the range and the azimuth bias (per metre)."""
         fn = "biasfield.BiasField.linear"
@@ -74,16 +84,26 @@ class BiasField:
         return cls(lambda x: f0 + (x - o) @ g.T, "linear")
 
     @classmethod
-    def smooth(cls, rng: np.random.Generator, *, center: ArrayLike, scale: float,
-               range_amplitude: float, azimuth_amplitude: float, bumps: int = 4) -> BiasField:
+    def smooth(
+        cls,
+        rng: np.random.Generator,
+        *,
+        center: ArrayLike,
+        scale: float,
+        range_amplitude: float,
+        azimuth_amplitude: float,
+        bumps: int = 4,
+    ) -> BiasField:
         """A smooth random field: a constant plus ``bumps`` Gaussian bumps of width ~scale
         placed within ±scale of ``center``; each component's peak magnitude is about its
         amplitude (``range_amplitude`` m, ``azimuth_amplitude`` rad; ``scale`` m)."""
         fn = "biasfield.BiasField.smooth"
         if not isinstance(rng, np.random.Generator):
-            raise ProblemError(f"{fn} rng: expected a numpy.random.Generator "
-                               "(numpy.random.default_rng(seed)), got "
-                               f"{type(rng).__name__}")
+            raise ProblemError(
+                f"{fn} rng: expected a numpy.random.Generator "
+                "(numpy.random.default_rng(seed)), got "
+                f"{type(rng).__name__}"
+            )
         c = as_finite_array(f"{fn} center", center, shape=(2,), max_abs=MAX_MAGNITUDE)
         scale = as_positive(f"{fn} scale (m)", scale)
         range_amplitude = as_number(f"{fn} range_amplitude (m)", range_amplitude)
@@ -106,9 +126,13 @@ class BiasField:
     def from_callable(cls, function: FieldFunction, description: str = "user") -> BiasField:
         """Any vectorised function (..., 2) → (..., 2)."""
         if not callable(function):
-            raise ProblemError("biasfield.BiasField.from_callable function: expected a "
-                               "callable (..., 2) -> (..., 2)")
+            raise ProblemError(
+                "biasfield.BiasField.from_callable function: expected a "
+                "callable (..., 2) -> (..., 2)"
+            )
         if not isinstance(description, str):
-            raise ProblemError("biasfield.BiasField.from_callable description: expected a "
-                               f"str, got {type(description).__name__}")
+            raise ProblemError(
+                "biasfield.BiasField.from_callable description: expected a "
+                f"str, got {type(description).__name__}"
+            )
         return cls(function, description)

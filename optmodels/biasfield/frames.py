@@ -70,8 +70,9 @@ def _epoch(name: str, epoch: Any) -> Any:
     try:
         ts = pd.Timestamp(epoch)
     except (TypeError, ValueError) as exc:
-        raise ProblemError(f"{name}: expected a date/time (e.g. '2026-03-01'), got "
-                           f"{epoch!r:.60}") from exc
+        raise ProblemError(
+            f"{name}: expected a date/time (e.g. '2026-03-01'), got {epoch!r:.60}"
+        ) from exc
     if ts is pd.NaT:
         raise ProblemError(f"{name}: NaT is not a date")
     return ts.tz_localize("UTC") if ts.tzinfo is None else ts.tz_convert("UTC")
@@ -112,8 +113,10 @@ def _seconds(df: Any, fn: str, epoch: Any) -> np.ndarray:
         e = _epoch(f"{fn} epoch", epoch) if epoch is not None else t.min().floor("D")
         return ((t - e).dt.total_seconds()).to_numpy(float)
     if epoch is not None:
-        raise ProblemError(f"{fn} epoch: only for datetime timestamps (these are numbers, "
-                           "s since the table's epoch)")
+        raise ProblemError(
+            f"{fn} epoch: only for datetime timestamps (these are numbers, "
+            "s since the table's epoch)"
+        )
     return _numbers(col, fn, "timestamp")
 
 
@@ -126,8 +129,7 @@ def _numbers(col: Any, fn: str, name: str, *, nan_ok: bool = False) -> np.ndarra
     bad = np.isinf(v) if nan_ok else ~np.isfinite(v)
     if bad.any():
         i = int(np.flatnonzero(bad)[0])
-        raise ProblemError(f"{fn} {name}: {int(bad.sum())} non-finite values (first at row "
-                           f"{i})")
+        raise ProblemError(f"{fn} {name}: {int(bad.sum())} non-finite values (first at row {i})")
     return v
 
 
@@ -140,8 +142,9 @@ def _icao(col: Any, fn: str) -> np.ndarray:
         except ValueError:
             v = -1
         if len(text) > 6 or not 0 <= v < 2**24:
-            raise ProblemError(f"{fn} icao24: row {i}: {s!r} is not a 24-bit hex address "
-                               "(up to 6 hex digits)")
+            raise ProblemError(
+                f"{fn} icao24: row {i}: {s!r} is not a 24-bit hex address (up to 6 hex digits)"
+            )
         out[i] = v
     return out
 
@@ -169,12 +172,19 @@ def _timestamps(t: np.ndarray, epoch: Any) -> Any:
             f"frames.to_frame epoch: {int(bad.sum())} times (first {t[i]:.6g} s, row {i}) "
             f"fall outside datetime64[ns] (1677-09-21 to 2262-04-11, within ±292 years of "
             f"the epoch {e.isoformat()}); are they in seconds? (epoch=None writes float "
-            f"seconds)")
+            f"seconds)"
+        )
     return e + pd.to_timedelta(np.round(t * 1e9).astype(np.int64), unit="ns")
 
 
-def to_frame(table: Any, *, radars: Any = None, addresses: Any = None,
-             epoch: Any = None, convention: str = "optmodels") -> Any:
+def to_frame(
+    table: Any,
+    *,
+    radars: Any = None,
+    addresses: Any = None,
+    epoch: Any = None,
+    convention: str = "optmodels",
+) -> Any:
     """A DataFrame of a :class:`PlotTable`, :class:`AdsbReports` or
     :class:`~optmodels.biasfield.recording.Recording` (its plots, with ``icao24`` and its
     epoch and radars).
@@ -206,13 +216,22 @@ def to_frame(table: Any, *, radars: Any = None, addresses: Any = None,
     pd = _pd()
     conv = as_choice("frames.to_frame convention", convention, CONVENTIONS)
     if isinstance(table, Recording):
-        return to_frame(table.plots, radars=table.radars if radars is None else radars,
-                        addresses=table.addresses if addresses is None else addresses,
-                        epoch=table.epoch if epoch is None else epoch, convention=conv)
+        return to_frame(
+            table.plots,
+            radars=table.radars if radars is None else radars,
+            addresses=table.addresses if addresses is None else addresses,
+            epoch=table.epoch if epoch is None else epoch,
+            convention=conv,
+        )
     if isinstance(table, AdsbReports):
-        out = pd.DataFrame({"timestamp": _timestamps(table.time, epoch),
-                            "icao24": _hex(table.address), "latitude": table.latitude,
-                            "longitude": table.longitude})
+        out = pd.DataFrame(
+            {
+                "timestamp": _timestamps(table.time, epoch),
+                "icao24": _hex(table.address),
+                "latitude": table.latitude,
+                "longitude": table.longitude,
+            }
+        )
         if conv == "traffic":
             out["altitude"] = table.pressure_altitude / FOOT
             out["geoaltitude"] = table.height / FOOT
@@ -223,35 +242,53 @@ def to_frame(table: Any, *, radars: Any = None, addresses: Any = None,
         out.attrs[MARK] = conv
         return out
     if not isinstance(table, PlotTable):
-        raise ProblemError("frames.to_frame table: expected a PlotTable, AdsbReports or "
-                           f"Recording, got {type(table).__name__}")
+        raise ProblemError(
+            "frames.to_frame table: expected a PlotTable, AdsbReports or "
+            f"Recording, got {type(table).__name__}"
+        )
     if radars is not None and not isinstance(radars, RadarSet):
-        raise ProblemError(f"frames.to_frame radars: expected a RadarSet, got "
-                           f"{type(radars).__name__}")
+        raise ProblemError(
+            f"frames.to_frame radars: expected a RadarSet, got {type(radars).__name__}"
+        )
     radar: Any = table.radar
     if radars is not None:
         if np.any((table.radar < 0) | (table.radar >= radars.m)):
-            raise ProblemError("frames.to_frame radars: the plots use radar indices beyond "
-                               f"the {radars.m} radars given")
+            raise ProblemError(
+                "frames.to_frame radars: the plots use radar indices beyond "
+                f"the {radars.m} radars given"
+            )
         radar = np.asarray(radars.names, dtype=object)[table.radar]
-    out = pd.DataFrame({"timestamp": _timestamps(table.time, epoch), "radar": radar,
-                        "range": table.range, "azimuth": np.degrees(table.azimuth),
-                        "object": table.object})
+    out = pd.DataFrame(
+        {
+            "timestamp": _timestamps(table.time, epoch),
+            "radar": radar,
+            "range": table.range,
+            "azimuth": np.degrees(table.azimuth),
+            "object": table.object,
+        }
+    )
     if addresses is not None:
         addr = np.asarray(addresses, dtype=np.int64)
         if np.any(table.object >= addr.size):
-            raise ProblemError(f"frames.to_frame addresses: {addr.size} addresses for "
-                               f"object ids up to {int(table.object.max())}")
-        out["icao24"] = _hex(np.where(table.object >= 0, addr[np.maximum(table.object, 0)],
-                                      -1))
+            raise ProblemError(
+                f"frames.to_frame addresses: {addr.size} addresses for "
+                f"object ids up to {int(table.object.max())}"
+            )
+        out["icao24"] = _hex(np.where(table.object >= 0, addr[np.maximum(table.object, 0)], -1))
     if table.height is not None:
         out["height"] = table.height
     out.attrs[MARK] = conv
     return out
 
 
-def from_frame(df: Any, *, kind: str | None = None, radars: Any = None,
-               epoch: Any = None, convention: str | None = None) -> Any:
+def from_frame(
+    df: Any,
+    *,
+    kind: str | None = None,
+    radars: Any = None,
+    epoch: Any = None,
+    convention: str | None = None,
+) -> Any:
     """A :class:`PlotTable` (columns ``timestamp, radar, range, azimuth`` …) or
     :class:`AdsbReports` (``timestamp, icao24, latitude, longitude, altitude`` …) from a
     DataFrame; ``kind`` ("plots" or "adsb") or detected from the columns.
@@ -297,8 +334,15 @@ def from_frame(df: Any, *, kind: str | None = None, radars: Any = None,
         h, baro = _altitudes(df, fn, _convention(df, fn, convention), t.size)
         _, obj = np.unique(addr, return_inverse=True)
         order = np.lexsort((t, obj))
-        return AdsbReports(t[order], obj[order].astype(np.int64), addr[order], lat[order],
-                           lon[order], h[order], baro[order])
+        return AdsbReports(
+            t[order],
+            obj[order].astype(np.int64),
+            addr[order],
+            lat[order],
+            lon[order],
+            h[order],
+            baro[order],
+        )
     for c in _PLOTS:
         _column(df, c, fn)
     if convention is not None:
@@ -313,17 +357,19 @@ def from_frame(df: Any, *, kind: str | None = None, radars: Any = None,
         if bad.any():
             i = int(np.flatnonzero(bad)[0])
             within = "≥ 0" if m is None else f"in 0..{m - 1} (the {m} radars given)"
-            raise ProblemError(f"{fn} radar: {int(bad.sum())} radar indices not {within} "
-                               f"(first {int(radar[i])} at row {i})")
+            raise ProblemError(
+                f"{fn} radar: {int(bad.sum())} radar indices not {within} "
+                f"(first {int(radar[i])} at row {i})"
+            )
     else:
         if not isinstance(radars, RadarSet):
-            raise ProblemError(f"{fn} radars: radar names in the frame need the RadarSet "
-                               "(radars=)")
+            raise ProblemError(f"{fn} radars: radar names in the frame need the RadarSet (radars=)")
         names = {n: i for i, n in enumerate(radars.names)}
         unknown = sorted({str(r) for r in col if str(r) not in names})
         if unknown:
-            raise ProblemError(f"{fn} radar: unknown radar(s) {unknown[:5]} (known: "
-                               f"{radars.names})")
+            raise ProblemError(
+                f"{fn} radar: unknown radar(s) {unknown[:5]} (known: {radars.names})"
+            )
         radar = np.array([names[str(r)] for r in col], dtype=np.int64)
     if "object" in df.columns:
         obj = _numbers(df["object"], fn, "object")
@@ -332,26 +378,27 @@ def from_frame(df: Any, *, kind: str | None = None, radars: Any = None,
         obj = obj.astype(np.int64)
         if np.any(obj < -1):
             i = int(np.flatnonzero(obj < -1)[0])
-            raise ProblemError(f"{fn} object: ids are ≥ 0 (−1: unknown), got {obj[i]} at "
-                               f"row {i}")
+            raise ProblemError(f"{fn} object: ids are ≥ 0 (−1: unknown), got {obj[i]} at row {i}")
     elif "icao24" in df.columns:
         _, obj = np.unique(_icao(df["icao24"], fn), return_inverse=True)
         obj = obj.astype(np.int64)
     else:
         obj = np.full(t.size, -1, np.int64)
-    height = (_numbers(df["height"], fn, "height", nan_ok=True)
-              if "height" in df.columns else None)
+    height = _numbers(df["height"], fn, "height", nan_ok=True) if "height" in df.columns else None
     rng = _numbers(df["range"], fn, "range")
     if np.any(rng < 0):
         i = int(np.flatnonzero(rng < 0)[0])
-        raise ProblemError(f"{fn} range: {int(np.sum(rng < 0))} negative ranges (m; first "
-                           f"{rng[i]:g} at row {i})")
+        raise ProblemError(
+            f"{fn} range: {int(np.sum(rng < 0))} negative ranges (m; first {rng[i]:g} at row {i})"
+        )
     az = _numbers(df["azimuth"], fn, "azimuth")
     if np.any(np.abs(az) > 360.0):
         i = int(np.flatnonzero(np.abs(az) > 360.0)[0])
-        raise ProblemError(f"{fn} azimuth: {int(np.sum(np.abs(az) > 360.0))} values outside "
-                           f"±360° (degrees clockwise from north; first {az[i]:g} at row "
-                           f"{i}: radians, mils or a damaged column?)")
+        raise ProblemError(
+            f"{fn} azimuth: {int(np.sum(np.abs(az) > 360.0))} values outside "
+            f"±360° (degrees clockwise from north; first {az[i]:g} at row "
+            f"{i}: radians, mils or a damaged column?)"
+        )
     return PlotTable(t, radar, rng, np.radians(az), obj, height)
 
 
@@ -362,40 +409,51 @@ def _convention(df: Any, fn: str, convention: str | None) -> str:
     if convention is not None:
         conv = as_choice(f"{fn} convention", convention, CONVENTIONS)
         if mark in CONVENTIONS and mark != conv:
-            raise ProblemError(f"{fn} convention: {conv!r} given, but the frame was written "
-                               f"with convention {mark!r} (to_frame)")
+            raise ProblemError(
+                f"{fn} convention: {conv!r} given, but the frame was written "
+                f"with convention {mark!r} (to_frame)"
+            )
     elif mark in CONVENTIONS:
         conv = mark
     else:
         cols = set(df.columns)
-        looks = ("its columns are the traffic library's (altitude + geoaltitude: feet)"
-                 if "geoaltitude" in cols else
-                 "'altitude' may be metres above the WGS-84 ellipsoid or the traffic "
-                 "library's barometric feet")
+        looks = (
+            "its columns are the traffic library's (altitude + geoaltitude: feet)"
+            if "geoaltitude" in cols
+            else "'altitude' may be metres above the WGS-84 ellipsoid or the traffic "
+            "library's barometric feet"
+        )
         raise ProblemError(
             f"{fn} convention: the altitude unit of this ADS-B frame is not known ({looks});"
             f" give convention='traffic' (altitude = barometric ft, geoaltitude = "
             f"geometric ft) or convention='optmodels' (altitude = m above the WGS-84 "
-            f"ellipsoid, baroaltitude = m)")
+            f"ellipsoid, baroaltitude = m)"
+        )
     cols = set(df.columns)
     if conv == "optmodels":
         if "geoaltitude" in cols:
-            raise ProblemError(f"{fn} convention: 'optmodels' has no 'geoaltitude' column "
-                               f"(the traffic library's, in feet): give convention='traffic'")
+            raise ProblemError(
+                f"{fn} convention: 'optmodels' has no 'geoaltitude' column "
+                f"(the traffic library's, in feet): give convention='traffic'"
+            )
         _column(df, "altitude", fn)
     elif "baroaltitude" in cols:
-        raise ProblemError(f"{fn} convention: 'traffic' has no 'baroaltitude' column (its "
-                           f"barometric altitude is 'altitude', ft): give "
-                           f"convention='optmodels'")
+        raise ProblemError(
+            f"{fn} convention: 'traffic' has no 'baroaltitude' column (its "
+            f"barometric altitude is 'altitude', ft): give "
+            f"convention='optmodels'"
+        )
     elif not cols & {"altitude", "geoaltitude"}:
-        raise ProblemError(f"{fn} df: missing column 'altitude' or 'geoaltitude' (have "
-                           f"{list(df.columns)})")
+        raise ProblemError(
+            f"{fn} df: missing column 'altitude' or 'geoaltitude' (have {list(df.columns)})"
+        )
     return conv
 
 
 def _altitudes(df: Any, fn: str, conv: str, n: int) -> tuple[np.ndarray, np.ndarray]:
     """(height m above the ellipsoid, pressure altitude m) of an ADS-B frame, NaN where
     unknown, read in convention ``conv``."""
+
     def col(name: str, scale: float = 1.0) -> np.ndarray:
         if name not in df.columns:
             return np.full(n, np.nan)

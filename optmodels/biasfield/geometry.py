@@ -48,8 +48,7 @@ def _site(site: ArrayLike) -> FloatArray:
 def to_polar(x: ArrayLike, site: ArrayLike) -> FloatArray:
     """p_i(x): (..., 2) Cartesian East-North (m) → (..., 2) [range (m), azimuth (rad)]."""
     d = _points("x", x) - _site(site)
-    return np.stack([np.hypot(d[..., 0], d[..., 1]), np.arctan2(d[..., 0], d[..., 1])],
-                    axis=-1)
+    return np.stack([np.hypot(d[..., 0], d[..., 1]), np.arctan2(d[..., 0], d[..., 1])], axis=-1)
 
 
 def from_polar(polar: ArrayLike, site: ArrayLike) -> FloatArray:
@@ -71,8 +70,13 @@ def polar_jacobian(x: ArrayLike, site: ArrayLike) -> FloatArray:
     if np.any(r2 == 0):
         raise ProblemError("x: a point coincides with the radar site (azimuth undefined)")
     r = np.sqrt(r2)
-    return np.stack([np.stack([d[..., 0] / r, d[..., 1] / r], axis=-1),
-                     np.stack([d[..., 1] / r2, -d[..., 0] / r2], axis=-1)], axis=-2)
+    return np.stack(
+        [
+            np.stack([d[..., 0] / r, d[..., 1] / r], axis=-1),
+            np.stack([d[..., 1] / r2, -d[..., 0] / r2], axis=-1),
+        ],
+        axis=-2,
+    )
 
 
 def shift_from_bias(x: ArrayLike, site: ArrayLike, f: ArrayLike) -> FloatArray:

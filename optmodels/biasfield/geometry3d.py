@@ -65,8 +65,10 @@ def site_geodetic(name: str, site: ArrayLike) -> FloatArray:
     """A geodetic point (3,): latitude (deg, |φ| < 90), longitude (deg), height (m)."""
     s = as_finite_array(name, site, shape=(3,))
     if abs(s[0]) >= 90.0 or abs(s[2]) > 1e5:
-        raise ProblemError(f"{name}: expected (latitude deg in (−90, 90), longitude deg, "
-                           f"height m within ±100 km), got {s.tolist()}")
+        raise ProblemError(
+            f"{name}: expected (latitude deg in (−90, 90), longitude deg, "
+            f"height m within ±100 km), got {s.tolist()}"
+        )
     return s
 
 
@@ -74,15 +76,21 @@ def _arr(name: str, x: ArrayLike) -> FloatArray:
     return np.asarray(as_finite_array(name, x), dtype=float)
 
 
-def measure(site: ArrayLike, lat: ArrayLike, lon: ArrayLike, h: ArrayLike
-            ) -> tuple[FloatArray, FloatArray]:
+def measure(
+    site: ArrayLike, lat: ArrayLike, lon: ArrayLike, h: ArrayLike
+) -> tuple[FloatArray, FloatArray]:
     """Slant range (m) and azimuth (rad, clockwise from the radar's own north, in (−π, π])
     of targets at geodetic (lat, lon (deg), h (m above the ellipsoid)) seen from ``site``
     (lat deg, lon deg, h m). Broadcasts over the target arrays."""
     s = site_geodetic("biasfield.measure site", site)
-    az, _, rng = pymap3d.geodetic2aer(_arr("biasfield.measure lat", lat),
-                                      _arr("biasfield.measure lon", lon),
-                                      _arr("biasfield.measure h", h), s[0], s[1], s[2])
+    az, _, rng = pymap3d.geodetic2aer(
+        _arr("biasfield.measure lat", lat),
+        _arr("biasfield.measure lon", lon),
+        _arr("biasfield.measure h", h),
+        s[0],
+        s[1],
+        s[2],
+    )
     return np.asarray(rng, dtype=float), wrap_angle(np.deg2rad(az))
 
 
@@ -91,8 +99,9 @@ def common_plane(lat: ArrayLike, lon: ArrayLike, origin: ArrayLike) -> FloatArra
     ENU frame of ``origin`` (lat deg, lon deg, h m); see the module docstring."""
     o = site_geodetic("biasfield.common_plane origin", origin)
     la = _arr("biasfield.common_plane lat", lat)
-    e, n, _ = pymap3d.geodetic2enu(la, _arr("biasfield.common_plane lon", lon),
-                                   np.zeros(np.shape(la)), o[0], o[1], o[2])
+    e, n, _ = pymap3d.geodetic2enu(
+        la, _arr("biasfield.common_plane lon", lon), np.zeros(np.shape(la)), o[0], o[1], o[2]
+    )
     return np.stack([np.asarray(e, float), np.asarray(n, float)], axis=-1)
 
 
@@ -104,13 +113,16 @@ def plane_to_geodetic(en: ArrayLike, origin: ArrayLike) -> tuple[FloatArray, Flo
     o = site_geodetic("biasfield.plane_to_geodetic origin", origin)
     p = as_finite_array("biasfield.plane_to_geodetic en", en)
     if p.ndim == 0 or p.shape[-1] != 2:
-        raise ProblemError("biasfield.plane_to_geodetic en: expected (..., 2) East-North (m),"
-                           f" got shape {p.shape}")
+        raise ProblemError(
+            f"biasfield.plane_to_geodetic en: expected (..., 2) East-North (m), got shape {p.shape}"
+        )
     e, n = p[..., 0], p[..., 1]
     d2 = e**2 + n**2
     if np.any(d2 > (0.9 * _A) ** 2):
-        raise ProblemError("biasfield.plane_to_geodetic en: points beyond 0.9 R of the "
-                           "origin have no footprint on this plane")
+        raise ProblemError(
+            "biasfield.plane_to_geodetic en: points beyond 0.9 R of the "
+            "origin have no footprint on this plane"
+        )
     rr = _A + o[2]
     u = np.sqrt(rr**2 - d2) - rr  # sphere through the origin point as a first guess
     for _ in range(_ITER):
@@ -123,8 +135,13 @@ def plane_to_geodetic(en: ArrayLike, origin: ArrayLike) -> tuple[FloatArray, Flo
     return np.asarray(lat, float), np.asarray(lon, float)
 
 
-def locate(site: ArrayLike, slant_range: ArrayLike, azimuth: ArrayLike, height: ArrayLike,
-           origin: ArrayLike) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+def locate(
+    site: ArrayLike,
+    slant_range: ArrayLike,
+    azimuth: ArrayLike,
+    height: ArrayLike,
+    origin: ArrayLike,
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
     """p_i⁻¹: the target seen by the radar at ``site`` at slant range (m) and azimuth (rad,
     clockwise from the radar's own north) whose height above the ellipsoid is ``height``
     (m). Returns latitude, longitude (deg) and its plane position East, North (m) in the
@@ -133,9 +150,11 @@ def locate(site: ArrayLike, slant_range: ArrayLike, azimuth: ArrayLike, height: 
     range shorter than the height difference, or beyond the horizon) the outputs are NaN."""
     s = site_geodetic("biasfield.locate site", site)
     o = site_geodetic("biasfield.locate origin", origin)
-    r, az, h = np.broadcast_arrays(_arr("biasfield.locate slant_range", slant_range),
-                                   _arr("biasfield.locate azimuth", azimuth),
-                                   _arr("biasfield.locate height", height))
+    r, az, h = np.broadcast_arrays(
+        _arr("biasfield.locate slant_range", slant_range),
+        _arr("biasfield.locate azimuth", azimuth),
+        _arr("biasfield.locate height", height),
+    )
     if np.any(r < 0):
         raise ProblemError("biasfield.locate slant_range: negative slant range")
     rs, rt = _A + s[2], _A + h
@@ -170,8 +189,7 @@ def to_polar3d(x: ArrayLike, h: ArrayLike, site: ArrayLike, origin: ArrayLike) -
     return np.stack([r, az], axis=-1)
 
 
-def from_polar3d(polar: ArrayLike, h: ArrayLike, site: ArrayLike, origin: ArrayLike
-                 ) -> FloatArray:
+def from_polar3d(polar: ArrayLike, h: ArrayLike, site: ArrayLike, origin: ArrayLike) -> FloatArray:
     """p_i⁻¹(·; h): (..., 2) [slant range, azimuth] at heights h → plane positions (..., 2);
     ProblemError where no elevation reaches that height."""
     p = as_finite_array("polar", polar)
@@ -179,13 +197,14 @@ def from_polar3d(polar: ArrayLike, h: ArrayLike, site: ArrayLike, origin: ArrayL
         raise ProblemError(f"polar: expected (..., 2) [range, azimuth], got {p.shape}")
     _, _, e, n = locate(site, p[..., 0], p[..., 1], h, origin)
     if np.any(np.isnan(e)):
-        raise ProblemError(f"polar: {int(np.isnan(e).sum())} (range, azimuth, height) have no "
-                           "position (slant range shorter than the height difference)")
+        raise ProblemError(
+            f"polar: {int(np.isnan(e).sum())} (range, azimuth, height) have no "
+            "position (slant range shorter than the height difference)"
+        )
     return np.stack([e, n], axis=-1)
 
 
-def polar_jacobian3d(x: ArrayLike, h: ArrayLike, site: ArrayLike, origin: ArrayLike
-                     ) -> FloatArray:
+def polar_jacobian3d(x: ArrayLike, h: ArrayLike, site: ArrayLike, origin: ArrayLike) -> FloatArray:
     """∇p_i(x; h) = ∂(slant range, azimuth)/∂(East, North) at fixed height, (..., 2, 2).
     Rows as in :func:`~optmodels.biasfield.geometry.polar_jacobian`.
 
@@ -206,32 +225,39 @@ def polar_jacobian3d(x: ArrayLike, h: ArrayLike, site: ArrayLike, origin: ArrayL
     for dlat, dlon in ((d, 0.0), (0.0, d)):
         az_hi, _, r_hi = pymap3d.geodetic2aer(lat + dlat, lon + dlon, hh, s[0], s[1], s[2])
         az_lo, _, r_lo = pymap3d.geodetic2aer(lat - dlat, lon - dlon, hh, s[0], s[1], s[2])
-        pol_cols.append(np.stack([np.asarray(r_hi) - r_lo,
-                                  wrap_angle(np.deg2rad(np.asarray(az_hi) - az_lo))],
-                                 axis=-1) / (2 * d))
+        pol_cols.append(
+            np.stack(
+                [np.asarray(r_hi) - r_lo, wrap_angle(np.deg2rad(np.asarray(az_hi) - az_lo))],
+                axis=-1,
+            )
+            / (2 * d)
+        )
         e_hi, n_hi, _ = pymap3d.geodetic2enu(lat + dlat, lon + dlon, zero, o[0], o[1], o[2])
         e_lo, n_lo, _ = pymap3d.geodetic2enu(lat - dlat, lon - dlon, zero, o[0], o[1], o[2])
-        en_cols.append(np.stack([np.asarray(e_hi) - e_lo, np.asarray(n_hi) - n_lo],
-                                axis=-1) / (2 * d))
+        en_cols.append(
+            np.stack([np.asarray(e_hi) - e_lo, np.asarray(n_hi) - n_lo], axis=-1) / (2 * d)
+        )
     d_pol = np.stack(pol_cols, axis=-1)  # ∂(r, α)/∂(φ, λ)
     d_en = np.stack(en_cols, axis=-1)  # ∂(E, N)/∂(φ, λ), never singular below 0.9 R
     jac = d_pol @ np.linalg.inv(d_en)
     det = jac[..., 0, 0] * jac[..., 1, 1] - jac[..., 0, 1] * jac[..., 1, 0]
     if np.any(~np.isfinite(det)) or np.any(det == 0):
-        raise ProblemError("x: the polar map is singular at a point (at or above the radar "
-                           "site, azimuth undefined)")
+        raise ProblemError(
+            "x: the polar map is singular at a point (at or above the radar "
+            "site, azimuth undefined)"
+        )
     return jac
 
 
-def plane_jacobian(x: ArrayLike, h: ArrayLike, site: ArrayLike, origin: ArrayLike
-                   ) -> FloatArray:
+def plane_jacobian(x: ArrayLike, h: ArrayLike, site: ArrayLike, origin: ArrayLike) -> FloatArray:
     """∂(East, North)/∂(slant range, azimuth) at fixed height, (..., 2, 2): the inverse of
     :func:`polar_jacobian3d` (how a polar bias moves the plotted position on the plane)."""
     return np.linalg.inv(polar_jacobian3d(x, h, site, origin))
 
 
-def shift_from_bias3d(x: ArrayLike, h: ArrayLike, site: ArrayLike, origin: ArrayLike,
-                      f: ArrayLike) -> FloatArray:
+def shift_from_bias3d(
+    x: ArrayLike, h: ArrayLike, site: ArrayLike, origin: ArrayLike, f: ArrayLike
+) -> FloatArray:
     """s_i(x) = p_i⁻¹(p_i(x; h) + f; h) − x, exact, for a polar bias f (..., 2)."""
     xx = as_finite_array("x", x)
     pol = to_polar3d(xx, h, site, origin) + as_finite_array("f", f)
@@ -239,10 +265,10 @@ def shift_from_bias3d(x: ArrayLike, h: ArrayLike, site: ArrayLike, origin: Array
     return from_polar3d(pol, h, site, origin) - xx
 
 
-def bias_from_shift3d(x: ArrayLike, h: ArrayLike, site: ArrayLike, origin: ArrayLike,
-                      s: ArrayLike) -> FloatArray:
+def bias_from_shift3d(
+    x: ArrayLike, h: ArrayLike, site: ArrayLike, origin: ArrayLike, s: ArrayLike
+) -> FloatArray:
     """f_i(x) = p_i(x + s; h) − p_i(x; h), exact, azimuth wrapped."""
     xx = as_finite_array("x", x)
-    d = to_polar3d(xx + as_finite_array("s", s), h, site, origin) - to_polar3d(xx, h, site,
-                                                                                 origin)
+    d = to_polar3d(xx + as_finite_array("s", s), h, site, origin) - to_polar3d(xx, h, site, origin)
     return np.stack([d[..., 0], wrap_angle(d[..., 1])], axis=-1)

@@ -43,8 +43,10 @@ def identifiability(data: FieldData, *, batch: int = 512) -> Identifiability:
     try:
         lu = splinalg.splu(h)
     except RuntimeError as exc:
-        raise ProblemError(f"biasfield.identifiability data: Φ1ᵀRΦ1 is singular ({exc}); "
-                           "the field is not identifiable on these cells") from None
+        raise ProblemError(
+            f"biasfield.identifiability data: Φ1ᵀRΦ1 is singular ({exc}); "
+            "the field is not identifiable on these cells"
+        ) from None
     n = h.shape[0]
     diag = np.empty((n // 2, 2, 2))
     for start in range(0, n, batch):
@@ -53,10 +55,15 @@ def identifiability(data: FieldData, *, batch: int = 512) -> Identifiability:
         rhs[cols, np.arange(cols.size)] = 1.0
         x = lu.solve(rhs)
         for c_i, c in enumerate(cols):
-            diag[c // 2, :, c % 2] = x[2 * (c // 2):2 * (c // 2) + 2, c_i]
+            diag[c // 2, :, c % 2] = x[2 * (c // 2) : 2 * (c // 2) + 2, c_i]
     spread = np.sqrt(np.maximum(np.trace(diag, axis1=1, axis2=2), 0.0))
     lam_max = float(splinalg.eigsh(h, k=1, which="LA", return_eigenvectors=False)[0])
-    inv_max = float(splinalg.eigsh(splinalg.LinearOperator(h.shape, matvec=lu.solve,
-                                                           dtype=float),
-                                   k=1, which="LA", return_eigenvectors=False)[0])
+    inv_max = float(
+        splinalg.eigsh(
+            splinalg.LinearOperator(h.shape, matvec=lu.solve, dtype=float),
+            k=1,
+            which="LA",
+            return_eigenvectors=False,
+        )[0]
+    )
     return Identifiability(lam_max * inv_max, spread, np.argsort(-spread))

@@ -81,8 +81,9 @@ class _Table:
 
     def need(self, name: str) -> np.ndarray:
         if name not in self.cols:
-            raise ProblemError(f"{self.path}: missing column {name!r} "
-                               f"(have {', '.join(sorted(self.cols))})")
+            raise ProblemError(
+                f"{self.path}: missing column {name!r} (have {', '.join(sorted(self.cols))})"
+            )
         return self.cols[name]
 
     def numeric(self, name: str) -> FloatArray:
@@ -91,24 +92,35 @@ class _Table:
     def text(self, name: str) -> list[str]:
         return [str(c).strip() for c in self.need(name)]
 
-    def within(self, name: str, v: FloatArray, low: float, high: float, *,
-               high_open: bool = False, unit: str = "") -> None:
+    def within(
+        self,
+        name: str,
+        v: FloatArray,
+        low: float,
+        high: float,
+        *,
+        high_open: bool = False,
+        unit: str = "",
+    ) -> None:
         """Refuse values outside [low, high] (or [low, high)), naming the first one."""
         bad = (v < low) | (v >= high if high_open else v > high)
         if bad.any():
             i = int(np.flatnonzero(bad)[0])
             close = ")" if high_open else "]"
-            raise ProblemError(f"{self.path}: {self.where(i)}, column {name!r}: {v[i]:g}{unit}"
-                               f" is outside [{low:g}, {high:g}{close}{unit} "
-                               f"({int(bad.sum())} such value(s))")
+            raise ProblemError(
+                f"{self.path}: {self.where(i)}, column {name!r}: {v[i]:g}{unit}"
+                f" is outside [{low:g}, {high:g}{close}{unit} "
+                f"({int(bad.sum())} such value(s))"
+            )
 
     def positive(self, name: str) -> FloatArray:
         v = self.numeric(name)
         bad = v <= 0
         if bad.any():
             i = int(np.flatnonzero(bad)[0])
-            raise ProblemError(f"{self.path}: {self.where(i)}, column {name!r}: {v[i]:g} "
-                               "(must be positive)")
+            raise ProblemError(
+                f"{self.path}: {self.where(i)}, column {name!r}: {v[i]:g} (must be positive)"
+            )
         return v
 
 
@@ -119,8 +131,11 @@ def table_file(path: str | os.PathLike[str], what: str) -> _Table:
         return _parquet(p, what)
     rows = read_csv_rows(p, what=f"{what} CSV")
     cols = list(zip(*rows.rows, strict=True))
-    return _Table(p, {h: np.array([c.strip() for c in col])
-                      for h, col in zip(rows.header, cols, strict=True)}, rows.lines)
+    return _Table(
+        p,
+        {h: np.array([c.strip() for c in col]) for h, col in zip(rows.header, cols, strict=True)},
+        rows.lines,
+    )
 
 
 def _parquet(p: Path, what: str) -> _Table:
@@ -128,8 +143,9 @@ def _parquet(p: Path, what: str) -> _Table:
         import pyarrow as pa
         import pyarrow.parquet as pq
     except ImportError as exc:  # pragma: no cover - pyarrow is in the test extra
-        raise ProblemError(f"{p}: reading Parquet needs pyarrow "
-                           "(pip install 'optmodels[parquet]')") from exc
+        raise ProblemError(
+            f"{p}: reading Parquet needs pyarrow (pip install 'optmodels[parquet]')"
+        ) from exc
     input_file(p, what=f"{what} Parquet file")
     try:
         tab = pq.read_table(p)
@@ -144,8 +160,7 @@ def _parquet(p: Path, what: str) -> _Table:
         try:
             cols[key] = tab.column(name).to_numpy(zero_copy_only=False)
         except (pa.ArrowException, ValueError, TypeError) as exc:
-            raise ProblemError(f"{p}: column {name!r} cannot be read as an array "
-                               f"({exc})") from None
+            raise ProblemError(f"{p}: column {name!r} cannot be read as an array ({exc})") from None
     if tab.num_rows == 0:
         raise ProblemError(f"{p}: no data rows")
     return _Table(p, cols, None)
@@ -157,9 +172,11 @@ def _as_origin(name: str, origin: Any) -> GeodeticOrigin:
         raise ProblemError(f"{name}: expected (lat, lon, alt), got {origin!r:.60}")
     if len(origin) != 3:
         raise ProblemError(f"{name}: expected (lat, lon, alt), got {len(origin)} values")
-    return (as_number(f"{name} lat", origin[0], low=-90.0, high=90.0),
-            as_number(f"{name} lon", origin[1], low=-180.0, high=360.0, high_open=True),
-            as_number(f"{name} alt", origin[2]))
+    return (
+        as_number(f"{name} lat", origin[0], low=-90.0, high=90.0),
+        as_number(f"{name} lon", origin[1], low=-180.0, high=360.0, high_open=True),
+        as_number(f"{name} alt", origin[2]),
+    )
 
 
 def _geodetic(tab: _Table) -> tuple[FloatArray, FloatArray, FloatArray]:
@@ -175,9 +192,12 @@ def _in_file(path: Path, exc: ProblemError) -> ProblemError:
     return ProblemError(f"{path}: {exc}")
 
 
-def read_radars(path: str | os.PathLike[str], *,
-                origin: GeodeticOrigin | str | None = None, geometry: str = "2d"
-                ) -> tuple[RadarSet, GeodeticOrigin | None]:
+def read_radars(
+    path: str | os.PathLike[str],
+    *,
+    origin: GeodeticOrigin | str | None = None,
+    geometry: str = "2d",
+) -> tuple[RadarSet, GeodeticOrigin | None]:
     """Radars of paper 001 (sites, and the noise V_i of (1)) from a CSV.
 
     Columns ``name`` and either ``x, y`` (local East-North, m) or ``lat, lon[, alt]``
@@ -216,8 +236,7 @@ def read_radars(path: str | os.PathLike[str], *,
     fn = "biasfield.read_radars"
     geometry = as_choice(f"{fn} geometry", geometry, ("2d", "3d"))
     mode = origin if isinstance(origin, str) and origin in ("mean", "first") else None
-    org_given = None if origin is None or mode is not None else _as_origin(
-        f"{fn} origin", origin)
+    org_given = None if origin is None or mode is not None else _as_origin(f"{fn} origin", origin)
     tab = table_file(path, "radars")
     names = tab.text("name")
     seen: dict[str, int] = {}
@@ -225,8 +244,10 @@ def read_radars(path: str | os.PathLike[str], *,
         if not name:
             raise ProblemError(f"{tab.path}: {tab.where(i)}: empty radar name")
         if name in seen:
-            raise ProblemError(f"{tab.path}: {tab.where(i)}: radar name {name!r} repeats "
-                               f"{tab.where(seen[name])} (names must be distinct)")
+            raise ProblemError(
+                f"{tab.path}: {tab.where(i)}: radar name {name!r} repeats "
+                f"{tab.where(seen[name])} (names must be distinct)"
+            )
         seen[name] = i
     ids: tuple[tuple[int, int], ...] = ()
     if "sac" in tab.cols or "sic" in tab.cols:
@@ -235,8 +256,10 @@ def read_radars(path: str | os.PathLike[str], *,
             bad = (v != np.round(v)) | (v < 0) | (v > 255)
             if bad.any():
                 i = int(np.flatnonzero(bad)[0])
-                raise ProblemError(f"{tab.path}: {tab.where(i)}, column {col!r}: {v[i]:g} "
-                                   "is not an integer 0-255 (ASTERIX I010)")
+                raise ProblemError(
+                    f"{tab.path}: {tab.where(i)}, column {col!r}: {v[i]:g} "
+                    "is not an integer 0-255 (ASTERIX I010)"
+                )
         ids = tuple((int(a), int(b)) for a, b in zip(sac, sic, strict=True))
     geo = None
     if "lat" in tab.cols or "lon" in tab.cols:
@@ -254,27 +277,41 @@ def read_radars(path: str | os.PathLike[str], *,
         geo = np.column_stack([lat, lon, alt])
     else:
         if geometry == "3d":
-            raise ProblemError(f"{tab.path}: geometry='3d' needs the columns lat, lon[, alt] "
-                               "(degrees, m above the WGS-84 ellipsoid)")
+            raise ProblemError(
+                f"{tab.path}: geometry='3d' needs the columns lat, lon[, alt] "
+                "(degrees, m above the WGS-84 ellipsoid)"
+            )
         sites = np.column_stack([tab.numeric("x"), tab.numeric("y")])
         org = None
     sig_r, sig_az = tab.positive("sigma_range"), tab.positive("sigma_azimuth")
     max_range = tab.positive("max_range")
     try:
         if geometry == "3d":
-            radars = RadarSet(None, sig_r, np.deg2rad(sig_az), max_range, tuple(names),
-                              geodetic=geo, origin=np.asarray(org), ids=ids)
+            radars = RadarSet(
+                None,
+                sig_r,
+                np.deg2rad(sig_az),
+                max_range,
+                tuple(names),
+                geodetic=geo,
+                origin=np.asarray(org),
+                ids=ids,
+            )
         else:
-            radars = RadarSet(sites, sig_r, np.deg2rad(sig_az), max_range, tuple(names),
-                              ids=ids)
+            radars = RadarSet(sites, sig_r, np.deg2rad(sig_az), max_range, tuple(names), ids=ids)
     except ProblemError as exc:
         raise _in_file(tab.path, exc) from None
     return radars, org
 
 
-def read_plots(path: str | os.PathLike[str], radars: RadarSet, *, azimuth_unit: str = "deg",
-               drop_out_of_range: bool = False, labels: list[str] | None = None
-               ) -> tuple[PlotTable, dict[str, int]]:
+def read_plots(
+    path: str | os.PathLike[str],
+    radars: RadarSet,
+    *,
+    azimuth_unit: str = "deg",
+    drop_out_of_range: bool = False,
+    labels: list[str] | None = None,
+) -> tuple[PlotTable, dict[str, int]]:
     """Radar plots of paper 001 ((1): range and azimuth per radar and instant).
 
     Columns ``time`` (s), ``radar`` (a name of ``radars``, or its index), ``range`` (m,
@@ -309,8 +346,10 @@ def read_plots(path: str | os.PathLike[str], radars: RadarSet, *, azimuth_unit: 
     rng = tab.numeric("range")
     neg = np.flatnonzero(rng < 0)
     if neg.size:
-        raise ProblemError(f"{tab.path}: {tab.where(int(neg[0]))}, column 'range': "
-                           f"{rng[neg[0]]:g} m is negative ({neg.size} such value(s))")
+        raise ProblemError(
+            f"{tab.path}: {tab.where(int(neg[0]))}, column 'range': "
+            f"{rng[neg[0]]:g} m is negative ({neg.size} such value(s))"
+        )
     az = tab.numeric("azimuth")
     if unit == "deg":
         tab.within("azimuth", az, -360.0, 360.0, unit="°")
@@ -324,15 +363,20 @@ def read_plots(path: str | os.PathLike[str], radars: RadarSet, *, azimuth_unit: 
     unknown = sorted({r for r in raw if r not in lookup})
     if unknown:
         i = next(k for k, r in enumerate(raw) if r not in lookup)
-        raise ProblemError(f"{tab.path}: unknown radar id(s) {unknown[:5]} (first at "
-                           f"{tab.where(i)}; known: {radars.names})")
+        raise ProblemError(
+            f"{tab.path}: unknown radar id(s) {unknown[:5]} (first at "
+            f"{tab.where(i)}; known: {radars.names})"
+        )
     radar = np.array([lookup[r] for r in raw], dtype=np.int64)
-    label_col = "object" if "object" in tab.cols else "address" if "address" in tab.cols \
-        else None
+    label_col = "object" if "object" in tab.cols else "address" if "address" in tab.cols else None
     if label_col is not None:
         obj_raw = tab.text(label_col)
-        ids = {o: k for k, o in enumerate(dict.fromkeys(o for o in obj_raw if o not in
-                                                         ("", "-1", "nan", "None")))}
+        ids = {
+            o: k
+            for k, o in enumerate(
+                dict.fromkeys(o for o in obj_raw if o not in ("", "-1", "nan", "None"))
+            )
+        }
         obj = np.array([ids.get(o, -1) for o in obj_raw], dtype=np.int64)
         if labels is not None:
             labels[:] = list(ids)
@@ -344,9 +388,13 @@ def read_plots(path: str | os.PathLike[str], radars: RadarSet, *, azimuth_unit: 
         blank = np.array([c.lower() in ("", "nan") for c in cells])
         height = np.full(t.size, np.nan)
         if (~blank).any():
-            sub = _Table(tab.path, {"height": np.asarray(tab.need("height"))[~blank]},
-                         None if tab.lines is None else
-                         [ln for ln, b in zip(tab.lines, blank, strict=True) if not b])
+            sub = _Table(
+                tab.path,
+                {"height": np.asarray(tab.need("height"))[~blank]},
+                None
+                if tab.lines is None
+                else [ln for ln, b in zip(tab.lines, blank, strict=True) if not b],
+            )
             height[~blank] = sub.numeric("height")
     try:
         table = PlotTable(t, radar, rng, az, obj, height=height)
@@ -357,18 +405,26 @@ def read_plots(path: str | os.PathLike[str], radars: RadarSet, *, azimuth_unit: 
     if over.any():
         if not drop_out_of_range:
             i = int(np.flatnonzero(over)[0])
-            raise ProblemError(f"{tab.path}: {int(over.sum())} plots beyond their radar's "
-                               f"max_range (first at {tab.where(i)}; pass "
-                               "drop_out_of_range=True to drop them)")
+            raise ProblemError(
+                f"{tab.path}: {int(over.sum())} plots beyond their radar's "
+                f"max_range (first at {tab.where(i)}; pass "
+                "drop_out_of_range=True to drop them)"
+            )
         dropped["beyond max_range"] = int(over.sum())
         table = table.subset(~over)
     return table, dropped
 
 
-def read_tracks(path: str | os.PathLike[str], origin: GeodeticOrigin, *, step: float | None = 1.0,
-                clean: bool = True, limits: CleaningLimits = ADSB_LIMITS,
-                sigma: float = ADSB_SIGMA, report: bool = False
-                ) -> AircraftPaths | tuple[AircraftPaths, CleaningReport]:
+def read_tracks(
+    path: str | os.PathLike[str],
+    origin: GeodeticOrigin,
+    *,
+    step: float | None = 1.0,
+    clean: bool = True,
+    limits: CleaningLimits = ADSB_LIMITS,
+    sigma: float = ADSB_SIGMA,
+    report: bool = False,
+) -> AircraftPaths | tuple[AircraftPaths, CleaningReport]:
     """Aircraft tracks ``object, time, lat, lon[, alt]`` (e.g. ADS-B) → 3-D paths, each
     aircraft over its own span.
 
@@ -429,25 +485,38 @@ def read_tracks(path: str | os.PathLike[str], origin: GeodeticOrigin, *, step: f
     few = np.flatnonzero(np.bincount(distinct, minlength=names.size) < 2)
     if few.size:
         name = names[few[np.argmin(first[few])]]
-        raise ProblemError(f"{tab.path}: object {name!r} has fewer than 2 reports at "
-                           "distinct times")
+        raise ProblemError(
+            f"{tab.path}: object {name!r} has fewer than 2 reports at distinct times"
+        )
     span = float(np.sum(hi - lo))
     size = span / (dt or 1.0) + 2.0 * names.size
     if dt is not None and size > MAX_TRACK_GRID:
-        raise ProblemError(f"{tab.path}: resampling {names.size} aircraft over {span:g} s "
-                           f"in all every {dt:g} s needs {size:.3g} grid values (limit "
-                           f"{MAX_TRACK_GRID:.0e}); are the times in seconds?")
+        raise ProblemError(
+            f"{tab.path}: resampling {names.size} aircraft over {span:g} s "
+            f"in all every {dt:g} s needs {size:.3g} grid values (limit "
+            f"{MAX_TRACK_GRID:.0e}); are the times in seconds?"
+        )
     e, n, u = pymap3d.geodetic2enu(lat, lon, alt, *org)
     xyz = np.column_stack([e, n, u])
     if clean:
         segment, rep = clean_reports(obj, t, xyz, sigma=sig, heights=alt, limits=lim)
     else:
-        segment, rep = clean_reports(obj, t, xyz, sigma=sig, limits=replace(
-            lim, max_speed=np.inf, max_acceleration=np.inf, ground_speed=0.0, min_points=1,
-            glitch_run=1))
+        segment, rep = clean_reports(
+            obj,
+            t,
+            xyz,
+            sigma=sig,
+            limits=replace(
+                lim,
+                max_speed=np.inf,
+                max_acceleration=np.inf,
+                ground_speed=0.0,
+                min_points=1,
+                glitch_run=1,
+            ),
+        )
     if not np.any(segment >= 0):
-        raise ProblemError(f"{tab.path}: no usable track after the cleaning "
-                           f"(dropped {rep.counts})")
+        raise ProblemError(f"{tab.path}: no usable track after the cleaning (dropped {rep.counts})")
     order = np.lexsort((t, segment))
     order = order[segment[order] >= 0]
     cuts = np.flatnonzero(np.diff(segment[order])) + 1

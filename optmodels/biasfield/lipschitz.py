@@ -33,10 +33,15 @@ __all__ = ["SOCP_DEFAULTS", "solve_lipschitz"]
 SOCP_DEFAULTS: dict[str, dict[str, Any]] = DEFAULTS["socp"]
 
 
-def solve_lipschitz(data: FieldData, *, box: tuple[float, float] | None = None,
-                    solver: str = "CLARABEL", cap: float | None = None,
-                    formulation: Literal["constrained", "reduced"] = "reduced",
-                    **options: Any) -> FieldSolution:
+def solve_lipschitz(
+    data: FieldData,
+    *,
+    box: tuple[float, float] | None = None,
+    solver: str = "CLARABEL",
+    cap: float | None = None,
+    formulation: Literal["constrained", "reduced"] = "reduced",
+    **options: Any,
+) -> FieldSolution:
     r"""The field of smallest Lipschitz constant on neighbour pairs:
 
     min L  s.t.  ‖Lᵀ_P(f(x̌_i) − f(x̌_j))‖ ≤ L‖x̌_i − x̌_j‖ (all neighbour pairs),
@@ -70,11 +75,13 @@ def solve_lipschitz(data: FieldData, *, box: tuple[float, float] | None = None,
     if bound is not None:
         bad = box_feasibility(data, box, sets=sets)  # type: ignore[arg-type]
         if bad.size:
-            raise ProblemError(f"{fn} box: the box misses the uncertainty sets of cells "
-                               f"{bad[:20].tolist()}")
+            raise ProblemError(
+                f"{fn} box: the box misses the uncertainty sets of cells {bad[:20].tolist()}"
+            )
     prob_data = lipschitz_data(data, sets)
-    sc, u0, bmat, dmat, dist, ref, lip0 = (prob_data[k] for k in (
-        "sc", "u0", "bmat", "dmat", "dist", "ref", "lip0"))
+    sc, u0, bmat, dmat, dist, ref, lip0 = (
+        prob_data[k] for k in ("sc", "u0", "bmat", "dmat", "dist", "ref", "lip0")
+    )
     m2 = 2 * data.m
     with timed() as tb:
         eta = cp.Variable(phi1.shape[1])
@@ -105,13 +112,17 @@ def solve_lipschitz(data: FieldData, *, box: tuple[float, float] | None = None,
     jumps = np.linalg.norm((prob_data["jump"] @ phi).reshape(-1, m2), axis=1) / dist
     sol = pack_solution(data, sets, phi, et, common, bound, None, lipschitz=float(np.max(jumps)))
     sol.info["components"] = n_comp
-    duals = {"soc": soc.dual_value,
-             "upper": box_cons[0].dual_value if box_cons else None,
-             "lower": box_cons[1].dual_value if box_cons else None,
-             "cap": cap_cons[0].dual_value if cap_cons else None}
-    sol.info["solver_lipschitz"] = float(lip.value) * lip0 / ref if lip.value is not None \
-        else float("nan")
+    duals = {
+        "soc": soc.dual_value,
+        "upper": box_cons[0].dual_value if box_cons else None,
+        "lower": box_cons[1].dual_value if box_cons else None,
+        "cap": cap_cons[0].dual_value if cap_cons else None,
+    }
+    sol.info["solver_lipschitz"] = (
+        float(lip.value) * lip0 / ref if lip.value is not None else float("nan")
+    )
     sol.info["duals"] = duals  # the solver's multipliers: the certificate checked below
-    sol.residuals.update(lipschitz_residuals(data, sol, duals, box=box, cap=cap_v,
-                                             sets=sets, prob_data=prob_data))
+    sol.residuals.update(
+        lipschitz_residuals(data, sol, duals, box=box, cap=cap_v, sets=sets, prob_data=prob_data)
+    )
     return verify_solution(sol)

@@ -16,17 +16,26 @@ from optmodels.core import MAX_MAGNITUDE, FloatArray, ProblemError, as_count, as
 __all__ = ["AircraftPaths"]
 
 
-def _track_arrays(fn: str, a: int, times: ArrayLike, lat: ArrayLike, lon: ArrayLike,
-                  height: ArrayLike, org: FloatArray
-                  ) -> tuple[FloatArray, FloatArray, FloatArray]:
+def _track_arrays(
+    fn: str,
+    a: int,
+    times: ArrayLike,
+    lat: ArrayLike,
+    lon: ArrayLike,
+    height: ArrayLike,
+    org: FloatArray,
+) -> tuple[FloatArray, FloatArray, FloatArray]:
     """One aircraft's checked times (T,), plane positions (T, 2) and geodetic (T, 3)."""
     t = as_finite_array(f"{fn} times[{a}]", times, ndim=1, max_abs=MAX_MAGNITUDE)
     if t.size < 1 or np.any(np.diff(t) <= 0):
         raise ProblemError(f"{fn} times[{a}]: need ≥ 1 strictly increasing instants")
-    geo = np.column_stack([
-        as_finite_array(f"{fn} lat[{a}]", lat, shape=t.shape),
-        as_finite_array(f"{fn} lon[{a}]", lon, shape=t.shape),
-        as_finite_array(f"{fn} height[{a}]", height, shape=t.shape, max_abs=1e6)])
+    geo = np.column_stack(
+        [
+            as_finite_array(f"{fn} lat[{a}]", lat, shape=t.shape),
+            as_finite_array(f"{fn} lon[{a}]", lon, shape=t.shape),
+            as_finite_array(f"{fn} height[{a}]", height, shape=t.shape, max_abs=1e6),
+        ]
+    )
     if np.any(np.abs(geo[:, 0]) >= 90):
         raise ProblemError(f"{fn} lat[{a}]: latitudes must be within (−90, 90) deg")
     return t, g3.common_plane(geo[:, 0], geo[:, 1], org), geo
@@ -53,17 +62,24 @@ class AircraftPaths:
     duplicates: int = 0
 
     def __init__(self, times: ArrayLike, positions: ArrayLike, active: ArrayLike) -> None:
-        t = as_finite_array("biasfield.AircraftPaths times", times, ndim=1,
-                            max_abs=MAX_MAGNITUDE)
+        t = as_finite_array("biasfield.AircraftPaths times", times, ndim=1, max_abs=MAX_MAGNITUDE)
         if t.size < 2 or np.any(np.diff(t) <= 0):
-            raise ProblemError("biasfield.AircraftPaths times: need at least 2 strictly "
-                               f"increasing instants, got {t.size}")
-        pos = as_finite_array("biasfield.AircraftPaths positions", positions,
-                              shape=(None, t.size, 2), max_abs=MAX_MAGNITUDE)
+            raise ProblemError(
+                "biasfield.AircraftPaths times: need at least 2 strictly "
+                f"increasing instants, got {t.size}"
+            )
+        pos = as_finite_array(
+            "biasfield.AircraftPaths positions",
+            positions,
+            shape=(None, t.size, 2),
+            max_abs=MAX_MAGNITUDE,
+        )
         act = np.asarray(active)
         if act.dtype != bool or act.shape != pos.shape[:2]:
-            raise ProblemError(f"biasfield.AircraftPaths active: expected {pos.shape[:2]} "
-                               f"booleans, got {act.dtype} {act.shape}")
+            raise ProblemError(
+                f"biasfield.AircraftPaths active: expected {pos.shape[:2]} "
+                f"booleans, got {act.dtype} {act.shape}"
+            )
         self._dense: tuple[FloatArray, FloatArray, np.ndarray] | None = (t, pos, act)
         self._view: tuple[FloatArray, FloatArray, np.ndarray] | None = None
         # the dense form interpolates over the whole grid (as before); spans from ``active``
@@ -75,9 +91,14 @@ class AircraftPaths:
 
     # ----------------------------------------------------------------- constructors
     @classmethod
-    def _per_aircraft(cls, times: list[FloatArray], en: list[FloatArray],
-                      geo: list[FloatArray] | None, origin: FloatArray | None,
-                      labels: tuple[Any, ...]) -> AircraftPaths:
+    def _per_aircraft(
+        cls,
+        times: list[FloatArray],
+        en: list[FloatArray],
+        geo: list[FloatArray] | None,
+        origin: FloatArray | None,
+        labels: tuple[Any, ...],
+    ) -> AircraftPaths:
         obj = cls.__new__(cls)
         obj._dense = None
         obj._view = None
@@ -87,16 +108,24 @@ class AircraftPaths:
         return obj
 
     @classmethod
-    def from_tracks(cls, times: list[ArrayLike], lat: list[ArrayLike], lon: list[ArrayLike],
-                    height: list[ArrayLike], origin: ArrayLike,
-                    labels: tuple[Any, ...] | None = None) -> AircraftPaths:
+    def from_tracks(
+        cls,
+        times: list[ArrayLike],
+        lat: list[ArrayLike],
+        lon: list[ArrayLike],
+        height: list[ArrayLike],
+        origin: ArrayLike,
+        labels: tuple[Any, ...] | None = None,
+    ) -> AircraftPaths:
         """3-D paths from per-aircraft arrays: times (s, strictly increasing), latitude,
         longitude (deg), height (m above the ellipsoid); ``origin`` of the common plane."""
         fn = "biasfield.AircraftPaths.from_tracks"
         org = g3.site_geodetic(f"{fn} origin", origin)
         if not (len(times) == len(lat) == len(lon) == len(height)) or not len(times):
-            raise ProblemError(f"{fn} times: need the same number (≥ 1) of per-aircraft "
-                               "times, lat, lon and height arrays")
+            raise ProblemError(
+                f"{fn} times: need the same number (≥ 1) of per-aircraft "
+                "times, lat, lon and height arrays"
+            )
         ts, ens, geos = [], [], []
         for a in range(len(times)):
             t, en, geo = _track_arrays(fn, a, times[a], lat[a], lon[a], height[a], org)
@@ -109,8 +138,14 @@ class AircraftPaths:
         return cls._per_aircraft(ts, ens, geos, org, lab)
 
     @classmethod
-    def from_plane(cls, times: list[ArrayLike], en: list[ArrayLike], height: list[ArrayLike],
-                   origin: ArrayLike, labels: tuple[Any, ...] | None = None) -> AircraftPaths:
+    def from_plane(
+        cls,
+        times: list[ArrayLike],
+        en: list[ArrayLike],
+        height: list[ArrayLike],
+        origin: ArrayLike,
+        labels: tuple[Any, ...] | None = None,
+    ) -> AircraftPaths:
         """3-D paths from per-aircraft plane positions East-North (T_a, 2) (m) and heights
         (m above the ellipsoid); latitude and longitude by the exact inverse of the plane."""
         fn = "biasfield.AircraftPaths.from_plane"
@@ -124,8 +159,15 @@ class AircraftPaths:
         return cls.from_tracks(times, lats, lons, height, org, labels)
 
     @classmethod
-    def from_reports(cls, objects: ArrayLike, times: ArrayLike, lat: ArrayLike,
-                     lon: ArrayLike, height: ArrayLike, origin: ArrayLike) -> AircraftPaths:
+    def from_reports(
+        cls,
+        objects: ArrayLike,
+        times: ArrayLike,
+        lat: ArrayLike,
+        lon: ArrayLike,
+        height: ArrayLike,
+        origin: ArrayLike,
+    ) -> AircraftPaths:
         """3-D paths from reports, one row each (e.g. ADS-B): ``objects`` (n,) aircraft
         labels (ints or strings, e.g. icao24), ``times`` (s), ``lat``, ``lon`` (deg),
         ``height`` (m above the ellipsoid). Aircraft are indexed in sorted label order
@@ -139,8 +181,7 @@ class AircraftPaths:
         h = as_finite_array(f"{fn} height", height, shape=(n,), max_abs=1e6)
         obj = np.asarray(objects)
         if obj.shape != (n,) or n == 0:
-            raise ProblemError(f"{fn} objects: expected {n} (≥ 1) labels, got shape "
-                               f"{obj.shape}")
+            raise ProblemError(f"{fn} objects: expected {n} (≥ 1) labels, got shape {obj.shape}")
         org = g3.site_geodetic(f"{fn} origin", origin)
         labels, inv = np.unique(obj, return_inverse=True)
         order = np.lexsort((t, inv))
@@ -158,9 +199,9 @@ class AircraftPaths:
             ts.append(tt)
             ens.append(en)
             geos.append(geo)
-        out = cls._per_aircraft(ts, ens, geos, org,
-                                tuple(lab.item() if hasattr(lab, "item") else lab
-                                      for lab in labels))
+        out = cls._per_aircraft(
+            ts, ens, geos, org, tuple(lab.item() if hasattr(lab, "item") else lab for lab in labels)
+        )
         out.duplicates = int(n - keep.sum())
         return out
 
@@ -178,8 +219,11 @@ class AircraftPaths:
         """Bytes held by the per-aircraft arrays (the dense form: its three arrays)."""
         if self._dense is not None:
             return int(sum(x.nbytes for x in self._dense))
-        return int(sum(x.nbytes for x in self._t) + sum(x.nbytes for x in self._en)
-                   + sum(x.nbytes for x in (self._geo or [])))
+        return int(
+            sum(x.nbytes for x in self._t)
+            + sum(x.nbytes for x in self._en)
+            + sum(x.nbytes for x in (self._geo or []))
+        )
 
     def _index(self, name: str, a: int) -> int:
         return as_count(f"biasfield.AircraftPaths.{name} a", a, maximum=len(self) - 1)
@@ -204,8 +248,9 @@ class AircraftPaths:
         a = self._index("at", a)
         tt = as_finite_array("biasfield.AircraftPaths.at t", t)
         p = self._en[a]
-        return np.stack([np.interp(tt, self._t[a], p[:, 0]),
-                         np.interp(tt, self._t[a], p[:, 1])], axis=-1)
+        return np.stack(
+            [np.interp(tt, self._t[a], p[:, 0]), np.interp(tt, self._t[a], p[:, 1])], axis=-1
+        )
 
     def geodetic_at(self, a: int, t: ArrayLike) -> FloatArray:
         """Geodetic position (len(t), 3) latitude, longitude (deg), height (m above the
@@ -214,9 +259,11 @@ class AircraftPaths:
         plane-linear :meth:`at` by L² tan φ / (8R): 2 mm for 250 m steps at 55°N)."""
         a = self._index("geodetic_at", a)
         if self._geo is None:
-            raise ProblemError("biasfield.AircraftPaths.geodetic_at: these paths are 2-D "
-                               "(no geodetic positions); build them with from_reports, "
-                               "from_tracks or from_plane")
+            raise ProblemError(
+                "biasfield.AircraftPaths.geodetic_at: these paths are 2-D "
+                "(no geodetic positions); build them with from_reports, "
+                "from_tracks or from_plane"
+            )
         tt = as_finite_array("biasfield.AircraftPaths.geodetic_at t", t)
         g = self._geo[a]
         return np.stack([np.interp(tt, self._t[a], g[:, j]) for j in range(3)], axis=-1)

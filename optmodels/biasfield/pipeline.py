@@ -59,11 +59,20 @@ def _say(progress: bool, text: str) -> None:
         print(text, file=sys.stderr, flush=True)
 
 
-def field_data_from_plots(plots: PlotTable, radars: RadarSet, *, cells: int | ArrayLike = 50,
-                          knot_spacing: float = 20.0,
-                          coverage: Literal["all", "union"] = "union", clean: bool = False,
-                          locate: bool = True, scheduler: Any = None, progress: bool = False,
-                          seed: int = 0, **options: Any) -> FieldBuild:
+def field_data_from_plots(
+    plots: PlotTable,
+    radars: RadarSet,
+    *,
+    cells: int | ArrayLike = 50,
+    knot_spacing: float = 20.0,
+    coverage: Literal["all", "union"] = "union",
+    clean: bool = False,
+    locate: bool = True,
+    scheduler: Any = None,
+    progress: bool = False,
+    seed: int = 0,
+    **options: Any,
+) -> FieldBuild:
     """Plots → FieldData, the whole chain in one place (module docstring).
 
     Parameters
@@ -128,18 +137,31 @@ def field_data_from_plots(plots: PlotTable, radars: RadarSet, *, cells: int | Ar
     clock = time.perf_counter()
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        fd, diag = build_field_data(plots, radars, cells=cells, knot_spacing=knot_spacing,
-                                    coverage=coverage, scheduler=scheduler, positions=z,
-                                    seed=seed, progress=progress, **options)
+        fd, diag = build_field_data(
+            plots,
+            radars,
+            cells=cells,
+            knot_spacing=knot_spacing,
+            coverage=coverage,
+            scheduler=scheduler,
+            positions=z,
+            seed=seed,
+            progress=progress,
+            **options,
+        )
     timings["field_data"] = time.perf_counter() - clock
     for reason, n in diag.dropped_plots.items():
         dropped[reason] = dropped.get(reason, 0) + int(n)
-    return FieldBuild(fd, diag, plots, dropped, cleaning, [str(w.message) for w in caught],
-                      timings)
+    return FieldBuild(fd, diag, plots, dropped, cleaning, [str(w.message) for w in caught], timings)
 
 
-def save_field_data(data: FieldData, path: Any, *, names: tuple[str, ...] | list[str] = (),
-                    name: str = "biasfield.save_field_data path") -> Any:
+def save_field_data(
+    data: FieldData,
+    path: Any,
+    *,
+    names: tuple[str, ...] | list[str] = (),
+    name: str = "biasfield.save_field_data path",
+) -> Any:
     """Write ``data`` to the ``.npz`` :meth:`FieldData.load
     <optmodels.biasfield.cells.FieldData.load>` reads (the keys of ``FieldData.save``),
     with the radars' ``names`` if given, exactly at ``path`` and atomically
@@ -151,17 +173,22 @@ def save_field_data(data: FieldData, path: Any, *, names: tuple[str, ...] | list
 
     data = as_instance("biasfield.save_field_data data", data, FieldData)
     upper = sparse.triu(data.adjacency, k=1).tocoo()
-    arrays: dict[str, Any] = {"radars": data.radars, "centers": data.centers, "xi": data.xi,
-                              "edges": np.column_stack([upper.row, upper.col]).astype(np.int64),
-                              "P": data.P}
+    arrays: dict[str, Any] = {
+        "radars": data.radars,
+        "centers": data.centers,
+        "xi": data.xi,
+        "edges": np.column_stack([upper.row, upper.col]).astype(np.int64),
+        "P": data.P,
+    }
     for key in ("xi_cov", "jacobians", "heights", "geodetic", "origin", "seen"):
         if getattr(data, key) is not None:
             arrays[key] = getattr(data, key)
     names = tuple(str(v) for v in names)
     if names:
         if len(names) != data.m:
-            raise ProblemError(f"biasfield.save_field_data names: {len(names)} names for "
-                               f"{data.m} radars")
+            raise ProblemError(
+                f"biasfield.save_field_data names: {len(names)} names for {data.m} radars"
+            )
         arrays["names"] = np.array(names, dtype=str)
     return save_npz(path, name=name, **arrays)
 

@@ -19,19 +19,30 @@ from numpy.typing import ArrayLike
 
 from optmodels.core import MAX_MAGNITUDE, FloatArray, ProblemError, as_finite_array
 
-__all__ = ["BATCH", "hat_basis", "inv2", "locate", "normal_band", "polyline_knots",
-           "polyline_normal", "solve_band", "solve_bands", "split_at_gaps", "whiten"]
+__all__ = [
+    "BATCH",
+    "hat_basis",
+    "inv2",
+    "locate",
+    "normal_band",
+    "polyline_knots",
+    "polyline_normal",
+    "solve_band",
+    "solve_bands",
+    "split_at_gaps",
+    "whiten",
+]
 
 
 def hat_basis(t: ArrayLike, knots: FloatArray) -> FloatArray:
     """(T, K) hat-function values h_k(t) of the polyline with these knots (t inside;
     knots strictly increasing, s)."""
-    tt = as_finite_array("biasfield.hat_basis t", t, ndim=(0, 1),
-                         max_abs=MAX_MAGNITUDE).reshape(-1)
+    tt = as_finite_array("biasfield.hat_basis t", t, ndim=(0, 1), max_abs=MAX_MAGNITUDE).reshape(-1)
     knots = as_finite_array("biasfield.hat_basis knots", knots, ndim=1, max_abs=MAX_MAGNITUDE)
     if knots.size < 2 or np.any(np.diff(knots) <= 0):
-        raise ProblemError("biasfield.hat_basis knots: need ≥ 2 strictly increasing knots, "
-                           f"got {knots.size}")
+        raise ProblemError(
+            f"biasfield.hat_basis knots: need ≥ 2 strictly increasing knots, got {knots.size}"
+        )
     k = np.clip(np.searchsorted(knots, tt, side="right") - 1, 0, len(knots) - 2)
     u = (tt - knots[k]) / (knots[k + 1] - knots[k])
     out = np.zeros((tt.size, len(knots)))
@@ -82,8 +93,9 @@ def polyline_knots(t: FloatArray, spacing: float) -> FloatArray:
     knots = np.concatenate([[t0], inner, [t1]])
     while knots.size > 2:
         k, u = locate(t, knots)
-        support = (np.bincount(k, 1.0 - u, minlength=knots.size)
-                   + np.bincount(k + 1, u, minlength=knots.size))
+        support = np.bincount(k, 1.0 - u, minlength=knots.size) + np.bincount(
+            k + 1, u, minlength=knots.size
+        )
         weak = np.flatnonzero(support[1:-1] < 0.5) + 1
         if weak.size == 0:
             break
@@ -91,8 +103,9 @@ def polyline_knots(t: FloatArray, spacing: float) -> FloatArray:
     return knots
 
 
-def polyline_normal(t: FloatArray, knots: FloatArray, vinv: FloatArray, z: FloatArray
-                    ) -> tuple[FloatArray, FloatArray, FloatArray]:
+def polyline_normal(
+    t: FloatArray, knots: FloatArray, vinv: FloatArray, z: FloatArray
+) -> tuple[FloatArray, FloatArray, FloatArray]:
     """Normal equations of the polyline GLS: N = Σ_j (h_j h_jᵀ) ⊗ V_j⁻¹ (2K, 2K),
     b = Σ_j h_j ⊗ V_j⁻¹z_j (θ row-major), and the hat values h (n, K). Each plot touches
     the two knots of its interval, so N is block-tridiagonal; it is assembled by scatter
@@ -109,12 +122,12 @@ def polyline_normal(t: FloatArray, knots: FloatArray, vinv: FloatArray, z: Float
         np.add.at(bblk, idx + p_, wts[:, p_, None] * vz)
         for q_ in range(2):
             np.add.at(nblk, (idx + p_, idx + q_), (wts[:, p_] * wts[:, q_])[:, None, None] * vinv)
-    return nblk.transpose(0, 2, 1, 3).reshape(2 * k, 2 * k), bblk.reshape(-1), \
-        hat_basis(t, knots)
+    return nblk.transpose(0, 2, 1, 3).reshape(2 * k, 2 * k), bblk.reshape(-1), hat_basis(t, knots)
 
 
-def normal_band(t: FloatArray, knots: FloatArray, vinv: FloatArray, z: FloatArray
-                 ) -> tuple[FloatArray, FloatArray, FloatArray, np.ndarray, FloatArray]:
+def normal_band(
+    t: FloatArray, knots: FloatArray, vinv: FloatArray, z: FloatArray
+) -> tuple[FloatArray, FloatArray, FloatArray, np.ndarray, FloatArray]:
     """The blocks of the block-tridiagonal N: diagonal D (K, 2, 2), upper B (K−1, 2, 2)
     (B_k = N[k, k+1]), right side b (K, 2); and each plot's interval and weight."""
     k = knots.size
@@ -124,8 +137,9 @@ def normal_band(t: FloatArray, knots: FloatArray, vinv: FloatArray, z: FloatArra
     vz = np.einsum("nab,nb->na", vinv, z)
 
     def acc(at: np.ndarray, w: FloatArray, vals: FloatArray, size: int) -> FloatArray:
-        return np.stack([np.bincount(at, w * vals[:, c], minlength=size)
-                         for c in range(vals.shape[1])], axis=1)
+        return np.stack(
+            [np.bincount(at, w * vals[:, c], minlength=size) for c in range(vals.shape[1])], axis=1
+        )
 
     diag = (acc(idx, w0 * w0, flat, k) + acc(idx + 1, w1 * w1, flat, k)).reshape(k, 2, 2)
     upper = acc(idx, w0 * w1, flat, k - 1).reshape(k - 1, 2, 2)
@@ -133,8 +147,9 @@ def normal_band(t: FloatArray, knots: FloatArray, vinv: FloatArray, z: FloatArra
     return diag, upper, rhs, idx, u
 
 
-def solve_band(diag: FloatArray, upper: FloatArray, rhs: FloatArray
-                ) -> tuple[FloatArray, FloatArray, FloatArray] | None:
+def solve_band(
+    diag: FloatArray, upper: FloatArray, rhs: FloatArray
+) -> tuple[FloatArray, FloatArray, FloatArray] | None:
     """Block Cholesky of the block-tridiagonal SPD N (2×2 blocks, plain floats): θ = N⁻¹b
     and the block band of N⁻¹ (diagonal, upper), or None if N is not numerically
     positive definite.
@@ -191,9 +206,11 @@ def solve_band(diag: FloatArray, upper: FloatArray, rhs: FloatArray
         cnext[j] = [[n00, n01], [n10, n11]]
         i00, i01, i11 = sinv[j]
         # Σ_j = (AΣ) Aᵀ + S⁻¹
-        c00, c01, c11 = (n00 * a00 + n01 * a01 + i00,
-                         0.5 * (n00 * a10 + n01 * a11 + n10 * a00 + n11 * a01) + i01,
-                         n10 * a10 + n11 * a11 + i11)
+        c00, c01, c11 = (
+            n00 * a00 + n01 * a01 + i00,
+            0.5 * (n00 * a10 + n01 * a11 + n10 * a00 + n11 * a01) + i01,
+            n10 * a10 + n11 * a11 + i11,
+        )
         cdiag[j] = [[c00, c01], [c01, c11]]
         rx0, rx1 = red[j]
         x0, x1 = rx0 + a00 * x0 + a01 * x1, rx1 + a10 * x0 + a11 * x1
@@ -210,8 +227,9 @@ def whiten(vinv: FloatArray, r: FloatArray) -> FloatArray:
 BATCH = 256
 
 
-def solve_bands(bands: list[tuple[FloatArray, ...]]
-                 ) -> list[tuple[FloatArray, FloatArray, FloatArray] | None]:
+def solve_bands(
+    bands: list[tuple[FloatArray, ...]],
+) -> list[tuple[FloatArray, FloatArray, FloatArray] | None]:
     """:func:`solve_band` for many pieces at once: the same recursion on arrays over the
     pieces (sorted by K, padded with identity blocks that couple to nothing), so that the
     Python loop runs over the knots of a batch, not over every knot of every piece."""
@@ -219,7 +237,7 @@ def solve_bands(bands: list[tuple[FloatArray, ...]]
     sizes = np.array([b[0].shape[0] for b in bands], dtype=np.int64)
     order = np.argsort(sizes, kind="stable")
     for start in range(0, order.size, BATCH):
-        idx = order[start:start + BATCH]
+        idx = order[start : start + BATCH]
         nb, kmax = idx.size, int(sizes[idx].max())
         d = np.tile(np.array([1.0, 0.0, 0.0, 1.0]), (nb, kmax, 1))
         bl = np.zeros((nb, max(kmax - 1, 0), 4))
@@ -227,7 +245,7 @@ def solve_bands(bands: list[tuple[FloatArray, ...]]
         for j, i in enumerate(idx):
             k = int(sizes[i])
             d[j, :k] = bands[i][0].reshape(k, 4)
-            bl[j, :k - 1] = bands[i][1].reshape(k - 1, 4)
+            bl[j, : k - 1] = bands[i][1].reshape(k - 1, 4)
             r[j, :k] = bands[i][2]
         k_of = sizes[idx]
         scale = np.array([np.abs(bands[i][0][:, (0, 1), (0, 1)]).max() for i in idx])
@@ -272,9 +290,11 @@ def solve_bands(bands: list[tuple[FloatArray, ...]]
             n10, n11 = a10 * c00 + a11 * c01, a10 * c01 + a11 * c11
             cnext[j] = n00, n01, n10, n11
             i00, i01, i11 = sinv[j]
-            c00, c01, c11 = (n00 * a00 + n01 * a01 + i00,
-                             0.5 * (n00 * a10 + n01 * a11 + n10 * a00 + n11 * a01) + i01,
-                             n10 * a10 + n11 * a11 + i11)
+            c00, c01, c11 = (
+                n00 * a00 + n01 * a01 + i00,
+                0.5 * (n00 * a10 + n01 * a11 + n10 * a00 + n11 * a01) + i01,
+                n10 * a10 + n11 * a11 + i11,
+            )
             cdiag[j] = c00, c01, c11
             rx0, rx1 = red[j]
             x0, x1 = rx0 + a00 * x0 + a01 * x1, rx1 + a10 * x0 + a11 * x1
@@ -285,5 +305,5 @@ def solve_bands(bands: list[tuple[FloatArray, ...]]
         for j, i in enumerate(idx):
             if ok[j]:
                 k = int(sizes[i])
-                out[i] = (th[j, :k].copy(), cd[j, :k].copy(), cn[j, :k - 1].copy())
+                out[i] = (th[j, :k].copy(), cd[j, :k].copy(), cn[j, : k - 1].copy())
     return out

@@ -78,8 +78,7 @@ class FieldSolution(Solution):
     frame: dict[str, Any] = dataclasses.field(default_factory=dict, repr=False)
     seen: np.ndarray | None = None
 
-    def map(self, *, names: Sequence[str] = (), max_distance: float | None = None
-            ) -> FieldMap:
+    def map(self, *, names: Sequence[str] = (), max_distance: float | None = None) -> FieldMap:
         """The field as a :class:`~optmodels.biasfield.usage.FieldMap` (the P1 interpolant
         on the Delaunay triangulation of ``centers``, with the data's frame and the radars'
         ``names`` if given; ``max_distance`` (m) bounds the covered area, default 1.5 × the
@@ -88,21 +87,32 @@ class FieldSolution(Solution):
         from optmodels.biasfield.usage import FieldMap
 
         if not self.status.ok:
-            raise ProblemError(f"biasfield.FieldSolution.map: status {self.status.value} has "
-                               "no field to use")
+            raise ProblemError(
+                f"biasfield.FieldSolution.map: status {self.status.value} has no field to use"
+            )
         c = np.asarray(self.centers, dtype=float)
         if c.ndim != 2 or c.shape[0] != np.shape(self.field)[0]:
-            raise ProblemError("biasfield.FieldSolution.map: the solution carries no cell "
-                               f"centres for its field (centers {c.shape}, field "
-                               f"{np.shape(self.field)}); use biasfield.field_map(solution, "
-                               "data)")
+            raise ProblemError(
+                "biasfield.FieldSolution.map: the solution carries no cell "
+                f"centres for its field (centers {c.shape}, field "
+                f"{np.shape(self.field)}); use biasfield.field_map(solution, "
+                "data)"
+            )
         key = (tuple(str(n) for n in names), max_distance)
         cache = self.__dict__.get("_maps")
         if cache is None or cache[0] != key or cache[2] is not self.field:
             dmax = float("nan") if max_distance is None else max_distance
-            fm = FieldMap(c, self.field, dmax, key[0], self.frame.get("sites"),
-                          self.frame.get("geodetic"), self.frame.get("origin"),
-                          self.frame.get("chain", ""), seen=self.seen)
+            fm = FieldMap(
+                c,
+                self.field,
+                dmax,
+                key[0],
+                self.frame.get("sites"),
+                self.frame.get("geodetic"),
+                self.frame.get("origin"),
+                self.frame.get("chain", ""),
+                seen=self.seen,
+            )
             cache = (key, fm, self.field)
             self.__dict__["_maps"] = cache
         fm_cached: FieldMap = cache[1]
@@ -153,17 +163,20 @@ def _edges(data: FieldData) -> tuple[np.ndarray, np.ndarray, FloatArray]:
 def check_graph(data: FieldData) -> tuple[int, np.ndarray]:
     """Connected components of the neighbour graph; isolated cells are refused."""
     if not isinstance(data, FieldData):
-        raise ProblemError(f"biasfield data: expected a FieldData (biasfield.build_field_data "
-                           f"or FieldData(...)), got {type(data).__name__}")
+        raise ProblemError(
+            f"biasfield data: expected a FieldData (biasfield.build_field_data "
+            f"or FieldData(...)), got {type(data).__name__}"
+        )
     n, labels = csgraph.connected_components(_overlap_graph(data), directed=False)
     sizes = np.bincount(labels)
     lonely = np.flatnonzero(sizes[labels] == 1)
     if lonely.size:
-        what = ("have no neighbour" if data.seen is None else
-                "share no radar with any neighbour")
-        raise ProblemError(f"adjacency: cells {lonely[:10].tolist()} {what}; their "
-                           "field is not determined by the smoothness criterion (add edges "
-                           "or drop them)")
+        what = "have no neighbour" if data.seen is None else "share no radar with any neighbour"
+        raise ProblemError(
+            f"adjacency: cells {lonely[:10].tolist()} {what}; their "
+            "field is not determined by the smoothness criterion (add edges "
+            "or drop them)"
+        )
     return int(n), labels
 
 
@@ -176,8 +189,10 @@ def _overlap_graph(data: FieldData) -> sparse.csr_matrix:
         return data.adjacency
     upper = sparse.triu(data.adjacency, k=1).tocoo()
     share = np.any(data.seen[upper.row] & data.seen[upper.col], axis=1)
-    a = sparse.csr_matrix((np.ones(int(share.sum())), (upper.row[share], upper.col[share])),
-                          shape=data.adjacency.shape)
+    a = sparse.csr_matrix(
+        (np.ones(int(share.sum())), (upper.row[share], upper.col[share])),
+        shape=data.adjacency.shape,
+    )
     return (a + a.T).tocsr()
 
 
@@ -195,9 +210,10 @@ def _edge_difference(data: FieldData, weights: FloatArray) -> sparse.csr_matrix:
     (2m·E × 2mK)."""
     i, j, _ = _edges(data)
     e = np.arange(i.size)
-    diff = sparse.csr_matrix((np.concatenate([weights, -weights]),
-                              (np.concatenate([e, e]), np.concatenate([i, j]))),
-                             shape=(i.size, data.k))
+    diff = sparse.csr_matrix(
+        (np.concatenate([weights, -weights]), (np.concatenate([e, e]), np.concatenate([i, j]))),
+        shape=(i.size, data.k),
+    )
     lt = np.linalg.cholesky(p_full(data)).T
     g = sparse.kron(diff, sparse.csr_matrix(lt), format="csr")
     on = _edge_radars(data)
@@ -234,20 +250,24 @@ def r_matrix(data: FieldData) -> sparse.csr_matrix:
     if data.seen is not None:
         g = edge_factor(data)
         return (g.T @ g).tocsr()
-    return sparse.kron(laplacian(data.centers, data.adjacency), sparse.csr_matrix(p_full(data)),
-                       format="csr")
+    return sparse.kron(
+        laplacian(data.centers, data.adjacency), sparse.csr_matrix(p_full(data)), format="csr"
+    )
 
 
-def box_bounds(data: FieldData, box: Sequence[float] | None, where: str = "biasfield.solve"
-               ) -> FloatArray | None:
+def box_bounds(
+    data: FieldData, box: Sequence[float] | None, where: str = "biasfield.solve"
+) -> FloatArray | None:
     """The box (8) as bounds on φ (2mK,): ``box`` = (K1 range bound, m; K2 azimuth bound,
     rad), two positive finite numbers, or None."""
     as_instance(f"{where} data", data, FieldData)
     if box is None:
         return None
     if isinstance(box, str | bytes) or np.ndim(box) != 1 or np.size(box) != 2:
-        raise ProblemError(f"{where} box: expected a pair (K1 range bound in m, K2 azimuth "
-                           f"bound in rad), got {box!r:.80}")
+        raise ProblemError(
+            f"{where} box: expected a pair (K1 range bound in m, K2 azimuth "
+            f"bound in rad), got {box!r:.80}"
+        )
     k1 = as_positive(f"{where} box[0] (K1, range bound, m)", box[0])
     k2 = as_positive(f"{where} box[1] (K2, azimuth bound, rad)", box[1])
     return np.tile([k1, k2], data.m * data.k)
@@ -269,8 +289,9 @@ def variable_scales(data: FieldData, phi0: FloatArray) -> FloatArray:
     return np.tile(s, data.m * data.k)
 
 
-def check_arguments(fn: str, data: FieldData, formulation: Any, solver: Any, box: Any
-                    ) -> tuple[int, Any, str, Any, Any]:
+def check_arguments(
+    fn: str, data: FieldData, formulation: Any, solver: Any, box: Any
+) -> tuple[int, Any, str, Any, Any]:
     """The checked arguments common to :func:`~optmodels.biasfield.selection.solve` and
     :func:`~optmodels.biasfield.lipschitz.solve_lipschitz`: the number of graph components,
     the formulation, the solver's name, the box bound and the uncertainty sets (10)."""
@@ -289,18 +310,27 @@ def run_solver(where: str, prob: cp.Problem, solver: str, opts: dict[str, Any]) 
         raise ProblemError(f"{where} options: {exc}") from None
 
 
-def failed_solution(data: FieldData, sets: Sets, common: dict[str, Any],
-                    bound: FloatArray | None) -> FieldSolution:
+def failed_solution(
+    data: FieldData, sets: Sets, common: dict[str, Any], bound: FloatArray | None
+) -> FieldSolution:
     """The result of a method that produced no field (a failed solve, an overflow, a
     proven-infeasible box): φ and η NaN, packed and re-checked by :func:`pack_solution`."""
     phi0, phi1 = sets
-    return pack_solution(data, sets, np.full(phi0.size, np.nan), np.full(phi1.shape[1], np.nan),
-                   common, bound, None)
+    return pack_solution(
+        data, sets, np.full(phi0.size, np.nan), np.full(phi1.shape[1], np.nan), common, bound, None
+    )
 
 
-def pack_solution(data: FieldData, sets: Sets, phi: FloatArray, eta: FloatArray,
-                  common: dict[str, Any], bound: FloatArray | None, duals: FloatArray | None,
-                  lipschitz: float | None = None) -> FieldSolution:
+def pack_solution(
+    data: FieldData,
+    sets: Sets,
+    phi: FloatArray,
+    eta: FloatArray,
+    common: dict[str, Any],
+    bound: FloatArray | None,
+    duals: FloatArray | None,
+    lipschitz: float | None = None,
+) -> FieldSolution:
     """A method's φ, η (and box multipliers ``duals``) packed as a :class:`FieldSolution`
     with the residuals of the sets (10) and of the box (8) and the box's active set; the
     status in ``common`` is not judged here (the gate is
@@ -317,20 +347,31 @@ def pack_solution(data: FieldData, sets: Sets, phi: FloatArray, eta: FloatArray,
         active[phi >= bound - tol] = 1
         active[phi <= -bound + tol] = -1
     dual = np.zeros(phi.size) if duals is None else duals
-    return FieldSolution(objective=_objective(edge_factor(data), phi), residuals=res,
-                         field=phi.reshape(k, m, 2), phi=phi, eta=eta.reshape(k, 2),
-                         active=active.reshape(k, m, 2), duals=dual.reshape(k, m, 2),
-                         lipschitz=lipschitz, centers=data.centers.copy(),
-                         frame=_frame(data),
-                         seen=None if data.seen is None else data.seen.copy(), **common)
+    return FieldSolution(
+        objective=_objective(edge_factor(data), phi),
+        residuals=res,
+        field=phi.reshape(k, m, 2),
+        phi=phi,
+        eta=eta.reshape(k, 2),
+        active=active.reshape(k, m, 2),
+        duals=dual.reshape(k, m, 2),
+        lipschitz=lipschitz,
+        centers=data.centers.copy(),
+        frame=_frame(data),
+        seen=None if data.seen is None else data.seen.copy(),
+        **common,
+    )
 
 
 def _frame(data: FieldData) -> dict[str, Any]:
     """The frame a field on ``data``'s cells belongs to (see :class:`FieldSolution`)."""
     three = data.geodetic is not None and data.origin is not None
-    return {"sites": data.radars.copy(), "chain": "3d" if three else "2d",
-            "geodetic": None if not three else np.array(data.geodetic, dtype=float),
-            "origin": None if not three else np.array(data.origin, dtype=float)}
+    return {
+        "sites": data.radars.copy(),
+        "chain": "3d" if three else "2d",
+        "geodetic": None if not three else np.array(data.geodetic, dtype=float),
+        "origin": None if not three else np.array(data.origin, dtype=float),
+    }
 
 
 def lipschitz_data(data: FieldData, sets: Sets) -> dict[str, Any]:
@@ -349,6 +390,15 @@ def lipschitz_data(data: FieldData, sets: Sets) -> dict[str, Any]:
     lip0 = float(np.max(np.linalg.norm((dmat @ u0).reshape(-1, m2), axis=1) / dist)) * ref
     if not (np.isfinite(lip0) and lip0 > 0):
         lip0 = 1.0
-    return {"sc": sc, "u0": u0, "bmat": bmat, "dmat": dmat, "dist": dist, "ref": ref,
-            "lip0": lip0, "jump": jump, "db": (dmat @ bmat).tocsr() / lip0,
-            "c": dmat @ u0 / lip0}
+    return {
+        "sc": sc,
+        "u0": u0,
+        "bmat": bmat,
+        "dmat": dmat,
+        "dist": dist,
+        "ref": ref,
+        "lip0": lip0,
+        "jump": jump,
+        "db": (dmat @ bmat).tocsr() / lip0,
+        "c": dmat @ u0 / lip0,
+    }

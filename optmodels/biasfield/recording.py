@@ -54,8 +54,15 @@ from optmodels.core import (
     as_positive,
 )
 
-__all__ = ["AdsbReports", "Recording", "RecordingReport", "adsb_height_spikes", "fl_to_height",
-           "read_recording", "read_sites"]
+__all__ = [
+    "AdsbReports",
+    "Recording",
+    "RecordingReport",
+    "adsb_height_spikes",
+    "fl_to_height",
+    "read_recording",
+    "read_sites",
+]
 
 #: Earth radius of the ISA geopotential ↔ geometric conversion (m, ICAO Doc 7488).
 R_ISA = 6_356_766.0
@@ -71,8 +78,9 @@ def fl_to_height(pressure_altitude: Any, geoid_undulation: float = 0.0) -> Float
     undulation, m) above the WGS-84 ellipsoid. Exact only in the standard atmosphere.
     """
     hp = np.asarray(pressure_altitude, dtype=float)
-    n = as_number("biasfield.fl_to_height geoid_undulation", geoid_undulation,
-                  low=-120.0, high=120.0)
+    n = as_number(
+        "biasfield.fl_to_height geoid_undulation", geoid_undulation, low=-120.0, high=120.0
+    )
     return R_ISA * hp / (R_ISA - hp) + n
 
 
@@ -123,14 +131,19 @@ class RecordingReport:
 
     def as_dict(self) -> dict[str, Any]:
         """JSON-ready (for ``--json``)."""
-        return {"plots_read": self.plots_read, "plots_kept": self.plots_kept,
-                "plots_dropped": dict(self.dropped), "heights": dict(self.heights),
-                "adsb_read": self.adsb_read, "adsb_kept": self.adsb_kept,
-                "adsb_dropped": dict(self.adsb_dropped),
-                "records": {f"CAT{k:03d}": v for k, v in self.records.items()},
-                "decoder_dropped": dict(self.decoder),
-                "unknown_sac_sic": [list(i) for i in self.unknown_ids],
-                "adsb_heights_rejected": self.adsb_heights_rejected}
+        return {
+            "plots_read": self.plots_read,
+            "plots_kept": self.plots_kept,
+            "plots_dropped": dict(self.dropped),
+            "heights": dict(self.heights),
+            "adsb_read": self.adsb_read,
+            "adsb_kept": self.adsb_kept,
+            "adsb_dropped": dict(self.adsb_dropped),
+            "records": {f"CAT{k:03d}": v for k, v in self.records.items()},
+            "decoder_dropped": dict(self.decoder),
+            "unknown_sac_sic": [list(i) for i in self.unknown_ids],
+            "adsb_heights_rejected": self.adsb_heights_rejected,
+        }
 
 
 @dataclass(frozen=True)
@@ -173,8 +186,9 @@ class Recording:
         return [f"{int(a):06x}" for a in self.addresses]
 
 
-def read_sites(path: str | os.PathLike[str], *,
-               origin: tuple[float, float, float] | str | None = None) -> RadarSet:
+def read_sites(
+    path: str | os.PathLike[str], *, origin: tuple[float, float, float] | str | None = None
+) -> RadarSet:
     """Radar sites of a recording: a CSV (or Parquet) with ``name, sac, sic, lat, lon,
     alt`` (deg, deg, m above the WGS-84 ellipsoid) and the noise columns ``sigma_range``
     (m), ``sigma_azimuth`` (deg), ``max_range`` (m) → a 3-D :class:`RadarSet` with
@@ -194,8 +208,7 @@ def read_sites(path: str | os.PathLike[str], *,
     tab = table_file(path, "radars")
     for col in ("sac", "sic", "lat", "lon", "alt"):
         tab.need(col)
-    radars, _ = read_radars(path, origin="mean" if origin is None else origin,
-                            geometry="3d")
+    radars, _ = read_radars(path, origin="mean" if origin is None else origin, geometry="3d")
     return radars
 
 
@@ -204,18 +217,26 @@ def _paths(paths: Any) -> list[Any]:
         return [paths]
     if isinstance(paths, Iterable):
         return list(paths)
-    raise ProblemError(f"biasfield.read_recording paths: expected a file path or a list of "
-                       f"paths, got {type(paths).__name__}")
+    raise ProblemError(
+        f"biasfield.read_recording paths: expected a file path or a list of "
+        f"paths, got {type(paths).__name__}"
+    )
 
 
-def read_recording(paths: str | os.PathLike[str] | Iterable[str | os.PathLike[str]],
-                   radars: RadarSet | str | os.PathLike[str], *,
-                   origin: tuple[float, float, float] | str | None = None,
-                   date: Any = None, max_gap: float = 20.0, geoid_undulation: float = 0.0,
-                   drop_out_of_range: bool = True,
-                   editions: dict[int, tuple[int, int]] | None = None,
-                   height_margin: float = 300.0, height_margin_rel: float = 0.08,
-                   clean_heights: bool = True) -> Recording:
+def read_recording(
+    paths: str | os.PathLike[str] | Iterable[str | os.PathLike[str]],
+    radars: RadarSet | str | os.PathLike[str],
+    *,
+    origin: tuple[float, float, float] | str | None = None,
+    date: Any = None,
+    max_gap: float = 20.0,
+    geoid_undulation: float = 0.0,
+    drop_out_of_range: bool = True,
+    editions: dict[int, tuple[int, int]] | None = None,
+    height_margin: float = 300.0,
+    height_margin_rel: float = 0.08,
+    clean_heights: bool = True,
+) -> Recording:
     """Read an ASTERIX recording (CAT048 plots, CAT021 ADS-B; one file or several) into the
     bias-field tables.
 
@@ -269,26 +290,29 @@ def read_recording(paths: str | os.PathLike[str] | Iterable[str | os.PathLike[st
     radars = as_instance(f"{fn} radars", radars, RadarSet)
     if origin is not None and not isinstance(origin, str) and radars.origin is not None:
         try:
-            same = np.allclose(np.asarray(origin, dtype=float), radars.origin, rtol=0,
-                               atol=1e-9)
+            same = np.allclose(np.asarray(origin, dtype=float), radars.origin, rtol=0, atol=1e-9)
         except (TypeError, ValueError):
             same = False
         if not same:
-            raise ProblemError(f"{fn} origin: {origin!r:.60} differs from the RadarSet's "
-                               f"origin {tuple(map(float, radars.origin))}; give the origin "
-                               "to read_sites (a RadarSet carries its own)")
+            raise ProblemError(
+                f"{fn} origin: {origin!r:.60} differs from the RadarSet's "
+                f"origin {tuple(map(float, radars.origin))}; give the origin "
+                "to read_sites (a RadarSet carries its own)"
+            )
     if not radars.is_3d or not radars.ids:
-        raise ProblemError(f"{fn} radars: need a 3-D RadarSet (geodetic sites) with SAC/SIC "
-                           "ids, e.g. from read_sites")
+        raise ProblemError(
+            f"{fn} radars: need a 3-D RadarSet (geodetic sites) with SAC/SIC "
+            "ids, e.g. from read_sites"
+        )
     max_gap = as_positive(f"{fn} max_gap", max_gap)
     height_margin = as_positive(f"{fn} height_margin (m)", height_margin)
-    height_margin_rel = as_number(f"{fn} height_margin_rel", height_margin_rel, low=0.0,
-                                  high=1.0)
+    height_margin_rel = as_number(f"{fn} height_margin_rel", height_margin_rel, low=0.0, high=1.0)
     clean_heights = as_flag(f"{fn} clean_heights", clean_heights)
     drop_out_of_range = as_flag(f"{fn} drop_out_of_range", drop_out_of_range)
     fl_to_height(0.0, geoid_undulation)  # checks it
-    data = read_asterix([Path(p) if isinstance(p, str) else p for p in _paths(paths)],
-                        date=date, editions=editions)
+    data = read_asterix(
+        [Path(p) if isinstance(p, str) else p for p in _paths(paths)], date=date, editions=editions
+    )
     c, a = data.cat048, data.cat021
     dropped: dict[str, int] = {}
 
@@ -302,16 +326,19 @@ def read_recording(paths: str | os.PathLike[str] | Iterable[str | os.PathLike[st
         lut[256 * sac + sic] = i
     radar = lut[256 * c.sac + c.sic] if len(c) else np.zeros(0, np.int64)
     keep = radar >= 0
-    unknown = tuple(sorted({(int(s), int(t)) for s, t in zip(c.sac[~keep], c.sic[~keep],
-                                                            strict=True)}))
+    unknown = tuple(
+        sorted({(int(s), int(t)) for s, t in zip(c.sac[~keep], c.sic[~keep], strict=True)})
+    )
     drop("unknown SAC/SIC", ~keep)
     no_addr = keep & (c.address < 0)
     drop("no aircraft address (I048/220)", no_addr)
     keep &= ~no_addr
     over = keep & (c.range > radars.max_range[np.maximum(radar, 0)])
     if over.any() and not drop_out_of_range:
-        raise ProblemError(f"{fn}: {int(over.sum())} plots beyond their radar's max_range "
-                           "(drop_out_of_range=False)")
+        raise ProblemError(
+            f"{fn}: {int(over.sum())} plots beyond their radar's max_range "
+            "(drop_out_of_range=False)"
+        )
     drop("beyond max_range", over)
     keep &= ~over
 
@@ -324,42 +351,85 @@ def read_recording(paths: str | os.PathLike[str] | Iterable[str | os.PathLike[st
     a_obj = np.searchsorted(addresses, a.address[a_keep])
     a_t = a.time[a_keep]
     order = np.lexsort((a_t, a_obj))
-    adsb = AdsbReports(a_t[order], a_obj[order], a.address[a_keep][order],
-                       a.latitude[a_keep][order], a.longitude[a_keep][order],
-                       a.height[a_keep][order], a.pressure_altitude[a_keep][order])
+    adsb = AdsbReports(
+        a_t[order],
+        a_obj[order],
+        a.address[a_keep][order],
+        a.latitude[a_keep][order],
+        a.longitude[a_keep][order],
+        a.height[a_keep][order],
+        a.pressure_altitude[a_keep][order],
+    )
 
     # --- plot heights: CAT021 spikes out, then interpolated, then checked against FL
-    spikes = (adsb_height_spikes(adsb.object, adsb.time, adsb.height) if clean_heights
-              else np.zeros(len(adsb), dtype=bool))
+    spikes = (
+        adsb_height_spikes(adsb.object, adsb.time, adsb.height)
+        if clean_heights
+        else np.zeros(len(adsb), dtype=bool)
+    )
     h_clean = np.where(spikes, np.nan, adsb.height)
     p_t = c.time[keep]
     p_obj = np.searchsorted(addresses, c.address[keep])
     h_adsb = _interp_by_object(adsb.object, adsb.time, h_clean, p_obj, p_t, max_gap)
     hp = c.pressure_altitude[keep]
     h_fl = fl_to_height(hp, geoid_undulation)
-    off = (np.isfinite(h_adsb) & np.isfinite(h_fl)
-           & (np.abs(h_adsb - h_fl) > height_margin + height_margin_rel * np.abs(hp)))
-    source = np.where(off, 3, np.where(np.isfinite(h_adsb), 1,
-                                       np.where(np.isfinite(h_fl), 2, 0)))
+    off = (
+        np.isfinite(h_adsb)
+        & np.isfinite(h_fl)
+        & (np.abs(h_adsb - h_fl) > height_margin + height_margin_rel * np.abs(hp))
+    )
+    source = np.where(off, 3, np.where(np.isfinite(h_adsb), 1, np.where(np.isfinite(h_fl), 2, 0)))
     height = np.where(source == 1, h_adsb, np.where(source >= 2, h_fl, np.nan))
     order_p = np.argsort(p_t, kind="stable")
-    plots = PlotTable(p_t[order_p], radar[keep][order_p], c.range[keep][order_p],
-                      c.azimuth[keep][order_p], p_obj[order_p], height[order_p])
+    plots = PlotTable(
+        p_t[order_p],
+        radar[keep][order_p],
+        c.range[keep][order_p],
+        c.azimuth[keep][order_p],
+        p_obj[order_p],
+        height[order_p],
+    )
     heights = {HEIGHT_SOURCES[k]: int(np.sum(source == k)) for k in (1, 2, 0)}
     if (source == 3).any():
         heights[HEIGHT_SOURCES[3]] = int(np.sum(source == 3))
-    report = RecordingReport(len(c), len(plots), dropped, heights, len(a), len(adsb),
-                             adsb_dropped, dict(data.records), dict(data.dropped), unknown,
-                             int(spikes.sum()))
+    report = RecordingReport(
+        len(c),
+        len(plots),
+        dropped,
+        heights,
+        len(a),
+        len(adsb),
+        adsb_dropped,
+        dict(data.records),
+        dict(data.dropped),
+        unknown,
+        int(spikes.sum()),
+    )
     rows = np.flatnonzero(keep)[order_p]
-    return Recording(plots, adsb, radars, addresses, source[order_p],
-                     c.mode3a[keep][order_p], data.epoch, report, rows,
-                     np.asarray(c.offset)[rows], np.asarray(c.file)[rows])
+    return Recording(
+        plots,
+        adsb,
+        radars,
+        addresses,
+        source[order_p],
+        c.mode3a[keep][order_p],
+        data.epoch,
+        report,
+        rows,
+        np.asarray(c.offset)[rows],
+        np.asarray(c.file)[rows],
+    )
 
 
-def adsb_height_spikes(obj: np.ndarray, t: FloatArray, height: FloatArray, *,
-                       neighbours: int = 2, tolerance: float = 150.0,
-                       vertical_rate: float = 100.0) -> np.ndarray:
+def adsb_height_spikes(
+    obj: np.ndarray,
+    t: FloatArray,
+    height: FloatArray,
+    *,
+    neighbours: int = 2,
+    tolerance: float = 150.0,
+    vertical_rate: float = 100.0,
+) -> np.ndarray:
     """(n,) True for the ADS-B geometric heights that are spikes.
 
     Reports sorted by (object, time). A Hampel filter: each finite height h_k is compared
@@ -399,8 +469,14 @@ def adsb_height_spikes(obj: np.ndarray, t: FloatArray, height: FloatArray, *,
     return out
 
 
-def _interp_by_object(obj: np.ndarray, t: FloatArray, v: FloatArray, q_obj: np.ndarray,
-                      q_t: FloatArray, max_gap: float) -> FloatArray:
+def _interp_by_object(
+    obj: np.ndarray,
+    t: FloatArray,
+    v: FloatArray,
+    q_obj: np.ndarray,
+    q_t: FloatArray,
+    max_gap: float,
+) -> FloatArray:
     """Per query (object, time) the linear interpolation of ``v`` between the two
     bracketing reports of the same object with finite ``v``, if they are at most
     ``max_gap`` apart (a query at a report's own time takes its value); NaN otherwise.
@@ -414,7 +490,7 @@ def _interp_by_object(obj: np.ndarray, t: FloatArray, v: FloatArray, q_obj: np.n
     base = min(float(t.min()), float(q_t.min())) - max_gap
     key = obj * span + (t - base)
     qkey = q_obj * span + (q_t - base)
-    j = np.searchsorted(key, qkey, side="right")          # first report after the query
+    j = np.searchsorted(key, qkey, side="right")  # first report after the query
     lo, hi = j - 1, j
     valid = (lo >= 0) & (hi < t.size)
     lo_c, hi_c = np.clip(lo, 0, t.size - 1), np.clip(hi, 0, t.size - 1)

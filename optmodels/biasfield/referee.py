@@ -66,8 +66,14 @@ from optmodels.core import (
     verified_status,
 )
 
-__all__ = ["AbsoluteError", "AdsbField", "absolute_error", "adsb_field", "adsb_reference",
-           "compare_fields"]
+__all__ = [
+    "AbsoluteError",
+    "AdsbField",
+    "absolute_error",
+    "adsb_field",
+    "adsb_reference",
+    "compare_fields",
+]
 
 
 @dataclass(frozen=True)
@@ -92,22 +98,25 @@ class AdsbField:
     solve_time: float
     stationarity: float = float("nan")
 
-    def map(self, centers: ArrayLike | FieldData, *, names: tuple[str, ...] | list[str] = ()
-            ) -> FieldMap:
+    def map(
+        self, centers: ArrayLike | FieldData, *, names: tuple[str, ...] | list[str] = ()
+    ) -> FieldMap:
         """The field as a :class:`~optmodels.biasfield.usage.FieldMap`: on ``centers``
         (K, 2) (m, common plane; no frame), or on the cells of a :class:`FieldData` (the
         one it was estimated on), which also gives the map its frame (sites; geodetic
         sites and origin in 3-D) and, with ``names``, the radars' names."""
         if not self.status.ok:
-            raise ProblemError(f"biasfield.AdsbField.map: status {self.status.value}; the "
-                               "field is not returned")
+            raise ProblemError(
+                f"biasfield.AdsbField.map: status {self.status.value}; the field is not returned"
+            )
         if isinstance(centers, FieldData):
             return field_map(self, centers, names=names)
         return FieldMap(np.asarray(centers, dtype=float), self.field, names=tuple(names))
 
 
-def adsb_reference(plots: PlotTable, adsb: Any, origin: ArrayLike, *, max_gap: float = 10.0
-                   ) -> FloatArray:
+def adsb_reference(
+    plots: PlotTable, adsb: Any, origin: ArrayLike, *, max_gap: float = 10.0
+) -> FloatArray:
     """The ADS-B position (n, 2) (m, East/North on the common plane of ``origin``) of each
     plot's aircraft at the plot time, the ``reference`` of :func:`adsb_field`,
     :func:`absolute_error` and :func:`compare_fields`.
@@ -128,9 +137,11 @@ def adsb_reference(plots: PlotTable, adsb: Any, origin: ArrayLike, *, max_gap: f
     cols = {}
     for name in ("time", "object", "latitude", "longitude"):
         if not hasattr(adsb, name):
-            raise ProblemError(f"{fn} adsb: expected ADS-B reports with time, object, "
-                               f"latitude, longitude (e.g. Recording.adsb), got "
-                               f"{type(adsb).__name__} without {name!r}")
+            raise ProblemError(
+                f"{fn} adsb: expected ADS-B reports with time, object, "
+                f"latitude, longitude (e.g. Recording.adsb), got "
+                f"{type(adsb).__name__} without {name!r}"
+            )
         cols[name] = np.asarray(getattr(adsb, name))
     n_rep = cols["time"].shape[0]
     for name, v in cols.items():
@@ -172,12 +183,16 @@ def adsb_reference(plots: PlotTable, adsb: Any, origin: ArrayLike, *, max_gap: f
 def _reference(fn: str, plots: PlotTable, reference: ArrayLike) -> FloatArray:
     ref = np.asarray(reference, dtype=float)
     if ref.shape != (len(plots), 2):
-        raise ProblemError(f"{fn} reference: expected ADS-B positions ({len(plots)}, 2) (m, "
-                           f"common plane; NaN where none), got {ref.shape}")
+        raise ProblemError(
+            f"{fn} reference: expected ADS-B positions ({len(plots)}, 2) (m, "
+            f"common plane; NaN where none), got {ref.shape}"
+        )
     bad = np.isinf(ref) | (np.abs(np.nan_to_num(ref)) > MAX_MAGNITUDE)
     if bad.any():
-        raise ProblemError(f"{fn} reference: {int(bad.any(axis=1).sum())} infinite or huge "
-                           "positions (use NaN where there is no ADS-B position)")
+        raise ProblemError(
+            f"{fn} reference: {int(bad.any(axis=1).sum())} infinite or huge "
+            "positions (use NaN where there is no ADS-B position)"
+        )
     return ref
 
 
@@ -186,9 +201,17 @@ def _heights(plots: PlotTable, rows: np.ndarray) -> FloatArray | None:
     return None if h is None else np.asarray(h)[rows]
 
 
-def adsb_field(data: FieldData, plots: PlotTable, radars: RadarSet, reference: ArrayLike, *,
-               cell_radius: float | None = None, sigma_reference: float = 10.0,
-               model: str = "cells", level: str = "discrepancy") -> AdsbField:
+def adsb_field(
+    data: FieldData,
+    plots: PlotTable,
+    radars: RadarSet,
+    reference: ArrayLike,
+    *,
+    cell_radius: float | None = None,
+    sigma_reference: float = 10.0,
+    model: str = "cells",
+    level: str = "discrepancy",
+) -> AdsbField:
     """The bias field referenced to ADS-B (module docstring) on the cells of ``data``.
 
     ``reference`` (n, 2): the ADS-B position (m, common plane) of each plot's aircraft at
@@ -234,13 +257,16 @@ def adsb_field(data: FieldData, plots: PlotTable, radars: RadarSet, reference: A
         null = _null_space(data)
         phi, chi2, mu, status = _smoothing_level(sys_, awa, rhs, r, null, dof, level)
         if not np.all(np.isfinite(phi)):
-            raise ProblemError(f"{fn}: the solve overflowed (the data and the smoothness "
-                               "do not determine the field)")
+            raise ProblemError(
+                f"{fn}: the solve overflowed (the data and the smoothness "
+                "do not determine the field)"
+            )
         obj = float(phi @ (r @ phi))
         resid = _stationarity(phi, mu, awa, rhs, r, null)
         status = verified_status(status, resid)
-    return AdsbField(phi.reshape(k, m, 2), sys_.mean, sys_.counts, mu, chi2, dof, obj, status,
-                     tm.elapsed, resid)
+    return AdsbField(
+        phi.reshape(k, m, 2), sys_.mean, sys_.counts, mu, chi2, dof, obj, status, tm.elapsed, resid
+    )
 
 
 class _AdsbSystem(NamedTuple):
@@ -255,9 +281,17 @@ class _AdsbSystem(NamedTuple):
     n_used: int
 
 
-def _adsb_system(fn: str, data: FieldData, plots: PlotTable, radars: RadarSet,
-                 ref: FloatArray, tree: cKDTree, radius: float, sig_ref: float, model: str
-                 ) -> _AdsbSystem:
+def _adsb_system(
+    fn: str,
+    data: FieldData,
+    plots: PlotTable,
+    radars: RadarSet,
+    ref: FloatArray,
+    tree: cKDTree,
+    radius: float,
+    sig_ref: float,
+    model: str,
+) -> _AdsbSystem:
     """Each used plot's discrepancy d = measured − what its radar would measure of the
     ADS-B position, its row of A (the plot's cell, or the P1 weights at the ADS-B
     position) and its weight (V_i + σ_ref² J Jᵀ)⁻¹."""
@@ -284,8 +318,7 @@ def _adsb_system(fn: str, data: FieldData, plots: PlotTable, radars: RadarSet,
         h = _heights(plots, rows)
         # what radar i would measure of the ADS-B position (3-D: slant range and azimuth
         # in its own frame at the plot's height)
-        d = np.column_stack([plots.range[rows], plots.azimuth[rows]]) - radars.to_polar(
-            i, y, h)
+        d = np.column_stack([plots.range[rows], plots.azimuth[rows]]) - radars.to_polar(i, y, h)
         d[:, 1] = wrap_angle(d[:, 1])
         np.add.at(sums[:, i], cell, d)
         np.add.at(counts[:, i], cell, 1)
@@ -302,20 +335,23 @@ def _adsb_system(fn: str, data: FieldData, plots: PlotTable, radars: RadarSet,
             a_vals.append(bary.ravel())
         # per-plot covariance V_i + σ_ref² J Jᵀ (the ADS-B error seen in polar)
         jac = radars.polar_jacobian(i, y, h)
-        cov = (np.diag([radars.sigma_range[i] ** 2, radars.sigma_azimuth[i] ** 2])
-               + sig_ref**2 * jac @ jac.transpose(0, 2, 1))
+        cov = np.diag(
+            [radars.sigma_range[i] ** 2, radars.sigma_azimuth[i] ** 2]
+        ) + sig_ref**2 * jac @ jac.transpose(0, 2, 1)
         w_list.append(np.linalg.inv(cov))
         d_list.append(d.reshape(-1))
         n_used += rows.size
     if n_used == 0:
-        raise ProblemError(f"{fn} reference: no plot with an ADS-B position lies in the "
-                           "covered area of the cells")
+        raise ProblemError(
+            f"{fn} reference: no plot with an ADS-B position lies in the covered area of the cells"
+        )
     seen = counts > 0
     mean = np.full((k, m, 2), np.nan)
     mean[seen] = sums[seen] / counts[seen, None]
-    amat = sparse.csr_matrix((np.concatenate(a_vals), (np.concatenate(a_rows),
-                                                       np.concatenate(a_cols))),
-                             shape=(2 * n_used, 2 * m * k))
+    amat = sparse.csr_matrix(
+        (np.concatenate(a_vals), (np.concatenate(a_rows), np.concatenate(a_cols))),
+        shape=(2 * n_used, 2 * m * k),
+    )
     wmat = sparse.block_diag(list(np.concatenate(w_list)), format="csr")
     return _AdsbSystem(amat, wmat, np.concatenate(d_list), mean, counts, n_used)
 
@@ -325,14 +361,22 @@ def _null_space(data: FieldData) -> sparse.csr_matrix:
     neighbour graph (2m·K × 2m·components)."""
     k, m = data.k, data.m
     n_comp, labels = csgraph.connected_components(data.adjacency, directed=False)
-    return sparse.kron(sparse.csr_matrix((np.ones(k), (np.arange(k), labels)),
-                                         shape=(k, n_comp)),
-                       sparse.identity(2 * m), format="csr")
+    return sparse.kron(
+        sparse.csr_matrix((np.ones(k), (np.arange(k), labels)), shape=(k, n_comp)),
+        sparse.identity(2 * m),
+        format="csr",
+    )
 
 
-def _smoothing_level(sys_: _AdsbSystem, awa: sparse.csc_matrix, rhs: FloatArray,
-                     r: sparse.csc_matrix, null: sparse.csr_matrix, dof: int, level: str
-                     ) -> tuple[FloatArray, float, float, Status]:
+def _smoothing_level(
+    sys_: _AdsbSystem,
+    awa: sparse.csc_matrix,
+    rhs: FloatArray,
+    r: sparse.csc_matrix,
+    null: sparse.csr_matrix,
+    dof: int,
+    level: str,
+) -> tuple[FloatArray, float, float, Status]:
     """The field of the smoothing weight μ: (μR + AᵀWA)φ = AᵀWd with χ²(μ) at the expected
     level ``dof`` (``"discrepancy"``, bisection in log μ) or μ → 0 (``"means"``). Returns
     φ, χ², μ and the status (OPTIMAL_INACCURATE when the level is not reached)."""
@@ -380,15 +424,22 @@ def _smoothing_level(sys_: _AdsbSystem, awa: sparse.csc_matrix, rhs: FloatArray,
     return phi, chi2, mu, status
 
 
-def _stationarity(phi: FloatArray, mu: float, awa: sparse.csc_matrix, rhs: FloatArray,
-                  r: sparse.csc_matrix, null: sparse.csr_matrix) -> float:
+def _stationarity(
+    phi: FloatArray,
+    mu: float,
+    awa: sparse.csc_matrix,
+    rhs: FloatArray,
+    r: sparse.csc_matrix,
+    null: sparse.csr_matrix,
+) -> float:
     """The re-check: the stationarity of the Lagrangian, (μR + AᵀWA)φ − AᵀWd (μ = ∞: Rφ = 0
     and the data term stationary in the null space of R), relative."""
     ref_scale = max(float(np.max(np.abs(rhs))), 1e-300)
     if np.isinf(mu):
-        return max(float(np.max(np.abs(null.T @ (awa @ phi - rhs)))) / ref_scale,
-                   float(np.max(np.abs(r @ phi))) / max(
-                       float(abs(r).max() * np.max(np.abs(phi))), 1e-300))
+        return max(
+            float(np.max(np.abs(null.T @ (awa @ phi - rhs)))) / ref_scale,
+            float(np.max(np.abs(r @ phi))) / max(float(abs(r).max() * np.max(np.abs(phi))), 1e-300),
+        )
     return float(np.max(np.abs(mu * (r @ phi) + awa @ phi - rhs))) / ref_scale
 
 
@@ -407,14 +458,25 @@ class AbsoluteError:
     area: float
 
     def to_dict(self) -> dict[str, Any]:
-        return {"overall_m": self.overall, "raw_overall_m": self.raw_overall,
-                "noise_m": self.noise, "area_m": self.area, "radars_m": dict(self.radars)}
+        return {
+            "overall_m": self.overall,
+            "raw_overall_m": self.raw_overall,
+            "noise_m": self.noise,
+            "area_m": self.area,
+            "radars_m": dict(self.radars),
+        }
 
 
-def absolute_error(plots: PlotTable, radars: RadarSet, reference: ArrayLike, *,
-                   area: float = 25e3, min_samples: int = 20,
-                   within: FieldMap | None = None,
-                   positions: ArrayLike | None = None) -> AbsoluteError:
+def absolute_error(
+    plots: PlotTable,
+    radars: RadarSet,
+    reference: ArrayLike,
+    *,
+    area: float = 25e3,
+    min_samples: int = 20,
+    within: FieldMap | None = None,
+    positions: ArrayLike | None = None,
+) -> AbsoluteError:
     """RMS over areas of the systematic part of z − y, z a plot's position on the common
     plane and y its ADS-B position (per-area means less their noise, estimated from the
     scatter of the per-aircraft means; areas of ≥ ``min_samples`` plots of ≥ 2 aircraft),
@@ -440,8 +502,7 @@ def absolute_error(plots: PlotTable, radars: RadarSet, reference: ArrayLike, *,
         d = z[rows] - ref[rows]
         raw += float(np.sum(d * d))
         n_raw += rows.size
-        _, label = np.unique(np.floor(z[rows] / area).astype(np.int64), axis=0,
-                             return_inverse=True)
+        _, label = np.unique(np.floor(z[rows] / area).astype(np.int64), axis=0, return_inverse=True)
         label = label.ravel()
         s_i = 0.0
         n_i = 0
@@ -460,14 +521,24 @@ def absolute_error(plots: PlotTable, radars: RadarSet, reference: ArrayLike, *,
         n_tot += n_i
     if n_raw == 0:
         raise ProblemError(f"{fn} reference: no plot has an ADS-B position")
-    return AbsoluteError(float(np.sqrt(max(tot, 0.0) / n_tot)) if n_tot else float("nan"),
-                         out, float(np.sqrt(raw / n_raw)),
-                         float(np.sqrt(var_tot / n_tot)) if n_tot else float("nan"), area)
+    return AbsoluteError(
+        float(np.sqrt(max(tot, 0.0) / n_tot)) if n_tot else float("nan"),
+        out,
+        float(np.sqrt(raw / n_raw)),
+        float(np.sqrt(var_tot / n_tot)) if n_tot else float("nan"),
+        area,
+    )
 
 
 # ----------------------------------------------------------------------------- comparison
-def compare_fields(plots: PlotTable, radars: RadarSet, reference: ArrayLike,
-                   fields: dict[str, FieldMap], *, area: float = 25e3) -> dict[str, Any]:
+def compare_fields(
+    plots: PlotTable,
+    radars: RadarSet,
+    reference: ArrayLike,
+    fields: dict[str, FieldMap],
+    *,
+    area: float = 25e3,
+) -> dict[str, Any]:
     """Cross-radar disagreement and absolute error against ADS-B, before and after
     correcting the plots with each field of ``fields`` (e.g. ``{"smoothest": ...,
     "adsb": ...}``), all measured on the area covered by every field. Returns a dict
@@ -487,14 +558,13 @@ def compare_fields(plots: PlotTable, radars: RadarSet, reference: ArrayLike,
 
     def figures(p: PlotTable, zp: FloatArray | None = None) -> dict[str, Any]:
         zp = p.cartesian(radars) if zp is None else zp  # placed once for both figures
-        reg: RegistrationError = registration_error(p, radars, area=area, within=first,
-                                                    positions=zp)
+        reg: RegistrationError = registration_error(
+            p, radars, area=area, within=first, positions=zp
+        )
         ab = absolute_error(p, radars, ref_sub, area=area, positions=zp)
         return {"registration": reg.to_dict(), "absolute": ab.to_dict()}
 
-    out: dict[str, Any] = {"before": figures(sub, z[covered_all]),
-                           "plots": int(covered_all.sum())}
+    out: dict[str, Any] = {"before": figures(sub, z[covered_all]), "plots": int(covered_all.sum())}
     for name, fm in maps.items():
         out[name] = figures(correct_plots(sub, radars, fm).plots)
     return out
-

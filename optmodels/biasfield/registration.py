@@ -56,26 +56,39 @@ class RegistrationError:
         def key(p: tuple[str, str]) -> str:
             return f"{p[0]}-{p[1]}"
 
-        return {"overall_m": self.overall, "raw_overall_m": self.raw_overall,
-                "noise_m": self.noise, "area_m": self.area,
-                "pairs": {key(p): {"rms_m": v, "raw_rms_m": self.raw_pairs[p],
-                                   "noise_m": self.noise_pairs.get(p, float("nan")),
-                                   "samples": self.samples[p], "areas": self.areas[p]}
-                          for p, v in self.pairs.items()}}
+        return {
+            "overall_m": self.overall,
+            "raw_overall_m": self.raw_overall,
+            "noise_m": self.noise,
+            "area_m": self.area,
+            "pairs": {
+                key(p): {
+                    "rms_m": v,
+                    "raw_rms_m": self.raw_pairs[p],
+                    "noise_m": self.noise_pairs.get(p, float("nan")),
+                    "samples": self.samples[p],
+                    "areas": self.areas[p],
+                }
+                for p, v in self.pairs.items()
+            },
+        }
 
 
-def plane_positions(fn: str, plots: PlotTable, radars: RadarSet,
-                     positions: ArrayLike | None) -> FloatArray:
+def plane_positions(
+    fn: str, plots: PlotTable, radars: RadarSet, positions: ArrayLike | None
+) -> FloatArray:
     """The plots' positions (n, 2) on the common plane: ``positions`` checked, or computed
     (``plots.cartesian(radars)``, exact in 3-D)."""
     if positions is None:
         return plots.cartesian(radars)
-    return as_finite_array(f"{fn} positions (m)", positions, shape=(len(plots), 2),
-                           max_abs=MAX_MAGNITUDE)
+    return as_finite_array(
+        f"{fn} positions (m)", positions, shape=(len(plots), 2), max_abs=MAX_MAGNITUDE
+    )
 
 
-def _local_quadratic(t: FloatArray, z: FloatArray, tq: FloatArray, half: float
-                     ) -> tuple[FloatArray, np.ndarray]:
+def _local_quadratic(
+    t: FloatArray, z: FloatArray, tq: FloatArray, half: float
+) -> tuple[FloatArray, np.ndarray]:
     """Radar j's track at times ``tq``: a least-squares quadratic in time through its plots
     (t, z) within ±``half`` s of each query time (≥ 2 plots on each side). Returns (q, 2)
     positions and the mask of the times that could be served."""
@@ -120,10 +133,16 @@ def systematic_square(d: FloatArray, obj: np.ndarray) -> tuple[float, float] | N
     return float(mean @ mean) - var, var
 
 
-def registration_error(plots: PlotTable, radars: RadarSet, *, area: float = 25e3,
-                       window: float | None = None, min_samples: int = 20,
-                       within: FieldMap | None = None,
-                       positions: ArrayLike | None = None) -> RegistrationError:
+def registration_error(
+    plots: PlotTable,
+    radars: RadarSet,
+    *,
+    area: float = 25e3,
+    window: float | None = None,
+    min_samples: int = 20,
+    within: FieldMap | None = None,
+    positions: ArrayLike | None = None,
+) -> RegistrationError:
     """RMS horizontal distance (m) between two radars' positions of the same aircraft at
     the same time, per radar pair and overall, measured on per-area means.
 
@@ -166,8 +185,7 @@ def registration_error(plots: PlotTable, radars: RadarSet, *, area: float = 25e3
         gaps = [np.diff(plots.time[r]) for (_, j), r in tracks.items() if j == i and r.size > 1]
         g = np.concatenate(gaps) if gaps else np.array([])
         g = g[g > 0]
-        half[i] = window if window is not None else (2.5 * float(np.median(g)) if g.size
-                                                     else 1.0)
+        half[i] = window if window is not None else (2.5 * float(np.median(g)) if g.size else 1.0)
     diffs: dict[tuple[int, int], list[FloatArray]] = {}
     where: dict[tuple[int, int], list[FloatArray]] = {}
     owner: dict[tuple[int, int], list[np.ndarray]] = {}
@@ -229,9 +247,11 @@ def registration_error(plots: PlotTable, radars: RadarSet, *, area: float = 25e3
         tot_raw += float(np.sum(d * d))
         tot_raw_n += d.shape[0]
     if not pairs:
-        raise ProblemError(f"{fn} plots: no aircraft is seen by two radars at the same time "
-                           "(nothing to register)")
+        raise ProblemError(
+            f"{fn} plots: no aircraft is seen by two radars at the same time (nothing to register)"
+        )
     overall = float(np.sqrt(max(tot_sys, 0.0) / tot_n)) if tot_n else float("nan")
     noise = float(np.sqrt(tot_var / tot_n)) if tot_n else float("nan")
-    return RegistrationError(overall, pairs, float(np.sqrt(tot_raw / tot_raw_n)), raw, count,
-                             areas, area, noise, floor)
+    return RegistrationError(
+        overall, pairs, float(np.sqrt(tot_raw / tot_raw_n)), raw, count, areas, area, noise, floor
+    )

@@ -78,9 +78,19 @@ from optmodels.core import (  # noqa: F401 -- the tolerances are documented here
     timed,
 )
 
-__all__ = ["FieldSolution", "Identifiability", "box_feasibility", "closed_form", "edge_factor",
-           "identifiability", "kkt_residuals", "lipschitz_residuals", "objective", "solve",
-           "solve_lipschitz"]
+__all__ = [
+    "FieldSolution",
+    "Identifiability",
+    "box_feasibility",
+    "closed_form",
+    "edge_factor",
+    "identifiability",
+    "kkt_residuals",
+    "lipschitz_residuals",
+    "objective",
+    "solve",
+    "solve_lipschitz",
+]
 
 
 #: Default solver options: the back-end's table for QPs that must agree with a closed form
@@ -89,9 +99,14 @@ SOLVER_DEFAULTS: dict[str, dict[str, Any]] = DEFAULTS["qp"]
 
 
 # ----------------------------------------------------------------------------- QP
-def solve(data: FieldData, *, box: tuple[float, float] | None = None,
-          solver: str = "CLARABEL", formulation: Literal["constrained", "reduced"] = "reduced",
-          **options: Any) -> FieldSolution:
+def solve(
+    data: FieldData,
+    *,
+    box: tuple[float, float] | None = None,
+    solver: str = "CLARABEL",
+    formulation: Literal["constrained", "reduced"] = "reduced",
+    **options: Any,
+) -> FieldSolution:
     """The QP (9)-(10) [+ box (8)] in CVXPY.
 
     ``formulation="constrained"``: the original problem as written -- variables φ and η,
@@ -119,12 +134,18 @@ def solve(data: FieldData, *, box: tuple[float, float] | None = None,
     if bound is not None:
         bad = box_feasibility(data, box, sets=sets)  # type: ignore[arg-type]
         if bad.size:
-            return failed_solution(data, sets, {
-                "status": Status.INFEASIBLE, "method": method,
-                "message": f"box (8) misses the uncertainty sets of cells {bad[:20].tolist()}"
-                           f"{' …' if bad.size > 20 else ''} ({bad.size} cells): no field "
-                           "in these sets satisfies |f_range| ≤ K1, |f_azimuth| ≤ K2"},
-                bound)
+            return failed_solution(
+                data,
+                sets,
+                {
+                    "status": Status.INFEASIBLE,
+                    "method": method,
+                    "message": f"box (8) misses the uncertainty sets of cells {bad[:20].tolist()}"
+                    f"{' …' if bad.size > 20 else ''} ({bad.size} cells): no field "
+                    "in these sets satisfies |f_range| ≤ K1, |f_azimuth| ≤ K2",
+                },
+                bound,
+            )
     sc = variable_scales(data, phi0)
     with timed() as tb:
         gs = (edge_factor(data) @ sparse.diags(sc)).tocsr()
@@ -141,8 +162,10 @@ def solve(data: FieldData, *, box: tuple[float, float] | None = None,
         else:
             u = u0 + bmat @ eta
             cons = []
-            obj = (cp.quad_form(eta, cp.psd_wrap((bmat.T @ rs @ bmat).tocsc() / norm2))
-                   + (2.0 / norm2) * (bmat.T @ (rs @ u0)) @ eta)
+            obj = (
+                cp.quad_form(eta, cp.psd_wrap((bmat.T @ rs @ bmat).tocsc() / norm2))
+                + (2.0 / norm2) * (bmat.T @ (rs @ u0)) @ eta
+            )
         box_cons = [u <= bound / sc, -u <= bound / sc] if bound is not None else []
         prob = cp.Problem(cp.Minimize(obj), cons + box_cons)
     opts = solver_options("qp", solver, options)

@@ -46,9 +46,13 @@ def _fit(a: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
     return beta, np.sqrt(np.maximum(np.diag(cov), 0.0)), rms
 
 
-def radar_baseline(field: ArrayLike, centers: ArrayLike, sites: ArrayLike,
-                   seen: ArrayLike | None = None,
-                   names: tuple[str, ...] | list[str] = ()) -> list[dict[str, Any]]:
+def radar_baseline(
+    field: ArrayLike,
+    centers: ArrayLike,
+    sites: ArrayLike,
+    seen: ArrayLike | None = None,
+    names: tuple[str, ...] | list[str] = (),
+) -> list[dict[str, Any]]:
     """Per radar: constant range and azimuth bias ± σ, range gain ± σ, the field's spread
     and the baseline's residual (module docstring).
 
@@ -97,13 +101,19 @@ def radar_baseline(field: ArrayLike, centers: ArrayLike, sites: ArrayLike,
         else:
             beta, se, rms_r = np.array([fr.mean(), np.nan]), np.full(2, np.nan), 0.0
         ba, sa, rms_a = _fit(np.ones((idx.size, 1)), fa)
-        row.update({"range_bias_m": float(beta[0]), "range_bias_sigma_m": float(se[0]),
-                    "range_gain_ppm": float(beta[1] * 1e6),
-                    "range_gain_sigma_ppm": float(se[1] * 1e6),
-                    "azimuth_bias_deg": float(ba[0]), "azimuth_bias_sigma_deg": float(sa[0]),
-                    "range_spread_m": float(np.std(fr)),
-                    "azimuth_spread_deg": float(np.std(fa)),
-                    "baseline_residual_range_m": rms_r,
-                    "baseline_residual_azimuth_deg": rms_a})
+        row.update(
+            {
+                "range_bias_m": float(beta[0]),
+                "range_bias_sigma_m": float(se[0]),
+                "range_gain_ppm": float(beta[1] * 1e6),
+                "range_gain_sigma_ppm": float(se[1] * 1e6),
+                "azimuth_bias_deg": float(ba[0]),
+                "azimuth_bias_sigma_deg": float(sa[0]),
+                "range_spread_m": float(np.std(fr)),
+                "azimuth_spread_deg": float(np.std(fa)),
+                "baseline_residual_range_m": rms_r,
+                "baseline_residual_azimuth_deg": rms_a,
+            }
+        )
         out.append(row)
     return out

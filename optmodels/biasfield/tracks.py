@@ -56,8 +56,14 @@ from optmodels.core import (
 )
 
 # polyline_normal stays importable from here (tests/test_biasfield_clean.py)
-__all__ = ["Dropped", "ResidualCheck", "TrackFit", "fit_tracks", "polyline_normal",
-           "residual_check"]
+__all__ = [
+    "Dropped",
+    "ResidualCheck",
+    "TrackFit",
+    "fit_tracks",
+    "polyline_normal",
+    "residual_check",
+]
 
 
 @dataclass
@@ -104,7 +110,7 @@ class TrackFit:
         for a in range(w):
             out[a, a] = self.cov_diag[j0 + a]
         if w > 1:
-            gain = self.cov_next[j0:j1] @ inv2(self.cov_diag[j0 + 1:j1 + 1])  # A_j
+            gain = self.cov_next[j0:j1] @ inv2(self.cov_diag[j0 + 1 : j1 + 1])  # A_j
             for col in range(1, w):
                 out[col - 1, col] = self.cov_next[j0 + col - 1]
                 for row in range(col - 2, -1, -1):
@@ -116,20 +122,25 @@ class TrackFit:
 
     def at(self, t: ArrayLike) -> FloatArray:
         """ξ̂(t), (T, 2), for t inside the span."""
-        tt = as_finite_array("biasfield.TrackFit.at t", t, ndim=(0, 1),
-                             max_abs=MAX_MAGNITUDE).reshape(-1)
+        tt = as_finite_array(
+            "biasfield.TrackFit.at t", t, ndim=(0, 1), max_abs=MAX_MAGNITUDE
+        ).reshape(-1)
         k, u = locate(tt, self.knots)
         return (1.0 - u)[:, None] * self.theta[k] + u[:, None] * self.theta[k + 1]
 
     def cov_at(self, t: ArrayLike) -> FloatArray:
         """Cov ξ̂(t), (T, 2, 2)."""
-        tt = as_finite_array("biasfield.TrackFit.cov_at t", t, ndim=(0, 1),
-                             max_abs=MAX_MAGNITUDE).reshape(-1)
+        tt = as_finite_array(
+            "biasfield.TrackFit.cov_at t", t, ndim=(0, 1), max_abs=MAX_MAGNITUDE
+        ).reshape(-1)
         k, u = locate(tt, self.knots)
         a, b = (1.0 - u)[:, None, None], u[:, None, None]
         nxt = self.cov_next[k]
-        return (a * a * self.cov_diag[k] + b * b * self.cov_diag[k + 1]
-                + a * b * (nxt + np.swapaxes(nxt, 1, 2)))
+        return (
+            a * a * self.cov_diag[k]
+            + b * b * self.cov_diag[k + 1]
+            + a * b * (nxt + np.swapaxes(nxt, 1, 2))
+        )
 
     def mean_over(self, t: ArrayLike) -> tuple[FloatArray, FloatArray]:
         """Average of ξ̂ over the instants t and its covariance (exact: a linear function
@@ -143,10 +154,11 @@ class TrackFit:
         k, u = locate(tt, self.knots)
         j0, j1 = int(k.min()), int(k.max()) + 1
         w = j1 - j0 + 1
-        h = (np.bincount(k - j0, 1.0 - u, minlength=w)
-             + np.bincount(k + 1 - j0, u, minlength=w)) / tt.size
-        mean = h @ self.theta[j0:j1 + 1]
-        diag = self.cov_diag[j0:j1 + 1].reshape(w, 4).tolist()
+        h = (
+            np.bincount(k - j0, 1.0 - u, minlength=w) + np.bincount(k + 1 - j0, u, minlength=w)
+        ) / tt.size
+        mean = h @ self.theta[j0 : j1 + 1]
+        diag = self.cov_diag[j0 : j1 + 1].reshape(w, 4).tolist()
         nxt = self.cov_next[j0:j1].reshape(w - 1, 4).tolist()
         hl = h.tolist()
         g00 = g01 = g10 = g11 = 0.0
@@ -174,7 +186,6 @@ class TrackFit:
             g10, g11 = e10 * a00 + e11 * a10, e10 * a01 + e11 * a11
         return mean, np.array([[s00, s01], [s01, s11]])
 
-
     def means_over(self, t: ArrayLike, group: ArrayLike) -> tuple[FloatArray, FloatArray]:
         """:meth:`mean_over` for many sets of instants at once: ``group`` (T,) labels
         0..G−1 of the instants ``t`` (T,); returns the G averages (G, 2) and their
@@ -183,17 +194,33 @@ class TrackFit:
         gets NaN."""
         tt = np.asarray(t, dtype=float).reshape(-1)
         grp = np.asarray(group).reshape(-1)
-        if grp.shape != tt.shape or not np.issubdtype(grp.dtype, np.integer) or (
-                grp.size and grp.min() < 0) or not np.all(np.isfinite(tt)):
-            raise ProblemError("biasfield.TrackFit.means_over: expected finite instants t "
-                               "(T,) and group labels ≥ 0 (T,)")
+        if (
+            grp.shape != tt.shape
+            or not np.issubdtype(grp.dtype, np.integer)
+            or (grp.size and grp.min() < 0)
+            or not np.all(np.isfinite(tt))
+        ):
+            raise ProblemError(
+                "biasfield.TrackFit.means_over: expected finite instants t "
+                "(T,) and group labels ≥ 0 (T,)"
+            )
         ng = int(grp.max()) + 1 if grp.size else 0
         k, u = locate(tt, self.knots)
         cnt = np.bincount(grp, minlength=ng).astype(float)
         with np.errstate(invalid="ignore", divide="ignore"):
-            mean = np.column_stack([
-                np.bincount(grp, (1.0 - u) * self.theta[k, c] + u * self.theta[k + 1, c],
-                            minlength=ng) for c in range(2)]) / cnt[:, None]
+            mean = (
+                np.column_stack(
+                    [
+                        np.bincount(
+                            grp,
+                            (1.0 - u) * self.theta[k, c] + u * self.theta[k + 1, c],
+                            minlength=ng,
+                        )
+                        for c in range(2)
+                    ]
+                )
+                / cnt[:, None]
+            )
         j0 = np.full(ng, np.iinfo(np.int64).max)
         j1 = np.full(ng, -1)
         np.minimum.at(j0, grp, k)
@@ -268,17 +295,29 @@ def _taken(a: Any) -> Any:
     return a.source[a.rows] if isinstance(a, _Take) else a
 
 
-def _fit_chunk(radars: RadarSet, radar: int, rows: np.ndarray, t: FloatArray,
-               z: FloatArray, height: FloatArray | None, bounds: np.ndarray,
-               objects: np.ndarray, spacing: float, gap: float, redundancy: int
-               ) -> tuple[list[TrackFit], int]:
+def _fit_chunk(
+    radars: RadarSet,
+    radar: int,
+    rows: np.ndarray,
+    t: FloatArray,
+    z: FloatArray,
+    height: FloatArray | None,
+    bounds: np.ndarray,
+    objects: np.ndarray,
+    spacing: float,
+    gap: float,
+    redundancy: int,
+) -> tuple[list[TrackFit], int]:
     """Fit the tracks of one radar in one task: track g has the plots
     ``bounds[g]:bounds[g+1]`` (sorted by time) of object ``objects[g]``; ``rows`` their
     indices in the caller's table. Returns the fits and the number of plots of pieces too
     short for their polyline."""
     t, z, height = _taken(t), _taken(z), _taken(height)
-    vinv = inv2(radars.cartesian_cov(radar, z) if height is None
-                 else radars.cartesian_cov(radar, z, height=height))
+    vinv = inv2(
+        radars.cartesian_cov(radar, z)
+        if height is None
+        else radars.cartesian_cov(radar, z, height=height)
+    )
     short = 0
     jobs: list[tuple[int, np.ndarray, FloatArray, tuple[FloatArray, ...]]] = []
     for g in range(objects.size):
@@ -289,8 +328,9 @@ def _fit_chunk(radars: RadarSet, radar: int, rows: np.ndarray, t: FloatArray,
             if 2 * sel.size < 2 * knots.size + redundancy:
                 short += sel.size
                 continue
-            jobs.append((int(objects[g]), sel, knots,
-                         normal_band(t[sel], knots, vinv[sel], z[sel])))
+            jobs.append(
+                (int(objects[g]), sel, knots, normal_band(t[sel], knots, vinv[sel], z[sel]))
+            )
     solved = solve_bands([j[3][:3] for j in jobs])
     fits: list[TrackFit] = []
     for (obj, sel, knots, (_, _, _, idx, u)), sol in zip(jobs, solved, strict=True):
@@ -300,22 +340,33 @@ def _fit_chunk(radars: RadarSet, radar: int, rows: np.ndarray, t: FloatArray,
         theta, cdiag, cnext = sol
         fitted = (1.0 - u)[:, None] * theta[idx] + u[:, None] * theta[idx + 1]
         white = whiten(vinv[sel], z[sel] - fitted)
-        fits.append(TrackFit(radar, obj, knots, theta, cdiag, cnext, rows[sel],
-                             float(np.sum(white**2)), int(2 * sel.size - 2 * knots.size),
-                             white))
+        fits.append(
+            TrackFit(
+                radar,
+                obj,
+                knots,
+                theta,
+                cdiag,
+                cnext,
+                rows[sel],
+                float(np.sum(white**2)),
+                int(2 * sel.size - 2 * knots.size),
+                white,
+            )
+        )
     return fits, short
 
 
-def _tasks(plots: PlotTable, radars: RadarSet, z_all: FloatArray, chunk: int
-           ) -> list[tuple[Any, ...]]:
+def _tasks(
+    plots: PlotTable, radars: RadarSet, z_all: FloatArray, chunk: int
+) -> list[tuple[Any, ...]]:
     """The (radar, object) tracks in tasks of about ``chunk`` plots, in a fixed order
     (radar, then object, then time): the same fits whatever runs them."""
     heights = plots.height if getattr(radars, "is_3d", False) else None
     known = np.flatnonzero(plots.object >= 0)
     order = known[np.lexsort((plots.time[known], plots.object[known], plots.radar[known]))]
     rad, obj = plots.radar[order], plots.object[order]
-    new = np.flatnonzero(np.concatenate([[True], (rad[1:] != rad[:-1])
-                                         | (obj[1:] != obj[:-1])]))
+    new = np.flatnonzero(np.concatenate([[True], (rad[1:] != rad[:-1]) | (obj[1:] != obj[:-1])]))
     starts = np.append(new, order.size)
     tasks: list[tuple[Any, ...]] = []
     g = 0
@@ -323,14 +374,22 @@ def _tasks(plots: PlotTable, radars: RadarSet, z_all: FloatArray, chunk: int
         i = int(rad[new[g]])
         g1 = g + 1
         # whole tracks of one radar, up to ``chunk`` plots (at least one track)
-        while (g1 < new.size and int(rad[new[g1]]) == i
-               and starts[g1 + 1] - starts[g] <= chunk):
+        while g1 < new.size and int(rad[new[g1]]) == i and starts[g1 + 1] - starts[g] <= chunk:
             g1 += 1
         lo, hi = int(starts[g]), int(starts[g1])
         rows = order[lo:hi]
-        tasks.append((radars, i, rows, _Take(plots.time, rows), _Take(z_all, rows),
-                      None if heights is None else _Take(heights, rows),
-                      starts[g:g1 + 1] - lo, obj[new[g:g1]]))
+        tasks.append(
+            (
+                radars,
+                i,
+                rows,
+                _Take(plots.time, rows),
+                _Take(z_all, rows),
+                None if heights is None else _Take(heights, rows),
+                starts[g : g1 + 1] - lo,
+                obj[new[g:g1]],
+            )
+        )
         g = g1
     return tasks
 
@@ -343,11 +402,18 @@ def _as_scheduler(fn: str, scheduler: Any) -> Any:
     return as_scheduler(f"{fn} scheduler", scheduler, default="serial")
 
 
-def fit_tracks(plots: PlotTable, radars: RadarSet, *, knot_spacing: float = 20.0,
-               max_gap: float | None = None, min_redundancy: int = 2,
-               scheduler: Any = None, workers: int | None = None,
-               chunk: int = CHUNK_PLOTS, positions: ArrayLike | None = None
-               ) -> tuple[list[TrackFit], Dropped]:
+def fit_tracks(
+    plots: PlotTable,
+    radars: RadarSet,
+    *,
+    knot_spacing: float = 20.0,
+    max_gap: float | None = None,
+    min_redundancy: int = 2,
+    scheduler: Any = None,
+    workers: int | None = None,
+    chunk: int = CHUNK_PLOTS,
+    positions: ArrayLike | None = None,
+) -> tuple[list[TrackFit], Dropped]:
     """GLS polyline fits (3) of every (radar, object) track of ``plots``.
 
     Plots with ``object == -1`` cannot be assigned to a track and are dropped (counted).
@@ -382,15 +448,23 @@ def fit_tracks(plots: PlotTable, radars: RadarSet, *, knot_spacing: float = 20.0
     engine = _as_scheduler(fn, scheduler)
     check_tables(fn, plots, radars)
     plots.check(radars)
-    z_all = plots.cartesian(radars) if positions is None else as_finite_array(
-        f"{fn} positions (m)", positions, shape=(len(plots), 2), max_abs=MAX_MAGNITUDE)
+    z_all = (
+        plots.cartesian(radars)
+        if positions is None
+        else as_finite_array(
+            f"{fn} positions (m)", positions, shape=(len(plots), 2), max_abs=MAX_MAGNITUDE
+        )
+    )
     dropped = Dropped()
     dropped.add("no object id", int(np.sum(plots.object < 0)))
     if not np.any(plots.object >= 0):
-        raise ProblemError(f"{fn} plots: no plot with an object id is left ({len(plots)} "
-                           "plots; were they all dropped by the reader or the cleaning?)")
-    tasks = [(*task, knot_spacing, gap, min_redundancy)
-             for task in _tasks(plots, radars, z_all, chunk)]
+        raise ProblemError(
+            f"{fn} plots: no plot with an object id is left ({len(plots)} "
+            "plots; were they all dropped by the reader or the cleaning?)"
+        )
+    tasks = [
+        (*task, knot_spacing, gap, min_redundancy) for task in _tasks(plots, radars, z_all, chunk)
+    ]
     results: list[tuple[list[TrackFit], int] | None] = [None] * len(tasks)
 
     trim = _heap_trimmer() if engine != "serial" else None
@@ -400,8 +474,7 @@ def fit_tracks(plots: PlotTable, radars: RadarSet, *, knot_spacing: float = 20.0
         if trim is not None:
             trim(0)  # the unpickling buffers of each result, back to the OS
 
-    execute(_fit_chunk, tasks, on_result=keep, scheduler=engine, workers=workers,
-            what=fn)
+    execute(_fit_chunk, tasks, on_result=keep, scheduler=engine, workers=workers, what=fn)
     fits: list[TrackFit] = []
     for res in results:
         assert res is not None  # execute raises rather than lose a task

@@ -53,8 +53,17 @@ from optmodels.core import (
     as_instance,
 )
 
-__all__ = ["REASONS", "FieldMap", "FieldScore", "RegistrationError", "correct_plots",
-           "field_map", "registration_error", "score", "seen_by_others"]
+__all__ = [
+    "REASONS",
+    "FieldMap",
+    "FieldScore",
+    "RegistrationError",
+    "correct_plots",
+    "field_map",
+    "registration_error",
+    "score",
+    "seen_by_others",
+]
 
 
 # ----------------------------------------------------------------------------- score
@@ -81,8 +90,11 @@ class FieldScore:
         out: dict[str, Any] = {}
         for name in ("total", "shift", "rest"):
             v = getattr(self, name)
-            out[name] = {"range_m": float(v[0]), "azimuth_deg": float(np.rad2deg(v[1])),
-                         "horizontal_m": float(getattr(self, f"{name}_m"))}
+            out[name] = {
+                "range_m": float(v[0]),
+                "azimuth_deg": float(np.rad2deg(v[1])),
+                "horizontal_m": float(getattr(self, f"{name}_m")),
+            }
         return out
 
 
@@ -116,8 +128,9 @@ def score(field: ArrayLike, truth: ArrayLike, data: FieldData) -> FieldScore:
     try:
         deta = np.linalg.solve(a, rhs[..., None])[..., 0]
     except np.linalg.LinAlgError:
-        raise ProblemError(f"{fn} data: a cell's common shift is not determined (Φ¹_kᵀPΦ¹_k "
-                           "singular)") from None
+        raise ProblemError(
+            f"{fn} data: a cell's common shift is not determined (Φ¹_kᵀPΦ¹_k singular)"
+        ) from None
     sh = np.einsum("kia,ka->ki", jac, deta).reshape(k, m, 2)
     rest = e - sh
     rest[~seen] = 0.0

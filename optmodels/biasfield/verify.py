@@ -46,9 +46,14 @@ def condition_number(h: sparse.spmatrix, lu: Any = None) -> float:
             lu = splinalg.splu(hc)
         except RuntimeError:
             return float("inf")
-    op = splinalg.LinearOperator(hc.shape, matvec=lu.solve, matmat=lu.solve,
-                                 rmatvec=lambda v: lu.solve(v, trans="T"),
-                                 rmatmat=lambda v: lu.solve(v, trans="T"), dtype=float)
+    op = splinalg.LinearOperator(
+        hc.shape,
+        matvec=lu.solve,
+        matmat=lu.solve,
+        rmatvec=lambda v: lu.solve(v, trans="T"),
+        rmatmat=lambda v: lu.solve(v, trans="T"),
+        dtype=float,
+    )
     with np.errstate(all="ignore"):
         kappa = float(splinalg.norm(hc, 1)) * float(splinalg.onenormest(op, t=1))
     return kappa if np.isfinite(kappa) else float("inf")
@@ -83,9 +88,13 @@ def verify_solution(sol: FieldSolution) -> FieldSolution:
 
 
 # ----------------------------------------------------------------------------- QP
-def kkt_residuals(data: FieldData, sol: FieldSolution,
-                  box: tuple[float, float] | None = None, *,
-                  sets: Sets | None = None) -> dict[str, float]:
+def kkt_residuals(
+    data: FieldData,
+    sol: FieldSolution,
+    box: tuple[float, float] | None = None,
+    *,
+    sets: Sets | None = None,
+) -> dict[str, float]:
     """KKT of the QP in η: Φ¹ᵀ(2Rφ + μ) = 0 with μ the box multipliers (μ_j ≥ 0 at an upper
     bound, ≤ 0 at a lower one, 0 inside), relative to the gradient at η = 0 (or ‖Φ¹ᵀμ‖ if
     larger); complementarity
@@ -108,12 +117,14 @@ def kkt_residuals(data: FieldData, sol: FieldSolution,
         sign_ok = np.where(sol.phi > 0, mu >= -tiny, np.where(sol.phi < 0, mu <= tiny, True))
         out["dual_sign"] = float(np.mean(~sign_ok))
         out["complementarity"] = float(np.max(np.abs(mu) * np.maximum(slack, 0))) / max(
-            sol.objective, 1e-300)
+            sol.objective, 1e-300
+        )
     return out
 
 
-def box_feasibility(data: FieldData, box: tuple[float, float], *,
-                    sets: Sets | None = None) -> np.ndarray:
+def box_feasibility(
+    data: FieldData, box: tuple[float, float], *, sets: Sets | None = None
+) -> np.ndarray:
     """Cells whose uncertainty set misses the box (8). The box and the sets are per cell,
     so each cell is a 2-variable feasibility problem: the polygon ∩_j {η : |Φ⁰_j + a_jᵀη| ≤
     b_j}. It is non-empty iff one of the pairwise intersections of its boundary lines is
@@ -122,8 +133,9 @@ def box_feasibility(data: FieldData, box: tuple[float, float], *,
     Returns the indices of the infeasible cells."""
     bound = box_bounds(data, box, "biasfield.box_feasibility")
     if bound is None:
-        raise ProblemError("biasfield.box_feasibility box: expected a pair (K1 m, K2 rad), "
-                           "got None")
+        raise ProblemError(
+            "biasfield.box_feasibility box: expected a pair (K1 m, K2 rad), got None"
+        )
     phi0, phi1 = uncertainty_sets(data) if sets is None else sets
     k, m2 = data.k, 2 * data.m
     a = _cell_blocks(phi1, k, m2)
@@ -138,8 +150,13 @@ def box_feasibility(data: FieldData, box: tuple[float, float], *,
     det = mat[..., 0, 0] * mat[..., 1, 1] - mat[..., 0, 1] * mat[..., 1, 0]
     ok_det = np.abs(det) > 1e-12 * np.max(np.abs(mat), axis=(2, 3)) ** 2
     det = np.where(ok_det, det, 1.0)
-    eta = np.stack([(rhs[..., 0] * mat[..., 1, 1] - mat[..., 0, 1] * rhs[..., 1]) / det,
-                    (mat[..., 0, 0] * rhs[..., 1] - rhs[..., 0] * mat[..., 1, 0]) / det], -1)
+    eta = np.stack(
+        [
+            (rhs[..., 0] * mat[..., 1, 1] - mat[..., 0, 1] * rhs[..., 1]) / det,
+            (mat[..., 0, 0] * rhs[..., 1] - rhs[..., 0] * mat[..., 1, 0]) / det,
+        ],
+        -1,
+    )
     val = p0[:, None, :] + np.einsum("kjd,kpd->kpj", a, eta)  # (k, pairs, m2)
     inside = np.all(np.abs(val) <= 1 + 1e-9, axis=2) & ok_det
     return np.flatnonzero(~inside.any(axis=1))
@@ -154,10 +171,16 @@ def _cell_blocks(phi1: sparse.csr_matrix, k: int, m2: int) -> FloatArray:
 
 
 # ----------------------------------------------------------------------------- Lipschitz
-def lipschitz_residuals(data: FieldData, sol: FieldSolution, duals: dict[str, Any], *,
-                        box: tuple[float, float] | None = None, cap: float | None = None,
-                        sets: Sets | None = None,
-                        prob_data: dict[str, Any] | None = None) -> dict[str, float]:
+def lipschitz_residuals(
+    data: FieldData,
+    sol: FieldSolution,
+    duals: dict[str, Any],
+    *,
+    box: tuple[float, float] | None = None,
+    cap: float | None = None,
+    sets: Sets | None = None,
+    prob_data: dict[str, Any] | None = None,
+) -> dict[str, float]:
     r"""Re-check of a Lipschitz SOCP solution against the problem, in NumPy.
 
     In the scaled variables of :func:`~optmodels.biasfield.lipschitz.solve_lipschitz`

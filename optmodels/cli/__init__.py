@@ -75,8 +75,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     ap = _Parser(prog="optmodels", description=__doc__)
     ap.add_argument("--version", action="version", version=f"optmodels {_version()}")
-    ap.add_argument("--debug", action="store_true",
-                    help="show the traceback of an internal error")
+    ap.add_argument("--debug", action="store_true", help="show the traceback of an internal error")
     sub = ap.add_subparsers(dest="command", required=True, metavar="COMMAND")
     demo.register(sub)
     compare.register(sub)
@@ -96,5 +95,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     return _execute(args)
 
 
-__all__ = ["EXIT_INPUT", "EXIT_INTERNAL", "EXIT_INTERRUPTED", "EXIT_NOT_OK", "EXIT_OK",
-           "PROBLEMS", "Outcome", "build_parser", "main"]
+__all__ = [
+    "EXIT_INPUT",
+    "EXIT_INTERNAL",
+    "EXIT_INTERRUPTED",
+    "EXIT_NOT_OK",
+    "EXIT_OK",
+    "PROBLEMS",
+    "Outcome",
+    "build_parser",
+    "main",
+]

@@ -11,8 +11,9 @@ from typing import Any
 from optmodels.core import ProblemError, as_count, as_number, as_positive, as_probability
 
 
-def _flag_type(what: str, check: Callable[[Any], Any],
-               parse: Callable[[str], Any] = float) -> Callable[[str], Any]:
+def _flag_type(
+    what: str, check: Callable[[Any], Any], parse: Callable[[str], Any] = float
+) -> Callable[[str], Any]:
     """An argparse ``type=``: ``parse`` the text, then ``check`` it with one of
     :mod:`optmodels.core`'s scalar checks (called with the name ``"value"``); a failure is
     a usage error (exit 2) naming the flag."""
@@ -48,20 +49,22 @@ def _finite() -> Callable[[str], float]:
 
 
 def _level() -> Callable[[str], float]:
-    return _flag_type("a probability in (0, 1)", lambda v: as_probability(
-        "value", v, low_open=True, high_open=True))
+    return _flag_type(
+        "a probability in (0, 1)",
+        lambda v: as_probability("value", v, low_open=True, high_open=True),
+    )
 
 
 def _count(minimum: int) -> Callable[[str], int]:
-    return _flag_type(f"a whole number >= {minimum}",
-                      lambda v: as_count("value", v, minimum=minimum), _whole)
+    return _flag_type(
+        f"a whole number >= {minimum}", lambda v: as_count("value", v, minimum=minimum), _whole
+    )
 
 
 def _int_list(text: str) -> list[int]:
     """``--sizes 100,1000``: positive whole numbers."""
     try:
-        vals = [as_count("value", _whole(x), minimum=1) for x in text.split(",")
-                if x.strip()]
+        vals = [as_count("value", _whole(x), minimum=1) for x in text.split(",") if x.strip()]
     except (ValueError, OverflowError) as exc:  # ProblemError is a ValueError
         raise argparse.ArgumentTypeError(
             f"expected positive whole numbers like 100,1000 ({str(exc).removeprefix('value: ')})"

@@ -59,14 +59,21 @@ def _reading(label: str) -> Iterator[None]:
     except OptModelsError:
         raise
     except UnicodeDecodeError as exc:
-        raise ProblemError(f"{label}: not UTF-8 text (byte {exc.start}: {exc.reason}); "
-                           "save it as UTF-8") from exc
+        raise ProblemError(
+            f"{label}: not UTF-8 text (byte {exc.start}: {exc.reason}); save it as UTF-8"
+        ) from exc
     except json.JSONDecodeError as exc:
         raise ProblemError(f"{label}: not valid JSON ({exc})") from exc
     except OSError as exc:
         raise ProblemError(f"{label}: {exc.strerror or exc}") from exc
-    except (ValueError, TypeError, KeyError, IndexError, ArithmeticError,
-            np.linalg.LinAlgError) as exc:
+    except (
+        ValueError,
+        TypeError,
+        KeyError,
+        IndexError,
+        ArithmeticError,
+        np.linalg.LinAlgError,
+    ) as exc:
         raise ProblemError(f"{label}: {type(exc).__name__}: {exc}") from exc
 
 
@@ -196,7 +203,8 @@ def _execute(args: argparse.Namespace) -> int:
                 traceback.print_exc()
             code = EXIT_INTERNAL
             message = f"internal error: {type(exc).__name__}: {exc}" + (
-                "" if debug else " (rerun with --debug for the traceback)")
+                "" if debug else " (rerun with --debug for the traceback)"
+            )
     if code != EXIT_OK:
         return _fail(args, code, message)
     _emit(text)
@@ -245,9 +253,13 @@ class _Help(argparse.RawDescriptionHelpFormatter):
 def _shows_default(action: argparse.Action) -> bool:
     """Whether ``--help`` states ``action``'s default (options only; a default that is
     "off" -- ``None``, ``False``, suppressed -- is not a value worth showing)."""
-    return (bool(action.option_strings) and action.default is not None
-            and action.default is not False and action.default is not argparse.SUPPRESS
-            and not isinstance(action, argparse._HelpAction | argparse._VersionAction))
+    return (
+        bool(action.option_strings)
+        and action.default is not None
+        and action.default is not False
+        and action.default is not argparse.SUPPRESS
+        and not isinstance(action, argparse._HelpAction | argparse._VersionAction)
+    )
 
 
 class _Parser(argparse.ArgumentParser):
@@ -274,10 +286,13 @@ class _Parser(argparse.ArgumentParser):
 def _leaf(sub: Any, name: str, help_: str) -> argparse.ArgumentParser:
     """A command parser with the common flags --json and --debug."""
     p = sub.add_parser(name, help=help_, description=help_)
-    p.add_argument("--json", action="store_true",
-                   help="print exactly one JSON document on stdout")
-    p.add_argument("--debug", action="store_true", default=argparse.SUPPRESS,
-                   help="show the traceback of an internal error")
+    p.add_argument("--json", action="store_true", help="print exactly one JSON document on stdout")
+    p.add_argument(
+        "--debug",
+        action="store_true",
+        default=argparse.SUPPRESS,
+        help="show the traceback of an internal error",
+    )
     return p
 
 

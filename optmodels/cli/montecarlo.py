@@ -35,36 +35,52 @@ def _montecarlo(args: argparse.Namespace) -> Outcome:
         study = mc.study(args.study, **params)
     checkpoint = _out_file("--checkpoint", args.checkpoint) if args.checkpoint else None
     out_path = _out_file("--out", args.out) if args.out else None
-    res = mc.run(study, args.trials, args.seed, scheduler=args.scheduler,
-                 checkpoint=checkpoint, workers=args.workers, progress=not args.json,
-                 retry_failed=args.retry_failed)
-    out = {"study": res.study, "seed": res.seed, "trials": int(res.trials.size),
-           "requested": res.requested, "n_ok": res.n_ok,
-           "failed": len(res.failures),
-           "failures": [[int(i), str(m)] for i, m in res.failures[:20]],
-           "skipped_lines": res.skipped_lines,
-           "resumed": res.resumed, "engine": res.engine, "summary": res.summary,
-           "means": {k: res.mean(k) for k in res.values},
-           "standard_errors": {k: res.se(k) for k in res.values} if res.n_ok > 1
-           else {}}
+    res = mc.run(
+        study,
+        args.trials,
+        args.seed,
+        scheduler=args.scheduler,
+        checkpoint=checkpoint,
+        workers=args.workers,
+        progress=not args.json,
+        retry_failed=args.retry_failed,
+    )
+    out = {
+        "study": res.study,
+        "seed": res.seed,
+        "trials": int(res.trials.size),
+        "requested": res.requested,
+        "n_ok": res.n_ok,
+        "failed": len(res.failures),
+        "failures": [[int(i), str(m)] for i, m in res.failures[:20]],
+        "skipped_lines": res.skipped_lines,
+        "resumed": res.resumed,
+        "engine": res.engine,
+        "summary": res.summary,
+        "means": {k: res.mean(k) for k in res.values},
+        "standard_errors": {k: res.se(k) for k in res.values} if res.n_ok > 1 else {},
+    }
     out["out"] = str(out_path.resolve()) if out_path is not None else None
     out["checkpoint"] = str(checkpoint.resolve()) if checkpoint is not None else None
     if out_path is not None:
         write_json(out_path, {**out, "values": res.values})
-    finite = all(bool(np.all(np.isfinite(np.asarray(v, dtype=float))))
-                 for v in res.values.values())
+    finite = all(bool(np.all(np.isfinite(np.asarray(v, dtype=float)))) for v in res.values.values())
     return out, finite and not res.failures
 
 
 def _print_montecarlo(res: dict[str, Any]) -> None:
-    print(f"{res['study']}: {res['trials']} trials (seed {res['seed']}, {res['resumed']} "
-          f"from the checkpoint), engine {res['engine']}")
+    print(
+        f"{res['study']}: {res['trials']} trials (seed {res['seed']}, {res['resumed']} "
+        f"from the checkpoint), engine {res['engine']}"
+    )
     for key, what in (("out", "values and summary"), ("checkpoint", "checkpoint")):
         if res.get(key):
             print(f"  wrote {res[key]} ({what})")
     if res["failed"]:
-        print(f"  {res['failed']} of {res['requested']} trials failed (recorded; "
-              "--retry-failed runs them again), e.g.")
+        print(
+            f"  {res['failed']} of {res['requested']} trials failed (recorded; "
+            "--retry-failed runs them again), e.g."
+        )
         for i, msg in res["failures"][:3]:
             print(f"    trial {i}: {msg}")
     if res["skipped_lines"]:
@@ -81,20 +97,37 @@ def register(sub: Any) -> None:
     count0, count1 = _count(0), _count(1)
 
     mcp = _leaf(sub, "montecarlo", "run a seeded Monte Carlo study (local or Dask)")
-    mcp.add_argument("study", help="plane-angle, trajectories-eta, fusion-weight, "
-                                   "biasfield-recovery, assignment-separation")
+    mcp.add_argument(
+        "study",
+        help="plane-angle, trajectories-eta, fusion-weight, "
+        "biasfield-recovery, assignment-separation",
+    )
     mcp.add_argument("--trials", type=count1, default=1000, help="trials to run (>= 1)")
-    mcp.add_argument("--seed", type=count0, default=0,
-                     help="seed of the study's numpy.random.Generator streams")
-    mcp.add_argument("--param", action="append", metavar="NAME=VALUE",
-                     help="study parameter (repeatable), e.g. --param n=100")
-    mcp.add_argument("--scheduler", type=scheduler_argument, default="processes",
-                     help="processes (default), serial, or a Dask address tcp://host:8786")
+    mcp.add_argument(
+        "--seed", type=count0, default=0, help="seed of the study's numpy.random.Generator streams"
+    )
+    mcp.add_argument(
+        "--param",
+        action="append",
+        metavar="NAME=VALUE",
+        help="study parameter (repeatable), e.g. --param n=100",
+    )
+    mcp.add_argument(
+        "--scheduler",
+        type=scheduler_argument,
+        default="processes",
+        help="processes (default), serial, or a Dask address tcp://host:8786",
+    )
     mcp.add_argument("--workers", type=count1, help="local processes (default: all cores)")
-    mcp.add_argument("--checkpoint", metavar="FILE",
-                     help="JSON-lines FILE; a rerun resumes from it")
-    mcp.add_argument("--retry-failed", action="store_true",
-                     help="run again the trials the checkpoint records as failed")
-    mcp.add_argument("--out", metavar="FILE",
-                     help="write the per-trial values and summary to this JSON FILE")
+    mcp.add_argument(
+        "--checkpoint", metavar="FILE", help="JSON-lines FILE; a rerun resumes from it"
+    )
+    mcp.add_argument(
+        "--retry-failed",
+        action="store_true",
+        help="run again the trials the checkpoint records as failed",
+    )
+    mcp.add_argument(
+        "--out", metavar="FILE", help="write the per-trial values and summary to this JSON FILE"
+    )
     mcp.set_defaults(func=_montecarlo, printer=_print_montecarlo)

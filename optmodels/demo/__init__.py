@@ -22,8 +22,9 @@ def _entry(name: str) -> str:
 def runners() -> dict[str, Any]:
     """Each registered problem's demo entry by problem name, in the registry's order."""
     mods = {p: registry.face_module(__name__, p) for p in registry.names()}
-    return {p: getattr(m, _entry(p)) for p, m in mods.items()
-            if m is not None and hasattr(m, _entry(p))}
+    return {
+        p: getattr(m, _entry(p)) for p, m in mods.items() if m is not None and hasattr(m, _entry(p))
+    }
 
 
 def _with_module() -> list[str]:

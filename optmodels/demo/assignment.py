@@ -46,8 +46,15 @@ def _cv(dt: float, accel: float) -> tuple[np.ndarray, np.ndarray]:
     return f, accel**2 * qn
 
 
-def track(sc: SpaceScenario, *, merges: bool, rng: np.random.Generator, rho: float = 0.3,
-          gate: float = 5.0, accel: float = 0.01) -> dict[str, Any]:
+def track(
+    sc: SpaceScenario,
+    *,
+    merges: bool,
+    rng: np.random.Generator,
+    rho: float = 0.3,
+    gate: float = 5.0,
+    accel: float = 0.01,
+) -> dict[str, Any]:
     """Run the tracker over the sessions. ``merges=False`` is the resolved-only baseline.
 
     Update of a block S that received measurement z: the members' stacked states with the
@@ -66,9 +73,17 @@ def track(sc: SpaceScenario, *, merges: bool, rng: np.random.Generator, rho: flo
         t_prev = s.time
         x = x @ f.T
         p = f @ p @ f.T + qn
-        data = asg.AssignmentData(x[:, :2], p[:, :2, :2], s.measurements, sc.meas_cov,
-                                  sc.volume, sc.pd, rho, max_group_size=None if merges else 1,
-                                  group_gate=gate if merges else None)
+        data = asg.AssignmentData(
+            x[:, :2],
+            p[:, :2, :2],
+            s.measurements,
+            sc.meas_cov,
+            sc.volume,
+            sc.pd,
+            rho,
+            max_group_size=None if merges else 1,
+            group_gate=gate if merges else None,
+        )
         sol = asg.solve(data).require_ok() if merges else asg.linear_assignment(data)
         for i, a in enumerate(sol.assignment):
             est = sol.partition[a] if a >= 0 else ()
@@ -81,33 +96,42 @@ def track(sc: SpaceScenario, *, merges: bool, rng: np.random.Generator, rho: flo
             hs = np.hstack([h / k] * k)
             ps = np.zeros((4 * k, 4 * k))
             for b, j in enumerate(members):
-                ps[4 * b:4 * b + 4, 4 * b:4 * b + 4] = p[j]
+                ps[4 * b : 4 * b + 4, 4 * b : 4 * b + 4] = p[j]
             xs = np.concatenate([x[j] for j in members])
             sm = hs @ ps @ hs.T + sc.meas_cov
             gain = ps @ hs.T @ np.linalg.inv(sm)
             xs = xs + gain @ (s.measurements[i] - hs @ xs)
             ps = (np.eye(4 * k) - gain @ hs) @ ps
             for b, j in enumerate(members):
-                x[j] = xs[4 * b:4 * b + 4]
-                p[j] = 0.5 * (ps[4 * b:4 * b + 4, 4 * b:4 * b + 4]
-                              + ps[4 * b:4 * b + 4, 4 * b:4 * b + 4].T)
+                x[j] = xs[4 * b : 4 * b + 4]
+                p[j] = 0.5 * (
+                    ps[4 * b : 4 * b + 4, 4 * b : 4 * b + 4]
+                    + ps[4 * b : 4 * b + 4, 4 * b : 4 * b + 4].T
+                )
     err = x[:, :2] - sc.sessions[-1].positions
-    return {"correct": correct, "total": total,
-            "rms_position": float(np.sqrt(np.mean(np.sum(err**2, axis=1))))}
+    return {
+        "correct": correct,
+        "total": total,
+        "rms_position": float(np.sqrt(np.mean(np.sum(err**2, axis=1)))),
+    }
 
 
-def run_assignment_demo(out: Path, *, runs: int = 8, seed: int = 0, q: int = 4,
-                        progress: bool = False) -> dict[str, Any]:
+def run_assignment_demo(
+    out: Path, *, runs: int = 8, seed: int = 0, q: int = 4, progress: bool = False
+) -> dict[str, Any]:
     """Writes ``out/association.png``, ``out/report.md`` and ``out/summary.json``."""
     out.mkdir(parents=True, exist_ok=True)
     rows = []
     peers = stonesoup_available()
     methods: list[tuple[str, Any]] = [
         ("MAP", lambda sc, g: track(sc, merges=True, rng=g)),
-        ("GNN", lambda sc, g: track(sc, merges=False, rng=g))]
+        ("GNN", lambda sc, g: track(sc, merges=False, rng=g)),
+    ]
     if peers:
-        methods += [("SS-GNN", lambda sc, g: track_stonesoup(sc, method="gnn", rng=g)),
-                    ("SS-JPDA", lambda sc, g: track_stonesoup(sc, method="jpda", rng=g))]
+        methods += [
+            ("SS-GNN", lambda sc, g: track_stonesoup(sc, method="gnn", rng=g)),
+            ("SS-JPDA", lambda sc, g: track_stonesoup(sc, method="jpda", rng=g)),
+        ]
     for sep in tqdm(SEPARATIONS, desc="assignment demo", disable=not progress):
         acc: dict[str, list[float]] = {}
         for r in range(runs):
@@ -126,12 +150,16 @@ def run_assignment_demo(out: Path, *, runs: int = 8, seed: int = 0, q: int = 4,
     fig = plots.association_rates(out / "association.png", rows)
     example = space_objects(np.random.default_rng([seed, 1]), q=3, separation=60.0)
     s0 = example.sessions[0]
-    counts = [{"Q": qq, "N": nn, "variants": sum(v[0] for v in
-                                                  asg.count_per_variant(qq, nn).values()),
-               "hypotheses (14)": asg.count_hypotheses(qq, nn)}
-              for qq, nn in ((2, 3), (3, 3), (4, 5), (7, 8), (10, 12), (12, 14))]
-    summary: dict[str, Any] = {"runs": runs, "seed": seed, "q": q, "rows": rows,
-                               "counts": counts}
+    counts = [
+        {
+            "Q": qq,
+            "N": nn,
+            "variants": sum(v[0] for v in asg.count_per_variant(qq, nn).values()),
+            "hypotheses (14)": asg.count_hypotheses(qq, nn),
+        }
+        for qq, nn in ((2, 3), (3, 3), (4, 5), (7, 8), (10, 12), (12, 14))
+    ]
+    summary: dict[str, Any] = {"runs": runs, "seed": seed, "q": q, "rows": rows, "counts": counts}
     tracking = track_level(out, seed=seed) if peers else None
     if tracking is not None:
         summary["tracking"] = tracking["rows"]
@@ -142,14 +170,17 @@ def run_assignment_demo(out: Path, *, runs: int = 8, seed: int = 0, q: int = 4,
             fmt[key] = ".3f"
         elif key.endswith("RMS pos, m"):
             fmt[key] = ".1f"
-    peer_text = ("Stone Soup (the external peer, `pip install 'optmodels[peers]'`) runs the "
-                 "same Kalman filter with its `GNNWith2DAssignment` (SS-GNN, Mahalanobis "
-                 "gate) and `JPDA` (SS-JPDA; its most probable hypothesis per track is "
-                 "scored, its posterior is the mixture reduction). Far apart, SS-GNN and the "
-                 "resolved-only baseline coincide to the metre — an independent check of "
-                 "the filter." if peers else
-                 "Stone Soup is not installed: `pip install 'optmodels[peers]'` adds its "
-                 "GNN and JPDA as external peers to this table.")
+    peer_text = (
+        "Stone Soup (the external peer, `pip install 'optmodels[peers]'`) runs the "
+        "same Kalman filter with its `GNNWith2DAssignment` (SS-GNN, Mahalanobis "
+        "gate) and `JPDA` (SS-JPDA; its most probable hypothesis per track is "
+        "scored, its posterior is the mixture reduction). Far apart, SS-GNN and the "
+        "resolved-only baseline coincide to the metre — an independent check of "
+        "the filter."
+        if peers
+        else "Stone Soup is not installed: `pip install 'optmodels[peers]'` adds its "
+        "GNN and JPDA as external peers to this table."
+    )
     report = f"""# Joint assignment with unresolved groups (paper 004)
 
 {q} space objects in a line, {len(example.sessions)} sessions 60 s apart, measurement noise
@@ -192,8 +223,14 @@ At Q = 12, N = 14 the MILP with exact dominance pruning takes about 0.5 s
     return summary
 
 
-def track_level(out: Path, *, seed: int = 0, ratios: tuple[float, ...] | None = None,
-                runs: int | None = None, scans: int | None = None) -> dict[str, Any]:
+def track_level(
+    out: Path,
+    *,
+    seed: int = 0,
+    ratios: tuple[float, ...] | None = None,
+    runs: int | None = None,
+    scans: int | None = None,
+) -> dict[str, Any]:
     """Track-level comparison (issue 18): crossing encounters of two objects seen by a radar
     with a finite resolution cell (:mod:`optmodels.scenarios.encounters`), tracked by Stone
     Soup Kalman trackers with the MAP associator with merges
@@ -216,8 +253,7 @@ def track_level(out: Path, *, seed: int = 0, ratios: tuple[float, ...] | None = 
     # left: mean GOSPA per method, the methods side by side at each ratio (dodged on the
     # log axis) so that equal values do not hide each other; right: swaps and breaks per
     # run as a table of numbers (mostly 0: as lines they were 8 series stacked on 0)
-    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(12, 4.4),
-                                   gridspec_kw={"width_ratios": [1.3, 1]})
+    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(12, 4.4), gridspec_kw={"width_ratios": [1.3, 1]})
     styles = {"MAP+merges": "o-", "resolved": "s--", "GNN": "^:", "JPDA": "v:"}
     methods = [m for m in at.METHODS if any(r["method"] == m for r in rows)]
     xs = sorted({r["ratio"] for r in rows})
@@ -226,8 +262,9 @@ def track_level(out: Path, *, seed: int = 0, ratios: tuple[float, ...] | None = 
         dodge = 1.0 + 0.04 * (k - (len(methods) - 1) / 2)
         x = [r["ratio"] * dodge for r in sel]
         se = [0.0 if not np.isfinite(r["gospa_se"]) else 2 * r["gospa_se"] for r in sel]
-        ax1.errorbar(x, [r["gospa"] for r in sel], yerr=se, fmt=styles.get(m, "o-"),
-                     capsize=3, label=m)
+        ax1.errorbar(
+            x, [r["gospa"] for r in sel], yerr=se, fmt=styles.get(m, "o-"), capsize=3, label=m
+        )
     ax1.set_xscale("log")
     ax1.set_xticks(xs, [f"{x:g}" for x in xs])
     ax1.minorticks_off()
@@ -237,29 +274,55 @@ def track_level(out: Path, *, seed: int = 0, ratios: tuple[float, ...] | None = 
     ax1.grid(alpha=0.3)
     ax1.legend(fontsize=8)
     by = {(r["method"], r["ratio"]): r for r in rows}
-    bad = np.array([[(by[(m, x)]["swaps"] + by[(m, x)]["breaks"]) / by[(m, x)]["runs"]
-                     if (m, x) in by else np.nan for x in xs] for m in methods])
-    ax2.imshow(bad, cmap="Reds", vmin=0, vmax=max(1.0, float(np.nanmax(bad))),
-               aspect="auto")
+    bad = np.array(
+        [
+            [
+                (by[(m, x)]["swaps"] + by[(m, x)]["breaks"]) / by[(m, x)]["runs"]
+                if (m, x) in by
+                else np.nan
+                for x in xs
+            ]
+            for m in methods
+        ]
+    )
+    ax2.imshow(bad, cmap="Reds", vmin=0, vmax=max(1.0, float(np.nanmax(bad))), aspect="auto")
     for i, m in enumerate(methods):
         for j, x in enumerate(xs):
             r = by.get((m, x))
             if r is not None:
-                ax2.text(j, i, f"{r['swaps'] / r['runs']:.1f} / {r['breaks'] / r['runs']:.1f}",
-                         ha="center", va="center", fontsize=9)
+                ax2.text(
+                    j,
+                    i,
+                    f"{r['swaps'] / r['runs']:.1f} / {r['breaks'] / r['runs']:.1f}",
+                    ha="center",
+                    va="center",
+                    fontsize=9,
+                )
     ax2.set_xticks(range(len(xs)), [f"{x:g}" for x in xs])
     ax2.set_yticks(range(len(methods)), methods)
     ax2.set_xlabel("separation / range resolution")
     ax2.set_title("track swaps / breaks per run (darker = more)", fontsize=10)
-    fig.suptitle(f"Crossing pairs, radar 50 km, range cell 150 m, 1°; {runs} runs × "
-                 f"{scans} scans per point (demo size)", fontsize=10)
+    fig.suptitle(
+        f"Crossing pairs, radar 50 km, range cell 150 m, 1°; {runs} runs × "
+        f"{scans} scans per point (demo size)",
+        fontsize=10,
+    )
     fig.tight_layout()
     path = out / "tracking.png"
     fig.savefig(path, dpi=110)
     plt.close(fig)
     fmt = {"gospa": ".1f", "gospa_se": ".1f", "merged_scans": ".1f", "s_per_run": ".2f"}
-    cols = ["ratio", "method", "runs", "gospa", "gospa_se", "swaps", "breaks",
-            "merged_scans", "s_per_run"]
+    cols = [
+        "ratio",
+        "method",
+        "runs",
+        "gospa",
+        "gospa_se",
+        "swaps",
+        "breaks",
+        "merged_scans",
+        "s_per_run",
+    ]
     text = f"""
 ## Track level: Stone Soup trackers on crossing encounters
 
@@ -288,8 +351,14 @@ def stonesoup_available() -> bool:
     return True
 
 
-def track_stonesoup(sc: SpaceScenario, *, method: str, rng: np.random.Generator,
-                    gate: float = 5.0, accel: float = 0.01) -> dict[str, Any]:
+def track_stonesoup(
+    sc: SpaceScenario,
+    *,
+    method: str,
+    rng: np.random.Generator,
+    gate: float = 5.0,
+    accel: float = 0.01,
+) -> dict[str, Any]:
     """The same tracking with Stone Soup's associators as an external peer: ``"gnn"`` =
     ``GNNWith2DAssignment`` (Mahalanobis ``DistanceHypothesiser``, missed distance
     ``gate``), ``"jpda"`` = ``JPDA`` (``PDAHypothesiser``; each track's posterior is the
@@ -322,27 +391,36 @@ def track_stonesoup(sc: SpaceScenario, *, method: str, rng: np.random.Generator,
     p0 = np.diag([sp**2, sp**2, sv**2, sv**2])
     x = sc.x0 + rng.multivariate_normal(np.zeros(4), p0, size=q)  # same draws as track()
     perm = [0, 2, 1, 3]  # ours [x, y, vx, vy] -> Stone Soup [x, vx, y, vy]
-    trans = CombinedLinearGaussianTransitionModel([ConstantVelocity(accel**2),
-                                                   ConstantVelocity(accel**2)])
+    trans = CombinedLinearGaussianTransitionModel(
+        [ConstantVelocity(accel**2), ConstantVelocity(accel**2)]
+    )
     meas_model = LinearGaussian(ndim_state=4, mapping=(0, 2), noise_covar=sc.meas_cov)
     predictor = KalmanPredictor(trans)
     updater = KalmanUpdater(meas_model)
     t0 = datetime(2026, 1, 1)
-    tracks = [Track([GaussianState(x[j, perm].reshape(-1, 1), p0[np.ix_(perm, perm)],
-                                   timestamp=t0)]) for j in range(q)]
+    tracks = [
+        Track([GaussianState(x[j, perm].reshape(-1, 1), p0[np.ix_(perm, perm)], timestamp=t0)])
+        for j in range(q)
+    ]
     if method == "gnn":
-        assoc: Any = GNNWith2DAssignment(DistanceHypothesiser(
-            predictor, updater, measure=Mahalanobis(), missed_distance=gate))
+        assoc: Any = GNNWith2DAssignment(
+            DistanceHypothesiser(predictor, updater, measure=Mahalanobis(), missed_distance=gate)
+        )
     elif method == "jpda":
-        assoc = JPDA(PDAHypothesiser(predictor, updater, clutter_spatial_density=2.0
-                                     / sc.volume, prob_detect=sc.pd))
+        assoc = JPDA(
+            PDAHypothesiser(
+                predictor, updater, clutter_spatial_density=2.0 / sc.volume, prob_detect=sc.pd
+            )
+        )
     else:
         raise ValueError(f"method: expected 'gnn' or 'jpda', got {method!r}")
     correct = total = 0
     for s in sc.sessions:
         when = t0 + timedelta(seconds=s.time)
-        dets = [Detection(z.reshape(-1, 1), timestamp=when, measurement_model=meas_model)
-                for z in s.measurements]
+        dets = [
+            Detection(z.reshape(-1, 1), timestamp=when, measurement_model=meas_model)
+            for z in s.measurements
+        ]
         index = {id(d): i for i, d in enumerate(dets)}
         hyps = assoc.associate(set(tracks), set(dets), when)
         claimed: dict[int, list[int]] = {}
@@ -361,17 +439,23 @@ def track_stonesoup(sc: SpaceScenario, *, method: str, rng: np.random.Generator,
                 weights.append(float(hh.probability))
                 if float(hh.probability) > best_p:
                     best, best_p = hh, float(hh.probability)
-            mean, cov = gm_reduce_single(StateVectors([st.state_vector for st in states]),
-                                         np.stack([st.covar for st in states], axis=2),
-                                         np.asarray(weights))
+            mean, cov = gm_reduce_single(
+                StateVectors([st.state_vector for st in states]),
+                np.stack([st.covar for st in states], axis=2),
+                np.asarray(weights),
+            )
             tr.append(GaussianStateUpdate(mean, cov, h, when))
             if best is not None and best.measurement:
                 claimed.setdefault(index[id(best.measurement)], []).append(j)
         for i in range(len(dets)):
             correct += int(tuple(sorted(claimed.get(i, []))) == tuple(sorted(s.truth[i])))
             total += 1
-    final = np.array([np.asarray(tr[-1].state_vector, dtype=float).ravel()[[0, 2]]
-                      for tr in tracks])
+    final = np.array(
+        [np.asarray(tr[-1].state_vector, dtype=float).ravel()[[0, 2]] for tr in tracks]
+    )
     err = final - sc.sessions[-1].positions
-    return {"correct": correct, "total": total,
-            "rms_position": float(np.sqrt(np.mean(np.sum(err**2, axis=1))))}
+    return {
+        "correct": correct,
+        "total": total,
+        "rms_position": float(np.sqrt(np.mean(np.sum(err**2, axis=1)))),
+    }

@@ -45,26 +45,38 @@ def _rms(a: np.ndarray) -> tuple[float, float]:
 def _baseline_rows(seed: int) -> list[dict[str, Any]]:
     out = []
     for kind in ("constant", "smooth"):
-        sc = radar_network(seed + 10, n_aircraft=30, duration=1800.0, turn_rate=(0.0, 0.0),
-                           fields=kind, geometry="3d", holding=0.0)  # type: ignore[arg-type]
+        sc = radar_network(
+            seed + 10,
+            n_aircraft=30,
+            duration=1800.0,
+            turn_rate=(0.0, 0.0),
+            fields=kind,
+            geometry="3d",
+            holding=0.0,
+        )  # type: ignore[arg-type]
         res = bf.azimuth_bias_baseline(sc.plots, sc.radars)
         ids = np.unique(sc.plots.object)
         h1 = bf.azimuth_bias_baseline(sc.plots, sc.radars, objects=ids[::2])
         h2 = bf.azimuth_bias_baseline(sc.plots, sc.radars, objects=ids[1::2])
         z = (h1.estimate - h2.estimate) / np.hypot(h1.std, h2.std)
         true = np.array([f(np.zeros((1, 2)))[0, 1] for f in sc.fields])
-        out.append({
-            "field": kind,
-            "Δα̂, deg": ", ".join(f"{v:.3f}" for v in np.rad2deg(res.estimate)),
-            "se, deg": ", ".join(f"{v:.4f}" for v in np.rad2deg(res.std)),
-            "true Δα at origin, deg": ", ".join(f"{v:.3f}" for v in np.rad2deg(true)),
-            "χ²/dof": res.chi2_per_dof, "p-value": res.p_value,
-            "max |halves z|": float(np.max(np.abs(z)))})
+        out.append(
+            {
+                "field": kind,
+                "Δα̂, deg": ", ".join(f"{v:.3f}" for v in np.rad2deg(res.estimate)),
+                "se, deg": ", ".join(f"{v:.4f}" for v in np.rad2deg(res.std)),
+                "true Δα at origin, deg": ", ".join(f"{v:.3f}" for v in np.rad2deg(true)),
+                "χ²/dof": res.chi2_per_dof,
+                "p-value": res.p_value,
+                "max |halves z|": float(np.max(np.abs(z))),
+            }
+        )
     return out
 
 
-def _use_rows(sc: Any, fd: bf.FieldData, cf: Any, seed: int
-              ) -> tuple[list[dict[str, Any]], dict[str, Any], Any]:
+def _use_rows(
+    sc: Any, fd: bf.FieldData, cf: Any, seed: int
+) -> tuple[list[dict[str, Any]], dict[str, Any], Any]:
     """The field in use: ADS-B-referenced field on the same cells, the plots corrected with
     each field, registration and absolute error before/after (in sample: every aircraft;
     held out: fields from the even-numbered aircraft, figures on the odd ones)."""
@@ -76,50 +88,69 @@ def _use_rows(sc: Any, fd: bf.FieldData, cf: Any, seed: int
     train = sc.plots.object % 2 == 0
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", UserWarning)  # cells without every radar dropped
-        fd_t = bf.field_data_from_plots(sc.plots.subset(train), sc.radars, cells=fd.k,
-                                        seed=seed, coverage="all").data
+        fd_t = bf.field_data_from_plots(
+            sc.plots.subset(train), sc.radars, cells=fd.k, seed=seed, coverage="all"
+        ).data
     cf_t = bf.closed_form(fd_t)
-    af_t = adsb_field(fd_t, sc.plots.subset(train), sc.radars, ref[train],
-                      sigma_reference=SIGMA_ADSB)
-    held = compare_fields(sc.plots.subset(~train), sc.radars, ref[~train],
-                          {"smoothest (11)": cf_t.map(names=names),
-                           "ADS-B-referenced": af_t.map(fd_t, names=names)})
+    af_t = adsb_field(
+        fd_t, sc.plots.subset(train), sc.radars, ref[train], sigma_reference=SIGMA_ADSB
+    )
+    held = compare_fields(
+        sc.plots.subset(~train),
+        sc.radars,
+        ref[~train],
+        {"smoothest (11)": cf_t.map(names=names), "ADS-B-referenced": af_t.map(fd_t, names=names)},
+    )
     rows = []
-    for key, label in (("before", "none (plots as read)"), ("smoothest (11)", "smoothest (11)"),
-                       ("ADS-B-referenced", "ADS-B-referenced")):
+    for key, label in (
+        ("before", "none (plots as read)"),
+        ("smoothest (11)", "smoothest (11)"),
+        ("ADS-B-referenced", "ADS-B-referenced"),
+    ):
         reg, ab = inside[key]["registration"], inside[key]["absolute"]
-        row: dict[str, Any] = {"correction": label,
-                               "registration, m": reg["overall_m"]}
+        row: dict[str, Any] = {"correction": label, "registration, m": reg["overall_m"]}
         for pair, v in reg["pairs"].items():
             row[f"reg {pair}, m"] = v["rms_m"]
         row["absolute, m"] = ab["overall_m"]
         row["held-out registration, m"] = held[key]["registration"]["overall_m"]
         row["held-out absolute, m"] = held[key]["absolute"]["overall_m"]
         rows.append(row)
-    floors = {"registration noise, m": inside["before"]["registration"]["noise_m"],
-              "absolute noise, m": inside["before"]["absolute"]["noise_m"],
-              "held-out registration noise, m": held["before"]["registration"]["noise_m"],
-              "held-out absolute noise, m": held["before"]["absolute"]["noise_m"],
-              "plots compared": inside["plots"], "held-out plots compared": held["plots"],
-              "adsb status": af.status.value, "adsb chi2/dof": af.chi2 / af.dof}
+    floors = {
+        "registration noise, m": inside["before"]["registration"]["noise_m"],
+        "absolute noise, m": inside["before"]["absolute"]["noise_m"],
+        "held-out registration noise, m": held["before"]["registration"]["noise_m"],
+        "held-out absolute noise, m": held["before"]["absolute"]["noise_m"],
+        "plots compared": inside["plots"],
+        "held-out plots compared": held["plots"],
+        "adsb status": af.status.value,
+        "adsb chi2/dof": af.chi2 / af.dof,
+    }
     return rows, {"in_sample": inside, "held_out": held, **floors}, af
 
 
-def run_biasfield_demo(out: Path, *, seed: int = 0, n_aircraft: int = 80,
-                       duration: float = 2400.0, cells: int = 150,
-                       progress: bool = False) -> dict[str, Any]:
+def run_biasfield_demo(
+    out: Path,
+    *,
+    seed: int = 0,
+    n_aircraft: int = 80,
+    duration: float = 2400.0,
+    cells: int = 150,
+    progress: bool = False,
+) -> dict[str, Any]:
     """Writes ``out/azimuth_maps.png``, ``out/range_maps.png``, ``out/use_azimuth_maps.png``,
     ``out/use_range_maps.png`` (true, smoothest and ADS-B-referenced fields),
     ``out/report.md`` and ``out/summary.json``; returns the summary."""
     del progress  # every step takes a second or less
     out.mkdir(parents=True, exist_ok=True)
-    sc = radar_network(seed, n_aircraft=n_aircraft, duration=duration, fields="smooth",
-                       geometry="3d")
+    sc = radar_network(
+        seed, n_aircraft=n_aircraft, duration=duration, fields="smooth", geometry="3d"
+    )
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         # the paper's all-radar cells (the ADS-B referee below is written for them)
-        build = bf.field_data_from_plots(sc.plots, sc.radars, cells=cells, seed=seed,
-                                         coverage="all")
+        build = bf.field_data_from_plots(
+            sc.plots, sc.radars, cells=cells, seed=seed, coverage="all"
+        )
         fd, diag = build.data, build.diagnostics
         for text in build.warnings:
             warnings.warn(text, UserWarning, stacklevel=1)
@@ -133,28 +164,47 @@ def run_biasfield_demo(out: Path, *, seed: int = 0, n_aircraft: int = 80,
     # field's largest |f| per component on a 5 % grid (in 3-D the sets couple the range and
     # azimuth of a cell, so one common fraction would often have to be ~100 %)
     grid = np.round(np.arange(0.6, 1.0001, 0.05), 2)
-    cands = sorted(((fr, fa) for fr in grid for fa in grid if min(fr, fa) < 1.0),
-                   key=lambda p: (p[0] * p[1], p))
-    frac_r, frac_a = next((p for p in cands if not sel.box_feasibility(
-        fd, (p[0] * float(big[0]), p[1] * float(big[1]))).size), (1.0, 1.0))
+    cands = sorted(
+        ((fr, fa) for fr in grid for fa in grid if min(fr, fa) < 1.0),
+        key=lambda p: (p[0] * p[1], p),
+    )
+    frac_r, frac_a = next(
+        (
+            p
+            for p in cands
+            if not sel.box_feasibility(fd, (p[0] * float(big[0]), p[1] * float(big[1]))).size
+        ),
+        (1.0, 1.0),
+    )
     box = (frac_r * float(big[0]), frac_a * float(big[1]))
     frac = f"{frac_r:.0%} range, {frac_a:.0%} azimuth"
     qb = bf.solve(fd, box=box)
     lip = bf.solve_lipschitz(fd)
     idf = sel.identifiability(fd)
-    methods = {"closed form (11)": cf, "QP reduced (Clarabel)": qp,
-               "QP constrained (Clarabel)": qpc, f"QP + box at {frac}": qb,
-               "Lipschitz SOCP": lip}
+    methods = {
+        "closed form (11)": cf,
+        "QP reduced (Clarabel)": qp,
+        "QP constrained (Clarabel)": qpc,
+        f"QP + box at {frac}": qb,
+        "Lipschitz SOCP": lip,
+    }
     rows = []
     for name, s in methods.items():
         rr, ra = _rms(s.field - truth)
-        rows.append({"method": name, "status": s.status.value, "J = φᵀRφ": s.objective,
-                     "J / J(11)": s.objective / cf.objective,
-                     "max |Δ vs (11)|, m": float(np.max(np.abs(s.field - cf.field)[..., 0])),
-                     "active bounds": int(np.sum(s.active != 0)),
-                     "L (max jump)": s.lipschitz if s.lipschitz is not None else float("nan"),
-                     "RMS error range, m": rr, "RMS error azimuth, deg": ra,
-                     "solve, s": s.solve_time + s.build_time})
+        rows.append(
+            {
+                "method": name,
+                "status": s.status.value,
+                "J = φᵀRφ": s.objective,
+                "J / J(11)": s.objective / cf.objective,
+                "max |Δ vs (11)|, m": float(np.max(np.abs(s.field - cf.field)[..., 0])),
+                "active bounds": int(np.sum(s.active != 0)),
+                "L (max jump)": s.lipschitz if s.lipschitz is not None else float("nan"),
+                "RMS error range, m": rr,
+                "RMS error azimuth, deg": ra,
+                "solve, s": s.solve_time + s.build_time,
+            }
+        )
     tr_r, tr_a = _rms(truth)
     # truth on a grid for the maps
     gx = np.linspace(-180e3, 180e3, 120)
@@ -163,11 +213,18 @@ def run_biasfield_demo(out: Path, *, seed: int = 0, n_aircraft: int = 80,
     pts = np.stack([gxx, gyy], axis=-1)
     gv = np.stack([sc.fields[i](pts) for i in range(fd.m)], axis=-2)  # (ny, nx, m, 2)
     panels = {"smoothest (11)": cf.field, f"with box {frac}": qb.field}
+
     def maps(stem: str, component: int, fields: dict[str, Any]) -> Any:
         """One figure of ``component`` (0 range, 1 azimuth) with the true field beneath."""
-        return plots.bias_maps(out / f"{stem}.png", fd.centers, fields, fd.radars,
-                               component=component, truth_grid=(gx, gy, gv[..., component]),
-                               names=sc.radars.names)
+        return plots.bias_maps(
+            out / f"{stem}.png",
+            fd.centers,
+            fields,
+            fd.radars,
+            component=component,
+            truth_grid=(gx, gy, gv[..., component]),
+            names=sc.radars.names,
+        )
 
     fig_a, fig_r = maps("azimuth_maps", 1, panels), maps("range_maps", 0, panels)
     use_rows, use, af = _use_rows(sc, fd, cf, seed)
@@ -175,25 +232,57 @@ def run_biasfield_demo(out: Path, *, seed: int = 0, n_aircraft: int = 80,
     fig_ua = maps("use_azimuth_maps", 1, use_panels)
     fig_ur = maps("use_range_maps", 0, use_panels)
     scores = {name: score(f, truth, fd).to_dict() for name, f in use_panels.items()}
-    score_rows = [{"field": name, "total, m": v["total"]["horizontal_m"],
-                   "common shift, m": v["shift"]["horizontal_m"],
-                   "rest, m": v["rest"]["horizontal_m"]} for name, v in scores.items()]
+    score_rows = [
+        {
+            "field": name,
+            "total, m": v["total"]["horizontal_m"],
+            "common shift, m": v["shift"]["horizontal_m"],
+            "rest, m": v["rest"]["horizontal_m"],
+        }
+        for name, v in scores.items()
+    ]
     base = _baseline_rows(seed)
-    chk_rows = [{"radar": sc.radars.names[i], "χ²/dof": float(chk.chi2[i] / chk.dof[i]),
-                 "mean whitened residual": f"{chk.mean[i, 0]:+.3f}, {chk.mean[i, 1]:+.3f}",
-                 "plots": int(sum(f.rows.size for f in diag.fits if f.radar == i))}
-                for i in range(fd.m)]
-    summary = {"seed": seed, "cells": fd.k, "dropped_cells": diag.dropped_cells,
-               "dropped_plots": diag.dropped_plots, "plots": len(sc.plots),
-               "methods": rows, "baseline": base, "condition": idf.condition,
-               "residual_check": chk_rows, "box": box,
-               "use": {"rows": use_rows, "score": scores,
-                       **{k: v for k, v in use.items() if k not in ("in_sample", "held_out")},
-                       "in_sample": use["in_sample"], "held_out": use["held_out"]}}
+    chk_rows = [
+        {
+            "radar": sc.radars.names[i],
+            "χ²/dof": float(chk.chi2[i] / chk.dof[i]),
+            "mean whitened residual": f"{chk.mean[i, 0]:+.3f}, {chk.mean[i, 1]:+.3f}",
+            "plots": int(sum(f.rows.size for f in diag.fits if f.radar == i)),
+        }
+        for i in range(fd.m)
+    ]
+    summary = {
+        "seed": seed,
+        "cells": fd.k,
+        "dropped_cells": diag.dropped_cells,
+        "dropped_plots": diag.dropped_plots,
+        "plots": len(sc.plots),
+        "methods": rows,
+        "baseline": base,
+        "condition": idf.condition,
+        "residual_check": chk_rows,
+        "box": box,
+        "use": {
+            "rows": use_rows,
+            "score": scores,
+            **{k: v for k, v in use.items() if k not in ("in_sample", "held_out")},
+            "in_sample": use["in_sample"],
+            "held_out": use["held_out"],
+        },
+    }
     write_json(out / "summary.json", summary)
-    fmt = {"J = φᵀRφ": ".4g", "J / J(11)": ".6f", "max |Δ vs (11)|, m": ".1e",
-           "L (max jump)": ".3g", "RMS error range, m": ".1f", "RMS error azimuth, deg": ".4f",
-           "solve, s": ".3f", "χ²/dof": ".3f", "p-value": ".3g", "max |halves z|": ".1f"}
+    fmt = {
+        "J = φᵀRφ": ".4g",
+        "J / J(11)": ".6f",
+        "max |Δ vs (11)|, m": ".1e",
+        "L (max jump)": ".3g",
+        "RMS error range, m": ".1f",
+        "RMS error azimuth, deg": ".4f",
+        "solve, s": ".3f",
+        "χ²/dof": ".3f",
+        "p-value": ".3g",
+        "max |halves z|": ".1f",
+    }
     fmt.update({k: ".0f" for k in use_rows[0] if k.endswith(", m")})
     fmt.update({k: ".1f" for k in score_rows[0] if k.endswith(", m")})
     warn_text = "; ".join(str(w.message) for w in caught) or "none"

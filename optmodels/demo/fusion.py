@@ -27,8 +27,9 @@ S1_M3 = np.diag([1.0, 2.0, 3.0])
 S2_M3 = np.array([[2.0, 0.5, 0.0], [0.5, 1.0, 0.2], [0.0, 0.2, 1.5]])
 
 
-def accuracy_rows(cases: dict[str, tuple[np.ndarray, np.ndarray]], trials: int, seed: int,
-                  progress: bool = False) -> list[dict[str, Any]]:
+def accuracy_rows(
+    cases: dict[str, tuple[np.ndarray, np.ndarray]], trials: int, seed: int, progress: bool = False
+) -> list[dict[str, Any]]:
     """Linearised Cov(vec Ŵ) (10) against Monte Carlo, and the bias of E Ŵ, per case,
     estimator (known / sample mean) and n in :data:`SNAPSHOTS`.
 
@@ -38,26 +39,32 @@ def accuracy_rows(cases: dict[str, tuple[np.ndarray, np.ndarray]], trials: int, 
     """
     rows = []
     jobs = [(c, mean, n) for c in cases for mean in ("known", "sample") for n in SNAPSHOTS]
-    for k, (case, mean, n) in enumerate(tqdm(jobs, desc="fusion Ŵ Monte Carlo",
-                                             disable=not progress)):
+    for k, (case, mean, n) in enumerate(
+        tqdm(jobs, desc="fusion Ŵ Monte Carlo", disable=not progress)
+    ):
         s1, s2 = cases[case]
         w = fu.weight_matrix(s1, s2)
-        mc = fu.monte_carlo_weight(s1, s2, n, n, trials=trials,
-                                   seed=np.random.default_rng([seed, k]), mean=mean)
+        mc = fu.monte_carlo_weight(
+            s1, s2, n, n, trials=trials, seed=np.random.default_rng([seed, k]), mean=mean
+        )
         lin = fu.weight_covariance(s1, s2, n, n, mean=mean)
         rel = np.diag(lin) / np.diag(mc.cov) - 1.0
         bias = np.abs(mc.mean - w)
         sd = np.sqrt(np.diag(mc.cov)).reshape(w.shape, order="F")
         wmax = float(np.max(np.abs(w)))
-        rows.append({
-            "case": case, "mean": mean, "n": n,
-            "max |lin/MC − 1| (diag)": float(np.max(np.abs(rel))),
-            "median lin/MC − 1": float(np.median(rel)),
-            "rel. std of Ŵ (MC)": float(np.sqrt(np.trace(mc.cov))) / float(np.linalg.norm(w)),
-            "max |E Ŵ − W| / max|W|": float(bias.max()) / wmax,
-            "bias se": float(sd.flat[int(np.argmax(bias))]) / np.sqrt(trials) / wmax,
-            "MC se of a variance": float(np.sqrt(2.0 / trials)),
-        })
+        rows.append(
+            {
+                "case": case,
+                "mean": mean,
+                "n": n,
+                "max |lin/MC − 1| (diag)": float(np.max(np.abs(rel))),
+                "median lin/MC − 1": float(np.median(rel)),
+                "rel. std of Ŵ (MC)": float(np.sqrt(np.trace(mc.cov))) / float(np.linalg.norm(w)),
+                "max |E Ŵ − W| / max|W|": float(bias.max()) / wmax,
+                "bias se": float(sd.flat[int(np.argmax(bias))]) / np.sqrt(trials) / wmax,
+                "MC se of a variance": float(np.sqrt(2.0 / trials)),
+            }
+        )
     return rows
 
 
@@ -71,8 +78,9 @@ def _rms(err: np.ndarray) -> float:
     return float(np.sqrt(np.mean(np.sum(err[ok] ** 2, axis=1))))
 
 
-def snapshot_weights(system: fu.TwoSiteSystem, x: np.ndarray, n: int, trials: int,
-                     rng: np.random.Generator) -> np.ndarray:
+def snapshot_weights(
+    system: fu.TwoSiteSystem, x: np.ndarray, n: int, trials: int, rng: np.random.Generator
+) -> np.ndarray:
     """One Ŵ per trial, (trials, 2, 2), each from the sample covariances of n snapshots
     (a1, a2) of the two estimators at x (the sample-mean estimator (3)), vectorised."""
     z = system.sample(x, trials * n, rng)
@@ -88,8 +96,7 @@ def snapshot_weights(system: fu.TwoSiteSystem, x: np.ndarray, n: int, trials: in
 SHARED_POSITIONS = ((8_000.0, 30_000.0), (-25_000.0, 12_000.0))
 
 
-def shared_snapshot_rows(system: fu.TwoSiteSystem, trials: int, seed: int
-                         ) -> list[dict[str, Any]]:
+def shared_snapshot_rows(system: fu.TwoSiteSystem, trials: int, seed: int) -> list[dict[str, Any]]:
     """(10) when Ŝ1, Ŝ2 come from the same snapshots of the two-site estimators: Monte
     Carlo Cov(vec Ŵ) (``trials`` draws of Ŵ, each from n snapshots) against (10) as printed
     (block-diagonal C_C) and with the cross block from S12."""
@@ -102,16 +109,23 @@ def shared_snapshot_rows(system: fu.TwoSiteSystem, trials: int, seed: int
             mc = np.diag(np.cov(w.transpose(0, 2, 1).reshape(trials, 4).T))
             printed = np.diag(fu.weight_covariance(s1, s2, n, n, mean="sample"))
             shared = np.diag(fu.weight_covariance(s1, s2, n, n, mean="sample", s12=s12))
-            rows.append({"east, km": x[0] / 1e3, "north, km": x[1] / 1e3, "n": n,
-                         "(10) printed / MC, range": f"{np.min(printed / mc):.2f}-"
-                                                     f"{np.max(printed / mc):.2f}",
-                         "(10) with S12 / MC, range": f"{np.min(shared / mc):.2f}-"
-                                                      f"{np.max(shared / mc):.2f}"})
+            rows.append(
+                {
+                    "east, km": x[0] / 1e3,
+                    "north, km": x[1] / 1e3,
+                    "n": n,
+                    "(10) printed / MC, range": f"{np.min(printed / mc):.2f}-"
+                    f"{np.max(printed / mc):.2f}",
+                    "(10) with S12 / MC, range": f"{np.min(shared / mc):.2f}-"
+                    f"{np.max(shared / mc):.2f}",
+                }
+            )
     return rows
 
 
-def position_rows(system: fu.TwoSiteSystem, positions: np.ndarray, trials: int, seed: int,
-                  progress: bool = False) -> list[dict[str, Any]]:
+def position_rows(
+    system: fu.TwoSiteSystem, positions: np.ndarray, trials: int, seed: int, progress: bool = False
+) -> list[dict[str, Any]]:
     """Per position: the joint ML's RMS error against the CRB √tr((JᵀR⁻¹J)⁻¹), every other
     method's RMS error divided by the joint ML's on the **same** ``trials`` noise draws (a
     paired ratio, far less noisy than two separate RMS values), and the first-order
@@ -131,20 +145,24 @@ def position_rows(system: fu.TwoSiteSystem, positions: np.ndarray, trials: int, 
             return float(np.sqrt(np.trace(cov))) / crb  # noqa: B023 (used in this loop)
 
         row: dict[str, Any] = {
-            "east, km": x[0] / 1e3, "north, km": x[1] / 1e3, "CRB RMS, m": crb,
-            "ML status": ml.status.value, "ML iterations": ml.iterations,
+            "east, km": x[0] / 1e3,
+            "north, km": x[1] / 1e3,
+            "CRB RMS, m": crb,
+            "ML status": ml.status.value,
+            "ML iterations": ml.iterations,
             "joint ML / CRB": ml_rms / crb,
             "estimator 1 (2 azimuths)": _rms(a1 - x) / ml_rms,
             "estimator 2 (azimuth + Δr)": _rms(a2 - x) / ml_rms,
             "fusion (1), W at true x": _rms(system.fused(z, weights_at="true", x_true=x) - x)
             / ml_rms,
             "fusion (1), W at estimated x": _rms(system.fused(z) - x) / ml_rms,
-            "correlated fusion, W at true x": _rms(system.fused(
-                z, weights_at="true", x_true=x, correlated=True) - x) / ml_rms,
+            "correlated fusion, W at true x": _rms(
+                system.fused(z, weights_at="true", x_true=x, correlated=True) - x
+            )
+            / ml_rms,
             "estimator 1, first order / CRB": first_order(s1),
             "estimator 2, first order / CRB": first_order(s2),
-            "fusion (1), first order / CRB": first_order(
-                fu.fused_covariance(w_true, s1, s2, s12)),
+            "fusion (1), first order / CRB": first_order(fu.fused_covariance(w_true, s1, s2, s12)),
             "failed estimates": int(np.sum(~np.all(np.isfinite(a1) & np.isfinite(a2), axis=1))),
         }
         for n in SNAPSHOTS:
@@ -155,24 +173,36 @@ def position_rows(system: fu.TwoSiteSystem, positions: np.ndarray, trials: int, 
     return rows
 
 
-METHODS = ("joint ML / CRB", "estimator 1 (2 azimuths)", "estimator 2 (azimuth + Δr)",
-           "fusion (1), W at true x", "fusion (1), W at estimated x",
-           *(f"fusion (1), Ŵ from n={n}" for n in SNAPSHOTS), "correlated fusion, W at true x",
-           "estimator 1, first order / CRB", "estimator 2, first order / CRB",
-           "fusion (1), first order / CRB")
+METHODS = (
+    "joint ML / CRB",
+    "estimator 1 (2 azimuths)",
+    "estimator 2 (azimuth + Δr)",
+    "fusion (1), W at true x",
+    "fusion (1), W at estimated x",
+    *(f"fusion (1), Ŵ from n={n}" for n in SNAPSHOTS),
+    "correlated fusion, W at true x",
+    "estimator 1, first order / CRB",
+    "estimator 2, first order / CRB",
+    "fusion (1), first order / CRB",
+)
 
 
 def _summary_rows(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
     out = []
     for m in METHODS:
         v = np.array([r[m] for r in rows])
-        out.append({"ratio": m, "median": float(np.median(v)),
-                    "90th percentile": float(np.quantile(v, 0.9)), "max": float(v.max())})
+        out.append(
+            {
+                "ratio": m,
+                "median": float(np.median(v)),
+                "90th percentile": float(np.quantile(v, 0.9)),
+                "max": float(v.max()),
+            }
+        )
     return out
 
 
-def _maps(system: fu.TwoSiteSystem, n: int, shape: tuple[int, int] = (61, 111)
-          ) -> dict[str, Any]:
+def _maps(system: fu.TwoSiteSystem, n: int, shape: tuple[int, int] = (61, 111)) -> dict[str, Any]:
     """First-order maps on a grid: CRB RMS, RMS of fusion (1) / CRB, and the relative
     standard deviation of Ŵ from (10) for n snapshots (sample mean)."""
     xmax, y0, y1 = REGION
@@ -191,9 +221,15 @@ def _maps(system: fu.TwoSiteSystem, n: int, shape: tuple[int, int] = (61, 111)
     return {"x": gx, "y": gy, "crb": crb, "fused_ratio": fused / crb, "rel_w": rel_w}
 
 
-def run_fusion_demo(out: Path, *, trials: int = 100_000, positions: int = 40,
-                    position_trials: int = 1000, seed: int = 0,
-                    progress: bool = False) -> dict[str, Any]:
+def run_fusion_demo(
+    out: Path,
+    *,
+    trials: int = 100_000,
+    positions: int = 40,
+    position_trials: int = 1000,
+    seed: int = 0,
+    progress: bool = False,
+) -> dict[str, Any]:
     """Paper 003 end to end. Writes ``out/maps.png``, ``out/positions.png``,
     ``out/vs_n.png``, ``out/weight_accuracy.csv``-like tables in ``out/report.md`` and
     ``out/summary.json``; returns the summary.
@@ -213,46 +249,84 @@ def run_fusion_demo(out: Path, *, trials: int = 100_000, positions: int = 40,
     shared = shared_snapshot_rows(system, max(2000, min(trials, 20_000)), seed)
     summ_rows = _summary_rows(prow)
     figs = _figures(out, system, pos, prow)
-    summary = {"trials": trials, "positions": positions, "position_trials": position_trials,
-               "seed": seed, "weight_accuracy": acc, "shared_snapshots": shared,
-               "positions_rows": prow,
-               "positions_summary": summ_rows, "system": {
-                   "baseline_m": system.baseline, "sigma_azimuth_rad": system.sigma_azimuth,
-                   "sigma_range_difference_m": system.sigma_range_difference}}
+    summary = {
+        "trials": trials,
+        "positions": positions,
+        "position_trials": position_trials,
+        "seed": seed,
+        "weight_accuracy": acc,
+        "shared_snapshots": shared,
+        "positions_rows": prow,
+        "positions_summary": summ_rows,
+        "system": {
+            "baseline_m": system.baseline,
+            "sigma_azimuth_rad": system.sigma_azimuth,
+            "sigma_range_difference_m": system.sigma_range_difference,
+        },
+    }
     write_json(out / "summary.json", summary)
-    text = (_report_accuracy(acc, shared, system, x_ref, figs[0], trials)
-            + _report_positions(prow, summ_rows, figs, positions, position_trials))
+    text = _report_accuracy(acc, shared, system, x_ref, figs[0], trials) + _report_positions(
+        prow, summ_rows, figs, positions, position_trials
+    )
     with atomic_write(out / "report.md", name="report.md") as fh:
         fh.write(text)
     return summary
 
 
-def _figures(out: Path, system: fu.TwoSiteSystem, pos: np.ndarray,
-             prow: list[dict[str, Any]]) -> tuple[Path, Path, Path]:
+def _figures(
+    out: Path, system: fu.TwoSiteSystem, pos: np.ndarray, prow: list[dict[str, Any]]
+) -> tuple[Path, Path, Path]:
     """``maps.png``, ``positions.png`` and ``vs_n.png``."""
     maps = _maps(system, 30)
     sites = np.stack([system.site_a, system.site_b])
     fig_maps = plots.fusion_maps(out / "maps.png", maps, sites, n=30)
     fig_pos = plots.fusion_positions(
-        out / "positions.png", pos, {m: np.array([r[m] for r in prow]) for m in (
-            "fusion (1), W at estimated x", "fusion (1), Ŵ from n=10",
-            "correlated fusion, W at true x")}, sites)
-    fig_n = plots.fusion_vs_n(out / "vs_n.png", SNAPSHOTS, [
-        np.array([r[f"fusion (1), Ŵ from n={n}"] for r in prow]) for n in SNAPSHOTS],
-        {m: np.array([r[m] for r in prow]) for m in (
-            "estimator 1 (2 azimuths)", "fusion (1), W at true x",
-            "correlated fusion, W at true x")})
+        out / "positions.png",
+        pos,
+        {
+            m: np.array([r[m] for r in prow])
+            for m in (
+                "fusion (1), W at estimated x",
+                "fusion (1), Ŵ from n=10",
+                "correlated fusion, W at true x",
+            )
+        },
+        sites,
+    )
+    fig_n = plots.fusion_vs_n(
+        out / "vs_n.png",
+        SNAPSHOTS,
+        [np.array([r[f"fusion (1), Ŵ from n={n}"] for r in prow]) for n in SNAPSHOTS],
+        {
+            m: np.array([r[m] for r in prow])
+            for m in (
+                "estimator 1 (2 azimuths)",
+                "fusion (1), W at true x",
+                "correlated fusion, W at true x",
+            )
+        },
+    )
 
     return fig_maps, fig_pos, fig_n
 
 
-def _report_accuracy(acc: list[dict[str, Any]], shared: list[dict[str, Any]],
-                     system: fu.TwoSiteSystem, x_ref: np.ndarray, fig_maps: Path,
-                     trials: int) -> str:
+def _report_accuracy(
+    acc: list[dict[str, Any]],
+    shared: list[dict[str, Any]],
+    system: fu.TwoSiteSystem,
+    x_ref: np.ndarray,
+    fig_maps: Path,
+    trials: int,
+) -> str:
     """The report's first part: the linearisation (10) and the two-site system."""
-    fmt_acc = {"max |lin/MC − 1| (diag)": ".3f", "median lin/MC − 1": "+.3f",
-               "rel. std of Ŵ (MC)": ".3f", "max |E Ŵ − W| / max|W|": ".4f",
-               "bias se": ".4f", "MC se of a variance": ".4f"}
+    fmt_acc = {
+        "max |lin/MC − 1| (diag)": ".3f",
+        "median lin/MC − 1": "+.3f",
+        "rel. std of Ŵ (MC)": ".3f",
+        "max |E Ŵ − W| / max|W|": ".4f",
+        "bias se": ".4f",
+        "MC se of a variance": ".4f",
+    }
     return f"""# Fusion of two estimates and the accuracy of its weight matrix (paper 003)
 
 Fusion (1)-(2): â_p = â1 + W(â2 − â1), W = (C1 + C2)⁻¹C2 = S1(S1 + S2)⁻¹, the solution of
@@ -312,29 +386,45 @@ neglected cross term, which is of the same order 1/n); with the cross block it d
 """
 
 
-def _report_positions(prow: list[dict[str, Any]], summ_rows: list[dict[str, Any]],
-                      figs: tuple[Path, Path, Path], positions: int,
-                      position_trials: int) -> str:
+def _report_positions(
+    prow: list[dict[str, Any]],
+    summ_rows: list[dict[str, Any]],
+    figs: tuple[Path, Path, Path],
+    positions: int,
+    position_trials: int,
+) -> str:
     """The report's second part: the Monte Carlo over positions and what it says."""
     _, fig_pos, fig_n = figs
     fmt_sum = {"median": ".3f", "90th percentile": ".3f", "max": ".3f"}
-    pcols = ["east, km", "north, km", "CRB RMS, m", "joint ML / CRB",
-             "estimator 1 (2 azimuths)", "estimator 2 (azimuth + Δr)",
-             "fusion (1), W at true x", "fusion (1), W at estimated x",
-             "fusion (1), Ŵ from n=5", "fusion (1), Ŵ from n=30",
-             "correlated fusion, W at true x", "fusion (1), first order / CRB"]
+    pcols = [
+        "east, km",
+        "north, km",
+        "CRB RMS, m",
+        "joint ML / CRB",
+        "estimator 1 (2 azimuths)",
+        "estimator 2 (azimuth + Δr)",
+        "fusion (1), W at true x",
+        "fusion (1), W at estimated x",
+        "fusion (1), Ŵ from n=5",
+        "fusion (1), Ŵ from n=30",
+        "correlated fusion, W at true x",
+        "fusion (1), first order / CRB",
+    ]
     fmt_pos: dict[str, str] = {c: ".3f" for c in pcols}
     fmt_pos.update({"east, km": ".1f", "north, km": ".1f", "CRB RMS, m": ".0f"})
     ml_ok = sum(r["ML status"] == "optimal" for r in prow)
     failed = sum(r["failed estimates"] for r in prow)
     by_ratio = sorted(prow, key=lambda r: r["fusion (1), first order / CRB"])
     shown = by_ratio[:4] + by_ratio[-4:]
-    worse = sum(r["fusion (1), W at true x"] > min(r["estimator 1 (2 azimuths)"],
-                                                   r["estimator 2 (azimuth + Δr)"])
-                for r in prow)
+    worse = sum(
+        r["fusion (1), W at true x"]
+        > min(r["estimator 1 (2 azimuths)"], r["estimator 2 (azimuth + Δr)"])
+        for r in prow
+    )
     fus_med = float(np.median([r["fusion (1), W at true x"] for r in prow]))
-    snap_text = ", ".join(f"{np.median([r[f'fusion (1), Ŵ from n={n}'] for r in prow]):.3f}"
-                          for n in SNAPSHOTS)
+    snap_text = ", ".join(
+        f"{np.median([r[f'fusion (1), Ŵ from n={n}'] for r in prow]):.3f}" for n in SNAPSHOTS
+    )
     return f"""### Monte Carlo over positions
 
 {positions} emitter positions drawn uniformly in East [−{REGION[0] / 1e3:.0f},

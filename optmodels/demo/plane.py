@@ -35,23 +35,34 @@ def _track_figure(path: Path, trk: Any, tr: Any) -> Path:
     fig, ax = plt.subplots(3, 1, figsize=(8, 9), sharex=True)
     tilt = _tilt_deg(trk.normals)
     ax[0].plot(t, tilt, "b.", ms=3, label="estimated (resolved steps)")
-    true_tilt = np.where(tr.segment[-len(t):] == 0, np.nan, tr.tilt_deg[tr.segment[-len(t):]])
+    true_tilt = np.where(tr.segment[-len(t) :] == 0, np.nan, tr.tilt_deg[tr.segment[-len(t) :]])
     ax[0].plot(t, true_tilt, "k-", lw=1, label="true plane of the current segment")
     with np.errstate(invalid="ignore"):
-        ax[0].plot(t, np.degrees(trk.detectable_tilt), "g--", lw=1,
-                   label=f"detectable tilt (power {trk.power:g})")
+        ax[0].plot(
+            t,
+            np.degrees(trk.detectable_tilt),
+            "g--",
+            lw=1,
+            label=f"detectable tilt (power {trk.power:g})",
+        )
     ax[0].set_ylabel("tilt from horizontal, deg")
     ax[0].set_ylim(0, 20)
     ax[0].legend(fontsize=8)
     ax[1].semilogy(t, trk.statistic / np.maximum(trk.dof, 1), label="Λ_min / dof (planarity)")
-    ax[1].semilogy(t, trk.threshold / np.maximum(trk.dof, 1), "k--", lw=1,
-                   label=f"χ² threshold / dof ({trk.level})")
+    ax[1].semilogy(
+        t,
+        trk.threshold / np.maximum(trk.dof, 1),
+        "k--",
+        lw=1,
+        label=f"χ² threshold / dof ({trk.level})",
+    )
     ax[1].semilogy(t, np.maximum(trk.detector, 1e-3), "m", lw=1, label="detector U")
     ax[1].semilogy(t, trk.detector_threshold, "m--", lw=1, label="detector threshold")
     ax[1].set_ylabel("statistic")
     ax[1].legend(fontsize=8)
-    for y, (name, arr) in enumerate((("resolved", trk.resolved), ("planar", trk.planar),
-                                     ("change", trk.change))):
+    for y, (name, arr) in enumerate(
+        (("resolved", trk.resolved), ("planar", trk.planar), ("change", trk.change))
+    ):
         ax[2].plot(t[arr], np.full(int(np.sum(arr)), y), "|", ms=12, label=name)
     ax[2].set_yticks([0, 1, 2], ["resolved", "planar", "change"])
     for a in ax:
@@ -83,28 +94,42 @@ def run_track_demo(out: Path, *, seed: int = 0) -> tuple[str, dict[str, Any]]:
     write_csv(out / "track_steps.csv", trk.to_rows())
     t1, t2 = (float(x) for x in tr.transitions)
     first_resolved = trk.times[trk.resolved]
-    res_t = float(first_resolved[first_resolved >= t1][0]) if np.any(first_resolved >= t1) \
+    res_t = (
+        float(first_resolved[first_resolved >= t1][0])
+        if np.any(first_resolved >= t1)
         else float("nan")
+    )
     alarms = trk.change_times
     after2 = alarms[alarms >= t2]
     rows = [
-        {"transition": "straight climb → climbing turn", "true time, s": t1,
-         "what the tracker reports": "first resolved step (a line has no plane: "
-                                     "nothing to compare before)",
-         "time, s": res_t, "delay, s": res_t - t1},
-        {"transition": f"climbing turn ({tr.tilt_deg[1]:.0f}°) → level turn",
-         "true time, s": t2, "what the tracker reports": "detector alarm",
-         "time, s": float(after2[0]) if after2.size else float("nan"),
-         "delay, s": float(after2[0]) - t2 if after2.size else float("nan")},
+        {
+            "transition": "straight climb → climbing turn",
+            "true time, s": t1,
+            "what the tracker reports": "first resolved step (a line has no plane: "
+            "nothing to compare before)",
+            "time, s": res_t,
+            "delay, s": res_t - t1,
+        },
+        {
+            "transition": f"climbing turn ({tr.tilt_deg[1]:.0f}°) → level turn",
+            "true time, s": t2,
+            "what the tracker reports": "detector alarm",
+            "time, s": float(after2[0]) if after2.size else float("nan"),
+            "delay, s": float(after2[0]) - t2 if after2.size else float("nan"),
+        },
     ]
     false = alarms[alarms < t2]
-    res = trk.resolved & (tr.segment[-trk.n_steps:] > 0)
-    tilt_err = np.abs(_tilt_deg(trk.normals[res]) - tr.tilt_deg[tr.segment[-trk.n_steps:]][res])
-    summary = {"transitions": rows, "alarms": alarms.tolist(),
-               "alarms_before_level_turn": false.tolist(),
-               "median_tilt_error_deg": float(np.median(tilt_err)) if tilt_err.size else None,
-               "steps": trk.n_steps, "solve_time_s": trk.solve_time,
-               "figure": fig.name}
+    res = trk.resolved & (tr.segment[-trk.n_steps :] > 0)
+    tilt_err = np.abs(_tilt_deg(trk.normals[res]) - tr.tilt_deg[tr.segment[-trk.n_steps :]][res])
+    summary = {
+        "transitions": rows,
+        "alarms": alarms.tolist(),
+        "alarms_before_level_turn": false.tolist(),
+        "median_tilt_error_deg": float(np.median(tilt_err)) if tilt_err.size else None,
+        "steps": trk.n_steps,
+        "solve_time_s": trk.solve_time,
+        "figure": fig.name,
+    }
     md = f"""
 ## The plane along a radar track (issue 19)
 
@@ -117,8 +142,7 @@ in all.
 
 ![track](track.png)
 
-{markdown_table(rows, list(rows[0]), {"true time, s": ".1f", "time, s": ".1f",
-                                       "delay, s": ".1f"})}
+{markdown_table(rows, list(rows[0]), {"true time, s": ".1f", "time, s": ".1f", "delay, s": ".1f"})}
 Alarms at t = {", ".join(f"{a:g}" for a in alarms) or "none"} s. On the straight climb the
 windows are unresolved (no normal is reported, the line direction instead); once
 resolved, the median tilt error is {summary["median_tilt_error_deg"]:.2f}°. Every step is in
@@ -133,8 +157,9 @@ def _crb(sc: scenarios.ManeuverScenario, n: int | None = None) -> tuple[float, f
     return c.angle_rms, c.offset_std
 
 
-def run_plane_demo(out: Path, *, runs: int = 200, seed: int = 0,
-                   progress: bool = False) -> dict[str, Any]:
+def run_plane_demo(
+    out: Path, *, runs: int = 200, seed: int = 0, progress: bool = False
+) -> dict[str, Any]:
     """Paper 000's example end to end: figures 1-4, Monte Carlo against the CRB.
 
     Writes ``out/fig1_trajectory.png`` ... ``out/fig4_offset_error.png``,
@@ -177,41 +202,75 @@ def run_plane_demo(out: Path, *, runs: int = 200, seed: int = 0,
 
     figs = {
         "fig1": plots.plane_trajectory(out / "fig1_trajectory.png", sc.truth, sc.points),
-        "fig2": plots.plane_statistic(out / "fig2_statistic.png", seq.times,
-                                      seq.paper_statistic, seq.paper_threshold,
-                                      seq.threshold, seq.level),
-        "fig3": plots.plane_error(out / "fig3_angle_error.png", seq.times, ang1 * 1e3,
-                                  crb_ang * 1e3, mc_rms=rms_ang * 1e3,
-                                  ylabel="normal angle error, mrad",
-                                  title="Fig. 3: error of the normal's direction"),
-        "fig4": plots.plane_error(out / "fig4_offset_error.png", seq.times, np.abs(off1),
-                                  crb_off, mc_rms=rms_off, ylabel="|error of a|, m",
-                                  title="Fig. 4: error of the offset a"),
-        "radius": plots.radius_bound(out / "radius_bound.png", radii, rb[:, 0], rb[:, 1],
-                                     scenarios.PAPER_RADIUS),
+        "fig2": plots.plane_statistic(
+            out / "fig2_statistic.png",
+            seq.times,
+            seq.paper_statistic,
+            seq.paper_threshold,
+            seq.threshold,
+            seq.level,
+        ),
+        "fig3": plots.plane_error(
+            out / "fig3_angle_error.png",
+            seq.times,
+            ang1 * 1e3,
+            crb_ang * 1e3,
+            mc_rms=rms_ang * 1e3,
+            ylabel="normal angle error, mrad",
+            title="Fig. 3: error of the normal's direction",
+        ),
+        "fig4": plots.plane_error(
+            out / "fig4_offset_error.png",
+            seq.times,
+            np.abs(off1),
+            crb_off,
+            mc_rms=rms_off,
+            ylabel="|error of a|, m",
+            title="Fig. 4: error of the offset a",
+        ),
+        "radius": plots.radius_bound(
+            out / "radius_bound.png", radii, rb[:, 0], rb[:, 1], scenarios.PAPER_RADIUS
+        ),
     }
     mc_rows = [
-        {"quantity": "normal angle error, mrad",
-         "MC RMS": rms_ang[-1] * 1e3, "MC mean": float(np.mean(ang[:, -1])) * 1e3,
-         "MC RMS std. error": rms_ang[-1] * 1e3 / np.sqrt(2 * runs),
-         "CRB (RMS)": crb_ang[-1] * 1e3, "paper": 1.4},
-        {"quantity": "offset error, m",
-         "MC RMS": rms_off[-1], "MC mean": float(np.mean(np.abs(off[:, -1]))),
-         "MC RMS std. error": rms_off[-1] / np.sqrt(2 * runs),
-         "CRB (RMS)": crb_off[-1], "paper": 2.0},
+        {
+            "quantity": "normal angle error, mrad",
+            "MC RMS": rms_ang[-1] * 1e3,
+            "MC mean": float(np.mean(ang[:, -1])) * 1e3,
+            "MC RMS std. error": rms_ang[-1] * 1e3 / np.sqrt(2 * runs),
+            "CRB (RMS)": crb_ang[-1] * 1e3,
+            "paper": 1.4,
+        },
+        {
+            "quantity": "offset error, m",
+            "MC RMS": rms_off[-1],
+            "MC mean": float(np.mean(np.abs(off[:, -1]))),
+            "MC RMS std. error": rms_off[-1] / np.sqrt(2 * runs),
+            "CRB (RMS)": crb_off[-1],
+            "paper": 2.0,
+        },
     ]
     solver_rows = [
-        {"method": s.method, "status": s.status.value, "objective (1.2)": s.objective,
-         "angle to closed form, rad": float(plane.angle_error(s.normal, cf.normal)),
-         "max residual (1.3)": s.max_residual, "build, s": s.build_time,
-         "solve, s": s.solve_time, "iterations": s.iterations}
+        {
+            "method": s.method,
+            "status": s.status.value,
+            "objective (1.2)": s.objective,
+            "angle to closed form, rad": float(plane.angle_error(s.normal, cf.normal)),
+            "max residual (1.3)": s.max_residual,
+            "build, s": s.build_time,
+            "solve, s": s.solve_time,
+            "iterations": s.iterations,
+        }
         for s in (cf, red, full)
     ]
     gen = seq.generic or {}
     gen_err = float(np.nanmax(plane.angle_error(gen["normal"], seq.normal[gen["index"]])))
     summary = {
-        "runs": runs, "seed": seed, "radius": scenarios.PAPER_RADIUS,
-        "monte_carlo": mc_rows, "solvers": solver_rows,
+        "runs": runs,
+        "seed": seed,
+        "radius": scenarios.PAPER_RADIUS,
+        "monte_carlo": mc_rows,
+        "solvers": solver_rows,
         "planarity_at_10s": test.to_dict(),
         "false_alarm_paper_rule": float(np.mean(paper_alarm)),
         "false_alarm_chi2": float(np.mean(chi2_alarm)),
@@ -219,8 +278,13 @@ def run_plane_demo(out: Path, *, runs: int = 200, seed: int = 0,
         "sequence_generic_vs_closed_form_max_angle_rad": gen_err,
         "figures": {k: str(v.name) for k, v in figs.items()},
     }
-    fmt = {"MC RMS": ".3f", "MC mean": ".3f", "MC RMS std. error": ".3f",
-           "CRB (RMS)": ".3f", "paper": ".1f"}
+    fmt = {
+        "MC RMS": ".3f",
+        "MC mean": ".3f",
+        "MC RMS std. error": ".3f",
+        "CRB (RMS)": ".3f",
+        "paper": ".1f",
+    }
     report = f"""# Plane of maneuver (paper 000): the paper's example
 
 Circle at 500 m/s in the vertical plane OXZ, centre 5000 m away at 45° elevation,

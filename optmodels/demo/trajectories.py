@@ -24,8 +24,13 @@ BATCHES = 20
 def _fit_dict(sol: tr.TrajectorySolution) -> dict[str, Any]:
     fam = sol.family
     assert fam is not None
-    return {"start": sol.start, "velocity": sol.velocity, "covariance": sol.covariance,
-            "start_index": fam.start_index, "velocity_index": fam.velocity_index}
+    return {
+        "start": sol.start,
+        "velocity": sol.velocity,
+        "covariance": sol.covariance,
+        "start_index": fam.start_index,
+        "velocity_index": fam.velocity_index,
+    }
 
 
 def _scenario_section(out: Path, family: str, seed: int) -> tuple[str, dict[str, Any]]:
@@ -34,51 +39,95 @@ def _scenario_section(out: Path, family: str, seed: int) -> tuple[str, dict[str,
     dep = tr.closed_form(data, family)  # type: ignore[arg-type]
     ind = tr.closed_form(data, "independent")
     fig = plots.trajectory_fits(
-        out / f"{family}_fits.png", sc.times, sc.values, _fit_dict(dep), _fit_dict(ind),
+        out / f"{family}_fits.png",
+        sc.times,
+        sc.values,
+        _fit_dict(dep),
+        _fit_dict(ind),
         (sc.start, sc.velocity),
-        f"{family} family: data, fits and errors (σ = {np.sqrt(sc.sigma2):.0f} m)")
+        f"{family} family: data, fits and errors (σ = {np.sqrt(sc.sigma2):.0f} m)",
+    )
     ratios = tr.variance_ratios(data, family)  # type: ignore[arg-type]
     q = data.n_objects
     fam = dep.family
     assert fam is not None
     sd, sdi = dep.std, ind.std
-    rows = [{"object": j + 1, "N_j": int(data.counts[j]),
-             "true start, m": sc.start[j], "start, m": dep.start[j],
-             "σ start, m": sd[fam.start_index[j]], "σ start indep., m": sdi[j],
-             "true V, m/s": sc.velocity[j], "V, m/s": dep.velocity[j],
-             "σ V, m/s": sd[fam.velocity_index[j]], "σ V indep., m/s": sdi[q + j],
-             "Var ratio start": float(ratios["start"][j]),
-             "Var ratio V": float(ratios["velocity"][j])} for j in range(q)]
+    rows = [
+        {
+            "object": j + 1,
+            "N_j": int(data.counts[j]),
+            "true start, m": sc.start[j],
+            "start, m": dep.start[j],
+            "σ start, m": sd[fam.start_index[j]],
+            "σ start indep., m": sdi[j],
+            "true V, m/s": sc.velocity[j],
+            "V, m/s": dep.velocity[j],
+            "σ V, m/s": sd[fam.velocity_index[j]],
+            "σ V indep., m/s": sdi[q + j],
+            "Var ratio start": float(ratios["start"][j]),
+            "Var ratio V": float(ratios["velocity"][j]),
+        }
+        for j in range(q)
+    ]
     tests = []
     for hyp in ("diverging", "parallel"):
         for mode in ("known", "estimated"):
             t = tr.family_test(data, hyp, sigma2=mode)
-            tests.append({"hypothesis": hyp, "σ²": mode, "statistic": t.statistic,
-                          "dof": t.dof if t.dof2 is None else f"{t.dof}, {t.dof2}",
-                          "threshold (0.95)": t.threshold, "p-value": t.p_value,
-                          "verdict": "rejected" if t.reject else "not rejected"})
+            tests.append(
+                {
+                    "hypothesis": hyp,
+                    "σ²": mode,
+                    "statistic": t.statistic,
+                    "dof": t.dof if t.dof2 is None else f"{t.dof}, {t.dof2}",
+                    "threshold (0.95)": t.threshold,
+                    "p-value": t.p_value,
+                    "verdict": "rejected" if t.reject else "not rejected",
+                }
+            )
     gen = []
     for solver in [s for s in ("CLARABEL", "OSQP", "SCS") if s in available_solvers()]:
         for form in ("constrained", "reduced"):
             g = tr.solve(data, family, solver=solver, formulation=form)  # type: ignore[arg-type]
             err = float(np.max(np.abs(g.theta - dep.theta) / np.abs(dep.theta).max()))
-            gen.append({"method": g.method, "status": g.status.value,
-                        "max rel. diff. θ vs closed form": err,
-                        "objective gap": (g.objective - dep.objective) / dep.objective,
-                        "max residual": g.max_residual, "build, s": g.build_time,
-                        "solve, s": g.solve_time})
-    fmt = {"true start, m": ".1f", "start, m": ".1f", "σ start, m": ".1f",
-           "σ start indep., m": ".1f", "true V, m/s": ".3f", "V, m/s": ".3f",
-           "σ V, m/s": ".4f", "σ V indep., m/s": ".4f", "Var ratio start": ".3f",
-           "Var ratio V": ".3f", "statistic": ".3f", "threshold (0.95)": ".3f",
-           "p-value": ".3g", "max rel. diff. θ vs closed form": ".1e",
-           "objective gap": ".1e", "max residual": ".1e", "build, s": ".4f",
-           "solve, s": ".4f"}
-    what = ("released together at t = 0 from one point (common start), different velocities"
-            if family == "diverging" else "spaced along the track, common drift velocity")
+            gen.append(
+                {
+                    "method": g.method,
+                    "status": g.status.value,
+                    "max rel. diff. θ vs closed form": err,
+                    "objective gap": (g.objective - dep.objective) / dep.objective,
+                    "max residual": g.max_residual,
+                    "build, s": g.build_time,
+                    "solve, s": g.solve_time,
+                }
+            )
+    fmt = {
+        "true start, m": ".1f",
+        "start, m": ".1f",
+        "σ start, m": ".1f",
+        "σ start indep., m": ".1f",
+        "true V, m/s": ".3f",
+        "V, m/s": ".3f",
+        "σ V, m/s": ".4f",
+        "σ V indep., m/s": ".4f",
+        "Var ratio start": ".3f",
+        "Var ratio V": ".3f",
+        "statistic": ".3f",
+        "threshold (0.95)": ".3f",
+        "p-value": ".3g",
+        "max rel. diff. θ vs closed form": ".1e",
+        "objective gap": ".1e",
+        "max residual": ".1e",
+        "build, s": ".4f",
+        "solve, s": ".4f",
+    }
+    what = (
+        "released together at t = 0 from one point (common start), different velocities"
+        if family == "diverging"
+        else "spaced along the track, common drift velocity"
+    )
     md = f"""## {family.capitalize()} family: {q} objects {what}
 
-Unequal schedules (N_j = {', '.join(map(str, data.counts))}), first measurement 60-200 s
+Unequal schedules (N_j = {", ".join(map(str, data.counts))}), first measurement 60-200 s
 after release, σ = {np.sqrt(sc.sigma2):.0f} m.
 
 ![{family}]({fig.name})
@@ -111,8 +160,10 @@ def _eta_rows(runs: int, seed: int, progress: bool) -> list[dict[str, Any]]:
     for q, n in tqdm(cases, desc="trajectories η Monte Carlo", disable=not progress):
         row: dict[str, Any] = {"Q": q, "N": n}
         se: dict[str, float] = {}
-        for family, unique, shared in (("diverging", "velocity", "start"),
-                                       ("parallel", "start", "velocity")):
+        for family, unique, shared in (
+            ("diverging", "velocity", "start"),
+            ("parallel", "start", "velocity"),
+        ):
             data = scenarios.equally_spaced(0, n=n, q=q, family=family).data()
             fam = tr.resolve_family(family, q)  # type: ignore[arg-type]
             ind = tr.Family.independent(q)
@@ -123,8 +174,9 @@ def _eta_rows(runs: int, seed: int, progress: bool) -> list[dict[str, Any]]:
                 est = np.linalg.lstsq(a, noise, rcond=None)[0]
                 # variances per batch of runs: the spread of the batch ratios gives the
                 # Monte Carlo standard error without a distributional formula
-                var[f.name] = np.stack([np.var(b, axis=1, ddof=1)
-                                        for b in np.array_split(est, BATCHES, axis=1)])
+                var[f.name] = np.stack(
+                    [np.var(b, axis=1, ddof=1) for b in np.array_split(est, BATCHES, axis=1)]
+                )
             dv, iv = var[family], var["independent"]
             u_idx = fam.velocity_index if unique == "velocity" else fam.start_index
             s_idx = fam.start_index if shared == "start" else fam.velocity_index
@@ -136,9 +188,13 @@ def _eta_rows(runs: int, seed: int, progress: bool) -> list[dict[str, Any]]:
             se[family] = float(eta_b.std(ddof=1) / np.sqrt(BATCHES))
             ratios = tr.variance_ratios(data, family)  # type: ignore[arg-type]
             if family == "diverging":
-                row.update({
-                    "eta paper (Q=2)": (5 * n - 1) / (4 * (2 * n - 1)) if q == 2 else "—",
-                    "eta formula": tr.eta(n, q), "eta0 formula": tr.eta0(q)})
+                row.update(
+                    {
+                        "eta paper (Q=2)": (5 * n - 1) / (4 * (2 * n - 1)) if q == 2 else "—",
+                        "eta formula": tr.eta(n, q),
+                        "eta0 formula": tr.eta0(q),
+                    }
+                )
             key = "div" if family == "diverging" else "par"
             row[f"eta Psi ({key})"] = float(np.mean(ratios[unique]))
             row[f"eta MC ({key})"] = eta_mc
@@ -151,8 +207,9 @@ def _eta_rows(runs: int, seed: int, progress: bool) -> list[dict[str, Any]]:
     return rows
 
 
-def run_trajectories_demo(out: Path, *, runs: int = 4000, seed: int = 0,
-                          progress: bool = False) -> dict[str, Any]:
+def run_trajectories_demo(
+    out: Path, *, runs: int = 4000, seed: int = 0, progress: bool = False
+) -> dict[str, Any]:
     """Paper 002 end to end. Writes ``out/diverging_fits.png``, ``out/parallel_fits.png``,
     ``out/eta.png``, ``out/report.md`` and ``out/summary.json``; returns the summary.
     ``runs`` Monte Carlo draws per (Q, N) for the η table."""
@@ -161,9 +218,20 @@ def run_trajectories_demo(out: Path, *, runs: int = 4000, seed: int = 0,
     md_par, s_par = _scenario_section(out, "parallel", seed + 1)
     eta = _eta_rows(runs, seed, progress)
     fig = plots.eta_curves(out / "eta.png", eta)
-    cols = ["Q", "N", "eta paper (Q=2)", "eta formula", "eta Psi (div)", "eta MC (div)",
-            "eta Psi (par)", "eta MC (par)", "eta MC se", "eta0 formula", "eta0 MC (div)",
-            "eta0 MC (par)"]
+    cols = [
+        "Q",
+        "N",
+        "eta paper (Q=2)",
+        "eta formula",
+        "eta Psi (div)",
+        "eta MC (div)",
+        "eta Psi (par)",
+        "eta MC (par)",
+        "eta MC se",
+        "eta0 formula",
+        "eta0 MC (div)",
+        "eta0 MC (par)",
+    ]
     fmt = {c: ".4f" for c in cols if c not in ("Q", "N")}
     v0, vv = tr.independent_variances(10)
     summary = {"runs": runs, "seed": seed, "diverging": s_div, "parallel": s_par, "eta": eta}

@@ -29,7 +29,22 @@ from optmodels.execution.scheduler import (
 )
 from optmodels.execution.workers import guard_worker, kill_pool, sigint_ignored
 
-__all__ = ["CONNECT_TIMEOUT", "MAX_WORKERS", "SCHEDULERS", "Interrupted", "LineLog",
-           "as_scheduler", "dask_client", "describe", "execute", "guard_worker",
-           "kill_pool", "log", "probe_dask", "report_skipped", "run_pool",
-           "scheduler_argument", "sigint_ignored"]
+__all__ = [
+    "CONNECT_TIMEOUT",
+    "MAX_WORKERS",
+    "SCHEDULERS",
+    "Interrupted",
+    "LineLog",
+    "as_scheduler",
+    "dask_client",
+    "describe",
+    "execute",
+    "guard_worker",
+    "kill_pool",
+    "log",
+    "probe_dask",
+    "report_skipped",
+    "run_pool",
+    "scheduler_argument",
+    "sigint_ignored",
+]

@@ -34,10 +34,17 @@ def describe(scheduler: Any, workers: int) -> str:
     return f"dask ({address})"
 
 
-def execute(fn: Callable[..., Any], tasks: Sequence[tuple[Any, ...]], *,
-            on_result: Callable[[int, Any], None], scheduler: Any = None,
-            workers: int | None = None, on_lost: Callable[[int, str], None] | None = None,
-            connect_timeout: float = CONNECT_TIMEOUT, what: str = "execute") -> str:
+def execute(
+    fn: Callable[..., Any],
+    tasks: Sequence[tuple[Any, ...]],
+    *,
+    on_result: Callable[[int, Any], None],
+    scheduler: Any = None,
+    workers: int | None = None,
+    on_lost: Callable[[int, str], None] | None = None,
+    connect_timeout: float = CONNECT_TIMEOUT,
+    what: str = "execute",
+) -> str:
     """Run ``fn(*tasks[k])`` for every ``k`` and call ``on_result(k, result)`` in this
     process as each one finishes (in completion order); return the engine's description.
 
@@ -78,8 +85,7 @@ def execute(fn: Callable[..., Any], tasks: Sequence[tuple[Any, ...]], *,
             except KilledWorker as exc:
                 if on_lost is None:
                     raise
-                on_lost(index[f.key], f"Dask worker died while running this task ({exc})"
-                        [:300])
+                on_lost(index[f.key], f"Dask worker died while running this task ({exc})"[:300])
             else:
                 on_result(index[f.key], res)
     except KeyboardInterrupt:
@@ -92,9 +98,13 @@ def execute(fn: Callable[..., Any], tasks: Sequence[tuple[Any, ...]], *,
     return engine
 
 
-def run_pool(fn: Callable[..., Any], tasks: list[tuple[Any, ...]], nworkers: int,
-             on_result: Callable[[int, Any], None],
-             on_lost: Callable[[int, str], None] | None) -> None:
+def run_pool(
+    fn: Callable[..., Any],
+    tasks: list[tuple[Any, ...]],
+    nworkers: int,
+    on_result: Callable[[int, Any], None],
+    on_lost: Callable[[int, str], None] | None,
+) -> None:
     """The local process pool; at most 2 tasks per worker in flight, so that Ctrl-C and
     a dead worker lose little. A dead worker breaks the pool: every task in flight goes
     to ``on_lost`` and a new pool runs the rest."""
@@ -103,8 +113,12 @@ def run_pool(fn: Callable[..., Any], tasks: list[tuple[Any, ...]], nworkers: int
     queue = list(reversed(range(len(tasks))))
     msg = "worker process died while running this task"
     while queue:
-        ex = ProcessPoolExecutor(nworkers, mp_context=mp.get_context("spawn"),
-                                 initializer=guard_worker, initargs=(os.getpid(),))
+        ex = ProcessPoolExecutor(
+            nworkers,
+            mp_context=mp.get_context("spawn"),
+            initializer=guard_worker,
+            initargs=(os.getpid(),),
+        )
         pending: dict[Future[Any], int] = {}
         try:
             while queue or pending:

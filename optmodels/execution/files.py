@@ -39,8 +39,7 @@ class LineLog:
         try:
             self.path = Path(path)
         except TypeError:
-            raise ProblemError(f"{what}: expected a file path, got {type(path).__name__}"
-                               ) from None
+            raise ProblemError(f"{what}: expected a file path, got {type(path).__name__}") from None
         self.what = what
         self._fh: Any = None
         self._lock_fd: int | None = None
@@ -49,8 +48,7 @@ class LineLog:
         try:
             self.path.parent.mkdir(parents=True, exist_ok=True)
         except OSError as exc:
-            raise ProblemError(f"{what}: cannot create the folder of {self.path} ({exc})"
-                               ) from None
+            raise ProblemError(f"{what}: cannot create the folder of {self.path} ({exc})") from None
         self._lock()
 
     def _lock(self) -> None:
@@ -62,8 +60,7 @@ class LineLog:
         try:
             fd = os.open(lock, os.O_RDWR | os.O_CREAT, 0o644)
         except OSError as exc:
-            raise ProblemError(f"{self.what}: cannot create the lock file {lock} ({exc})"
-                               ) from None
+            raise ProblemError(f"{self.what}: cannot create the lock file {lock} ({exc})") from None
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except OSError:
@@ -72,7 +69,8 @@ class LineLog:
             raise ProblemError(
                 f"{self.what}: {self.path} is in use by another process"
                 + (f" (pid {holder})" if holder else "")
-                + f"; wait for it to finish or use another path (lock: {lock})") from None
+                + f"; wait for it to finish or use another path (lock: {lock})"
+            ) from None
         os.ftruncate(fd, 0)
         os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
         self._lock_fd = fd
@@ -95,8 +93,10 @@ class LineLog:
         if lines:
             return lines, tail
         if tail and not (head + "\n").encode().startswith(tail):
-            raise ProblemError(f"{self.what}: {self.path} is not {foreign} (no header "
-                               "line); use another path or delete it")
+            raise ProblemError(
+                f"{self.what}: {self.path} is not {foreign} (no header "
+                "line); use another path or delete it"
+            )
         if tail:
             self.rewrite([], [])  # a header cut short by a crash: start afresh
         self.append([head])
@@ -156,5 +156,6 @@ class LineLog:
 def report_skipped(what: str, path: Path, bad: int, tail: int, moved: Path) -> None:
     """One warning line (logger ``optmodels``) for lines that could not be read."""
     parts = ([f"{bad} unreadable line{'s' * (bad != 1)}"] if bad else []) + (
-        [f"a last line cut short ({tail} bytes)"] if tail else [])
+        [f"a last line cut short ({tail} bytes)"] if tail else []
+    )
     log.warning("%s: %s: skipped %s (moved to %s)", what, path, " and ".join(parts), moved)

@@ -23,8 +23,14 @@ from typing import Any
 
 from optmodels.core import ProblemError, SolverNotAvailable
 
-__all__ = ["CONNECT_TIMEOUT", "SCHEDULERS", "as_scheduler", "dask_client",
-           "probe_dask", "scheduler_argument"]
+__all__ = [
+    "CONNECT_TIMEOUT",
+    "SCHEDULERS",
+    "as_scheduler",
+    "dask_client",
+    "probe_dask",
+    "scheduler_argument",
+]
 
 #: The words of the vocabulary (besides a Dask address or a ``distributed.Client``).
 SCHEDULERS = ("serial", "processes")
@@ -32,8 +38,7 @@ SCHEDULERS = ("serial", "processes")
 #: Seconds to wait for a Dask scheduler to answer (connection and handshake).
 CONNECT_TIMEOUT = 10.0
 
-_EXPECTED = ("'serial', 'processes', a Dask address like tcp://host:8786 or a "
-             "distributed.Client")
+_EXPECTED = "'serial', 'processes', a Dask address like tcp://host:8786 or a distributed.Client"
 
 
 def _address_problem(text: str) -> str | None:
@@ -111,15 +116,18 @@ def probe_dask(where: str, address: str, timeout: float) -> None:
     try:
         port = int(port_text.split("/")[0]) if sep else 8786
     except ValueError:
-        raise ProblemError(f"{where}: {address!r} has no port number (expected "
-                           f"tcp://host:8786)") from None
+        raise ProblemError(
+            f"{where}: {address!r} has no port number (expected tcp://host:8786)"
+        ) from None
     deadline = time.monotonic() + timeout
     try:
         sock = socket.create_connection((host or "127.0.0.1", port), timeout=timeout)
     except OSError as exc:
-        raise ProblemError(f"{where}: cannot reach the Dask scheduler at {address} "
-                           f"within {timeout:g} s ({type(exc).__name__}: "
-                           f"{str(exc)[:200]})") from None
+        raise ProblemError(
+            f"{where}: cannot reach the Dask scheduler at {address} "
+            f"within {timeout:g} s ({type(exc).__name__}: "
+            f"{str(exc)[:200]})"
+        ) from None
     data = b""
     try:
         need = 8
@@ -141,21 +149,24 @@ def probe_dask(where: str, address: str, timeout: float) -> None:
         raise ProblemError(
             f"{where}: {address} accepts connections but sent no Dask handshake within "
             f"{timeout:g} s (received {len(data)} bytes): not a Dask scheduler, or a "
-            f"stalled one") from None
+            f"stalled one"
+        ) from None
     except OSError as exc:
-        raise ProblemError(f"{where}: the connection to {address} failed during the "
-                           f"Dask handshake ({type(exc).__name__}: {str(exc)[:200]})"
-                           ) from None
+        raise ProblemError(
+            f"{where}: the connection to {address} failed during the "
+            f"Dask handshake ({type(exc).__name__}: {str(exc)[:200]})"
+        ) from None
     finally:
         sock.close()
     if not all(key in data for key in (b"compression", b"python", b"pickle-protocol")):
         shown = data[:40].decode("latin-1").encode("unicode_escape").decode()
-        raise ProblemError(f"{where}: {address} is not a Dask scheduler (its first "
-                           f"{len(data)} bytes are no Dask handshake: {shown!r})")
+        raise ProblemError(
+            f"{where}: {address} is not a Dask scheduler (its first "
+            f"{len(data)} bytes are no Dask handshake: {shown!r})"
+        )
 
 
-def dask_client(where: str, scheduler: Any, timeout: float = CONNECT_TIMEOUT
-                ) -> tuple[Any, bool]:
+def dask_client(where: str, scheduler: Any, timeout: float = CONNECT_TIMEOUT) -> tuple[Any, bool]:
     """``(client, owned)``: the given ``distributed.Client`` (not owned), or a new Client
     connected to the address within ``timeout`` s (owned: close it). An address that
     cannot be reached, never speaks or is not a Dask scheduler is a ``ProblemError``
@@ -163,14 +174,17 @@ def dask_client(where: str, scheduler: Any, timeout: float = CONNECT_TIMEOUT
     try:
         from distributed import Client
     except ImportError as exc:  # pragma: no cover - the test extra installs it
-        raise SolverNotAvailable(f"{where}: Dask distributed is not installed; "
-                                 "pip install 'optmodels[distributed]'") from exc
+        raise SolverNotAvailable(
+            f"{where}: Dask distributed is not installed; pip install 'optmodels[distributed]'"
+        ) from exc
     if isinstance(scheduler, Client):
         return scheduler, False
     probe_dask(where, scheduler, timeout)
     try:
         return Client(scheduler, timeout=timeout), True
     except (OSError, TimeoutError, ValueError) as exc:
-        raise ProblemError(f"{where}: cannot reach the Dask scheduler at "
-                           f"{scheduler} within {timeout:g} s "
-                           f"({type(exc).__name__}: {str(exc)[:200]})") from None
+        raise ProblemError(
+            f"{where}: cannot reach the Dask scheduler at "
+            f"{scheduler} within {timeout:g} s "
+            f"({type(exc).__name__}: {str(exc)[:200]})"
+        ) from None

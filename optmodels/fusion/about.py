@@ -9,6 +9,11 @@ PROBLEM = {
     "title": "Fusion of two estimates and the accuracy of its weight matrix (Kulyavets et al.)",
     "original": "(1)",
     "closed_form": "(2), (6)",
-    "api": {"data": None, "residuals": ("weight_matrix", "fused_covariance"),
-            "solve": "fuse", "closed_form": None, "estimate": "estimate"},
+    "api": {
+        "data": None,
+        "residuals": ("weight_matrix", "fused_covariance"),
+        "solve": "fuse",
+        "closed_form": None,
+        "estimate": "estimate",
+    },
 }

@@ -25,9 +25,9 @@ from optmodels.fusion.inputs import (
 from optmodels.fusion.weights import _cross, _weight
 
 
-def weight_jacobians(s1: ArrayLike, s2: ArrayLike, *,
-                     method: Literal["closed_form", "ad"] = "closed_form"
-                     ) -> tuple[FloatArray, FloatArray]:
+def weight_jacobians(
+    s1: ArrayLike, s2: ArrayLike, *, method: Literal["closed_form", "ad"] = "closed_form"
+) -> tuple[FloatArray, FloatArray]:
     """P1 = d vec(W)/d vec(S1), P2 = d vec(W)/d vec(S2), each (m², m²), all m² entries of
     S_μ treated as independent, columns in the order of vec (12) (column-major).
 
@@ -40,7 +40,8 @@ def weight_jacobians(s1: ArrayLike, s2: ArrayLike, *,
     m = a.shape[0]
     _dim_guard(fn, m)
     method = as_choice(  # type: ignore[assignment]
-        _where(fn, "method"), method, ("closed_form", "ad"))
+        _where(fn, "method"), method, ("closed_form", "ad")
+    )
     if method == "closed_form":
         return _jacobians(a, b)
     if method == "ad":
@@ -58,8 +59,10 @@ def _jacobians(a: FloatArray, b: FloatArray) -> tuple[FloatArray, FloatArray]:
     w = _weight(a, b)
     i = np.eye(a.shape[0])
     c1, c2 = np.linalg.inv(a), np.linalg.inv(b)
-    return (np.asarray(np.kron((c1 @ w).T, i - w), dtype=float),
-            np.asarray(-np.kron((c2 @ (i - w)).T, w), dtype=float))
+    return (
+        np.asarray(np.kron((c1 @ w).T, i - w), dtype=float),
+        np.asarray(-np.kron((c2 @ (i - w)).T, w), dtype=float),
+    )
 
 
 def commutation_matrix(m: int) -> FloatArray:
@@ -72,8 +75,9 @@ def commutation_matrix(m: int) -> FloatArray:
     return k
 
 
-def sample_covariance_moments(sigma: ArrayLike, n: int, *, mean: MeanKind = "known"
-                              ) -> tuple[FloatArray, FloatArray]:
+def sample_covariance_moments(
+    sigma: ArrayLike, n: int, *, mean: MeanKind = "known"
+) -> tuple[FloatArray, FloatArray]:
     """Mean (m, m) and covariance of vec(Ŝ) (m², m²) for the estimator (3) with divisor
     n − 1 of ``n`` Gaussian snapshots with covariance ``sigma``.
 
@@ -102,8 +106,15 @@ def _moments(s: FloatArray, n: int, mean: str) -> tuple[FloatArray, FloatArray]:
     return mu, c * np.kron(s, s) @ (np.eye(m * m) + commutation_matrix(m))
 
 
-def weight_covariance(s1: ArrayLike, s2: ArrayLike, n1: int, n2: int, *,
-                      mean: MeanKind = "known", s12: ArrayLike | None = None) -> FloatArray:
+def weight_covariance(
+    s1: ArrayLike,
+    s2: ArrayLike,
+    n1: int,
+    n2: int,
+    *,
+    mean: MeanKind = "known",
+    s12: ArrayLike | None = None,
+) -> FloatArray:
     """Linearised Cov(vec Ŵ) (10): P C_C Pᵀ with P = [P1 P2] the Jacobians (13)-(14) at
     the true S_μ and C_C the covariance of (vec Ŝ1, vec Ŝ2) from
     :func:`sample_covariance_moments`.
@@ -128,9 +139,11 @@ def weight_covariance(s1: ArrayLike, s2: ArrayLike, n1: int, n2: int, *,
     out = p1 @ k1 @ p1.T + p2 @ k2 @ p2.T
     if s12 is not None:
         if n1 != n2:
-            raise ProblemError(f"{_where(fn, 'n2')}: with s12 both sample covariances come "
-                               f"from the same snapshots, so n1 = n2 is required (got {n1}, "
-                               f"{n2})")
+            raise ProblemError(
+                f"{_where(fn, 'n2')}: with s12 both sample covariances come "
+                f"from the same snapshots, so n1 = n2 is required (got {n1}, "
+                f"{n2})"
+            )
         c, _ = _cross(s12, a, b, fn)
         _, k12 = _moments(c, n1, mean)  # same c·(X ⊗ X)(I + K) form with X = S12
         cross = p1 @ k12 @ p2.T

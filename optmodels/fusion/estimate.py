@@ -40,10 +40,17 @@ from optmodels.fusion.weights import (
 )
 
 
-def fuse(a1: ArrayLike, s1: ArrayLike, a2: ArrayLike, s2: ArrayLike, *,
-         s12: ArrayLike | None = None,
-         method: Literal["closed_form", "cvxpy"] = "closed_form",
-         solver: str = "CLARABEL", **solver_options: Any) -> FusionSolution:
+def fuse(
+    a1: ArrayLike,
+    s1: ArrayLike,
+    a2: ArrayLike,
+    s2: ArrayLike,
+    *,
+    s12: ArrayLike | None = None,
+    method: Literal["closed_form", "cvxpy"] = "closed_form",
+    solver: str = "CLARABEL",
+    **solver_options: Any,
+) -> FusionSolution:
     """Fuse two estimates a1, a2 of the same α with error covariances S1, S2.
 
     Independent estimates (``s12=None``, the paper's assumption): (1)-(2) in closed form, or
@@ -82,7 +89,8 @@ def fuse(a1: ArrayLike, s1: ArrayLike, a2: ArrayLike, s2: ArrayLike, *,
     x1 = as_finite_array(_where(fn, "a1"), a1, shape=(m,), max_abs=MAX_MAGNITUDE)
     x2 = as_finite_array(_where(fn, "a2"), a2, shape=(m,), max_abs=MAX_MAGNITUDE)
     method = as_choice(  # type: ignore[assignment]
-        _where(fn, "method"), method, ("closed_form", "cvxpy"))
+        _where(fn, "method"), method, ("closed_form", "cvxpy")
+    )
     if not isinstance(solver, str):
         raise ProblemError(f"{_where(fn, 'solver')}: expected a solver name, got {solver!r}")
     if s12 is not None:
@@ -95,8 +103,12 @@ def fuse(a1: ArrayLike, s1: ArrayLike, a2: ArrayLike, s2: ArrayLike, *,
     if method == "closed_form":
         with timed() as tm:
             est = x1 + w @ (x2 - x1)
-        common: dict[str, Any] = {"status": Status.OPTIMAL, "method": "closed_form",
-                                  "solve_time": tm.elapsed, "message": "(1)-(2)"}
+        common: dict[str, Any] = {
+            "status": Status.OPTIMAL,
+            "method": "closed_form",
+            "solve_time": tm.elapsed,
+            "message": "(1)-(2)",
+        }
     elif method == "cvxpy":
         with timed() as tb:
             # α = a1 + d·u with d the spread of the two estimates and C_μ divided by
@@ -107,14 +119,18 @@ def fuse(a1: ArrayLike, s1: ArrayLike, a2: ArrayLike, s2: ArrayLike, *,
             cn = max(float(np.max(np.abs(c1 + c2))), 1e-300)
             delta = (x2 - x1) / d
             u = cp.Variable(m)
-            obj = (cp.quad_form(u, cp.psd_wrap(c1 / cn))
-                   + cp.quad_form(u - delta, cp.psd_wrap(c2 / cn)))
+            obj = cp.quad_form(u, cp.psd_wrap(c1 / cn)) + cp.quad_form(
+                u - delta, cp.psd_wrap(c2 / cn)
+            )
             prob = cp.Problem(cp.Minimize(obj))
         res = solve_problem(prob, solver, **solver_options)
         common = res.common()
         common["build_time"] += tb.elapsed
-        est = (x1 + d * np.asarray(u.value) if res.status.ok and u.value is not None
-               else np.full(m, np.nan))
+        est = (
+            x1 + d * np.asarray(u.value)
+            if res.status.ok and u.value is not None
+            else np.full(m, np.nan)
+        )
     grad = c1 @ (est - x1) + c2 @ (est - x2)
     scale = np.abs(c1) @ np.abs(x1) + np.abs(c2) @ np.abs(x2) + np.abs(c1 + c2) @ np.abs(est)
     res_grad = float(np.max(np.abs(grad) / (scale + 1e-300)))
@@ -131,29 +147,47 @@ def fuse(a1: ArrayLike, s1: ArrayLike, a2: ArrayLike, s2: ArrayLike, *,
         g_err = g_err + gamma * (ac @ np.abs(s_k) @ ac + ac) @ np.abs(est - x_k)
     dw = _weight_bound(w, s1a + s2a, s1a)
     alpha_w = x1 + w @ (x2 - x1)
-    bound = np.minimum(np.abs(cov) @ g_err,
-                       np.abs(est - alpha_w) + _combination_bound(w, dw, x1, x2))
+    bound = np.minimum(
+        np.abs(cov) @ g_err, np.abs(est - alpha_w) + _combination_bound(w, dw, x1, x2)
+    )
     size = max(float(np.max(np.abs(np.concatenate([est, x1, x2])))), np.finfo(float).tiny)
     w_err = _relative_weight_error(dw, w)
-    residuals = {"gradient": res_grad, "estimate_error": float(np.max(bound) / size),
-                 "weight_error": w_err}
-    sol = _finish(FusionSolution(objective=float("nan"), residuals=residuals, estimate=est,
-                                 covariance=cov, W=w, **common))
+    residuals = {
+        "gradient": res_grad,
+        "estimate_error": float(np.max(bound) / size),
+        "weight_error": w_err,
+    }
+    sol = _finish(
+        FusionSolution(
+            objective=float("nan"), residuals=residuals, estimate=est, covariance=cov, W=w, **common
+        )
+    )
     sol.objective = _wls_objective(sol.estimate, x1, c1, x2, c2)
     return sol
 
 
-def _fuse_correlated(x1: FloatArray, a: FloatArray, x2: FloatArray, b: FloatArray,
-                     s12: ArrayLike, method: str, solver: str,
-                     solver_options: dict[str, Any]) -> FusionSolution:
+def _fuse_correlated(
+    x1: FloatArray,
+    a: FloatArray,
+    x2: FloatArray,
+    b: FloatArray,
+    s12: ArrayLike,
+    method: str,
+    solver: str,
+    solver_options: dict[str, Any],
+) -> FusionSolution:
     c, d = _cross(s12, a, b, "fuse")
     m = a.shape[0]
     eye = np.eye(m)
     if method == "closed_form":
         with timed() as tm:
             w = _correlated_weight(a, c, d)
-        common: dict[str, Any] = {"status": Status.OPTIMAL, "method": "closed_form",
-                                  "solve_time": tm.elapsed, "message": "Bar-Shalom-Campo"}
+        common: dict[str, Any] = {
+            "status": Status.OPTIMAL,
+            "method": "closed_form",
+            "solve_time": tm.elapsed,
+            "message": "Bar-Shalom-Campo",
+        }
     elif method == "cvxpy":
         joint = np.block([[a, c], [c.T, b]])
         lam, vecs = np.linalg.eigh(0.5 * (joint + joint.T))
@@ -166,21 +200,28 @@ def _fuse_correlated(x1: FloatArray, a: FloatArray, x2: FloatArray, b: FloatArra
         res = solve_problem(prob, solver, **solver_options)
         common = res.common()
         common["build_time"] += tb.elapsed
-        w = (np.asarray(wv.value) if res.status.ok and wv.value is not None
-             else np.full((m, m), np.nan))
+        w = (
+            np.asarray(wv.value)
+            if res.status.ok and wv.value is not None
+            else np.full((m, m), np.nan)
+        )
     est = x1 + w @ (x2 - x1)
     # optimality: d tr(cov)/dW = 2(W D − (S1 − S12)) = 0
     cov = fused_covariance(w, a, b, c)
     grad = w @ d - (a - c)
     res_grad = float(np.max(np.abs(grad)) / (np.max(np.abs(d)) * max(1.0, np.max(np.abs(w)))))
-    dw = _weight_bound(w, d, a - c, np.asarray(np.linalg.pinv(d, rcond=PINV_RTOL,
-                                                              hermitian=True), dtype=float))
+    dw = _weight_bound(
+        w, d, a - c, np.asarray(np.linalg.pinv(d, rcond=PINV_RTOL, hermitian=True), dtype=float)
+    )
     w_err = _relative_weight_error(dw, w)
     # |δα| ≤ |δW||a2 − a1| + round-off of a1 + W(a2 − a1)
     size = max(float(np.max(np.abs(np.concatenate([est, x1, x2])))), np.finfo(float).tiny)
     bound = float(np.max(_combination_bound(w, dw, x1, x2))) / size
     residuals = {"gradient": res_grad, "estimate_error": bound, "weight_error": w_err}
-    sol = _finish(FusionSolution(objective=float("nan"), residuals=residuals, estimate=est,
-                                 covariance=cov, W=w, **common))
+    sol = _finish(
+        FusionSolution(
+            objective=float("nan"), residuals=residuals, estimate=est, covariance=cov, W=w, **common
+        )
+    )
     sol.objective = float(np.trace(sol.covariance))
     return sol

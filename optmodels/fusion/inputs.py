@@ -36,8 +36,10 @@ def _where(fn: str, arg: str) -> str:
 
 def _dim_guard(fn: str, m: int) -> None:
     if m > MAX_DIM:
-        raise ProblemError(f"{_where(fn, 'S1')}: dimension m = {m} above {MAX_DIM} (this "
-                           f"function builds (m², m²) matrices: {m * m}² entries)")
+        raise ProblemError(
+            f"{_where(fn, 'S1')}: dimension m = {m} above {MAX_DIM} (this "
+            f"function builds (m², m²) matrices: {m * m}² entries)"
+        )
 
 
 def _cov(name: str, s: ArrayLike, m: int | None = None) -> FloatArray:
@@ -51,8 +53,10 @@ def _cov(name: str, s: ArrayLike, m: int | None = None) -> FloatArray:
     if low < 1 / MAX_MAGNITUDE:
         # found by the robustness sweep: C = S⁻¹ at 1e151 times estimates at 1e149
         # overflowed; variances below 1e-100 are a units problem, not a fusion one
-        raise ProblemError(f"{name}: smallest eigenvalue {low:.3g} below 1e-100 (its inverse "
-                           "overflows against the estimates); change units")
+        raise ProblemError(
+            f"{name}: smallest eigenvalue {low:.3g} below 1e-100 (its inverse "
+            "overflows against the estimates); change units"
+        )
     return 0.5 * (arr + arr.T)
 
 
@@ -75,8 +79,10 @@ def _check_n(name: str, n: int, m: int, mean: str = "sample") -> int:
     k = as_count(name, n)  # refuses NaN, inf, 2.5, booleans and strings
     if k < least:
         rel = "n ≥ m" if mean == "known" else "n > m"
-        raise ProblemError(f"{name}: need an integer sample size {rel} = {m} with the {mean} "
-                           f"mean (the sample covariance is singular otherwise), got {k}")
+        raise ProblemError(
+            f"{name}: need an integer sample size {rel} = {m} with the {mean} "
+            f"mean (the sample covariance is singular otherwise), got {k}"
+        )
     return k
 
 

@@ -50,9 +50,16 @@ class WeightMonteCarlo:
     trials: int
 
 
-def monte_carlo_weight(s1: ArrayLike, s2: ArrayLike, n1: int, n2: int, *,
-                       trials: int = 100_000, seed: int | np.random.Generator | None = None,
-                       mean: MeanKind = "known") -> WeightMonteCarlo:
+def monte_carlo_weight(
+    s1: ArrayLike,
+    s2: ArrayLike,
+    n1: int,
+    n2: int,
+    *,
+    trials: int = 100_000,
+    seed: int | np.random.Generator | None = None,
+    mean: MeanKind = "known",
+) -> WeightMonteCarlo:
     """Monte Carlo law of Ŵ = Ŝ1(Ŝ1 + Ŝ2)⁻¹ with Ŝ_μ from (3).
 
     Σ_s (x_s − m)(x_s − m)ᵀ is Wishart(n, S) with the true mean, Wishart(n − 1, S) with the
@@ -74,10 +81,12 @@ def monte_carlo_weight(s1: ArrayLike, s2: ArrayLike, n1: int, n2: int, *,
     n2 = _check_n(_where(fn, "n2"), n2, m, mean)
     trials = as_count(_where(fn, "trials"), trials, minimum=2)
     if trials * m * m > MAX_MC_WORK:
-        raise ProblemError(f"{_where(fn, 'trials')}: {trials} trials at m = {m} is "
-                           f"trials·m² = {trials * m * m:.3g}, above the limit {MAX_MC_WORK:.0e} "
-                           f"(≈ 15 s); use at most {MAX_MC_WORK // (m * m)} trials (the "
-                           "Monte Carlo standard error falls only as 1/√trials)")
+        raise ProblemError(
+            f"{_where(fn, 'trials')}: {trials} trials at m = {m} is "
+            f"trials·m² = {trials * m * m:.3g}, above the limit {MAX_MC_WORK:.0e} "
+            f"(≈ 15 s); use at most {MAX_MC_WORK // (m * m)} trials (the "
+            "Monte Carlo standard error falls only as 1/√trials)"
+        )
     rng = _rng(_where(fn, "seed"), seed)
     lost = 0 if mean == "known" else 1
     w0 = _vec(_weight(a, b))  # shift: moments accumulated around the true W (stable sums)
@@ -99,8 +108,9 @@ def monte_carlo_weight(s1: ArrayLike, s2: ArrayLike, n1: int, n2: int, *,
         done += k
     mean_dv = total / trials
     cov = (outer - trials * np.outer(mean_dv, mean_dv)) / (trials - 1)
-    return WeightMonteCarlo(mean=(w0 + mean_dv).reshape(m, m, order="F"),
-                            cov=0.5 * (cov + cov.T), trials=trials)
+    return WeightMonteCarlo(
+        mean=(w0 + mean_dv).reshape(m, m, order="F"), cov=0.5 * (cov + cov.T), trials=trials
+    )
 
 
 def _rng(name: str, seed: Any) -> np.random.Generator:
@@ -109,8 +119,7 @@ def _rng(name: str, seed: Any) -> np.random.Generator:
     return as_generator(name, seed, allow_none=True)
 
 
-def weight_from_samples(a1: ArrayLike, a2: ArrayLike, *, correlated: bool = False
-                        ) -> FloatArray:
+def weight_from_samples(a1: ArrayLike, a2: ArrayLike, *, correlated: bool = False) -> FloatArray:
     """Ŵ from n snapshots of the two estimators, rows of ``a1`` and ``a2`` (n, m): the
     sample covariances (3) with the sample mean and divisor n − 1, then W of (2), or of
     :func:`weight_matrix_correlated` with the sample cross-covariance if ``correlated``.

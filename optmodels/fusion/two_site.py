@@ -75,35 +75,43 @@ class TwoSiteSystem(JointMLMixin):
     sigma_range_difference: float
 
     def __post_init__(self) -> None:
-        a = as_finite_array("fusion.TwoSiteSystem site_a", self.site_a, shape=(2,),
-                            max_abs=MAX_MAGNITUDE)
-        b = as_finite_array("fusion.TwoSiteSystem site_b", self.site_b, shape=(2,),
-                            max_abs=MAX_MAGNITUDE)
+        a = as_finite_array(
+            "fusion.TwoSiteSystem site_a", self.site_a, shape=(2,), max_abs=MAX_MAGNITUDE
+        )
+        b = as_finite_array(
+            "fusion.TwoSiteSystem site_b", self.site_b, shape=(2,), max_abs=MAX_MAGNITUDE
+        )
         if np.linalg.norm(b - a) == 0:
-            raise ProblemError("fusion.TwoSiteSystem site_b: coincides with site_a (zero "
-                               "baseline)")
+            raise ProblemError("fusion.TwoSiteSystem site_b: coincides with site_a (zero baseline)")
         for name in ("sigma_azimuth", "sigma_range_difference"):
             v = as_positive(f"fusion.TwoSiteSystem {name}", getattr(self, name))
             object.__setattr__(self, name, v)
         if self.sigma_azimuth > np.pi:
-            raise ProblemError(f"fusion.TwoSiteSystem sigma_azimuth: {self.sigma_azimuth:g} "
-                               "rad exceeds π (give radians)")
+            raise ProblemError(
+                f"fusion.TwoSiteSystem sigma_azimuth: {self.sigma_azimuth:g} "
+                "rad exceeds π (give radians)"
+            )
         object.__setattr__(self, "site_a", a)
         object.__setattr__(self, "site_b", b)
 
     @classmethod
-    def on_baseline(cls, baseline: float = 20_000.0, sigma_azimuth: float = 3e-3,
-                    sigma_range_difference: float = 3.0) -> TwoSiteSystem:
+    def on_baseline(
+        cls,
+        baseline: float = 20_000.0,
+        sigma_azimuth: float = 3e-3,
+        sigma_range_difference: float = 3.0,
+    ) -> TwoSiteSystem:
         """Sites at (∓baseline/2, 0), metres. Defaults: a 20 km baseline, σ_az = 3 mrad
         (0.17°), σ_Δr = 3 m (10 ns) -- both estimators then matter over the region of the
         demo."""
         b = as_positive("fusion.TwoSiteSystem.on_baseline baseline", baseline)
         if b > MAX_MAGNITUDE:
-            raise ProblemError(f"fusion.TwoSiteSystem.on_baseline baseline: {b:g} m above "
-                               f"{MAX_MAGNITUDE:.0e} (change units)")
+            raise ProblemError(
+                f"fusion.TwoSiteSystem.on_baseline baseline: {b:g} m above "
+                f"{MAX_MAGNITUDE:.0e} (change units)"
+            )
         h = 0.5 * b
-        return cls(np.array([-h, 0.0]), np.array([h, 0.0]), sigma_azimuth,
-                   sigma_range_difference)
+        return cls(np.array([-h, 0.0]), np.array([h, 0.0]), sigma_azimuth, sigma_range_difference)
 
     @property
     def baseline(self) -> float:
@@ -112,8 +120,9 @@ class TwoSiteSystem(JointMLMixin):
     @property
     def noise_cov(self) -> FloatArray:
         """R = diag(σ_az², σ_az², σ_Δr²) of z."""
-        return np.diag([self.sigma_azimuth**2, self.sigma_azimuth**2,
-                        self.sigma_range_difference**2])
+        return np.diag(
+            [self.sigma_azimuth**2, self.sigma_azimuth**2, self.sigma_range_difference**2]
+        )
 
     # ------------------------------------------------------------------ model
     def _pos(self, x: ArrayLike, name: str = "x") -> FloatArray:
@@ -128,8 +137,10 @@ class TwoSiteSystem(JointMLMixin):
             at = np.all(p == site, axis=-1)
             if np.any(at):
                 idx = _first_index(at)
-                raise ProblemError(f"{_at(name, idx)} = {_xy(p[idx])} m coincides with site "
-                                   f"{label}: the azimuth is undefined there")
+                raise ProblemError(
+                    f"{_at(name, idx)} = {_xy(p[idx])} m coincides with site "
+                    f"{label}: the azimuth is undefined there"
+                )
 
     def measure(self, x: ArrayLike) -> FloatArray:
         """Noise-free z(x) = (azimuth A, azimuth B, Δr), (..., 3). ProblemError at a site."""
@@ -139,9 +150,14 @@ class TwoSiteSystem(JointMLMixin):
 
     def _measure(self, p: FloatArray) -> FloatArray:
         da, db = p - self.site_a, p - self.site_b
-        return np.stack([np.arctan2(da[..., 0], da[..., 1]), np.arctan2(db[..., 0], db[..., 1]),
-                         np.hypot(db[..., 0], db[..., 1]) - np.hypot(da[..., 0], da[..., 1])],
-                        axis=-1)
+        return np.stack(
+            [
+                np.arctan2(da[..., 0], da[..., 1]),
+                np.arctan2(db[..., 0], db[..., 1]),
+                np.hypot(db[..., 0], db[..., 1]) - np.hypot(da[..., 0], da[..., 1]),
+            ],
+            axis=-1,
+        )
 
     def jacobian(self, x: ArrayLike) -> FloatArray:
         """∂z/∂x, (..., 3, 2). For azimuth atan2(dx, dy): ∂/∂x = (dy, −dx)/ρ².
@@ -165,13 +181,14 @@ class TwoSiteSystem(JointMLMixin):
 
     def sample(self, x: ArrayLike, trials: int, rng: np.random.Generator) -> FloatArray:
         """Noisy measurements (trials, 3) at one position x (2,); azimuths wrapped."""
-        p = as_finite_array("fusion.TwoSiteSystem.sample x", x, shape=(2,),
-                            max_abs=MAX_MAGNITUDE)
+        p = as_finite_array("fusion.TwoSiteSystem.sample x", x, shape=(2,), max_abs=MAX_MAGNITUDE)
         self._off_sites(p, "fusion.TwoSiteSystem.sample x")
         k = as_count("fusion.TwoSiteSystem.sample trials", trials, minimum=1)
         if not isinstance(rng, np.random.Generator):
-            raise ProblemError("fusion.TwoSiteSystem.sample rng: expected a "
-                               f"numpy.random.Generator, got {type(rng).__name__}")
+            raise ProblemError(
+                "fusion.TwoSiteSystem.sample rng: expected a "
+                f"numpy.random.Generator, got {type(rng).__name__}"
+            )
         z = self._measure(p) + rng.normal(size=(k, 3)) * np.sqrt(np.diag(self.noise_cov))
         z[:, :2] = np.angle(np.exp(1j * z[:, :2]))
         return z
@@ -183,6 +200,7 @@ class TwoSiteSystem(JointMLMixin):
         for degenerate ones before their results are set to NaN."""
         d = self.site_b - self.site_a
         return self.site_a + np.array([-d[1], d[0]])
+
     def _conditions(self, p: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
         """Condition numbers (...,) of the whitened Jacobians of estimator 1 (azimuths A,
         B), estimator 2 (azimuth A, Δr) and the joint problem (all three); inf at a site
@@ -198,8 +216,9 @@ class TwoSiteSystem(JointMLMixin):
             out.append(np.where(good & np.isfinite(cond), cond, np.inf))
         return out[0], out[1], out[2]
 
-    def _refuse_degenerate(self, p: FloatArray, bad: np.ndarray, cond: FloatArray,
-                           name: str, what: str) -> None:
+    def _refuse_degenerate(
+        self, p: FloatArray, bad: np.ndarray, cond: FloatArray, name: str, what: str
+    ) -> None:
         if np.any(bad):
             idx = _first_index(bad)
             self._off_sites(p, name)
@@ -208,11 +227,12 @@ class TwoSiteSystem(JointMLMixin):
                 f"number {float(cond[idx]):.2g} of its whitened Jacobian, limit "
                 f"{GEOMETRY_COND:.0e}): on or near the line through the sites, where the "
                 "position along that line is not observed, or too far away; give "
-                "on_degenerate='nan' for NaN there instead")
+                "on_degenerate='nan' for NaN there instead"
+            )
 
-    def covariances(self, x: ArrayLike, *,
-                    on_degenerate: Literal["raise", "nan"] = "raise"
-                    ) -> tuple[FloatArray, FloatArray, FloatArray]:
+    def covariances(
+        self, x: ArrayLike, *, on_degenerate: Literal["raise", "nan"] = "raise"
+    ) -> tuple[FloatArray, FloatArray, FloatArray]:
         """First-order S1, S2 and S12 = Cov(a1, a2) at position(s) x, each (..., 2, 2), m².
 
         a_k = x + G_k e_k with G_k = (∂z_k/∂x)⁻¹; e_1 = (e_azA, e_azB), e_2 = (e_azA, e_Δr),
@@ -226,8 +246,9 @@ class TwoSiteSystem(JointMLMixin):
         where either is).
         """
         name = "fusion.TwoSiteSystem.covariances x"
-        mode = as_choice("fusion.TwoSiteSystem.covariances on_degenerate", on_degenerate,
-                         ("raise", "nan"))
+        mode = as_choice(
+            "fusion.TwoSiteSystem.covariances on_degenerate", on_degenerate, ("raise", "nan")
+        )
         p = self._pos(x, name)
         c1, c2, _ = self._conditions(p)
         bad1, bad2 = ~(c1 <= GEOMETRY_COND), ~(c2 <= GEOMETRY_COND)
@@ -252,8 +273,7 @@ class TwoSiteSystem(JointMLMixin):
         s12 = np.where((bad1 | bad2)[..., None, None], nan, s12)
         return s1, s2, np.asarray(s12, dtype=float)
 
-    def crb(self, x: ArrayLike, *,
-            on_degenerate: Literal["raise", "nan"] = "raise") -> FloatArray:
+    def crb(self, x: ArrayLike, *, on_degenerate: Literal["raise", "nan"] = "raise") -> FloatArray:
         """(Jᵀ R⁻¹ J)⁻¹, (..., 2, 2), m²: first-order covariance of the joint ML (the CRB).
 
         On the extension of the baseline beyond the sites (and at the sites) the Fisher
@@ -264,8 +284,7 @@ class TwoSiteSystem(JointMLMixin):
         the position along the baseline).
         """
         name = "fusion.TwoSiteSystem.crb x"
-        mode = as_choice("fusion.TwoSiteSystem.crb on_degenerate", on_degenerate,
-                         ("raise", "nan"))
+        mode = as_choice("fusion.TwoSiteSystem.crb on_degenerate", on_degenerate, ("raise", "nan"))
         p = self._pos(x, name)
         _, _, c = self._conditions(p)
         bad = ~(c <= GEOMETRY_COND)
@@ -282,8 +301,10 @@ class TwoSiteSystem(JointMLMixin):
         a, b, d = info[..., 0, 0], info[..., 0, 1], info[..., 1, 1]
         with np.errstate(divide="ignore", invalid="ignore"):
             det = a * d - b * b
-            out = np.stack([np.stack([d, -b], axis=-1), np.stack([-b, a], axis=-1)],
-                           axis=-2) / det[..., None, None]
+            out = (
+                np.stack([np.stack([d, -b], axis=-1), np.stack([-b, a], axis=-1)], axis=-2)
+                / det[..., None, None]
+            )
         return out
 
     def residuals(self, z: ArrayLike, x: ArrayLike) -> FloatArray:
@@ -301,8 +322,9 @@ class TwoSiteSystem(JointMLMixin):
     def _z(self, z: ArrayLike, name: str = "z") -> FloatArray:
         arr = as_finite_array(name, z, max_abs=MAX_MAGNITUDE)
         if arr.shape[-1:] != (3,):
-            raise ProblemError(f"{name}: expected measurements (..., 3) = {MEASUREMENTS}, "
-                               f"got shape {arr.shape}")
+            raise ProblemError(
+                f"{name}: expected measurements (..., 3) = {MEASUREMENTS}, got shape {arr.shape}"
+            )
         return arr
 
     def triangulate(self, z: ArrayLike) -> FloatArray:
@@ -340,9 +362,15 @@ class TwoSiteSystem(JointMLMixin):
     # joint_ml (the original problem) and its Gauss-Newton cross-check are inherited
     # from optmodels.fusion.two_site_ml.JointMLMixin
 
-    def fused(self, z: ArrayLike, w: ArrayLike | None = None, *,
-              weights_at: Literal["true", "estimated"] = "estimated",
-              x_true: ArrayLike | None = None, correlated: bool = False) -> FloatArray:
+    def fused(
+        self,
+        z: ArrayLike,
+        w: ArrayLike | None = None,
+        *,
+        weights_at: Literal["true", "estimated"] = "estimated",
+        x_true: ArrayLike | None = None,
+        correlated: bool = False,
+    ) -> FloatArray:
         """Fusion (1) of the two estimators for every row of z, (T, 2).
 
         ``w`` (2, 2) fixes the weight (e.g. Ŵ from snapshots); otherwise W is computed from
@@ -356,7 +384,8 @@ class TwoSiteSystem(JointMLMixin):
         fn = "fusion.TwoSiteSystem.fused"
         zz = np.atleast_2d(self._z(z, f"{fn} z"))
         weights_at = as_choice(  # type: ignore[assignment]
-            f"{fn} weights_at", weights_at, ("true", "estimated"))
+            f"{fn} weights_at", weights_at, ("true", "estimated")
+        )
         as_flag(f"{fn} correlated", correlated)
         a1, a2 = self.triangulate(zz), self.azimuth_range_difference(zz)
         if w is not None:
@@ -372,8 +401,9 @@ class TwoSiteSystem(JointMLMixin):
             at = a1
         out = np.full_like(a1, np.nan)
         ok = np.all(np.isfinite(a1) & np.isfinite(a2), axis=1)
-        s1, s2, s12 = self.covariances(np.where(ok[:, None], at, self._harmless),
-                                       on_degenerate="nan")
+        s1, s2, s12 = self.covariances(
+            np.where(ok[:, None], at, self._harmless), on_degenerate="nan"
+        )
         ok &= np.all(np.isfinite(s1) & np.isfinite(s2), axis=(1, 2))
         s1, s2, s12 = s1[ok], s2[ok], s12[ok]
         if correlated:

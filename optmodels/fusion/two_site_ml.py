@@ -51,10 +51,14 @@ class JointMLMixin:
     :meth:`joint_ml`, ``_whitened``, ``_gauss_newton``), kept here with its NLP and cache;
     TwoSiteSystem inherits them."""
 
-    def joint_ml(self: TwoSiteSystem,  # type: ignore[misc]
-                 z: ArrayLike, *, x0: ArrayLike | None = None,
-                 method: Literal["ipopt", "gauss_newton"] = "ipopt",
-                 options: dict[str, Any] | None = None) -> JointMLSolution:
+    def joint_ml(
+        self: TwoSiteSystem,  # type: ignore[misc]
+        z: ArrayLike,
+        *,
+        x0: ArrayLike | None = None,
+        method: Literal["ipopt", "gauss_newton"] = "ipopt",
+        options: dict[str, Any] | None = None,
+    ) -> JointMLSolution:
         """ML position from all three measurements (the original problem):
         min_x Σ_k ((z_k − z_k(x)) / σ_k)² for every row of z (T rows, T ≥ 1).
 
@@ -87,7 +91,8 @@ class JointMLMixin:
         if t == 0:
             raise ProblemError(f"{fn} z: no measurements (0 rows)")
         method = as_choice(  # type: ignore[assignment]
-            f"{fn} method", method, ("ipopt", "gauss_newton"))
+            f"{fn} method", method, ("ipopt", "gauss_newton")
+        )
         opts = check_options(options)
         if x0 is None:
             start = self.triangulate(zz)
@@ -109,9 +114,16 @@ class JointMLMixin:
             length = np.sqrt(np.trace(self._crb(start), axis1=-2, axis2=-1))
             length = np.where(np.isfinite(length) & (length > 0), length, self.baseline)
             built, _ = _joint_nlp(t, opts)
-            params = np.concatenate([zz.reshape(-1, order="F"), start.reshape(-1, order="F"),
-                                     length, self.site_a, self.site_b,
-                                     [self.sigma_azimuth, self.sigma_range_difference]])
+            params = np.concatenate(
+                [
+                    zz.reshape(-1, order="F"),
+                    start.reshape(-1, order="F"),
+                    length,
+                    self.site_a,
+                    self.site_b,
+                    [self.sigma_azimuth, self.sigma_range_difference],
+                ]
+            )
             res, u = run_nlpsol(built, x0=np.zeros(2 * t), p=params)
             est = start + length[:, None] * u.reshape(t, 2, order="F")
             common = res.common()
@@ -119,30 +131,46 @@ class JointMLMixin:
         step = _newton_step(jw, g)
         worst_stat = float(np.max(stat))
         worst_step = float(np.max(step))
-        worst = max(worst_stat, worst_step) if np.isfinite(worst_stat + worst_step) \
-            else float("inf")
+        worst = (
+            max(worst_stat, worst_step) if np.isfinite(worst_stat + worst_step) else float("inf")
+        )
         # IPOPT's precision limit (tiny noise makes the whitened problem stiff): accept the
         # point only because the NumPy stationarity check passes
         common["status"], common["message"] = accept_precision_limit(
-            common["status"], common["message"], worst,
-            f" (stationarity {worst:.1e} verified in NumPy)")
+            common["status"],
+            common["message"],
+            worst,
+            f" (stationarity {worst:.1e} verified in NumPy)",
+        )
 
         def note(v: Verdict) -> str:
-            return (f"stationarity {worst_stat:.2g}, Newton step {worst_step:.2g} (CRB units)"
-                    " fail the NumPy check") if v.status == Status.ERROR and v.before.ok \
+            return (
+                (
+                    f"stationarity {worst_stat:.2g}, Newton step {worst_step:.2g} (CRB units)"
+                    " fail the NumPy check"
+                )
+                if v.status == Status.ERROR and v.before.ok
                 else ""
+            )
 
         def no_estimate(sol: JointMLSolution) -> None:
             sol.estimate = np.full_like(sol.estimate, np.nan)
             sol.objective = float("nan")
 
-        sol = JointMLSolution(objective=float(np.sum(wr**2)),
-                              residuals={"stationarity": worst_stat, "newton_step": worst_step},
-                              estimate=est, stationarity=stat, **common)
+        sol = JointMLSolution(
+            objective=float(np.sum(wr**2)),
+            residuals={"stationarity": worst_stat, "newton_step": worst_step},
+            estimate=est,
+            stationarity=stat,
+            **common,
+        )
         return finish(sol, note=note, reject=no_estimate)  # the one gate
 
-    def _whitened(self: TwoSiteSystem, z: FloatArray, x: FloatArray  # type: ignore[misc]
-                  ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+    def _whitened(
+        self: TwoSiteSystem,
+        z: FloatArray,
+        x: FloatArray,  # type: ignore[misc]
+    ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
         """Whitened Jacobian (T, 3, 2), residuals (T, 3), gradient J_tᵀR⁻¹r_t (T, 2) and the
         relative stationarity ‖g_t‖ / (‖J_t‖‖r_t‖ + 1) per row, at positions x (NaN rows
         where x is not finite or at a site)."""
@@ -151,12 +179,16 @@ class JointMLMixin:
             r = self._residuals(z, x)
             g = np.einsum("tki,tk->ti", jw, r)
             stat = np.linalg.norm(g, axis=1) / (
-                np.linalg.norm(jw, axis=(1, 2)) * np.linalg.norm(r, axis=1) + 1.0)
+                np.linalg.norm(jw, axis=(1, 2)) * np.linalg.norm(r, axis=1) + 1.0
+            )
         return jw, r, g, np.where(np.isfinite(stat), stat, np.inf)
 
-    def _gauss_newton(self: TwoSiteSystem,  # type: ignore[misc]
-                      z: FloatArray, start: FloatArray, max_iter: int = 50
-                      ) -> tuple[FloatArray, dict[str, Any]]:
+    def _gauss_newton(
+        self: TwoSiteSystem,  # type: ignore[misc]
+        z: FloatArray,
+        start: FloatArray,
+        max_iter: int = 50,
+    ) -> tuple[FloatArray, dict[str, Any]]:
         """Vectorised Gauss-Newton with step halving; stops when every row's full step is
         below 1e-10 of the baseline or its relative stationarity (as in :meth:`joint_ml`)
         below 1e-10 (GN converges only linearly on non-zero residuals), or no step along
@@ -171,13 +203,15 @@ class JointMLMixin:
             jw, _, g, stat = self._whitened(z, x)
             normal = np.swapaxes(jw, 1, 2) @ jw
             if not np.all(np.isfinite(normal)) or np.any(np.linalg.det(normal) <= 0):
-                return x, {"status": Status.ERROR, "method": "gauss_newton",
-                           "solve_time": time.perf_counter() - t0, "iterations": it,
-                           "message": "Gauss-Newton: singular normal matrix (degenerate "
-                                      "geometry)"}
+                return x, {
+                    "status": Status.ERROR,
+                    "method": "gauss_newton",
+                    "solve_time": time.perf_counter() - t0,
+                    "iterations": it,
+                    "message": "Gauss-Newton: singular normal matrix (degenerate geometry)",
+                }
             step = np.linalg.solve(normal, g[..., None])[..., 0]
-            done = (np.max(np.abs(step), axis=1) < 1e-10 * self.baseline) | (stat < 1e-10) \
-                | stalled
+            done = (np.max(np.abs(step), axis=1) < 1e-10 * self.baseline) | (stat < 1e-10) | stalled
             if done.all():
                 converged = True
                 break
@@ -193,9 +227,13 @@ class JointMLMixin:
             stalled = lam < 2.0**-20
             x, cost = trial, new
         status = Status.OPTIMAL if converged else Status.ITERATION_LIMIT
-        return x, {"status": status, "method": "gauss_newton",
-                   "solve_time": time.perf_counter() - t0, "iterations": it,
-                   "message": "Gauss-Newton"}
+        return x, {
+            "status": status,
+            "method": "gauss_newton",
+            "solve_time": time.perf_counter() - t0,
+            "iterations": it,
+            "message": "Gauss-Newton",
+        }
 
 
 def _newton_step(jw: FloatArray, g: FloatArray) -> FloatArray:
@@ -240,8 +278,7 @@ def _joint_problem(t: int) -> dict[str, Any]:
     rb = wrap(z[:, 1] - ca.atan2(db_x, db_y)) / sig[0]
     rd = (z[:, 2] - (ca.sqrt(db_x**2 + db_y**2) - ca.sqrt(da_x**2 + da_y**2))) / sig[1]
     f = ca.sumsqr(ra) + ca.sumsqr(rb) + ca.sumsqr(rd)
-    return {"x": ca.vec(u), "f": f / t,
-            "p": ca.vertcat(ca.vec(z), ca.vec(x0), length, sa, sb, sig)}
+    return {"x": ca.vec(u), "f": f / t, "p": ca.vertcat(ca.vec(z), ca.vec(x0), length, sa, sb, sig)}
 
 
 def clear_joint_cache() -> None:

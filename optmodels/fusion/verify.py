@@ -17,8 +17,9 @@ from optmodels.fusion.solution import _failure
 _EPS = float(np.finfo(float).eps)
 
 
-def _bounded_error(mat: FloatArray, sol: FloatArray, rhs: FloatArray, inv: FloatArray
-                   ) -> FloatArray:
+def _bounded_error(
+    mat: FloatArray, sol: FloatArray, rhs: FloatArray, inv: FloatArray
+) -> FloatArray:
     """LAPACK-style (xGERFS) forward error bound of a computed ``sol`` of
     ``mat @ sol = rhs``: |inv| (|r| + γ(|mat||sol| + |rhs|)) elementwise, r the residual,
     γ = (m + 2) eps, ``inv`` the (pseudo-)inverse of ``mat``. Componentwise, so a
@@ -28,8 +29,9 @@ def _bounded_error(mat: FloatArray, sol: FloatArray, rhs: FloatArray, inv: Float
     return np.abs(inv) @ (np.abs(r) + gamma * (np.abs(mat) @ np.abs(sol) + np.abs(rhs)))
 
 
-def _weight_bound(w: FloatArray, mat: FloatArray, rhs: FloatArray,
-                  inv: FloatArray | None = None) -> FloatArray:
+def _weight_bound(
+    w: FloatArray, mat: FloatArray, rhs: FloatArray, inv: FloatArray | None = None
+) -> FloatArray:
     """Elementwise forward error bound |δW| of W solving W·mat = rhs (mat symmetric, i.e.
     mat·Wᵀ = rhsᵀ): S1 + S2 and S1 for the paper's W (2), D and S1 − S12 for the
     correlated one (``inv`` = D⁺ there); inf where W is not finite."""
@@ -40,8 +42,9 @@ def _weight_bound(w: FloatArray, mat: FloatArray, rhs: FloatArray,
     return _bounded_error(mat, w.T, rhs.T, inv).T
 
 
-def _weight_error(w: FloatArray, mat: FloatArray, rhs: FloatArray,
-                  inv: FloatArray | None = None) -> float:
+def _weight_error(
+    w: FloatArray, mat: FloatArray, rhs: FloatArray, inv: FloatArray | None = None
+) -> float:
     """Relative forward error bound max|δW| / max|W| (see :func:`_weight_bound`)."""
     return _relative_weight_error(_weight_bound(w, mat, rhs, inv), w)
 
@@ -51,8 +54,7 @@ def _relative_weight_error(dw: FloatArray, w: FloatArray) -> float:
     return float(np.max(dw) / max(float(np.max(np.abs(w))), np.finfo(float).tiny))
 
 
-def _combination_bound(w: FloatArray, dw: FloatArray, x1: FloatArray, x2: FloatArray
-                       ) -> FloatArray:
+def _combination_bound(w: FloatArray, dw: FloatArray, x1: FloatArray, x2: FloatArray) -> FloatArray:
     """Elementwise error bound of a1 + W(a2 − a1) given |δW| ≤ dw: dw|a2 − a1| plus the
     round-off of the product and the sum."""
     spread = np.abs(x2 - x1)
@@ -62,13 +64,16 @@ def _combination_bound(w: FloatArray, dw: FloatArray, x1: FloatArray, x2: FloatA
 def _refuse_inaccurate(fn: str, err: float, what: str) -> None:
     """Functions that return a bare matrix cannot downgrade a status: refuse instead."""
     if not np.isfinite(err) or err > REJECT_TOL:
-        raise ProblemError(f"fusion.{fn}: {what} is too ill-conditioned: the result's "
-                           f"relative forward error bound {err:.2g} exceeds {REJECT_TOL:g} "
-                           "(NumPy re-check)")
+        raise ProblemError(
+            f"fusion.{fn}: {what} is too ill-conditioned: the result's "
+            f"relative forward error bound {err:.2g} exceeds {REJECT_TOL:g} "
+            "(NumPy re-check)"
+        )
 
 
-def _wls_objective(x: FloatArray, a1: FloatArray, c1: FloatArray, a2: FloatArray,
-                   c2: FloatArray) -> float:
+def _wls_objective(
+    x: FloatArray, a1: FloatArray, c1: FloatArray, a2: FloatArray, c2: FloatArray
+) -> float:
     d1, d2 = x - a1, x - a2
     return float(d1 @ c1 @ d1 + d2 @ c2 @ d2)
 

@@ -40,8 +40,9 @@ def weight_matrix(s1: ArrayLike, s2: ArrayLike) -> FloatArray:
     return w
 
 
-def _cross(s12: ArrayLike, a: FloatArray, b: FloatArray, fn: str = "fuse"
-           ) -> tuple[FloatArray, FloatArray]:
+def _cross(
+    s12: ArrayLike, a: FloatArray, b: FloatArray, fn: str = "fuse"
+) -> tuple[FloatArray, FloatArray]:
     """Validate a cross-covariance S12 = Cov(a1, a2): finite (m, m) and the joint covariance
     [[S1, S12], [S12ᵀ, S2]] positive semidefinite. Returns (S12, D) with
     D = S1 + S2 − S12 − S12ᵀ = Cov(a1 − a2) (positive semidefinite, possibly singular)."""
@@ -51,9 +52,11 @@ def _cross(s12: ArrayLike, a: FloatArray, b: FloatArray, fn: str = "fuse"
     joint = np.block([[a, c], [c.T, b]])
     lam = np.linalg.eigvalsh(joint)
     if lam[0] < -1e-10 * max(lam[-1], np.finfo(float).tiny):
-        raise ProblemError(f"{name}: the joint covariance [[S1, S12], [S12ᵀ, S2]] is not positive "
-                           f"semidefinite (smallest eigenvalue {lam[0]:.3g}); S12 cannot be the "
-                           "cross-covariance of these estimates")
+        raise ProblemError(
+            f"{name}: the joint covariance [[S1, S12], [S12ᵀ, S2]] is not positive "
+            f"semidefinite (smallest eigenvalue {lam[0]:.3g}); S12 cannot be the "
+            "cross-covariance of these estimates"
+        )
     d = a + b - c - c.T
     return c, 0.5 * (d + d.T)
 
@@ -83,14 +86,16 @@ def weight_matrix_correlated(s1: ArrayLike, s2: ArrayLike, s12: ArrayLike) -> Fl
     a, b = _pair(s1, s2, "weight_matrix_correlated")
     c, d = _cross(s12, a, b, "weight_matrix_correlated")
     w = _correlated_weight(a, c, d)
-    err = _weight_error(w, d, a - c, np.asarray(np.linalg.pinv(d, rcond=PINV_RTOL,
-                                                               hermitian=True), dtype=float))
+    err = _weight_error(
+        w, d, a - c, np.asarray(np.linalg.pinv(d, rcond=PINV_RTOL, hermitian=True), dtype=float)
+    )
     _refuse_inaccurate("weight_matrix_correlated", err, "D = S1 + S2 − S12 − S12ᵀ")
     return w
 
 
-def fused_covariance(w: ArrayLike, s1: ArrayLike, s2: ArrayLike,
-                     s12: ArrayLike | None = None) -> FloatArray:
+def fused_covariance(
+    w: ArrayLike, s1: ArrayLike, s2: ArrayLike, s12: ArrayLike | None = None
+) -> FloatArray:
     """Error covariance of (I − W)a1 + Wa2 for **any** W (stacks (..., m, m) broadcast):
     (I − W)S1(I − W)ᵀ + WS2Wᵀ + (I − W)S12Wᵀ + WS12ᵀ(I − W)ᵀ.
 

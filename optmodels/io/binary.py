@@ -34,8 +34,13 @@ def _file_head(path: str | os.PathLike[str], what: str, size: int = 6) -> tuple[
         raise ProblemError(f"{p}: cannot read the {what} ({exc.strerror or exc})") from None
 
 
-def read_npz(path: str | os.PathLike[str], *, what: str = ".npz archive",
-             required: Iterable[str] = (), one_of: Iterable[str] = ()) -> dict[str, np.ndarray]:
+def read_npz(
+    path: str | os.PathLike[str],
+    *,
+    what: str = ".npz archive",
+    required: Iterable[str] = (),
+    one_of: Iterable[str] = (),
+) -> dict[str, np.ndarray]:
     """All arrays of a NumPy ``.npz`` archive (pickles refused), checked for keys.
 
     Parameters
@@ -60,29 +65,39 @@ def read_npz(path: str | os.PathLike[str], *, what: str = ".npz archive",
     if not head:
         raise ProblemError(f"{p}: empty file (expected a {what})")
     if not head.startswith(_ZIP_MAGIC):
-        kind = ("a single NumPy .npy array" if head.startswith(b"\x93NUMPY")
-                else "not a ZIP archive")
+        kind = "a single NumPy .npy array" if head.startswith(b"\x93NUMPY") else "not a ZIP archive"
         raise ProblemError(f"{p}: {kind}, expected a {what} (written by numpy.savez)")
     try:
         with np.load(p, allow_pickle=False) as z:
             arrays = {k: z[k] for k in z.files}
     except ValueError as exc:
         if "pickle" in str(exc).lower() or "object arrays" in str(exc).lower():
-            raise ProblemError(f"{p}: holds object (pickled) arrays, which are not loaded; "
-                               f"expected a {what} of numeric arrays") from None
+            raise ProblemError(
+                f"{p}: holds object (pickled) arrays, which are not loaded; "
+                f"expected a {what} of numeric arrays"
+            ) from None
         raise ProblemError(f"{p}: corrupt {what} ({exc})") from None
-    except (zipfile.BadZipFile, EOFError, zlib.error, OSError, KeyError,
-            NotImplementedError) as exc:
-        raise ProblemError(f"{p}: truncated or corrupt {what} ({type(exc).__name__}: "
-                           f"{exc})") from None
+    except (
+        zipfile.BadZipFile,
+        EOFError,
+        zlib.error,
+        OSError,
+        KeyError,
+        NotImplementedError,
+    ) as exc:
+        raise ProblemError(
+            f"{p}: truncated or corrupt {what} ({type(exc).__name__}: {exc})"
+        ) from None
     need = list(required)
     missing = [k for k in need if k not in arrays]
     options = list(one_of)
     if options and not any(k in arrays for k in options):
         missing.append(" or ".join(options))
     if missing:
-        raise ProblemError(f"{p}: missing array(s) {', '.join(missing)} (it has "
-                           f"{', '.join(sorted(arrays)) or 'none'}); not a {what}?")
+        raise ProblemError(
+            f"{p}: missing array(s) {', '.join(missing)} (it has "
+            f"{', '.join(sorted(arrays)) or 'none'}); not a {what}?"
+        )
     return arrays
 
 
@@ -113,17 +128,25 @@ def read_npy(path: str | os.PathLike[str], *, what: str = ".npy array") -> np.nd
     """
     p, head = _file_head(path, what)
     if not head.startswith(b"\x93NUMPY"):
-        kind = ("an .npz archive" if head.startswith(_ZIP_MAGIC) else
-                "an empty file" if not head else "not a NumPy .npy file")
+        kind = (
+            "an .npz archive"
+            if head.startswith(_ZIP_MAGIC)
+            else "an empty file"
+            if not head
+            else "not a NumPy .npy file"
+        )
         raise ProblemError(f"{p}: {kind}, expected a {what} (written by numpy.save)")
     try:
         with p.open("rb") as fh:
             return np.load(fh, allow_pickle=False)
     except ValueError as exc:
         if "pickle" in str(exc).lower() or "object arrays" in str(exc).lower():
-            raise ProblemError(f"{p}: holds an object (pickled) array, which is not loaded; "
-                               f"expected a {what} of numbers") from None
+            raise ProblemError(
+                f"{p}: holds an object (pickled) array, which is not loaded; "
+                f"expected a {what} of numbers"
+            ) from None
         raise ProblemError(f"{p}: truncated or corrupt {what} ({exc})") from None
     except (EOFError, OSError) as exc:
-        raise ProblemError(f"{p}: truncated or corrupt {what} ({type(exc).__name__}: "
-                           f"{exc})") from None
+        raise ProblemError(
+            f"{p}: truncated or corrupt {what} ({type(exc).__name__}: {exc})"
+        ) from None

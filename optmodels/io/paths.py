@@ -33,7 +33,6 @@ _MAGIC = (
 )
 
 
-
 # --------------------------------------------------------------------------- paths
 def as_path(name: str, value: Any) -> Path:
     """A file-system path argument as :class:`~pathlib.Path`.
@@ -44,16 +43,16 @@ def as_path(name: str, value: Any) -> Path:
         Naming ``name`` if ``value`` is not a ``str``/``os.PathLike`` or is empty.
     """
     if isinstance(value, bytes) or not isinstance(value, str | os.PathLike):
-        raise ProblemError(f"{name}: expected a file path, got {type(value).__name__} "
-                           f"{value!r:.60}")
+        raise ProblemError(
+            f"{name}: expected a file path, got {type(value).__name__} {value!r:.60}"
+        )
     text = os.fspath(value)
     if not text or "\x00" in text:
         raise ProblemError(f"{name}: not a usable file path: {text!r:.60}")
     return Path(text)
 
 
-def input_file(path: str | os.PathLike[str], *, what: str = "file",
-               name: str = "path") -> Path:
+def input_file(path: str | os.PathLike[str], *, what: str = "file", name: str = "path") -> Path:
     """An existing, readable regular file.
 
     Raises
@@ -89,8 +88,7 @@ def _read_bytes(p: Path, what: str) -> bytes:
         raise ProblemError(f"{p}: cannot read the {what} ({exc.strerror or exc})") from None
 
 
-def read_text(path: str | os.PathLike[str], *, what: str = "text file",
-              name: str = "path") -> str:
+def read_text(path: str | os.PathLike[str], *, what: str = "text file", name: str = "path") -> str:
     """The text of a UTF-8 file (a leading byte-order mark is dropped).
 
     Raises
@@ -113,11 +111,13 @@ def read_text(path: str | os.PathLike[str], *, what: str = "text file",
         from optmodels.io.asterix.framing import BINARY_ACCEPTED, describe_binary
 
         line = data.count(b"\n", 0, nul) + 1
-        known = describe_binary(data[:1 << 16])
+        known = describe_binary(data[: 1 << 16])
         if known:
             raise ProblemError(f"{p}: {known}")
-        raise ProblemError(f"{p}: binary data (a NUL byte at byte {nul}, line {line}); "
-                           f"expected a text {what} ({BINARY_ACCEPTED})")
+        raise ProblemError(
+            f"{p}: binary data (a NUL byte at byte {nul}, line {line}); "
+            f"expected a text {what} ({BINARY_ACCEPTED})"
+        )
     skip = len(codecs.BOM_UTF8) if data.startswith(codecs.BOM_UTF8) else 0
     try:
         return data[skip:].decode("utf-8")
@@ -163,15 +163,21 @@ def _make_dir(d: Path, *, what: str) -> None:
     try:
         d.mkdir(parents=True, exist_ok=True)
     except (FileExistsError, NotADirectoryError):
-        raise ProblemError(f"{d}: cannot create {what} (it, or a parent, is an existing "
-                           "file)") from None
+        raise ProblemError(
+            f"{d}: cannot create {what} (it, or a parent, is an existing file)"
+        ) from None
     except OSError as exc:
         raise ProblemError(f"{d}: cannot create {what} ({exc.strerror or exc})") from None
 
 
 @contextlib.contextmanager
-def atomic_write(path: str | os.PathLike[str], *, name: str = "path", binary: bool = False,
-                 newline: str | None = None) -> Iterator[IO[Any]]:
+def atomic_write(
+    path: str | os.PathLike[str],
+    *,
+    name: str = "path",
+    binary: bool = False,
+    newline: str | None = None,
+) -> Iterator[IO[Any]]:
     """Write a file all or nothing: ``with atomic_write(p) as fh: fh.write(...)``.
 
     The data go to a temporary file in the target's folder (``.NAME.XXXX.tmp``); when the
@@ -217,8 +223,9 @@ def atomic_write(path: str | os.PathLike[str], *, name: str = "path", binary: bo
         done = True
         _fsync_dir(p.parent)
     except OSError as exc:
-        raise ProblemError(f"{p}: cannot write ({exc.strerror or exc}); the previous "
-                           "file, if any, is unchanged") from None
+        raise ProblemError(
+            f"{p}: cannot write ({exc.strerror or exc}); the previous file, if any, is unchanged"
+        ) from None
     finally:
         if not done:
             with contextlib.suppress(OSError):
@@ -240,8 +247,9 @@ def _fsync_dir(d: Path) -> None:
             os.close(fd)
 
 
-def save_npz(path: str | os.PathLike[str], *, name: str = "path", compressed: bool = True,
-             **arrays: Any) -> Path:
+def save_npz(
+    path: str | os.PathLike[str], *, name: str = "path", compressed: bool = True, **arrays: Any
+) -> Path:
     """``np.savez_compressed`` (or ``np.savez``) onto exactly ``path``, atomically.
 
     Unlike NumPy's own function, no ``.npz`` is appended to the name, and a kill part-way

@@ -72,16 +72,18 @@ def read_csv_rows(path: str | os.PathLike[str], *, what: str = "CSV file") -> Cs
         raise ProblemError(f"{p}: line {reader.line_num}: malformed CSV ({exc})") from None
     header = [h.strip().lower() for h in header_row]
     if len(header) == 1 and ";" in header[0]:
-        raise ProblemError(f"{p}: the header {header_row[0]!r} looks semicolon-separated; "
-                           "save the file with comma separators (and decimal points)")
+        raise ProblemError(
+            f"{p}: the header {header_row[0]!r} looks semicolon-separated; "
+            "save the file with comma separators (and decimal points)"
+        )
     if not rows:
         raise ProblemError(f"{p}: no data rows")
     for r, line in zip(rows, lines, strict=True):
         if len(r) != len(header):
-            raise ProblemError(f"{p}: line {line} has {len(r)} fields, the header has "
-                               f"{len(header)}")
-    keep = [j for j, h in enumerate(header)
-            if h or any(r[j].strip() for r in rows)]
+            raise ProblemError(
+                f"{p}: line {line} has {len(r)} fields, the header has {len(header)}"
+            )
+    keep = [j for j, h in enumerate(header) if h or any(r[j].strip() for r in rows)]
     if len(keep) < len(header):
         header = [header[j] for j in keep]
         rows = [[r[j] for j in keep] for r in rows]
@@ -93,8 +95,14 @@ def read_csv_rows(path: str | os.PathLike[str], *, what: str = "CSV file") -> Cs
     return CsvRows(header, rows, lines)
 
 
-def csv_numbers(path: str | os.PathLike[str], column: str, cells: Sequence[Any],
-                lines: Sequence[int] | None = None, *, finite: bool = True) -> FloatArray:
+def csv_numbers(
+    path: str | os.PathLike[str],
+    column: str,
+    cells: Sequence[Any],
+    lines: Sequence[int] | None = None,
+    *,
+    finite: bool = True,
+) -> FloatArray:
     """A column of CSV cells (text) or of a Parquet table (numbers) as floats.
 
     ``lines`` gives the file line of each cell for the messages (else the row number).
@@ -110,8 +118,14 @@ def csv_numbers(path: str | os.PathLike[str], column: str, cells: Sequence[Any],
     def where(i: int) -> str:
         return f"line {lines[i]}" if lines is not None else f"row {i + 1}"
 
-    if column in TIME_COLUMNS and arr.ndim == 1 and (arr.dtype.kind == "M" or (
-            arr.size and isinstance(arr.flat[0], str) and _ISO.match(arr.flat[0].strip()))):
+    if (
+        column in TIME_COLUMNS
+        and arr.ndim == 1
+        and (
+            arr.dtype.kind == "M"
+            or (arr.size and isinstance(arr.flat[0], str) and _ISO.match(arr.flat[0].strip()))
+        )
+    ):
         return csv_times(path, column, cells, lines)[0]
     if arr.dtype.kind == "M":
         raise ProblemError(f"{path}: column {column!r} holds date-times, expected numbers")
@@ -125,27 +139,37 @@ def csv_numbers(path: str | os.PathLike[str], column: str, cells: Sequence[Any],
                 float(c)
             except (TypeError, ValueError, OverflowError):
                 cell = c.item() if isinstance(c, np.generic) else c
-                raise ProblemError(f"{path}: {where(i)}, column {column!r}: {cell!r:.40} is "
-                                   "not a number") from None
+                raise ProblemError(
+                    f"{path}: {where(i)}, column {column!r}: {cell!r:.40} is not a number"
+                ) from None
         raise ProblemError(f"{path}: column {column!r} is not a column of numbers")
     if finite:
         bad = np.flatnonzero(~np.isfinite(values))
         if bad.size:
             i = int(bad[0])
-            raise ProblemError(f"{path}: {where(i)}, column {column!r}: {values[i]} (NaN/inf;"
-                               f" {bad.size} such value(s) in the column, need finite numbers)")
+            raise ProblemError(
+                f"{path}: {where(i)}, column {column!r}: {values[i]} (NaN/inf;"
+                f" {bad.size} such value(s) in the column, need finite numbers)"
+            )
     return values
 
 
 #: columns read as times: numbers (s) or ISO 8601 date-times (see :func:`csv_times`)
 TIME_COLUMNS = ("time", "t", "timestamp")
-_ISO = re.compile(r"^\d{4}-\d{2}-\d{2}([T ]\d{2}:\d{2}(:\d{2}(\.\d+)?)?)?"
-                  r"(Z|[+-]\d{2}:?\d{2})?$")
+_ISO = re.compile(
+    r"^\d{4}-\d{2}-\d{2}([T ]\d{2}:\d{2}(:\d{2}(\.\d+)?)?)?"
+    r"(Z|[+-]\d{2}:?\d{2})?$"
+)
 
 
-def csv_times(path: str | os.PathLike[str], column: str, cells: Sequence[Any],
-              lines: Sequence[int] | None = None, *, epoch: Any = None
-              ) -> tuple[FloatArray, np.datetime64 | None]:
+def csv_times(
+    path: str | os.PathLike[str],
+    column: str,
+    cells: Sequence[Any],
+    lines: Sequence[int] | None = None,
+    *,
+    epoch: Any = None,
+) -> tuple[FloatArray, np.datetime64 | None]:
     """A time column as seconds: numbers (s, returned as they are, epoch None) or ISO 8601
     date-times (``2026-03-01T12:00:05.25``, a space for the ``T``, ``Z`` or ``±HH:MM``
     offsets; naive times are UTC, as :func:`optmodels.biasfield.frames.from_frame` takes
@@ -178,14 +202,17 @@ def csv_times(path: str | os.PathLike[str], column: str, cells: Sequence[Any],
         for i, c in enumerate(arr.reshape(-1)):
             text = str(c).strip()
             if not _ISO.match(text):
-                raise ProblemError(f"{path}: {where(i)}, column {column!r}: {text!r:.40} is "
-                                   "not an ISO 8601 date-time (the column starts with one; "
-                                   "give all times as date-times or all as seconds)")
+                raise ProblemError(
+                    f"{path}: {where(i)}, column {column!r}: {text!r:.40} is "
+                    "not an ISO 8601 date-time (the column starts with one; "
+                    "give all times as date-times or all as seconds)"
+                )
             try:
                 d = _dt.datetime.fromisoformat(text.replace(" ", "T", 1))
             except ValueError as exc:
-                raise ProblemError(f"{path}: {where(i)}, column {column!r}: {text!r:.40}: "
-                                   f"{exc}") from None
+                raise ProblemError(
+                    f"{path}: {where(i)}, column {column!r}: {text!r:.40}: {exc}"
+                ) from None
             if d.tzinfo is not None:
                 d = d.astimezone(_dt.UTC).replace(tzinfo=None)
             out[i] = np.datetime64(d, "ns")
@@ -230,16 +257,22 @@ def read_plane_csv(path: str | os.PathLike[str], *, require_time: bool = False) 
     table = read_csv_rows(p, what="plane CSV")
     col = set(table.header)
     if require_time and "t" not in col:
-        raise ProblemError(f"{p}: missing column t (the measurement times, s, are needed "
-                           f"for a track; have {', '.join(table.header)})")
+        raise ProblemError(
+            f"{p}: missing column t (the measurement times, s, are needed "
+            f"for a track; have {', '.join(table.header)})"
+        )
     missing = [c for c in ("x", "y", "z") if c not in col]
     if missing:
-        raise ProblemError(f"{p}: missing column(s) {', '.join(missing)} (need x, y, z; "
-                           f"have {', '.join(table.header)})")
+        raise ProblemError(
+            f"{p}: missing column(s) {', '.join(missing)} (need x, y, z; "
+            f"have {', '.join(table.header)})"
+        )
     present = [c for c in _COV_COLUMNS if c in col]
     if present and len(present) != 6:
-        raise ProblemError(f"{p}: per-point covariance needs all of {', '.join(_COV_COLUMNS)}"
-                           f" (missing {', '.join(c for c in _COV_COLUMNS if c not in col)})")
+        raise ProblemError(
+            f"{p}: per-point covariance needs all of {', '.join(_COV_COLUMNS)}"
+            f" (missing {', '.join(c for c in _COV_COLUMNS if c not in col)})"
+        )
     names = ["x", "y", "z", *(c for c in ("t", "alpha2") if c in col), *present]
     v = _columns(p, table, names)
     out = PlaneCsv(points=np.column_stack([v["x"], v["y"], v["z"]]))
@@ -252,7 +285,8 @@ def read_plane_csv(path: str | os.PathLike[str], *, require_time: bool = False) 
                 raise ProblemError(
                     f"{p}: line {table.lines[i]}, column 't': {v['t'][i]:.17g} s is not after "
                     f"the previous row's {v['t'][i - 1]:.17g} s (times must be strictly "
-                    "increasing; sort the file by t)")
+                    "increasing; sort the file by t)"
+                )
     if "alpha2" in v:
         out["alpha2"] = v["alpha2"]
     if present:
@@ -311,6 +345,6 @@ def read_trajectory_csv(path: str | os.PathLike[str]) -> dict[str, Any]:
         "objects": list(arrays),
         "coordinates": coords,
         "times": [a[:, 0] for a in arrays.values()],
-        "values": [a[:, 1] if nc == 1 else a[:, 1:1 + nc] for a in arrays.values()],
+        "values": [a[:, 1] if nc == 1 else a[:, 1 : 1 + nc] for a in arrays.values()],
         "sigma2": [a[:, 1 + nc] for a in arrays.values()] if "sigma2" in col else None,
     }

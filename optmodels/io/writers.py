@@ -22,8 +22,9 @@ from optmodels.io.paths import _write_text, output_file
 
 
 # --------------------------------------------------------------------------- writers
-def write_plane_csv(path: str | os.PathLike[str], points: FloatArray,
-                    **columns: FloatArray) -> None:
+def write_plane_csv(
+    path: str | os.PathLike[str], points: FloatArray, **columns: FloatArray
+) -> None:
     """Write points (N, 3) (m) and optional per-point columns (``t``, ``alpha2``, the
     covariance ``cxx``...) in the format :func:`read_plane_csv` reads (17 digits: floats
     round-trip exactly). Missing parent folders are created.
@@ -37,12 +38,20 @@ def write_plane_csv(path: str | os.PathLike[str], points: FloatArray,
     pts = as_finite_array("io.write_plane_csv points", points, ndim=2)
     if pts.shape[1] != 3:
         raise ProblemError(f"io.write_plane_csv points: expected (N, 3), got {pts.shape}")
-    cols = [as_finite_array(f"io.write_plane_csv {k}", v, shape=(pts.shape[0],))
-            for k, v in columns.items()]
+    cols = [
+        as_finite_array(f"io.write_plane_csv {k}", v, shape=(pts.shape[0],))
+        for k, v in columns.items()
+    ]
     p = output_file(path, name="io.write_plane_csv path")
     buf = _stdio.StringIO()
-    np.savetxt(buf, np.column_stack([pts, *cols]), delimiter=",",
-               header=",".join(["x", "y", "z", *columns]), comments="", fmt="%.17g")
+    np.savetxt(
+        buf,
+        np.column_stack([pts, *cols]),
+        delimiter=",",
+        header=",".join(["x", "y", "z", *columns]),
+        comments="",
+        fmt="%.17g",
+    )
     _write_text(p, buf.getvalue())
 
 
@@ -59,8 +68,9 @@ def write_csv(path: str | os.PathLike[str], rows: Sequence[Mapping[str, Any]]) -
     cols: list[str] = []
     for i, r in enumerate(rows):
         if not isinstance(r, Mapping):
-            raise ProblemError(f"io.write_csv rows: row {i} is a {type(r).__name__}, "
-                               "expected a mapping")
+            raise ProblemError(
+                f"io.write_csv rows: row {i} is a {type(r).__name__}, expected a mapping"
+            )
         cols += [k for k in r if k not in cols]
     p = output_file(path, name="io.write_csv path")
     buf = _stdio.StringIO(newline="")
@@ -101,8 +111,11 @@ def json_default(o: Any) -> Any:
     return out
 
 
-def markdown_table(rows: Iterable[Mapping[str, Any]], columns: Sequence[str],
-                   formats: Mapping[str, str] | None = None) -> str:
+def markdown_table(
+    rows: Iterable[Mapping[str, Any]],
+    columns: Sequence[str],
+    formats: Mapping[str, str] | None = None,
+) -> str:
     """A GitHub-flavoured Markdown table of ``rows`` restricted to ``columns``."""
     fmts = formats or {}
     lines = ["| " + " | ".join(columns) + " |", "|" + "---|" * len(columns)]

@@ -73,6 +73,15 @@ from optmodels.montecarlo.studies import (
 )
 from optmodels.montecarlo.studies import Study as Study
 
-__all__ = ["STUDIES", "AssignmentSeparation", "BiasfieldRecovery", "FusionWeight",
-           "Interrupted", "MonteCarloResult", "PlaneAngle", "TrajectoriesEta", "run",
-           "study"]
+__all__ = [
+    "STUDIES",
+    "AssignmentSeparation",
+    "BiasfieldRecovery",
+    "FusionWeight",
+    "Interrupted",
+    "MonteCarloResult",
+    "PlaneAngle",
+    "TrajectoriesEta",
+    "run",
+    "study",
+]

@@ -15,12 +15,18 @@ from optmodels.execution import LineLog
 
 
 def _pair_ok(p: Any) -> bool:
-    return (isinstance(p, list) and len(p) == 2 and isinstance(p[0], int)
-            and not isinstance(p[0], bool) and p[0] >= 0)
+    return (
+        isinstance(p, list)
+        and len(p) == 2
+        and isinstance(p[0], int)
+        and not isinstance(p[0], bool)
+        and p[0] >= 0
+    )
 
 
-def _load_checkpoint(ck: LineLog, header: dict[str, Any]
-                     ) -> tuple[dict[int, dict[str, float]], dict[int, str], int]:
+def _load_checkpoint(
+    ck: LineLog, header: dict[str, Any]
+) -> tuple[dict[int, dict[str, float]], dict[int, str], int]:
     """Finished and failed trials recorded in the checkpoint, and the number of lines
     skipped. Writes the header of a new (or empty) file; repairs a damaged one."""
     head_line = json.dumps(header)
@@ -32,11 +38,14 @@ def _load_checkpoint(ck: LineLog, header: dict[str, Any]
     except (json.JSONDecodeError, UnicodeDecodeError):
         head = None
     if head != header:
-        what = ("is not a Monte Carlo checkpoint (its first line is not a header)"
-                if not isinstance(head, dict) or "study" not in head else
-                f"belongs to another study or seed ({head})")
-        raise ProblemError(f"{ck.what}: {ck.path} {what}; expected {header}. "
-                           f"Use another path or delete it.")
+        what = (
+            "is not a Monte Carlo checkpoint (its first line is not a header)"
+            if not isinstance(head, dict) or "study" not in head
+            else f"belongs to another study or seed ({head})"
+        )
+        raise ProblemError(
+            f"{ck.what}: {ck.path} {what}; expected {header}. Use another path or delete it."
+        )
     done: dict[int, dict[str, float]] = {}
     failed: dict[int, str] = {}
     keep, dropped = [head_line], []
@@ -46,14 +55,22 @@ def _load_checkpoint(ck: LineLog, header: dict[str, Any]
         try:
             rec = json.loads(raw)
             if isinstance(rec, list) and all(
-                    _pair_ok(p) and isinstance(p[1], dict) and p[1] and all(
-                        isinstance(v, int | float) and not isinstance(v, bool)
-                        for v in p[1].values()) for p in rec):
+                _pair_ok(p)
+                and isinstance(p[1], dict)
+                and p[1]
+                and all(
+                    isinstance(v, int | float) and not isinstance(v, bool) for v in p[1].values()
+                )
+                for p in rec
+            ):
                 for i, vals in rec:
                     done[i] = {str(k): float(v) for k, v in vals.items()}
-            elif (isinstance(rec, dict) and set(rec) == {"failed"}
-                  and isinstance(rec["failed"], list)
-                  and all(_pair_ok(p) and isinstance(p[1], str) for p in rec["failed"])):
+            elif (
+                isinstance(rec, dict)
+                and set(rec) == {"failed"}
+                and isinstance(rec["failed"], list)
+                and all(_pair_ok(p) and isinstance(p[1], str) for p in rec["failed"])
+            ):
                 for i, msg in rec["failed"]:
                     failed[i] = msg
             else:

@@ -55,8 +55,10 @@ def _chunk_task(study: Study, seed: int, indices: list[int]) -> Chunk:
         try:
             res = study(np.random.default_rng([seed, i]))
             if not isinstance(res, Mapping) or not res:
-                raise TypeError(f"the study returned {type(res).__name__}, expected a "
-                                f"non-empty dict of name -> number")
+                raise TypeError(
+                    f"the study returned {type(res).__name__}, expected a "
+                    f"non-empty dict of name -> number"
+                )
             vals = {str(k): float(v) for k, v in res.items()}
         except Exception as exc:
             failed.append((i, f"{type(exc).__name__}: {exc}"[:300]))
@@ -66,14 +68,23 @@ def _chunk_task(study: Study, seed: int, indices: list[int]) -> Chunk:
 
 
 def _chunks(todo: list[int], size: int) -> list[list[int]]:
-    return [todo[k:k + size] for k in range(0, len(todo), size)]
+    return [todo[k : k + size] for k in range(0, len(todo), size)]
 
 
-def run(study: Study | str, trials: int, seed: int = 0, *, scheduler: Any = None,
-        checkpoint: str | Path | None = None, workers: int | None = None,
-        chunk: int | None = None, progress: bool = False,
-        params: Mapping[str, Any] | None = None, retry_failed: bool = False,
-        connect_timeout: float = CONNECT_TIMEOUT) -> MonteCarloResult:
+def run(
+    study: Study | str,
+    trials: int,
+    seed: int = 0,
+    *,
+    scheduler: Any = None,
+    checkpoint: str | Path | None = None,
+    workers: int | None = None,
+    chunk: int | None = None,
+    progress: bool = False,
+    params: Mapping[str, Any] | None = None,
+    retry_failed: bool = False,
+    connect_timeout: float = CONNECT_TIMEOUT,
+) -> MonteCarloResult:
     """Run ``trials`` seeded trials of ``study`` and summarise the successful ones.
 
     Parameters
@@ -122,8 +133,9 @@ def run(study: Study | str, trials: int, seed: int = 0, *, scheduler: Any = None
     elif params:
         raise ProblemError("montecarlo.run params: only for a built-in study given by name")
     if not callable(study):
-        raise ProblemError(f"montecarlo.run study: expected a callable rng -> dict, got "
-                           f"{type(study).__name__}")
+        raise ProblemError(
+            f"montecarlo.run study: expected a callable rng -> dict, got {type(study).__name__}"
+        )
     trials = as_count("montecarlo.run trials", trials, minimum=1, maximum=MAX_TRIALS)
     seed = as_count("montecarlo.run seed", seed, minimum=0)
     if workers is not None:
@@ -134,19 +146,41 @@ def run(study: Study | str, trials: int, seed: int = 0, *, scheduler: Any = None
     scheduler = as_scheduler("montecarlo.run scheduler", scheduler, default="processes")
     name = _describe(study)
     header = {"study": name, "seed": seed}
-    ck = (LineLog(checkpoint, "montecarlo.run checkpoint") if checkpoint is not None
-          else None)
+    ck = LineLog(checkpoint, "montecarlo.run checkpoint") if checkpoint is not None else None
     try:
-        return _run(study, trials, seed, name, header, ck, scheduler, workers, chunk,
-                    progress, retry_failed, connect_timeout)
+        return _run(
+            study,
+            trials,
+            seed,
+            name,
+            header,
+            ck,
+            scheduler,
+            workers,
+            chunk,
+            progress,
+            retry_failed,
+            connect_timeout,
+        )
     finally:
         if ck is not None:
             ck.close()
 
 
-def _run(study: Study, trials: int, seed: int, name: str, header: dict[str, Any],
-         ck: LineLog | None, scheduler: Any, workers: int | None, chunk: int | None,
-         progress: bool, retry_failed: bool, connect_timeout: float) -> MonteCarloResult:
+def _run(
+    study: Study,
+    trials: int,
+    seed: int,
+    name: str,
+    header: dict[str, Any],
+    ck: LineLog | None,
+    scheduler: Any,
+    workers: int | None,
+    chunk: int | None,
+    progress: bool,
+    retry_failed: bool,
+    connect_timeout: float,
+) -> MonteCarloResult:
     done, failed, skipped = _load_checkpoint(ck, header) if ck is not None else ({}, {}, 0)
     done = {i: v for i, v in done.items() if i < trials}
     failed = {i: m for i, m in failed.items() if i < trials}
@@ -167,27 +201,51 @@ def _run(study: Study, trials: int, seed: int, name: str, header: dict[str, Any]
         for i, msg in bad:
             failed[i] = msg
         if ck is not None:
-            ck.append(([json.dumps(ok)] if ok else [])
-                      + ([json.dumps({"failed": bad})] if bad else []))
+            ck.append(
+                ([json.dumps(ok)] if ok else []) + ([json.dumps({"failed": bad})] if bad else [])
+            )
         bar.update(len(ok) + len(bad))
 
     def lost(k: int) -> None:
-        collect(([], [(i, "worker process died while running this chunk "
-                          "(a trial crashed the interpreter?)") for i in parts[k]]))
+        collect(
+            (
+                [],
+                [
+                    (
+                        i,
+                        "worker process died while running this chunk "
+                        "(a trial crashed the interpreter?)",
+                    )
+                    for i in parts[k]
+                ],
+            )
+        )
 
     engine = "serial" if not parts else describe(scheduler, nworkers)
     try:
-        engine = execute(_chunk_task, [(study, seed, p) for p in parts],
-                         on_result=lambda _k, res: collect(res), scheduler=scheduler,
-                         workers=nworkers, on_lost=lambda k, _msg: lost(k),
-                         connect_timeout=connect_timeout, what="montecarlo.run")
+        engine = execute(
+            _chunk_task,
+            [(study, seed, p) for p in parts],
+            on_result=lambda _k, res: collect(res),
+            scheduler=scheduler,
+            workers=nworkers,
+            on_lost=lambda k, _msg: lost(k),
+            connect_timeout=connect_timeout,
+            what="montecarlo.run",
+        )
     except KeyboardInterrupt:
-        partial = _result(study, name, seed, trials, done, failed, resumed, engine,
-                          skipped, interrupted=True)
-        where = (f"saved in {ck.path}; rerun the same command to resume" if ck is not None
-                 else "no checkpoint, kept in the exception's .partial")
-        raise Interrupted(f"montecarlo: interrupted after {len(done) + len(failed)} of "
-                          f"{trials} trials ({where})", partial) from None
+        partial = _result(
+            study, name, seed, trials, done, failed, resumed, engine, skipped, interrupted=True
+        )
+        where = (
+            f"saved in {ck.path}; rerun the same command to resume"
+            if ck is not None
+            else "no checkpoint, kept in the exception's .partial"
+        )
+        raise Interrupted(
+            f"montecarlo: interrupted after {len(done) + len(failed)} of {trials} trials ({where})",
+            partial,
+        ) from None
     finally:
         bar.close()
     return _result(study, name, seed, trials, done, failed, resumed, engine, skipped)

@@ -55,9 +55,18 @@ class MonteCarloResult:
         return float(np.std(v, ddof=1) / np.sqrt(v.size)) if v.size > 1 else float("nan")
 
 
-def _result(study: Study, name: str, seed: int, trials: int,
-            done: dict[int, dict[str, float]], failed: dict[int, str], resumed: int,
-            engine: str, skipped: int, interrupted: bool = False) -> MonteCarloResult:
+def _result(
+    study: Study,
+    name: str,
+    seed: int,
+    trials: int,
+    done: dict[int, dict[str, float]],
+    failed: dict[int, str],
+    resumed: int,
+    engine: str,
+    skipped: int,
+    interrupted: bool = False,
+) -> MonteCarloResult:
     ok = sorted(done)
     fails = dict(failed)
     keys = list(done[ok[0]]) if ok else []
@@ -74,6 +83,17 @@ def _result(study: Study, name: str, seed: int, trials: int,
                 summary = dict(study.summarise(values))
         except Exception as exc:  # e.g. a covariance from a single trial
             summary_error = f"{type(exc).__name__}: {exc}"[:300]
-    return MonteCarloResult(name, seed, np.array(ok, dtype=int), values, summary, resumed,
-                            engine, sorted(fails.items()), trials, skipped, interrupted,
-                            summary_error)
+    return MonteCarloResult(
+        name,
+        seed,
+        np.array(ok, dtype=int),
+        values,
+        summary,
+        resumed,
+        engine,
+        sorted(fails.items()),
+        trials,
+        skipped,
+        interrupted,
+        summary_error,
+    )

@@ -8,6 +8,11 @@ PROBLEM = {
     "title": "Plane of maneuver by maximum likelihood (Korobochkin)",
     "original": "(1.2)-(1.3)",
     "closed_form": "(1.5)-(1.8)",
-    "api": {"data": "PlaneData", "residuals": ("objective", "constraint_residuals"),
-            "solve": "solve", "closed_form": "closed_form", "estimate": "normal"},
+    "api": {
+        "data": "PlaneData",
+        "residuals": ("objective", "constraint_residuals"),
+        "solve": "solve",
+        "closed_form": "closed_form",
+        "estimate": "normal",
+    },
 }

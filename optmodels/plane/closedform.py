@@ -48,7 +48,11 @@ class _Eig:
 
 
 def _closed_form_from_sums(
-    s0: FloatArray, s1: FloatArray, s2: FloatArray, s2abs: FloatArray, count: FloatArray,
+    s0: FloatArray,
+    s1: FloatArray,
+    s2: FloatArray,
+    s2abs: FloatArray,
+    count: FloatArray,
     base_cov: FloatArray,
 ) -> _Eig:
     """The paper's route (1.5)-(1.7) from running sums, vectorised over a stack, then the
@@ -83,10 +87,16 @@ def _closed_form_from_sums(
         if not np.any(take):
             break
         nvec = np.where(take[:, None], cand, nvec)
-        chk = _Check(*(np.where(take[(...,) + (None,) * (a.ndim - 1)], b, a)
-                       for a, b in zip((chk.step, chk.curvature, chk.rho, chk.newton),
-                                       (c2.step, c2.curvature, c2.rho, c2.newton),
-                                       strict=True)))
+        chk = _Check(
+            *(
+                np.where(take[(...,) + (None,) * (a.ndim - 1)], b, a)
+                for a, b in zip(
+                    (chk.step, chk.curvature, chk.rho, chk.newton),
+                    (c2.step, c2.curvature, c2.rho, c2.newton),
+                    strict=True,
+                )
+            )
+        )
         refined |= take
     mean = s1 / s0[..., None]
     return _Eig(normal=nvec, lam=lam, mean=mean, line=line, check=chk, refined=refined)
@@ -104,8 +114,12 @@ def _scaled_sums(
     w = 1.0 / alpha2
     ay = np.abs(y)
     if cumulative:
-        terms = (w, w[:, None] * y, w[:, None, None] * (y[:, :, None] * y[:, None, :]),
-                 w[:, None, None] * (ay[:, :, None] * ay[:, None, :]))
+        terms = (
+            w,
+            w[:, None] * y,
+            w[:, None, None] * (y[:, :, None] * y[:, None, :]),
+            w[:, None, None] * (ay[:, :, None] * ay[:, None, :]),
+        )
         s0, s1, s2, s2abs = (np.cumsum(a, axis=0) for a in terms)
     else:
         s0 = np.array([np.sum(w)])
@@ -154,10 +168,10 @@ def closed_form(data: PlaneData, *, level: float | None = 0.997) -> PlaneSolutio
             "these are not -- use plane.solve(data) (full or reduced formulation)"
         )
     with timed() as t:
-        s0, s1, s2, s2abs, ref, spread = _scaled_sums(data.points, data.alpha2,
-                                                       cumulative=False)
-        eig = _closed_form_from_sums(s0, s1, s2, s2abs, np.array([float(data.n_points)]),
-                                     data.base_cov / spread**2)
+        s0, s1, s2, s2abs, ref, spread = _scaled_sums(data.points, data.alpha2, cumulative=False)
+        eig = _closed_form_from_sums(
+            s0, s1, s2, s2abs, np.array([float(data.n_points)]), data.base_cov / spread**2
+        )
         normal = eig.normal[0]
         offset = spread * float(normal @ eig.mean[0]) + float(normal @ ref)  # (1.7)
     lam = eig.lam[0]
@@ -170,11 +184,21 @@ def closed_form(data: PlaneData, *, level: float | None = 0.997) -> PlaneSolutio
             "round-off -- collinear points?)"
         )
     sol = _finish(
-        data, normal, offset, status=Status.OPTIMAL, method="closed_form",
-        stationarity=step, solve_time=t.elapsed, iterations=None,
-        info={"lambda_min": float(eig.check.rho[0]), "eigenvalues": lam.copy(),
-              "line_statistic": float(lam[0] + lam[1]), "line_dof": 2 * data.n_points - 4,
-              "refined": bool(eig.refined[0])},
+        data,
+        normal,
+        offset,
+        status=Status.OPTIMAL,
+        method="closed_form",
+        stationarity=step,
+        solve_time=t.elapsed,
+        iterations=None,
+        info={
+            "lambda_min": float(eig.check.rho[0]),
+            "eigenvalues": lam.copy(),
+            "line_statistic": float(lam[0] + lam[1]),
+            "line_dof": 2 * data.n_points - 4,
+            "refined": bool(eig.refined[0]),
+        },
     )
     return _resolve(sol, data, level)
 
@@ -227,7 +251,19 @@ def svd_fit(data: PlaneData) -> PlaneSolution:
     # re-check: the TLS normal is the pencil (scatter, I) eigenvector -- same Newton test
     y = data.points - c
     y = y / float(np.max(np.abs(y)))
-    chk = _rayleigh_check((y.T @ y)[None], (np.abs(y).T @ np.abs(y))[None], np.eye(3),
-                          normal[None], np.array([float(data.n_points)]))
-    return _finish(data, normal, offset, status=Status.OPTIMAL, method="svd",
-                   stationarity=float(chk.step[0]), solve_time=t.elapsed)
+    chk = _rayleigh_check(
+        (y.T @ y)[None],
+        (np.abs(y).T @ np.abs(y))[None],
+        np.eye(3),
+        normal[None],
+        np.array([float(data.n_points)]),
+    )
+    return _finish(
+        data,
+        normal,
+        offset,
+        status=Status.OPTIMAL,
+        method="svd",
+        stationarity=float(chk.step[0]),
+        solve_time=t.elapsed,
+    )

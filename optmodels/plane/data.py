@@ -64,8 +64,9 @@ class PlaneData:
     base_cov: FloatArray | None = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
-        pts = as_finite_array("plane.PlaneData points", self.points, shape=(None, 3),
-                              max_abs=MAX_MAGNITUDE)
+        pts = as_finite_array(
+            "plane.PlaneData points", self.points, shape=(None, 3), max_abs=MAX_MAGNITUDE
+        )
         n = pts.shape[0]
         if n < 3:
             raise ProblemError(f"plane.PlaneData points: a plane needs at least 3 points, got {n}")
@@ -73,14 +74,16 @@ class PlaneData:
         alpha2: FloatArray | None
         if cov.ndim == 2:
             if cov.shape != (3, 3):
-                raise ProblemError(f"plane.PlaneData cov: expected shape (3, 3) or ({n}, 3, 3), "
-                                   f"got {cov.shape}")
+                raise ProblemError(
+                    f"plane.PlaneData cov: expected shape (3, 3) or ({n}, 3, 3), got {cov.shape}"
+                )
             check_spd("plane.PlaneData cov", cov)
             if self.alpha2 is None:
                 alpha2 = np.ones(n)
             else:
-                alpha2 = as_finite_array("plane.PlaneData alpha2", self.alpha2, shape=(n,),
-                                         max_abs=MAX_MAGNITUDE)
+                alpha2 = as_finite_array(
+                    "plane.PlaneData alpha2", self.alpha2, shape=(n,), max_abs=MAX_MAGNITUDE
+                )
                 if np.any(alpha2 < 1 / MAX_MAGNITUDE):
                     raise ProblemError(
                         f"plane.PlaneData alpha2: the factors of (1.4) must be ≥ 1e-100; "
@@ -91,8 +94,9 @@ class PlaneData:
             base: FloatArray | None = common
         else:
             if cov.shape != (n, 3, 3):
-                raise ProblemError(f"plane.PlaneData cov: expected shape (3, 3) or ({n}, 3, 3), "
-                                   f"got {cov.shape}")
+                raise ProblemError(
+                    f"plane.PlaneData cov: expected shape (3, 3) or ({n}, 3, 3), got {cov.shape}"
+                )
             if self.alpha2 is not None:
                 raise ProblemError(
                     "plane.PlaneData alpha2: only meaningful with a common (3, 3) cov (1.4); "
@@ -111,8 +115,9 @@ class PlaneData:
         scale = float(np.max(np.abs(pts)))
         floor = 64.0 * _EPS * np.sqrt(n) * scale
         if spread[0] <= max(floor, 1e-12 * scale * np.sqrt(n)) or scale == 0.0:
-            raise ProblemError("plane.PlaneData points: all points are identical; no plane is "
-                              "defined")
+            raise ProblemError(
+                "plane.PlaneData points: all points are identical; no plane is defined"
+            )
         if spread[1] <= floor:
             raise ProblemError(
                 "plane.PlaneData points: the points are collinear (spread across their line "
@@ -129,7 +134,8 @@ class PlaneData:
             raise ProblemError(
                 f"plane.PlaneData cov: variances from {float(eig.min()):.3g} to "
                 f"{float(eig.max()):.3g} for points spread over {np.sqrt(ext2):.3g}; "
-                "outside 1e±100 of the spread² (float64 cannot hold the weights); check units")
+                "outside 1e±100 of the spread² (float64 cannot hold the weights); check units"
+            )
         object.__setattr__(self, "points", pts)
         object.__setattr__(self, "cov", cov)
         object.__setattr__(self, "alpha2", alpha2)
@@ -183,8 +189,7 @@ def constraint_residuals(
     dimensionless).
     """
     _check_data("plane.constraint_residuals", data)
-    x = as_finite_array("plane.constraint_residuals projected", projected,
-                        shape=(data.n_points, 3))
+    x = as_finite_array("plane.constraint_residuals projected", projected, shape=(data.n_points, 3))
     n = as_finite_array("plane.constraint_residuals normal", normal, shape=(3,))
     offset = as_number("plane.constraint_residuals offset", offset)
     return {
@@ -245,8 +250,7 @@ def _check_data(where: str, data: Any) -> None:
     as_instance(f"{where} data", data, PlaneData)
 
 
-def _check_plane(where: str, data: Any, normal: ArrayLike, offset: Any) -> tuple[FloatArray,
-                                                                                   float]:
+def _check_plane(where: str, data: Any, normal: ArrayLike, offset: Any) -> tuple[FloatArray, float]:
     """Validated ``(normal, offset)``: a finite non-zero (3,) vector (not renormalised:
     the functions are evaluated at the plane exactly as given) and a finite number."""
     _check_data(where, data)

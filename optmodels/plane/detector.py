@@ -84,8 +84,10 @@ def detector_threshold(false_alarm_rate: float, dt: float, n_scales: int) -> tup
 @lru_cache(maxsize=64)
 def noncentrality_for_power(threshold: float, power: float) -> float:
     """λ* with ``P(χ²_3(λ*) > threshold) = power`` (non-central χ²)."""
+
     def f(lam: float) -> float:
         return float(stats.ncx2.sf(threshold, DETECTOR_DOF, lam)) - power
+
     hi = max(1.0, threshold)
     while f(hi) < 0:
         hi *= 2.0
@@ -96,9 +98,14 @@ def _frame(normal: FloatArray) -> FloatArray:
     return _tangent_basis(normal)  # (K, 2, 3)
 
 
-def score_info_moments(normal: FloatArray, offset: FloatArray, junction: FloatArray,
-                       mom: Moments, base_cov: FloatArray, ell: FloatArray
-                       ) -> tuple[FloatArray, FloatArray]:
+def score_info_moments(
+    normal: FloatArray,
+    offset: FloatArray,
+    junction: FloatArray,
+    mom: Moments,
+    base_cov: FloatArray,
+    ell: FloatArray,
+) -> tuple[FloatArray, FloatArray]:
     r"""``(J, b)`` (K, 3, 3), (K, 3) of index ranges from their moments, under (1.4)
     (``v_i = α_i² nᵀDn``; the moments carry the weights 1/α_i²). Lengths in units of
     ``mom.spread``; ``ell`` (K,) in the same units.
@@ -126,23 +133,35 @@ def score_info_moments(normal: FloatArray, offset: FloatArray, junction: FloatAr
     k = len(normal)
     gm1 = np.einsum("kai,ki->ka", gm, m1)
     j = np.empty((k, 3, 3))
-    j[:, :2, :2] = (np.einsum("kai,kij,kbj->kab", gm, m2, gm)
-                    + gm1[:, :, None] * gv[:, None, :] + gv[:, :, None] * gm1[:, None, :]
-                    + mom.s0[:, None, None] * gv[:, :, None] * gv[:, None, :])
+    j[:, :2, :2] = (
+        np.einsum("kai,kij,kbj->kab", gm, m2, gm)
+        + gm1[:, :, None] * gv[:, None, :]
+        + gv[:, :, None] * gm1[:, None, :]
+        + mom.s0[:, None, None] * gv[:, :, None] * gv[:, None, :]
+    )
     j[:, :2, 2] = -(gm1 + mom.s0[:, None] * gv)
     j[:, 2, :2] = j[:, :2, 2]
     j[:, 2, 2] = mom.s0
     rsum = np.sum(normal * m1, axis=1) + mom.s0 * rho  # Σ w r
     b = np.empty((k, 3))
-    b[:, :2] = (np.einsum("kai,ki->ka", gm, np.einsum("kij,kj->ki", m2, normal)
-                          + m1 * rho[:, None]) + gv * rsum[:, None])
+    b[:, :2] = (
+        np.einsum("kai,ki->ka", gm, np.einsum("kij,kj->ki", m2, normal) + m1 * rho[:, None])
+        + gv * rsum[:, None]
+    )
     b[:, 2] = -rsum
     return j / v[:, None, None], b / v[:, None]
 
 
-def score_info_points(normal: FloatArray, offset: float, junction: FloatArray,
-                      points: FloatArray, covs: FloatArray, spread: float, ell: float,
-                      frame: FloatArray | None = None) -> tuple[FloatArray, FloatArray]:
+def score_info_points(
+    normal: FloatArray,
+    offset: float,
+    junction: FloatArray,
+    points: FloatArray,
+    covs: FloatArray,
+    spread: float,
+    ell: float,
+    frame: FloatArray | None = None,
+) -> tuple[FloatArray, FloatArray]:
     """``(J, b)`` (3, 3), (3,) of one range of points with general covariances
     (``frame``: the tangent basis (2, 3) of ``normal``, computed if not given); in-plane
     coordinates of the oblique projections (1.8), see :func:`score_info_moments`."""
@@ -172,8 +191,7 @@ def _solve_pd(j: FloatArray, b: FloatArray) -> FloatArray:
     return np.sum(y * y, axis=-1)
 
 
-def chow_statistic(ja: FloatArray, ba: FloatArray, jb: FloatArray, bb: FloatArray
-                   ) -> FloatArray:
+def chow_statistic(ja: FloatArray, ba: FloatArray, jb: FloatArray, bb: FloatArray) -> FloatArray:
     """U of the module docstring, for stacks (K, 3, 3), (K, 3); ≥ 0 up to round-off.
     ``J_A`` must be positive definite (a firm reference); ``J_B`` may be singular."""
     u = _solve_pd(ja, ba) + _solve_psd(jb, bb) - _solve_pd(ja + jb, ba + bb)
@@ -199,8 +217,13 @@ def reference_tilt_sd(ja: FloatArray, ell: FloatArray) -> FloatArray:
     return np.where(good, sd, np.inf)
 
 
-def detectable_tilt(ja: FloatArray, jb: FloatArray, ell: FloatArray, lam_star: float,
-                    direction: FloatArray | None = None) -> FloatArray:
+def detectable_tilt(
+    ja: FloatArray,
+    jb: FloatArray,
+    ell: FloatArray,
+    lam_star: float,
+    direction: FloatArray | None = None,
+) -> FloatArray:
     """θ* (rad) of the module docstring, for stacks; ``ell`` in the units of ``J``'s
     lengths (the same as the ``ell`` that built them). ``direction`` (K, 2): the unit
     direction ``u`` of the normal's change in the tangent basis (e.g. a rotation about
@@ -219,8 +242,9 @@ def detectable_tilt(ja: FloatArray, jb: FloatArray, ell: FloatArray, lam_star: f
     return np.where((mu > 0) & (s < 1.0), theta, np.inf)
 
 
-def velocity_direction(normal: FloatArray, frame: FloatArray, points: FloatArray,
-                       split: np.ndarray, back: np.ndarray) -> FloatArray:
+def velocity_direction(
+    normal: FloatArray, frame: FloatArray, points: FloatArray, split: np.ndarray, back: np.ndarray
+) -> FloatArray:
     """Direction ``u`` (K, 2) in the tangent basis ``frame`` of the change of the normal
     when the plane rotates about the velocity at the split (a bank change: the new plane
     of a continuous maneuver contains the velocity): the velocity is estimated from

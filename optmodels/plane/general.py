@@ -177,22 +177,35 @@ class GeneralFit:
             sc = float(np.sqrt(np.mean(np.sum(y * y, axis=1))))
             chk = _profile_check(y / sc, data.covs / sc**2, self.normal)
             step = max(step, float(chk.step[0]))
-        sol = _finish(data, self.normal, self.offset, status=status, method="general",
-                      stationarity=step, iterations=self.iterations, message=self.message,
-                      info={"resolved": self.resolved, "line_statistic": self.line_statistic,
-                            "line_direction": self.line_direction,
-                            "min_curvature": self.curvature,
-                            "numerical_error": self.numerical_error})
+        sol = _finish(
+            data,
+            self.normal,
+            self.offset,
+            status=status,
+            method="general",
+            stationarity=step,
+            iterations=self.iterations,
+            message=self.message,
+            info={
+                "resolved": self.resolved,
+                "line_statistic": self.line_statistic,
+                "line_direction": self.line_direction,
+                "min_curvature": self.curvature,
+                "numerical_error": self.numerical_error,
+            },
+        )
         if sol.ok:  # the fit's own (exact where it matters) line test: its verdict
             sol.resolved = bool(self.resolved)
             sol.line_direction = np.asarray(self.line_direction, dtype=float)
             if not self.resolved:
                 sol = _failure(sol)
                 sol.status = Status.ERROR
-                sol.message = (f"unresolved: the points lie on a line at level "
-                               f"{self.level:g} (line statistic {self.line_statistic:.6g} <= "
-                               f"{self.line_threshold:.6g}): the plane is not determined; "
-                               "line_direction is the maximum-likelihood line")
+                sol.message = (
+                    f"unresolved: the points lie on a line at level "
+                    f"{self.level:g} (line statistic {self.line_statistic:.6g} <= "
+                    f"{self.line_threshold:.6g}): the plane is not determined; "
+                    "line_direction is the maximum-likelihood line"
+                )
         return sol
 
 
@@ -206,8 +219,9 @@ def _profile(y: FloatArray, c: FloatArray, n: FloatArray) -> float:
     return float(w @ (r * r))
 
 
-def _derivatives(y: FloatArray, c: FloatArray, n: FloatArray
-                 ) -> tuple[float, float, FloatArray, FloatArray]:
+def _derivatives(
+    y: FloatArray, c: FloatArray, n: FloatArray
+) -> tuple[float, float, FloatArray, FloatArray]:
     """``(Φ, a, ∇Φ, ∇²Φ)`` at ``n`` (see the module docstring)."""
     u = np.einsum("ijk,k->ij", c, n)
     w = 1.0 / (u @ n)
@@ -221,9 +235,12 @@ def _derivatives(y: FloatArray, c: FloatArray, n: FloatArray
     phi = float(wr @ r)
     g = 2.0 * (wr @ y) - 2.0 * (w2r2 @ u)
     yu = (y * w2r[:, None]).T @ u
-    hnn = (2.0 * (y * w[:, None]).T @ y - 4.0 * (yu + yu.T)
-           + 8.0 * (u * (w2r2 * w)[:, None]).T @ u
-           - 2.0 * np.einsum("i,ijk->jk", w2r2, c))
+    hnn = (
+        2.0 * (y * w[:, None]).T @ y
+        - 4.0 * (yu + yu.T)
+        + 8.0 * (u * (w2r2 * w)[:, None]).T @ u
+        - 2.0 * np.einsum("i,ijk->jk", w2r2, c)
+    )
     hna = -2.0 * (w @ y) + 4.0 * (w2r @ u)
     h = hnn - np.outer(hna, hna) / (2.0 * sw)
     return phi, a, g, 0.5 * (h + h.T)
@@ -250,8 +267,9 @@ def _check(y: FloatArray, c: FloatArray, n: FloatArray) -> tuple[float, float, f
     w = 1.0 / (u @ n)
     absy = np.abs(y)
     r = y @ n - a
-    err = 2.0 * (w * (absy @ np.abs(n) + abs(a) + np.abs(r))) @ absy \
-        + 2.0 * (w * w * r * r) @ np.abs(u)
+    err = 2.0 * (w * (absy @ np.abs(n) + abs(a) + np.abs(r))) @ absy + 2.0 * (
+        w * w * r * r
+    ) @ np.abs(u)
     fl = 8.0 * np.finfo(float).eps * np.sqrt(len(y))
     gfloor = 2.0 * fl * float(np.linalg.norm(err))
     hfloor = fl * max(abs(hl[0]), abs(hl[1])) + gfloor
@@ -263,8 +281,9 @@ def _check(y: FloatArray, c: FloatArray, n: FloatArray) -> tuple[float, float, f
     return step, curv, a
 
 
-def _newton(y: FloatArray, c: FloatArray, n0: FloatArray, tol: float, max_iter: int
-            ) -> tuple[FloatArray, int, bool, float]:
+def _newton(
+    y: FloatArray, c: FloatArray, n0: FloatArray, tol: float, max_iter: int
+) -> tuple[FloatArray, int, bool, float]:
     """Newton on the sphere with backtracking; ``(n, iterations, converged, curvature)``."""
     n = n0 / np.linalg.norm(n0)
     phi, _, g, h = _derivatives(y, c, n)
@@ -370,8 +389,7 @@ def fit_general(
     if cv.shape == (3, 3):
         cv = np.broadcast_to(cv, (npts, 3, 3))
     elif cv.shape != (npts, 3, 3):
-        raise ProblemError(f"{_WHERE} cov: expected shape ({npts}, 3, 3) or (3, 3), got "
-                           f"{cv.shape}")
+        raise ProblemError(f"{_WHERE} cov: expected shape ({npts}, 3, 3) or (3, 3), got {cv.shape}")
     check_spd_stack(f"{_WHERE} cov", cv)
     tol = as_number(f"{_WHERE} tol", tol, low=0.0, low_open=True, high=REJECT_TOL)
     max_iter = as_count(f"{_WHERE} max_iter", max_iter, minimum=1, maximum=10**6)
@@ -393,14 +411,18 @@ def fit_general(
     if not scale > floor / np.sqrt(npts):
         raise ProblemError(f"{_WHERE} points: all points are identical; no plane is defined")
     if spread is not None and spread[1] <= floor:
-        raise ProblemError(f"{_WHERE} points: the points are collinear to round-off; every "
-                           "plane through the line fits, the plane is not unique")
+        raise ProblemError(
+            f"{_WHERE} points: the points are collinear to round-off; every "
+            "plane through the line fits, the plane is not unique"
+        )
     y = y / scale
     c = 0.5 * (cv + cv.transpose(0, 2, 1)) / scale**2
     tr = np.trace(c, axis1=1, axis2=2)  # SPD: λ_max ≤ tr ≤ 3 λ_max
     if float(tr.min()) < 1e-100 or float(tr.max()) > 1e100:
-        raise ProblemError(f"{_WHERE} cov: variances outside 1e±100 of the spread² of the "
-                           "points (float64 cannot hold the weights); check units")
+        raise ProblemError(
+            f"{_WHERE} cov: variances outside 1e±100 of the spread² of the "
+            "points (float64 cannot hold the weights); check units"
+        )
 
     if start is not None:
         starts = [start / np.linalg.norm(start)]
@@ -433,14 +455,15 @@ def fit_general(
     message = ""
     if not converged:
         status = Status.ITERATION_LIMIT
-        message = (f"Newton did not converge ({iters} iterations, at most {max_iter} per "
-                   "start; a flat profile: points on a line?)")
+        message = (
+            f"Newton did not converge ({iters} iterations, at most {max_iter} per "
+            "start; a flat profile: points on a line?)"
+        )
     elif curv < -1e-6:
         status = Status.ERROR
         message = f"not a minimum of (1.12)-(1.13): profile curvature {curv:.2g}"
     elif not status.ok:
-        message = (f"normal not determined to working precision (estimated error "
-                   f"{num_err:.2g} rad)")
+        message = f"normal not determined to working precision (estimated error {num_err:.2g} rad)"
     elif num_err > VERIFY_TOL:
         message = f"estimated error of the normal {num_err:.2g} rad (NumPy re-check)"
 
@@ -457,8 +480,19 @@ def fit_general(
     # undecided (iterations ran out near the threshold): not resolved, the safe side
     resolved = bool(above is True and num_err <= REJECT_TOL and converged)
     return GeneralFit(
-        normal=normal, offset=float(offset), objective=phi, iterations=iters,
-        converged=bool(converged), resolved=resolved, line_statistic=line_stat,
-        line_direction=line_dir, numerical_error=num_err, status=status, level=lv,
-        line_dof=line_dof, line_threshold=line_thr, curvature=curv, message=message,
+        normal=normal,
+        offset=float(offset),
+        objective=phi,
+        iterations=iters,
+        converged=bool(converged),
+        resolved=resolved,
+        line_statistic=line_stat,
+        line_direction=line_dir,
+        numerical_error=num_err,
+        status=status,
+        level=lv,
+        line_dof=line_dof,
+        line_threshold=line_thr,
+        curvature=curv,
+        message=message,
     )

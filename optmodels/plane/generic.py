@@ -137,30 +137,46 @@ def _full_derivatives(n: int) -> dict[str, ca.Function]:
     w = ca.reshape(p[3 * n :], 6, n)
     g = ca.vertcat((ca.mtimes(nv.T, pts) - a).T, ca.dot(nv, nv) - 1.0)
     # Jacobian, compressed columns: x_i^k -> row i; n_k -> rows 0..N; a -> rows 0..N-1.
-    colind = np.concatenate([np.arange(3 * n + 1), 3 * n + (n + 1) * np.arange(1, 4),
-                             [3 * n + 3 * (n + 1) + n]])
-    rows = np.concatenate([np.repeat(np.arange(n), 3), *[np.arange(n + 1)] * 3,
-                           np.arange(n)])
-    jac = ca.MX(ca.Sparsity(n + 1, 3 * n + 4, colind.tolist(), rows.tolist()),
-                ca.vertcat(ca.repmat(nv, n, 1), pts[0, :].T, 2 * nv[0], pts[1, :].T,
-                           2 * nv[1], pts[2, :].T, 2 * nv[2], -ca.DM.ones(n)))
+    colind = np.concatenate(
+        [np.arange(3 * n + 1), 3 * n + (n + 1) * np.arange(1, 4), [3 * n + 3 * (n + 1) + n]]
+    )
+    rows = np.concatenate([np.repeat(np.arange(n), 3), *[np.arange(n + 1)] * 3, np.arange(n)])
+    jac = ca.MX(
+        ca.Sparsity(n + 1, 3 * n + 4, colind.tolist(), rows.tolist()),
+        ca.vertcat(
+            ca.repmat(nv, n, 1),
+            pts[0, :].T,
+            2 * nv[0],
+            pts[1, :].T,
+            2 * nv[1],
+            pts[2, :].T,
+            2 * nv[2],
+            -ca.DM.ones(n),
+        ),
+    )
     # Hessian, upper triangle, compressed columns: column k of block i holds rows
     # 3i..3i+k; column n_k holds rows 3i+k (i < N) and its diagonal.
     blk_rows = (3 * np.arange(n)[:, None] + np.array([0, 0, 1, 0, 1, 2])).ravel()
     blk_colind = (6 * np.arange(n)[:, None] + np.array([0, 1, 3])).ravel()
-    hrows = np.concatenate([blk_rows, *[np.append(3 * np.arange(n) + k, 3 * n + k)
-                                        for k in range(3)]])
-    hcolind = np.concatenate([blk_colind, 6 * n + (n + 1) * np.arange(4),
-                              [6 * n + 3 * (n + 1)]])
+    hrows = np.concatenate(
+        [blk_rows, *[np.append(3 * np.arange(n) + k, 3 * n + k) for k in range(3)]]
+    )
+    hcolind = np.concatenate([blk_colind, 6 * n + (n + 1) * np.arange(4), [6 * n + 3 * (n + 1)]])
     order = [_IU.index(jk) for jk in ((0, 0), (0, 1), (1, 1), (0, 2), (1, 2), (2, 2))]
     lam, mu2 = lam_g[:n], 2 * lam_g[n]
-    hess = ca.MX(ca.Sparsity(3 * n + 4, 3 * n + 4, hcolind.tolist(), hrows.tolist()),
-                 ca.vertcat(ca.vec(w[order, :]) * (2.0 * lam_f / n),
-                            lam, mu2, lam, mu2, lam, mu2))
+    hess = ca.MX(
+        ca.Sparsity(3 * n + 4, 3 * n + 4, hcolind.tolist(), hrows.tolist()),
+        ca.vertcat(ca.vec(w[order, :]) * (2.0 * lam_f / n), lam, mu2, lam, mu2, lam, mu2),
+    )
     return {
         "jac_g": ca.Function("nlp_jac_g", [x, p], [g, jac], ["x", "p"], ["g", "jac_g_x"]),
-        "hess_lag": ca.Function("nlp_hess_l", [x, p, lam_f, lam_g], [hess],
-                                ["x", "p", "lam_f", "lam_g"], ["triu_hess_gamma_x_x"]),
+        "hess_lag": ca.Function(
+            "nlp_hess_l",
+            [x, p, lam_f, lam_g],
+            [hess],
+            ["x", "p", "lam_f", "lam_g"],
+            ["triu_hess_gamma_x_x"],
+        ),
     }
 
 
@@ -208,10 +224,13 @@ def cached_nlp(
     if full and plugin == "ipopt" and (options or {}).get("linear_solver", "mumps") == "mumps":
         options = {**FULL_IPOPT_DEFAULTS, **(options or {})}
     return cached_nlpsol(
-        _CACHE_NAMESPACE, (formulation, n),
+        _CACHE_NAMESPACE,
+        (formulation, n),
         lambda: _full_problem(n) if full else _reduced_problem(n),
-        plugin=plugin, options=options,
-        derivatives=(lambda: _full_derivatives(n)) if full and plugin == "ipopt" else None)
+        plugin=plugin,
+        options=options,
+        derivatives=(lambda: _full_derivatives(n)) if full and plugin == "ipopt" else None,
+    )
 
 
 #: A stationary point whose smallest profile curvature is below -1e-6 of the largest is a
@@ -226,8 +245,9 @@ def clear_nlp_cache() -> None:
     NLP_CACHE.clear(_CACHE_NAMESPACE)
 
 
-def _reduced_start(built: BuiltNlp, params: FloatArray, sc: _Scaled,
-                   nv0: FloatArray) -> tuple[FloatArray, float, float, int]:
+def _reduced_start(
+    built: BuiltNlp, params: FloatArray, sc: _Scaled, nv0: FloatArray
+) -> tuple[FloatArray, float, float, int]:
     r"""Phase 1 of a start of the full NLP: the reduced NLP (1.12)-(1.13) from the start
     normal ``nv0`` (scaled data), to its local minimum.
 
@@ -345,7 +365,8 @@ def solve(
     point with negative curvature (saddle or maximum) is reported as ERROR.
     """
     formulation, auto, n_starts, via_reduced = _check_args(
-        data, formulation, starts, plugin, ipopt_options, plugin_options, via_reduced)
+        data, formulation, starts, plugin, ipopt_options, plugin_options, via_reduced
+    )
     sc = _Scaled.of(data)
     if initial_normal is not None:
         n0 = as_finite_array("plane.solve initial_normal", initial_normal, shape=(3,))
@@ -360,8 +381,13 @@ def solve(
     first_fail: PlaneSolution | None = None
     curvature = float("nan")
     for nv0 in start_normals:
-        if auto and data.proportional and len(runs.objectives) == 1 and best is not None \
-                and curvature > 0:
+        if (
+            auto
+            and data.proportional
+            and len(runs.objectives) == 1
+            and best is not None
+            and curvature > 0
+        ):
             # Under (1.4) a local minimum of Φ on the sphere is the global one.
             break
         sol, curv_i = _run_start(data, sc, built, formulation, plugin, nv0, runs)
@@ -375,15 +401,22 @@ def solve(
     return _resolve(_package(out, built, runs, via_reduced), data, level)
 
 
-def _check_args(data: PlaneData, formulation: Any, starts: Any, plugin: Any,
-                ipopt_options: Any, plugin_options: Any, via_reduced: Any
-                ) -> tuple[Formulation, bool, int, bool]:
+def _check_args(
+    data: PlaneData,
+    formulation: Any,
+    starts: Any,
+    plugin: Any,
+    ipopt_options: Any,
+    plugin_options: Any,
+    via_reduced: Any,
+) -> tuple[Formulation, bool, int, bool]:
     """The arguments of :func:`solve` checked: the formulation, whether the starts are
     automatic, how many axes to start from, and whether the full NLP starts from the
     reduced one."""
     as_instance("plane.solve data", data, PlaneData)
     form: Formulation = as_choice(  # type: ignore[assignment]
-        "plane.solve formulation", formulation, ("full", "reduced"))
+        "plane.solve formulation", formulation, ("full", "reduced")
+    )
     auto = isinstance(starts, str) and starts == "auto"
     n_starts = 3
     if not auto:
@@ -393,12 +426,16 @@ def _check_args(data: PlaneData, formulation: Any, starts: Any, plugin: Any,
     if not isinstance(plugin, str) or not plugin:
         raise ProblemError(f"plane.solve plugin: expected a CasADi nlpsol name, got {plugin!r}")
     for name, opts in (("ipopt_options", ipopt_options), ("plugin_options", plugin_options)):
-        if opts is not None and (not isinstance(opts, dict)
-                                 or not all(isinstance(k, str) for k in opts)):
-            raise ProblemError(f"plane.solve {name}: expected a dict with str keys or None, "
-                               f"got {type(opts).__name__}")
-    reduced_first = as_flag("plane.solve via_reduced", via_reduced if via_reduced is not None
-                            else plugin == "ipopt")
+        if opts is not None and (
+            not isinstance(opts, dict) or not all(isinstance(k, str) for k in opts)
+        ):
+            raise ProblemError(
+                f"plane.solve {name}: expected a dict with str keys or None, "
+                f"got {type(opts).__name__}"
+            )
+    reduced_first = as_flag(
+        "plane.solve via_reduced", via_reduced if via_reduced is not None else plugin == "ipopt"
+    )
     return form, auto, n_starts, reduced_first and form == "full"
 
 
@@ -414,9 +451,14 @@ class _Built:
     reduced_params: FloatArray | None = None
 
 
-def _build(formulation: Formulation, sc: _Scaled, plugin: str,
-           ipopt_options: dict[str, Any] | None, plugin_options: dict[str, Any] | None,
-           via_reduced: bool) -> _Built:
+def _build(
+    formulation: Formulation,
+    sc: _Scaled,
+    plugin: str,
+    ipopt_options: dict[str, Any] | None,
+    plugin_options: dict[str, Any] | None,
+    via_reduced: bool,
+) -> _Built:
     """The NLP from the back-end's cache (built when new) and its parameters (the scaled
     points and the covariances, or their inverses for ``"full"``)."""
     n_pts = len(sc.points)
@@ -430,12 +472,16 @@ def _build(formulation: Formulation, sc: _Scaled, plugin: str,
         except RuntimeError as exc:  # CasADi: unknown plugin/option, missing library
             raise SolverNotAvailable(
                 f"plugin: CasADi nlpsol {plugin!r} could not be built for the plane NLP: "
-                f"{str(exc).splitlines()[0][:200]}") from exc
+                f"{str(exc).splitlines()[0][:200]}"
+            ) from exc
         pts_param = sc.points.T.ravel(order="F")
         if formulation == "full":
             params = np.concatenate(
-                [pts_param,
-                 _upper(np.asarray(np.linalg.inv(sc.covs), dtype=float)).ravel(order="F")])
+                [
+                    pts_param,
+                    _upper(np.asarray(np.linalg.inv(sc.covs), dtype=float)).ravel(order="F"),
+                ]
+            )
         else:
             params = np.concatenate([pts_param, _upper(sc.covs).ravel(order="F")])
         if via_reduced:
@@ -443,8 +489,14 @@ def _build(formulation: Formulation, sc: _Scaled, plugin: str,
             fresh = fresh or red_fresh
             red_params = np.concatenate([pts_param, _upper(sc.covs).ravel(order="F")])
     # build_time includes the construction when it happened here
-    return _Built(nlp=built, params=params, fresh=fresh, build_time=t_prep.elapsed,
-                  reduced=red_built, reduced_params=red_params)
+    return _Built(
+        nlp=built,
+        params=params,
+        fresh=fresh,
+        build_time=t_prep.elapsed,
+        reduced=red_built,
+        reduced_params=red_params,
+    )
 
 
 @dataclass
@@ -460,8 +512,15 @@ class _Runs:
     reduced_iterations: int = 0
 
 
-def _run_start(data: PlaneData, sc: _Scaled, built: _Built, formulation: Formulation,
-               plugin: str, nv0: FloatArray, runs: _Runs) -> tuple[PlaneSolution, float]:
+def _run_start(
+    data: PlaneData,
+    sc: _Scaled,
+    built: _Built,
+    formulation: Formulation,
+    plugin: str,
+    nv0: FloatArray,
+    runs: _Runs,
+) -> tuple[PlaneSolution, float]:
     """One start of :func:`solve` from the normal ``nv0``, re-checked and gated
     (:func:`optmodels.plane.verify._finish`); returns the solution and its profile
     curvature, and records the run in ``runs``."""
@@ -505,22 +564,34 @@ def _run_start(data: PlaneData, sc: _Scaled, built: _Built, formulation: Formula
         # IPOPT's precision limit: accept only a point verified independently
         # (the re-check in _finish then applies to it like to any other).
         status, message = accept_precision_limit(
-            status, message, step_i, f" (KKT point verified: Newton step {step_i:.1e} "
-            f"rad, curvature {curv_i:.2f})")
+            status,
+            message,
+            step_i,
+            f" (KKT point verified: Newton step {step_i:.1e} rad, curvature {curv_i:.2f})",
+        )
         if status.ok and curv_i < -_SADDLE_RTOL:
             status = Status.ERROR
-            message += f"; not a minimum of (1.12)-(1.13): profile curvature {curv_i:.2g}" \
+            message += (
+                f"; not a minimum of (1.12)-(1.13): profile curvature {curv_i:.2g}"
                 " (a saddle or maximum)"
-    sol = _finish(data, normal, offset, status=status, method=f"casadi:{plugin}:{formulation}",
-                  stationarity=step_i, message=message, projected=proj,
-                  info={"min_curvature": curv_i})
+            )
+    sol = _finish(
+        data,
+        normal,
+        offset,
+        status=status,
+        method=f"casadi:{plugin}:{formulation}",
+        stationarity=step_i,
+        message=message,
+        projected=proj,
+        info={"min_curvature": curv_i},
+    )
     runs.objectives.append(sol.objective)
     runs.status.append(res.message)
     return sol, curv_i
 
 
-def _package(out: PlaneSolution, built: _Built, runs: _Runs, via_reduced: bool
-             ) -> PlaneSolution:
+def _package(out: PlaneSolution, built: _Built, runs: _Runs, via_reduced: bool) -> PlaneSolution:
     """The chosen start's solution with the times and the ``info`` of every start."""
     verification = out.info.get("verification", {})
     curvature = float(out.info.get("min_curvature", float("nan")))

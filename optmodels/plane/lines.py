@@ -81,8 +81,9 @@ def _line_value(y: FloatArray, c: FloatArray, d: FloatArray) -> float:
     return float(np.sum(i00 * r0 * r0 + 2.0 * i01 * r0 * r1 + i11 * r1 * r1))
 
 
-def _line_fit(y: FloatArray, c: FloatArray, d0: FloatArray, *, max_iter: int = 50,
-              tol: float = 1e-8) -> tuple[float, FloatArray, bool]:
+def _line_fit(
+    y: FloatArray, c: FloatArray, d0: FloatArray, *, max_iter: int = 50, tol: float = 1e-8
+) -> tuple[float, FloatArray, bool]:
     """Minimum of (1.2) over lines: Newton on the sphere for :func:`_line_value` (the
     point of the line eliminated), with central-difference gradient and Hessian (step
     1e-4 rad: relative truncation ~1e-8 of the derivatives, so the value is exact to
@@ -193,8 +194,12 @@ def line_test(data: PlaneData, level: float = 0.997) -> LineTest:
         t = h / np.sqrt(m)
         r = t.T @ q @ t
         lam, g = np.linalg.eigh(0.5 * (r + r.T))
-        stat, direction, conv, exact = float(lam[0] + lam[1]), (h * np.sqrt(m)) @ g[:, 2], \
-            True, True
+        stat, direction, conv, exact = (
+            float(lam[0] + lam[1]),
+            (h * np.sqrt(m)) @ g[:, 2],
+            True,
+            True,
+        )
     else:
         centre = data.points.mean(axis=0)
         y = data.points - centre
@@ -209,5 +214,12 @@ def line_test(data: PlaneData, level: float = 0.997) -> LineTest:
             exact = True
     direction = direction / np.linalg.norm(direction)
     direction = direction if direction[np.argmax(np.abs(direction))] > 0 else -direction
-    return LineTest(statistic=float(stat), dof=dof, threshold=thr, level=lv,
-                    direction=direction, resolved=bool(conv and stat > thr), exact=exact)
+    return LineTest(
+        statistic=float(stat),
+        dof=dof,
+        threshold=thr,
+        level=lv,
+        direction=direction,
+        resolved=bool(conv and stat > thr),
+        exact=exact,
+    )

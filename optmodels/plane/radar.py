@@ -41,8 +41,10 @@ def _site_offsets(where: str, points: ArrayLike, site: ArrayLike) -> tuple[Float
     d = pts - st
     r = np.linalg.norm(d, axis=1)
     if np.any(r == 0):
-        raise ProblemError(f"{where} points: {int(np.sum(r == 0))} coincide with the site "
-                           "(azimuth and elevation undefined)")
+        raise ProblemError(
+            f"{where} points: {int(np.sum(r == 0))} coincide with the site "
+            "(azimuth and elevation undefined)"
+        )
     return d, r
 
 
@@ -63,7 +65,10 @@ def from_polar(polar: ArrayLike, site: ArrayLike) -> FloatArray:
 
 
 def radar_covariances(
-    points: ArrayLike, site: ArrayLike, sigma_range: float, sigma_azimuth: float,
+    points: ArrayLike,
+    site: ArrayLike,
+    sigma_range: float,
+    sigma_azimuth: float,
     sigma_elevation: float,
 ) -> FloatArray:
     r"""Cartesian (ENU) error covariances :math:`D_i` (N, 3, 3) of a radar's positions.
@@ -120,8 +125,10 @@ def radar_covariances(
     s_el = as_positive(f"{w} sigma_elevation (rad)", sigma_elevation)
     horiz = np.hypot(d[:, 0], d[:, 1])
     if np.any(horiz <= 1e-12 * r):
-        raise ProblemError(f"{w} points: {int(np.sum(horiz <= 1e-12 * r))} are straight above "
-                           "or below the site (azimuth undefined, the covariance singular)")
+        raise ProblemError(
+            f"{w} points: {int(np.sum(horiz <= 1e-12 * r))} are straight above "
+            "or below the site (azimuth undefined, the covariance singular)"
+        )
     # sin/cos of azimuth and elevation straight from the offsets (no atan2 round trip)
     saz, caz = d[:, 0] / horiz, d[:, 1] / horiz
     ce, se = horiz / r, d[:, 2] / r

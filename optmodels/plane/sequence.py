@@ -137,10 +137,16 @@ def identify_sequence(
             "general D_i call plane.solve on each window"
         )
     lv = as_probability("plane.identify_sequence level", level, low_open=True, high_open=True)
-    formulation = as_choice("plane.identify_sequence formulation",  # type: ignore[assignment]
-                            formulation, ("full", "reduced"))
-    every = None if resolve_every is None else as_count(
-        "plane.identify_sequence resolve_every", resolve_every, minimum=1)
+    formulation = as_choice(
+        "plane.identify_sequence formulation",  # type: ignore[assignment]
+        formulation,
+        ("full", "reduced"),
+    )
+    every = (
+        None
+        if resolve_every is None
+        else as_count("plane.identify_sequence resolve_every", resolve_every, minimum=1)
+    )
     if start is None:
         first = 3
     else:
@@ -153,11 +159,11 @@ def identify_sequence(
         )
 
     with timed() as tm:
-        s0, s1, s2, s2abs, ref, spread = _scaled_sums(data.points, data.alpha2,
-                                                       cumulative=True)
+        s0, s1, s2, s2abs, ref, spread = _scaled_sums(data.points, data.alpha2, cumulative=True)
         count = np.arange(first + 1, data.n_points + 1, dtype=float)
-        eig = _closed_form_from_sums(s0[first:], s1[first:], s2[first:], s2abs[first:],
-                                     count, data.base_cov / spread**2)
+        eig = _closed_form_from_sums(
+            s0[first:], s1[first:], s2[first:], s2abs[first:], count, data.base_cov / spread**2
+        )
         normal = eig.normal
         offset = spread * np.sum(normal * eig.mean, axis=-1) + normal @ ref  # (1.7)
         lead = np.take_along_axis(normal, np.argmax(normal != 0, axis=-1)[:, None], -1)[:, 0]
@@ -177,13 +183,26 @@ def identify_sequence(
     if every is not None:
         generic = _sequence_generic(data, first, every, formulation, resolved)
     return PlaneSequence(
-        times=t[first:], n_points=count, normal=normal, offset=offset, statistic=stat,
-        dof=arr["dof"], threshold=arr["threshold"], p_value=arr["p_value"],
-        planar=arr["planar"], paper_statistic=arr["paper_statistic"],
-        paper_threshold=arr["paper_threshold"], paper_planar=arr["paper_planar"],
-        level=lv, solve_time=tm.elapsed, resolved=resolved, line_statistic=line_stat,
-        line_threshold=arr["line_threshold"], line_direction=line_dir,
-        numerical_error=err, generic=generic,
+        times=t[first:],
+        n_points=count,
+        normal=normal,
+        offset=offset,
+        statistic=stat,
+        dof=arr["dof"],
+        threshold=arr["threshold"],
+        p_value=arr["p_value"],
+        planar=arr["planar"],
+        paper_statistic=arr["paper_statistic"],
+        paper_threshold=arr["paper_threshold"],
+        paper_planar=arr["paper_planar"],
+        level=lv,
+        solve_time=tm.elapsed,
+        resolved=resolved,
+        line_statistic=line_stat,
+        line_threshold=arr["line_threshold"],
+        line_direction=line_dir,
+        numerical_error=err,
+        generic=generic,
     )
 
 
@@ -209,5 +228,11 @@ def _sequence_generic(
         if sol.ok:
             normals[j], offsets[j], objs[j] = sol.normal, sol.offset, sol.objective
             prev = sol.normal
-    return {"index": steps - first, "normal": normals, "offset": offsets,
-            "objective": objs, "status": status, "solve_time": total}
+    return {
+        "index": steps - first,
+        "normal": normals,
+        "offset": offsets,
+        "objective": objs,
+        "status": status,
+        "solve_time": total,
+    }

@@ -53,8 +53,14 @@ class PlaneChangeTrack:
     segment: np.ndarray
 
 
-def _arc(p0: FloatArray, tangent: FloatArray, inward: FloatArray, radius: float,
-         speed: float, tau: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+def _arc(
+    p0: FloatArray,
+    tangent: FloatArray,
+    inward: FloatArray,
+    radius: float,
+    speed: float,
+    tau: FloatArray,
+) -> tuple[FloatArray, FloatArray, FloatArray]:
     """Positions on a circle from p0 (velocity ``speed·tangent``, centre at
     ``p0 + radius·inward``) after times tau; also the tangent and inward at the end."""
     w = speed / radius
@@ -136,22 +142,35 @@ def plane_change_track(
         cov = sigma**2 * np.eye(3)
         points = truth + sigma * rng.normal(size=truth.shape)
     else:
-        st = (np.array([-30e3, -30e3, 0.0]) if site is None else
-              np.asarray(site, dtype=float))
+        st = np.array([-30e3, -30e3, 0.0]) if site is None else np.asarray(site, dtype=float)
         cov = radar_covariances(truth, st, sigma_range, sigma_angle, sigma_angle)
         chol = np.linalg.cholesky(cov)
         points = truth + (chol @ rng.normal(size=(n, 3, 1)))[..., 0]
-    return PlaneChangeTrack(times=times, truth=truth, points=points, cov=cov,
-                            change_time=tc, normals=np.array([m1, m2]),
-                            offsets=np.array([a1, a2]), tilt=float(abs(tilt)),
-                            segment=(~seg1).astype(int))
+    return PlaneChangeTrack(
+        times=times,
+        truth=truth,
+        points=points,
+        cov=cov,
+        change_time=tc,
+        normals=np.array([m1, m2]),
+        offsets=np.array([a1, a2]),
+        tilt=float(abs(tilt)),
+        segment=(~seg1).astype(int),
+    )
 
 
 # =========================================================================== Monte Carlo
-def false_alarm_runs(hours: float, seed: int = 0, *, window: str | None = "40s",
-                     false_alarm_rate_per_h: float = 1.0, sigma: float = 50.0,
-                     errors: str = "isotropic", run_hours: float = 1.0,
-                     **kw: Any) -> dict[str, float]:
+def false_alarm_runs(
+    hours: float,
+    seed: int = 0,
+    *,
+    window: str | None = "40s",
+    false_alarm_rate_per_h: float = 1.0,
+    sigma: float = 50.0,
+    errors: str = "isotropic",
+    run_hours: float = 1.0,
+    **kw: Any,
+) -> dict[str, float]:
     """False alarms of :func:`optmodels.plane.tracking.track` on planar tracks (a turn of
     ``radius1`` in one plane, ``tilt_deg=0``), ``hours`` of track in runs of ``run_hours``.
 
@@ -169,21 +188,45 @@ def false_alarm_runs(hours: float, seed: int = 0, *, window: str | None = "40s",
     total = 0.0
     t0 = time.perf_counter()
     for _ in range(runs):
-        sc = plane_change_track(rng, tilt_deg=0.0, before=3600.0 * run_hours, after=0.0,
-                                sigma=sigma, errors=errors, **kw)
-        tr = track(sc.times, sc.points, sc.cov, window=window,
-                   false_alarm_rate_per_h=false_alarm_rate_per_h)
+        sc = plane_change_track(
+            rng,
+            tilt_deg=0.0,
+            before=3600.0 * run_hours,
+            after=0.0,
+            sigma=sigma,
+            errors=errors,
+            **kw,
+        )
+        tr = track(
+            sc.times,
+            sc.points,
+            sc.cov,
+            window=window,
+            false_alarm_rate_per_h=false_alarm_rate_per_h,
+        )
         alarms += int(np.sum(tr.change))
         total += float(tr.times[-1] - tr.times[0]) / 3600.0
-    return {"alarms": float(alarms), "hours": total, "rate": alarms / total,
-            "se": float(np.sqrt(max(alarms, 1))) / total, "stated": float(false_alarm_rate_per_h),
-            "seconds": time.perf_counter() - t0}
+    return {
+        "alarms": float(alarms),
+        "hours": total,
+        "rate": alarms / total,
+        "se": float(np.sqrt(max(alarms, 1))) / total,
+        "stated": float(false_alarm_rate_per_h),
+        "seconds": time.perf_counter() - t0,
+    }
 
 
-def detection_runs(runs: int, seed: int = 0, *, tilt_deg: float = 30.0,
-                   window: str | None = "40s", sigma: float = 50.0,
-                   errors: str = "isotropic", false_alarm_rate_per_h: float = 1.0,
-                   **kw: Any) -> dict[str, Any]:
+def detection_runs(
+    runs: int,
+    seed: int = 0,
+    *,
+    tilt_deg: float = 30.0,
+    window: str | None = "40s",
+    sigma: float = 50.0,
+    errors: str = "isotropic",
+    false_alarm_rate_per_h: float = 1.0,
+    **kw: Any,
+) -> dict[str, Any]:
     """Detection delay of :func:`optmodels.plane.tracking.track` on
     :func:`plane_change_track` (``runs`` seeded runs). ``delay`` (runs,) s from the change
     to the first alarm at or after it (inf: none); ``early`` (runs,) alarms before it;
@@ -200,8 +243,13 @@ def detection_runs(runs: int, seed: int = 0, *, tilt_deg: float = 30.0,
     t0 = time.perf_counter()
     for r in range(runs):
         sc = plane_change_track(rng, tilt_deg=tilt_deg, sigma=sigma, errors=errors, **kw)
-        tr = track(sc.times, sc.points, sc.cov, window=window,
-                   false_alarm_rate_per_h=false_alarm_rate_per_h)
+        tr = track(
+            sc.times,
+            sc.points,
+            sc.cov,
+            window=window,
+            false_alarm_rate_per_h=false_alarm_rate_per_h,
+        )
         at = tr.change_times
         early[r] = int(np.sum(at < sc.change_time))
         late = at[at >= sc.change_time]
@@ -211,8 +259,12 @@ def detection_runs(runs: int, seed: int = 0, *, tilt_deg: float = 30.0,
         tilt[r] = float(tr.detectable_tilt[min(k, tr.n_steps - 1)])
     det = np.isfinite(delay)
     ordered = np.sort(delay)
-    return {"delay": delay, "early": early, "detected": float(np.mean(det)),
-            "median": float(ordered[(runs - 1) // 2]),
-            "p90": float(ordered[int(np.ceil(0.9 * runs)) - 1]),
-            "detectable_tilt_deg": float(np.degrees(np.nanmedian(tilt))),
-            "seconds": time.perf_counter() - t0}
+    return {
+        "delay": delay,
+        "early": early,
+        "detected": float(np.mean(det)),
+        "median": float(ordered[(runs - 1) // 2]),
+        "p90": float(ordered[int(np.ceil(0.9 * runs)) - 1]),
+        "detectable_tilt_deg": float(np.degrees(np.nanmedian(tilt))),
+        "seconds": time.perf_counter() - t0,
+    }

@@ -48,7 +48,6 @@ class PlaneSolution(Solution):
     line_direction: FloatArray = field(default_factory=lambda: np.full(3, np.nan))
 
 
-
 def _failure(sol: PlaneSolution) -> PlaneSolution:
     """The failure form of a plane solution: NaN normal and offset, no projected points;
     what the solver returned is kept in ``info["rejected"]``."""

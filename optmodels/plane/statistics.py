@@ -99,7 +99,10 @@ class PlanarityTest:
 
 
 def _planarity_arrays(
-    stat: FloatArray, n: FloatArray, level: float, line_stat: FloatArray,
+    stat: FloatArray,
+    n: FloatArray,
+    level: float,
+    line_stat: FloatArray,
     determined: np.ndarray | bool = True,
 ) -> dict[str, FloatArray]:
     """The χ²(N − 3) test, the rule (1.17) and the line test, vectorised.
@@ -157,11 +160,16 @@ def planarity_test(
     if data.n_points < 4:
         raise ProblemError("points: the planarity test needs N >= 4 (dof = N - 3)")
     if solution is None:
-        solution = (closed_form(data, level=None) if data.proportional
-                    else solve(data, level=None).require_ok())
+        solution = (
+            closed_form(data, level=None)
+            if data.proportional
+            else solve(data, level=None).require_ok()
+        )
     if not isinstance(solution, PlaneSolution):
-        raise ProblemError("plane.planarity_test solution: expected a PlaneSolution, got "
-                           f"{type(solution).__name__}")
+        raise ProblemError(
+            "plane.planarity_test solution: expected a PlaneSolution, got "
+            f"{type(solution).__name__}"
+        )
     if solution.resolved is False and "rejected" in solution.info:
         # an unresolved fit: Λ_min at the plane it fitted (the statistic is defined, the
         # plane is not determined; the test then reports resolved=False)
@@ -172,18 +180,28 @@ def planarity_test(
     stat = reduced_objective(data, normal, offset)
     lt = line_test(data, lv)
     line = lt.statistic
-    arr = _planarity_arrays(np.asarray(stat), np.asarray(float(data.n_points)), lv,
-                            np.asarray(line),
-                            determined=bool(lt.resolved or not line > lt.threshold))
+    arr = _planarity_arrays(
+        np.asarray(stat),
+        np.asarray(float(data.n_points)),
+        lv,
+        np.asarray(line),
+        determined=bool(lt.resolved or not line > lt.threshold),
+    )
     return PlanarityTest(
-        statistic=stat, dof=int(arr["dof"]), level=lv, threshold=float(arr["threshold"]),
-        p_value=float(arr["p_value"]), planar=bool(arr["planar"]),
+        statistic=stat,
+        dof=int(arr["dof"]),
+        level=lv,
+        threshold=float(arr["threshold"]),
+        p_value=float(arr["p_value"]),
+        planar=bool(arr["planar"]),
         paper_statistic=float(arr["paper_statistic"]),
         paper_threshold=float(arr["paper_threshold"]),
         paper_planar=bool(arr["paper_planar"]),
         paper_false_alarm=float(arr["paper_false_alarm"]),
-        resolved=bool(arr["resolved"]), line_statistic=line,
-        line_dof=int(arr["line_dof"]), line_threshold=float(arr["line_threshold"]),
+        resolved=bool(arr["resolved"]),
+        line_statistic=line,
+        line_dof=int(arr["line_dof"]),
+        line_threshold=float(arr["line_threshold"]),
     )
 
 
@@ -238,10 +256,15 @@ def cramer_rao_bound(data: PlaneData, normal: ArrayLike, offset: float) -> Crame
         raise ProblemError(
             "plane.cramer_rao_bound data: the Fisher information is singular (eigenvalues "
             f"{ev[0]:.3g} ... {ev[-1]:.3g}): the true points do not determine the plane "
-            "(collinear?), the bound is infinite")
+            "(collinear?), the bound is infinite"
+        )
     cov = np.linalg.inv(fisher)
-    return CramerRao(cov=cov, tangent=tangent, angle_rms=float(np.sqrt(cov[0, 0] + cov[1, 1])),
-                     offset_std=float(np.sqrt(cov[2, 2])))
+    return CramerRao(
+        cov=cov,
+        tangent=tangent,
+        angle_rms=float(np.sqrt(cov[0, 0] + cov[1, 1])),
+        offset_std=float(np.sqrt(cov[2, 2])),
+    )
 
 
 def _direction_stack(name: str, value: ArrayLike) -> FloatArray:
@@ -289,8 +312,10 @@ def plane_errors(
     except (TypeError, ValueError) as exc:
         raise ProblemError(f"plane.plane_errors offset: not numeric ({exc})") from exc
     if a.shape != n.shape[:-1] or np.any(np.isinf(a)):
-        raise ProblemError(f"plane.plane_errors offset: expected finite values (NaN allowed) "
-                           f"of shape {n.shape[:-1]}, got shape {a.shape}")
+        raise ProblemError(
+            f"plane.plane_errors offset: expected finite values (NaN allowed) "
+            f"of shape {n.shape[:-1]}, got shape {a.shape}"
+        )
     true_offset = as_number("plane.plane_errors true_offset", true_offset)
     _direction_stack("plane.plane_errors true_normal", true_normal)
     sign = np.sign(np.sum(n * np.asarray(true_normal, dtype=float), axis=-1))

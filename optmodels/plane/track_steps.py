@@ -73,8 +73,9 @@ class _Fits:
     warm: FloatArray | None = None
 
 
-def _fits_proportional(data: PlaneData, lo: np.ndarray, base: int, end: int,
-                       spread: float, lv: float) -> _Fits:
+def _fits_proportional(
+    data: PlaneData, lo: np.ndarray, base: int, end: int, spread: float, lv: float
+) -> _Fits:
     """Closed form of the windows ``[lo_i, i]``, ``base <= i < end``."""
     assert data.base_cov is not None and data.alpha2 is not None
     hi = np.arange(base, end)
@@ -82,8 +83,9 @@ def _fits_proportional(data: PlaneData, lo: np.ndarray, base: int, end: int,
     w = 1.0 / data.alpha2
     mom = range_moments(data.points, w, lo, hi, origin=int(lo.min()), spread=spread)
     count = mom.count
-    eig = _closed_form_from_sums(mom.s0, np.zeros_like(mom.mean), mom.q, mom.qabs,
-                                 count, data.base_cov / spread**2)
+    eig = _closed_form_from_sums(
+        mom.s0, np.zeros_like(mom.mean), mom.q, mom.qabs, count, data.base_cov / spread**2
+    )
     normal = eig.normal
     offset = np.sum(normal * mom.mean, axis=1)  # (1.7) about the window's weighted mean
     lead = np.take_along_axis(normal, np.argmax(normal != 0, axis=-1)[:, None], -1)[:, 0]
@@ -95,32 +97,50 @@ def _fits_proportional(data: PlaneData, lo: np.ndarray, base: int, end: int,
     err = eig.check.step
     small = count < 4
     with np.errstate(invalid="ignore", divide="ignore"):
-        arr = _planarity_arrays(stat, np.maximum(count, 4.0), lv, line_stat,
-                                (err <= REJECT_TOL) & ~small)
-    return _Fits(normal=normal, offset=offset, stat=np.where(small, np.nan, stat),
-                 count=count, line_stat=line_stat, line_dir=eig.line, err=err,
-                 resolved=arr["resolved"], base=base, moments=mom)
+        arr = _planarity_arrays(
+            stat, np.maximum(count, 4.0), lv, line_stat, (err <= REJECT_TOL) & ~small
+        )
+    return _Fits(
+        normal=normal,
+        offset=offset,
+        stat=np.where(small, np.nan, stat),
+        count=count,
+        line_stat=line_stat,
+        line_dir=eig.line,
+        err=err,
+        resolved=arr["resolved"],
+        base=base,
+        moments=mom,
+    )
 
 
-def _fits_general(data: PlaneData, lo: np.ndarray, base: int, end: int, lv: float,
-                  warm: FloatArray | None) -> _Fits:
+def _fits_general(
+    data: PlaneData, lo: np.ndarray, base: int, end: int, lv: float, warm: FloatArray | None
+) -> _Fits:
     """fit_general on every window ``[lo_i, i]``, ``base <= i < end``, warm-started from
     the previous window's normal (cold again where the warm run is not OK)."""
     from optmodels.plane.general import fit_general
 
     m = end - base
-    out = _Fits(normal=np.full((m, 3), np.nan), offset=np.full(m, np.nan),
-                stat=np.full(m, np.nan), count=np.zeros(m), line_stat=np.full(m, np.nan),
-                line_dir=np.full((m, 3), np.nan), err=np.full(m, np.inf),
-                resolved=np.zeros(m, dtype=bool), base=base)
+    out = _Fits(
+        normal=np.full((m, 3), np.nan),
+        offset=np.full(m, np.nan),
+        stat=np.full(m, np.nan),
+        count=np.zeros(m),
+        line_stat=np.full(m, np.nan),
+        line_dir=np.full((m, 3), np.nan),
+        err=np.full(m, np.inf),
+        resolved=np.zeros(m, dtype=bool),
+        base=base,
+    )
     for r in range(m):
         i = base + r
         a = int(lo[i])
         out.count[r] = i - a + 1
         if out.count[r] < 4:
             continue
-        x = data.points[a: i + 1]
-        c = data.covs[a: i + 1]
+        x = data.points[a : i + 1]
+        c = data.covs[a : i + 1]
         try:
             fit = fit_general(x, c, normal0=warm, level=lv)
             cold = warm is None
@@ -149,10 +169,20 @@ def _fits_general(data: PlaneData, lo: np.ndarray, base: int, end: int, lv: floa
     return out
 
 
-def _detect(data: PlaneData, t: FloatArray, fits: _Fits, origin: int, report: int,
-            end: int, splits: list[np.ndarray], min_ref: int, spread: float,
-            lam_star: float, general: bool, max_sd: float
-            ) -> tuple[FloatArray, np.ndarray, FloatArray, FloatArray]:
+def _detect(
+    data: PlaneData,
+    t: FloatArray,
+    fits: _Fits,
+    origin: int,
+    report: int,
+    end: int,
+    splits: list[np.ndarray],
+    min_ref: int,
+    spread: float,
+    lam_star: float,
+    general: bool,
+    max_sd: float,
+) -> tuple[FloatArray, np.ndarray, FloatArray, FloatArray]:
     """Detector statistic (max over scales), its split index and the detectable tilts for
     the steps ``report..end-1`` (the fits hold the windows ``fits.base..end-1``)."""
     steps = np.arange(report, end)
@@ -183,27 +213,40 @@ def _detect(data: PlaneData, t: FloatArray, fits: _Fits, origin: int, report: in
             frames = _tangent_basis(na)
             for q, (j, s_, nrm, off) in enumerate(zip(jj, ss, na, aa, strict=True)):
                 a0 = int(s_ - fits.count[s_ - fits.base] + 1)
-                xa = data.points[a0: s_ + 1]
-                ell[q] = max(float(np.sqrt(np.mean(np.sum((xa - xa.mean(0)) ** 2, 1))))
-                             / spread, 1e-300)
-                ja[q], ba[q] = score_info_points(nrm, off, junction[q], xa,
-                                                 data.covs[a0: s_ + 1], spread, ell[q],
-                                                 frames[q])
-                jb[q], bb[q] = score_info_points(nrm, off, junction[q],
-                                                 data.points[s_ + 1: j + 1],
-                                                 data.covs[s_ + 1: j + 1], spread, ell[q],
-                                                 frames[q])
+                xa = data.points[a0 : s_ + 1]
+                ell[q] = max(
+                    float(np.sqrt(np.mean(np.sum((xa - xa.mean(0)) ** 2, 1)))) / spread, 1e-300
+                )
+                ja[q], ba[q] = score_info_points(
+                    nrm, off, junction[q], xa, data.covs[a0 : s_ + 1], spread, ell[q], frames[q]
+                )
+                jb[q], bb[q] = score_info_points(
+                    nrm,
+                    off,
+                    junction[q],
+                    data.points[s_ + 1 : j + 1],
+                    data.covs[s_ + 1 : j + 1],
+                    spread,
+                    ell[q],
+                    frames[q],
+                )
         else:
             assert fits.moments is not None and data.base_cov is not None
             assert data.alpha2 is not None
             ma = fits.moments
-            mom_a = Moments(s0=ma.s0[ra], mean=ma.mean[ra], q=ma.q[ra], qabs=ma.qabs[ra],
-                            count=ma.count[ra], spread=spread,
-                            recomputed=ma.recomputed[ra])
-            mom_b = range_moments(data.points, 1.0 / data.alpha2, ss + 1, jj,
-                                  origin=int(ss.min()) + 1, spread=spread)
-            ell = np.sqrt(np.maximum(np.trace(mom_a.q, axis1=1, axis2=2) / mom_a.s0,
-                                     1e-300))
+            mom_a = Moments(
+                s0=ma.s0[ra],
+                mean=ma.mean[ra],
+                q=ma.q[ra],
+                qabs=ma.qabs[ra],
+                count=ma.count[ra],
+                spread=spread,
+                recomputed=ma.recomputed[ra],
+            )
+            mom_b = range_moments(
+                data.points, 1.0 / data.alpha2, ss + 1, jj, origin=int(ss.min()) + 1, spread=spread
+            )
+            ell = np.sqrt(np.maximum(np.trace(mom_a.q, axis1=1, axis2=2) / mom_a.s0, 1e-300))
             ja, ba = score_info_moments(na, aa, junction, mom_a, data.base_cov, ell)
             jb, bb = score_info_moments(na, aa, junction, mom_b, data.base_cov, ell)
         firm = reference_tilt_sd(ja, ell) <= max_sd
@@ -224,4 +267,3 @@ def _detect(data: PlaneData, t: FloatArray, fits: _Fits, origin: int, report: in
     tilt = np.where(any_test, tilt, np.nan)
     tilt_any = np.where(any_test, tilt_any, np.nan)
     return best, arg, tilt, tilt_any
-

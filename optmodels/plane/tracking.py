@@ -65,10 +65,29 @@ _SCALE_FRACTIONS = (0.125, 0.25, 0.5)
 #: Default scales (s) for a growing window.
 _GROWING_SCALES = (5.0, 10.0, 20.0)
 
-_ARRAYS = ("times", "n_points", "window_start", "normals", "offsets", "statistic", "dof",
-           "threshold", "p_value", "resolved", "planar", "line_statistic",
-           "line_threshold", "line_direction", "numerical_error", "change", "detector",
-           "detector_threshold", "change_time", "detectable_tilt", "detectable_tilt_any")
+_ARRAYS = (
+    "times",
+    "n_points",
+    "window_start",
+    "normals",
+    "offsets",
+    "statistic",
+    "dof",
+    "threshold",
+    "p_value",
+    "resolved",
+    "planar",
+    "line_statistic",
+    "line_threshold",
+    "line_direction",
+    "numerical_error",
+    "change",
+    "detector",
+    "detector_threshold",
+    "change_time",
+    "detectable_tilt",
+    "detectable_tilt_any",
+)
 
 
 @dataclass
@@ -173,41 +192,58 @@ class PlaneTrack:
         for k in range(self.n_steps):
             n = self.normals[k]
             ld = self.line_direction[k]
-            rows.append({
-                "time": float(self.times[k]), "nx": float(n[0]), "ny": float(n[1]),
-                "nz": float(n[2]), "offset": float(self.offsets[k]),
-                "statistic": float(self.statistic[k]),
-                "threshold": float(self.threshold[k]),
-                "resolved": bool(self.resolved[k]), "planar": bool(self.planar[k]),
-                "change": bool(self.change[k]), "detector": float(self.detector[k]),
-                "detector_threshold": float(self.detector_threshold[k]),
-                "change_time": float(self.change_time[k]),
-                "detectable_tilt": float(self.detectable_tilt[k]),
-                "detectable_tilt_any": float(self.detectable_tilt_any[k]),
-                "n_points": int(self.n_points[k]),
-                "window_start": float(self.window_start[k]),
-                "line_x": float(ld[0]), "line_y": float(ld[1]), "line_z": float(ld[2]),
-                "numerical_error": float(self.numerical_error[k]),
-                "p_value": float(self.p_value[k]),
-            })
+            rows.append(
+                {
+                    "time": float(self.times[k]),
+                    "nx": float(n[0]),
+                    "ny": float(n[1]),
+                    "nz": float(n[2]),
+                    "offset": float(self.offsets[k]),
+                    "statistic": float(self.statistic[k]),
+                    "threshold": float(self.threshold[k]),
+                    "resolved": bool(self.resolved[k]),
+                    "planar": bool(self.planar[k]),
+                    "change": bool(self.change[k]),
+                    "detector": float(self.detector[k]),
+                    "detector_threshold": float(self.detector_threshold[k]),
+                    "change_time": float(self.change_time[k]),
+                    "detectable_tilt": float(self.detectable_tilt[k]),
+                    "detectable_tilt_any": float(self.detectable_tilt_any[k]),
+                    "n_points": int(self.n_points[k]),
+                    "window_start": float(self.window_start[k]),
+                    "line_x": float(ld[0]),
+                    "line_y": float(ld[1]),
+                    "line_z": float(ld[2]),
+                    "numerical_error": float(self.numerical_error[k]),
+                    "p_value": float(self.p_value[k]),
+                }
+            )
         return rows
 
     def to_dict(self) -> dict[str, Any]:
         """Plain lists for JSON: every array over steps, NaN and ±inf as ``None``, plus
         the settings."""
+
         def clean(a: np.ndarray) -> Any:
             if a.dtype == bool:
                 return a.tolist()
             obj = a.astype(object)
             obj[~np.isfinite(a)] = None
             return obj.tolist()
+
         out: dict[str, Any] = {k: clean(np.asarray(getattr(self, k))) for k in _ARRAYS}
-        out.update(level=self.level, false_alarm_rate_per_h=self.false_alarm_rate_per_h,
-                   power=self.power, window=window_label(self.window),
-                   scales=list(self.scales),
-                   method=self.method, test_level=self.test_level,
-                   solve_time=self.solve_time, n_steps=self.n_steps,
-                   change_times=self.change_times.tolist())
+        out.update(
+            level=self.level,
+            false_alarm_rate_per_h=self.false_alarm_rate_per_h,
+            power=self.power,
+            window=window_label(self.window),
+            scales=list(self.scales),
+            method=self.method,
+            test_level=self.test_level,
+            solve_time=self.solve_time,
+            n_steps=self.n_steps,
+            change_times=self.change_times.tolist(),
+        )
         return out
 
 
@@ -222,21 +258,21 @@ def _scales_arg(scales: Any, window: float | int | None) -> tuple[float, ...]:
     try:
         items = list(scales)
     except TypeError:
-        raise ProblemError(f"{_W} scales: expected a sequence of lengths, got "
-                           f"{scales!r}") from None
+        raise ProblemError(f"{_W} scales: expected a sequence of lengths, got {scales!r}") from None
     if not items:
         raise ProblemError(f"{_W} scales: at least one test-segment length is needed")
     if isinstance(window, int):
-        out = tuple(float(as_count(f"{_W} scales[{i}]", s, minimum=3))
-                    for i, s in enumerate(items))
+        out = tuple(float(as_count(f"{_W} scales[{i}]", s, minimum=3)) for i, s in enumerate(items))
     else:
         out = tuple(as_positive(f"{_W} scales[{i}]", s) for i, s in enumerate(items))
     if window is not None and max(out) > 0.5 * window:
         # the reference is the window's part before the test segment: a segment longer than
         # half the window leaves a reference too short to be firm (false alarms, found by review)
-        raise ProblemError(f"{_W} scales: test segments of at most half the window "
-                           f"({0.5 * window:g} {'points' if isinstance(window, int) else 's'})"
-                           f" are allowed, got {max(out):g}")
+        raise ProblemError(
+            f"{_W} scales: test segments of at most half the window "
+            f"({0.5 * window:g} {'points' if isinstance(window, int) else 's'})"
+            f" are allowed, got {max(out):g}"
+        )
     return tuple(sorted(set(out)))
 
 
@@ -317,11 +353,23 @@ def track(
         Naming the argument (``"plane.track <argument>"``; the points and covariances are
         checked by :class:`PlaneData`).
     """
-    setup = _validate(times, points, cov, window=window, window_points=window_points,
-                      window_seconds=window_seconds, level=level,
-                      false_alarm_rate_per_h=false_alarm_rate_per_h, alpha2=alpha2,
-                      start=start, scales=scales, power=power, min_reference=min_reference,
-                      max_reference_sd=max_reference_sd, false_alarm_rate=false_alarm_rate)
+    setup = _validate(
+        times,
+        points,
+        cov,
+        window=window,
+        window_points=window_points,
+        window_seconds=window_seconds,
+        level=level,
+        false_alarm_rate_per_h=false_alarm_rate_per_h,
+        alpha2=alpha2,
+        start=start,
+        scales=scales,
+        power=power,
+        min_reference=min_reference,
+        max_reference_sd=max_reference_sd,
+        false_alarm_rate=false_alarm_rate,
+    )
     rec = _records(setup.n - setup.first)
     with timed() as tm:
         restarts = _run(setup, rec)
@@ -355,11 +403,24 @@ class _Setup:
         return self.data.n_points
 
 
-def _validate(times: ArrayLike, points: ArrayLike, cov: ArrayLike, *, window: str | None,
-              window_points: int | None, window_seconds: float | None, level: float,
-              false_alarm_rate_per_h: float, alpha2: ArrayLike | None, start: float | None,
-              scales: Any, power: float, min_reference: int, max_reference_sd: float,
-              false_alarm_rate: Any) -> _Setup:
+def _validate(
+    times: ArrayLike,
+    points: ArrayLike,
+    cov: ArrayLike,
+    *,
+    window: str | None,
+    window_points: int | None,
+    window_seconds: float | None,
+    level: float,
+    false_alarm_rate_per_h: float,
+    alpha2: ArrayLike | None,
+    start: float | None,
+    scales: Any,
+    power: float,
+    min_reference: int,
+    max_reference_sd: float,
+    false_alarm_rate: Any,
+) -> _Setup:
     """Every argument of :func:`track` checked (one ``ProblemError`` naming it), and the
     detector's threshold, the scales and the splits."""
     try:
@@ -373,11 +434,13 @@ def _validate(times: ArrayLike, points: ArrayLike, cov: ArrayLike, *, window: st
     win = window_spec(window, window_points=window_points, window_seconds=window_seconds)
     lv = as_probability(f"{_W} level", level, low_open=True, high_open=True)
     if false_alarm_rate is not None:
-        raise ProblemError(f"{_W} false_alarm_rate: renamed false_alarm_rate_per_h, false "
-                           "alarms per HOUR (it was per second); write false_alarm_rate_per_h"
-                           f"={3600.0 * float(false_alarm_rate):g} for the same bound"
-                           if isinstance(false_alarm_rate, int | float) else
-                           f"{_W} false_alarm_rate: renamed false_alarm_rate_per_h (per hour)")
+        raise ProblemError(
+            f"{_W} false_alarm_rate: renamed false_alarm_rate_per_h, false "
+            "alarms per HOUR (it was per second); write false_alarm_rate_per_h"
+            f"={3600.0 * float(false_alarm_rate):g} for the same bound"
+            if isinstance(false_alarm_rate, int | float)
+            else f"{_W} false_alarm_rate: renamed false_alarm_rate_per_h (per hour)"
+        )
     far_h = as_positive(f"{_W} false_alarm_rate_per_h", false_alarm_rate_per_h)
     pw = as_probability(f"{_W} power", power, low_open=True, high_open=True)
     min_ref = as_count(f"{_W} min_reference", min_reference, minimum=4)
@@ -386,9 +449,11 @@ def _validate(times: ArrayLike, points: ArrayLike, cov: ArrayLike, *, window: st
     if isinstance(win, float) and n > 1:
         dt = float(np.median(np.diff(t)))
         if win < 3.0 * dt:  # a plane needs 4 points: found by review (n_points = 1 per step)
-            raise ProblemError(f"{_W} window_seconds: {win:g} s holds fewer than 4 measurements at "
-                               f"the median sampling interval {dt:g} s; give at least "
-                               f"{3.0 * dt:g} s")
+            raise ProblemError(
+                f"{_W} window_seconds: {win:g} s holds fewer than 4 measurements at "
+                f"the median sampling interval {dt:g} s; give at least "
+                f"{3.0 * dt:g} s"
+            )
     if start is None:
         first = 3
         if first >= n:  # issue 28: the message named "t = None"
@@ -397,31 +462,55 @@ def _validate(times: ArrayLike, points: ArrayLike, cov: ArrayLike, *, window: st
         t0 = as_number(f"{_W} start", start)
         first = max(int(np.searchsorted(t, t0, side="left")), 3)
         if first >= n:
-            raise ProblemError(f"{_W} start: no step with at least 4 measurements at or "
-                               f"after t = {t0:g} s")
+            raise ProblemError(
+                f"{_W} start: no step with at least 4 measurements at or after t = {t0:g} s"
+            )
     dt = float(np.median(np.diff(t)))
     thr, p_test = detector_threshold(far_h / 3600.0, dt, len(sc))
     if not p_test < 0.5:
-        raise ProblemError(f"{_W} false_alarm_rate_per_h: {far_h:g} per hour with a sampling "
-                           f"interval of {dt:g} s and {len(sc)} scales gives a per-test "
-                           f"level {p_test:.3g}; must be < 0.5")
-    return _Setup(data=data, t=t, win=win, lv=lv, far_h=far_h, pw=pw, min_ref=min_ref,
-                  max_sd=max_sd, sc=sc, first=first, dt=dt, thr=thr, p_test=p_test,
-                  lam_star=noncentrality_for_power(thr, pw), general=not data.proportional,
-                  spread=track_spread(data.points),
-                  splits=[_splits(t, s, win) for s in sc])
+        raise ProblemError(
+            f"{_W} false_alarm_rate_per_h: {far_h:g} per hour with a sampling "
+            f"interval of {dt:g} s and {len(sc)} scales gives a per-test "
+            f"level {p_test:.3g}; must be < 0.5"
+        )
+    return _Setup(
+        data=data,
+        t=t,
+        win=win,
+        lv=lv,
+        far_h=far_h,
+        pw=pw,
+        min_ref=min_ref,
+        max_sd=max_sd,
+        sc=sc,
+        first=first,
+        dt=dt,
+        thr=thr,
+        p_test=p_test,
+        lam_star=noncentrality_for_power(thr, pw),
+        general=not data.proportional,
+        spread=track_spread(data.points),
+        splits=[_splits(t, s, win) for s in sc],
+    )
 
 
 def _records(k: int) -> dict[str, Any]:
     """The per-step arrays of :func:`track`, NaN/empty for the ``k`` reported steps."""
     return {
-        "normal": np.full((k, 3), np.nan), "offset": np.full(k, np.nan),
-        "stat": np.full(k, np.nan), "count": np.zeros(k),
-        "wstart": np.full(k, np.nan), "line_stat": np.full(k, np.nan),
-        "line_dir": np.full((k, 3), np.nan), "err": np.full(k, np.inf),
-        "resolved": np.zeros(k, dtype=bool), "det": np.full(k, np.nan),
-        "change": np.zeros(k, dtype=bool), "ctime": np.full(k, np.nan),
-        "tilt": np.full(k, np.nan), "tilt_any": np.full(k, np.nan),
+        "normal": np.full((k, 3), np.nan),
+        "offset": np.full(k, np.nan),
+        "stat": np.full(k, np.nan),
+        "count": np.zeros(k),
+        "wstart": np.full(k, np.nan),
+        "line_stat": np.full(k, np.nan),
+        "line_dir": np.full((k, 3), np.nan),
+        "err": np.full(k, np.inf),
+        "resolved": np.zeros(k, dtype=bool),
+        "det": np.full(k, np.nan),
+        "change": np.zeros(k, dtype=bool),
+        "ctime": np.full(k, np.nan),
+        "tilt": np.full(k, np.nan),
+        "tilt_any": np.full(k, np.nan),
     }
 
 
@@ -445,20 +534,40 @@ def _run(st: _Setup, rec: dict[str, Any]) -> list[int]:
         end = min(n, report + size)
         base = max(origin, min(int(sp_idx[report]) for sp_idx in splits))
         base = min(base, report)
-        fits = (_fits_general(data, lo, base, end, st.lv, warm) if st.general
-                else _fits_proportional(data, lo, base, end, st.spread, st.lv))
-        det, arg_s, tilt, tilt_any = _detect(data, t, fits, origin, report, end,
-                                             splits, st.min_ref, st.spread, st.lam_star,
-                                             st.general, st.max_sd)
+        fits = (
+            _fits_general(data, lo, base, end, st.lv, warm)
+            if st.general
+            else _fits_proportional(data, lo, base, end, st.spread, st.lv)
+        )
+        det, arg_s, tilt, tilt_any = _detect(
+            data,
+            t,
+            fits,
+            origin,
+            report,
+            end,
+            splits,
+            st.min_ref,
+            st.spread,
+            st.lam_star,
+            st.general,
+            st.max_sd,
+        )
         alarms = np.flatnonzero(det > st.thr)
         stop = end if alarms.size == 0 else report + int(alarms[0]) + 1
         rows = np.arange(report, stop)
         r_fit = rows - base
         r_out = rows - first
-        for key, src in (("normal", fits.normal), ("offset", fits.offset),
-                         ("stat", fits.stat), ("count", fits.count),
-                         ("line_stat", fits.line_stat), ("line_dir", fits.line_dir),
-                         ("err", fits.err), ("resolved", fits.resolved)):
+        for key, src in (
+            ("normal", fits.normal),
+            ("offset", fits.offset),
+            ("stat", fits.stat),
+            ("count", fits.count),
+            ("line_stat", fits.line_stat),
+            ("line_dir", fits.line_dir),
+            ("err", fits.err),
+            ("resolved", fits.resolved),
+        ):
             rec[key][r_out] = src[r_fit]
         rec["wstart"][r_out] = t[lo[rows]]
         rec["det"][r_out] = det[: stop - report]
@@ -478,32 +587,52 @@ def _run(st: _Setup, rec: dict[str, Any]) -> list[int]:
     return restarts
 
 
-def _package(st: _Setup, rec: dict[str, Any], restarts: list[int], elapsed: float
-             ) -> PlaneTrack:
+def _package(st: _Setup, rec: dict[str, Any], restarts: list[int], elapsed: float) -> PlaneTrack:
     """The :class:`PlaneTrack` of the steps: the planarity and line tests per step, the
     estimates blanked where not resolved."""
     resolved = rec["resolved"]
     count = rec["count"]
     with np.errstate(invalid="ignore"):
-        arr = _planarity_arrays(np.nan_to_num(rec["stat"], nan=0.0), np.maximum(count, 4.0),
-                                st.lv, np.nan_to_num(rec["line_stat"], nan=0.0), resolved)
+        arr = _planarity_arrays(
+            np.nan_to_num(rec["stat"], nan=0.0),
+            np.maximum(count, 4.0),
+            st.lv,
+            np.nan_to_num(rec["line_stat"], nan=0.0),
+            resolved,
+        )
     normal = np.where(resolved[:, None], rec["normal"], np.nan)
     offset = np.where(resolved, rec["offset"], np.nan)
     line_dir = np.where(resolved[:, None], np.nan, rec["line_dir"])
     k = len(count)
     return PlaneTrack(
-        times=st.t[st.first:], n_points=count, window_start=rec["wstart"], normals=normal,
-        offsets=offset, statistic=rec["stat"], dof=count - 3.0,
-        threshold=np.asarray(arr["threshold"], dtype=float), p_value=arr["p_value"],
-        resolved=resolved, planar=arr["planar"] & np.isfinite(rec["stat"]),
+        times=st.t[st.first :],
+        n_points=count,
+        window_start=rec["wstart"],
+        normals=normal,
+        offsets=offset,
+        statistic=rec["stat"],
+        dof=count - 3.0,
+        threshold=np.asarray(arr["threshold"], dtype=float),
+        p_value=arr["p_value"],
+        resolved=resolved,
+        planar=arr["planar"] & np.isfinite(rec["stat"]),
         line_statistic=rec["line_stat"],
         line_threshold=np.asarray(arr["line_threshold"], dtype=float),
-        line_direction=line_dir, numerical_error=rec["err"], change=rec["change"],
-        detector=rec["det"], detector_threshold=np.full(k, st.thr),
-        change_time=rec["ctime"], detectable_tilt=rec["tilt"],
-        detectable_tilt_any=rec["tilt_any"], level=st.lv,
-        false_alarm_rate_per_h=st.far_h, power=st.pw, window=st.win, scales=st.sc,
-        method="general" if st.general else "closed_form", test_level=st.p_test,
-        solve_time=elapsed, info={"restarts": restarts, "noncentrality": st.lam_star,
-                                  "dt": st.dt},
+        line_direction=line_dir,
+        numerical_error=rec["err"],
+        change=rec["change"],
+        detector=rec["det"],
+        detector_threshold=np.full(k, st.thr),
+        change_time=rec["ctime"],
+        detectable_tilt=rec["tilt"],
+        detectable_tilt_any=rec["tilt_any"],
+        level=st.lv,
+        false_alarm_rate_per_h=st.far_h,
+        power=st.pw,
+        window=st.win,
+        scales=st.sc,
+        method="general" if st.general else "closed_form",
+        test_level=st.p_test,
+        solve_time=elapsed,
+        info={"restarts": restarts, "noncentrality": st.lam_star, "dt": st.dt},
     )

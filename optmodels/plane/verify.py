@@ -90,13 +90,18 @@ def _rayleigh_check(
     absn = np.abs(normal)
     term = np.einsum("kij,kj->ki", qabs, absn) + np.abs(rho)[:, None] * (absn @ np.abs(d))
     gfloor = 2.0 * fl * np.linalg.norm(term, axis=-1) / nd
-    hfloor = 2.0 * fl * (np.linalg.norm(qabs, axis=(-2, -1))
-                         + np.abs(rho) * np.linalg.norm(d)) / nd
+    hfloor = 2.0 * fl * (np.linalg.norm(qabs, axis=(-2, -1)) + np.abs(rho) * np.linalg.norm(d)) / nd
     return _newton(gt, h, gfloor, hfloor, t, rho)
 
 
-def _newton(gt: FloatArray, h: FloatArray, gfloor: FloatArray, hfloor: FloatArray,
-            t: FloatArray, rho: FloatArray) -> _Check:
+def _newton(
+    gt: FloatArray,
+    h: FloatArray,
+    gfloor: FloatArray,
+    hfloor: FloatArray,
+    t: FloatArray,
+    rho: FloatArray,
+) -> _Check:
     hl = np.linalg.eigvalsh(h)
     hmin = hl[:, 0] - hfloor
     good = hmin > 0
@@ -104,8 +109,9 @@ def _newton(gt: FloatArray, h: FloatArray, gfloor: FloatArray, hfloor: FloatArra
     delta = np.where(good[:, None], np.linalg.solve(hh, gt[..., None])[..., 0], 0.0)
     # the Newton step itself, plus what the round-off of g could hide (bounded by the
     # smallest curvature)
-    step = np.where(good, np.linalg.norm(delta, axis=-1)
-                    + gfloor / np.where(good, hmin, 1.0), np.inf)
+    step = np.where(
+        good, np.linalg.norm(delta, axis=-1) + gfloor / np.where(good, hmin, 1.0), np.inf
+    )
     newton = -np.einsum("ka,kaj->kj", delta, t)
     curv = hl[:, 0] / np.maximum(np.abs(hl[:, 1]), np.finfo(float).tiny)
     return _Check(step=step, curvature=curv, rho=rho, newton=newton)
@@ -132,8 +138,9 @@ def _profile_check(points: FloatArray, covs: FloatArray, normal: FloatArray) -> 
         r = p - a
         g = 2.0 * (w * r) @ points - 2.0 * (w * w * r * r) @ dn
         # round-off: r_i is a difference of terms of size |x_i| + |a|
-        err = 2.0 * (w * (absx @ np.abs(n) + abs(a) + np.abs(r))) @ absx \
-            + 2.0 * (w * w * r * r) @ np.abs(dn)
+        err = 2.0 * (w * (absx @ np.abs(n) + abs(a) + np.abs(r))) @ absx + 2.0 * (
+            w * w * r * r
+        ) @ np.abs(dn)
         return g, err
 
     n0 = normal / np.linalg.norm(normal)
@@ -153,14 +160,22 @@ def _profile_check(points: FloatArray, covs: FloatArray, normal: FloatArray) -> 
     hfloor = 1e-8 * hmax + gfloor / hstep
     wd, proj, a0 = _weighted_offset(points, covs, n0)
     rho = np.array([float(np.sum(wd * (proj - a0) ** 2))])
-    return _newton((t @ g0)[None, :], h[None], np.array([gfloor]), np.array([hfloor]),
-                   t[None], rho)
+    return _newton((t @ g0)[None, :], h[None], np.array([gfloor]), np.array([hfloor]), t[None], rho)
 
 
 def _finish(
-    data: PlaneData, normal: FloatArray, offset: float, *, status: Status, method: str,
-    stationarity: float, build_time: float = 0.0, solve_time: float = 0.0,
-    iterations: int | None = None, message: str = "", info: dict[str, Any] | None = None,
+    data: PlaneData,
+    normal: FloatArray,
+    offset: float,
+    *,
+    status: Status,
+    method: str,
+    stationarity: float,
+    build_time: float = 0.0,
+    solve_time: float = 0.0,
+    iterations: int | None = None,
+    message: str = "",
+    info: dict[str, Any] | None = None,
     projected: FloatArray | None = None,
 ) -> PlaneSolution:
     """Canonical sign, projection (1.8) if not given, re-check against the original form.
@@ -175,26 +190,40 @@ def _finish(
     returned plane (the stationarity of (1.2)-(1.3) in the :math:`x_i`).
     """
     info = dict(info or {})
-    if not np.all(np.isfinite(normal)) or not np.isfinite(offset) \
-            or float(np.linalg.norm(normal)) == 0.0:
-        return failure(PlaneSolution, method, message or "non-finite iterate", status=status,
-                       build_time=build_time, solve_time=solve_time, iterations=iterations,
-                       info=info)
+    if (
+        not np.all(np.isfinite(normal))
+        or not np.isfinite(offset)
+        or float(np.linalg.norm(normal)) == 0.0
+    ):
+        return failure(
+            PlaneSolution,
+            method,
+            message or "non-finite iterate",
+            status=status,
+            build_time=build_time,
+            solve_time=solve_time,
+            iterations=iterations,
+            info=info,
+        )
     normal, offset = _canonical_sign(normal, offset)
     checks: dict[str, float] = {}
     if projected is None:
         projected = project(data, normal, offset)
     else:
         unit = normal / np.linalg.norm(normal)
-        opt = _oblique_projection(data.points, data.covs, unit,
-                                  float(offset / np.linalg.norm(normal)))
+        opt = _oblique_projection(
+            data.points, data.covs, unit, float(offset / np.linalg.norm(normal))
+        )
         e = projected - opt
         dist2 = np.sum(e * np.linalg.solve(data.covs, e[..., None])[..., 0], axis=1)
         checks["projection"] = float(np.sqrt(np.max(np.abs(dist2))))
     residuals = constraint_residuals(data, projected, normal, offset)
     scale = float(np.max(np.abs(data.points)))
-    checks.update(unit_normal=residuals["unit_normal"], plane=residuals["plane"] / scale,
-                  stationarity=float(stationarity))
+    checks.update(
+        unit_normal=residuals["unit_normal"],
+        plane=residuals["plane"] / scale,
+        stationarity=float(stationarity),
+    )
     info["verification"] = checks
     sol = PlaneSolution(
         status=status,
@@ -212,8 +241,12 @@ def _finish(
     )
     # the one gate (core.finish) on the dimensionless checks; a refused plane is returned
     # without an estimate (its numbers stay in info["rejected"] for diagnosis)
-    return finish(sol, checks, reject=_failure,
-                  note=lambda v: f"re-check of (1.2)-(1.3): worst {v.worst:.2g} ({v.key})")
+    return finish(
+        sol,
+        checks,
+        reject=_failure,
+        note=lambda v: f"re-check of (1.2)-(1.3): worst {v.worst:.2g} ({v.key})",
+    )
 
 
 def _resolve(sol: PlaneSolution, data: PlaneData, level: float | None) -> PlaneSolution:
@@ -229,15 +262,21 @@ def _resolve(sol: PlaneSolution, data: PlaneData, level: float | None) -> PlaneS
     lt = line_test(data, level)
     sol.resolved = lt.resolved
     sol.line_direction = lt.direction
-    sol.info["line_test"] = {"statistic": lt.statistic, "dof": lt.dof,
-                             "threshold": lt.threshold, "level": lt.level,
-                             "exact": lt.exact}
+    sol.info["line_test"] = {
+        "statistic": lt.statistic,
+        "dof": lt.dof,
+        "threshold": lt.threshold,
+        "level": lt.level,
+        "exact": lt.exact,
+    }
     if lt.resolved:
         return sol
     sol = _failure(sol)
     sol.status = Status.ERROR
-    sol.message = (f"unresolved: the points lie on a line at level {lt.level:g} (line "
-                   f"statistic {lt.statistic:.6g} <= {lt.threshold:.6g}, chi2({lt.dof})): "
-                   "the plane is not determined; line_direction is the maximum-likelihood "
-                   "line")
+    sol.message = (
+        f"unresolved: the points lie on a line at level {lt.level:g} (line "
+        f"statistic {lt.statistic:.6g} <= {lt.threshold:.6g}, chi2({lt.dof})): "
+        "the plane is not determined; line_direction is the maximum-likelihood "
+        "line"
+    )
     return sol

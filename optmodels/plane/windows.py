@@ -76,8 +76,9 @@ def track_spread(points: FloatArray) -> float:
     return s if s > 0 else 1.0
 
 
-def direct_moments(points: FloatArray, w: FloatArray, lo: np.ndarray, hi: np.ndarray,
-                   spread: float) -> Moments:
+def direct_moments(
+    points: FloatArray, w: FloatArray, lo: np.ndarray, hi: np.ndarray, spread: float
+) -> Moments:
     """From-scratch moments of the ranges ``[lo_k, hi_k]`` (inclusive), one loop per
     range: the reference that :func:`range_moments` is tested against."""
     k = len(lo)
@@ -86,8 +87,8 @@ def direct_moments(points: FloatArray, w: FloatArray, lo: np.ndarray, hi: np.nda
     q = np.empty((k, 3, 3))
     qabs = np.empty((k, 3, 3))
     for j in range(k):
-        x = points[lo[j]: hi[j] + 1]
-        ww = w[lo[j]: hi[j] + 1]
+        x = points[lo[j] : hi[j] + 1]
+        ww = w[lo[j] : hi[j] + 1]
         ref = x[0]
         y = (x - ref) / spread
         s0[j] = np.sum(ww)
@@ -97,12 +98,26 @@ def direct_moments(points: FloatArray, w: FloatArray, lo: np.ndarray, hi: np.nda
         ay = np.abs(y)
         qabs[j] = (ay * ww[:, None]).T @ ay + s0[j] * np.outer(np.abs(m), np.abs(m))
         mean[j] = ref + spread * m
-    return Moments(s0=s0, mean=mean, q=q, qabs=qabs, count=(hi - lo + 1).astype(float),
-                   spread=spread, recomputed=np.ones(k, dtype=bool))
+    return Moments(
+        s0=s0,
+        mean=mean,
+        q=q,
+        qabs=qabs,
+        count=(hi - lo + 1).astype(float),
+        spread=spread,
+        recomputed=np.ones(k, dtype=bool),
+    )
 
 
-def range_moments(points: FloatArray, w: FloatArray, lo: np.ndarray, hi: np.ndarray, *,
-                  origin: int = 0, spread: float | None = None) -> Moments:
+def range_moments(
+    points: FloatArray,
+    w: FloatArray,
+    lo: np.ndarray,
+    hi: np.ndarray,
+    *,
+    origin: int = 0,
+    spread: float | None = None,
+) -> Moments:
     """Moments of the index ranges ``[lo_k, hi_k]`` (inclusive, ``origin <= lo_k <= hi_k``)
     of ``points`` (N, 3) with weights ``w`` (N,), in O(1) per range after an O(N) pass.
 
@@ -115,9 +130,15 @@ def range_moments(points: FloatArray, w: FloatArray, lo: np.ndarray, hi: np.ndar
     k = len(lo)
     if k == 0:
         z = np.zeros(0)
-        return Moments(s0=z, mean=np.zeros((0, 3)), q=np.zeros((0, 3, 3)),
-                       qabs=np.zeros((0, 3, 3)), count=z, spread=sp,
-                       recomputed=np.zeros(0, dtype=bool))
+        return Moments(
+            s0=z,
+            mean=np.zeros((0, 3)),
+            q=np.zeros((0, 3, 3)),
+            qabs=np.zeros((0, 3, 3)),
+            count=z,
+            spread=sp,
+            recomputed=np.zeros(0, dtype=bool),
+        )
     length = int(np.max(hi - lo + 1))
     end = int(np.max(hi)) + 1
     idx = np.arange(origin, end)
@@ -137,7 +158,8 @@ def range_moments(points: FloatArray, w: FloatArray, lo: np.ndarray, hi: np.ndar
 
     def _scan(a: FloatArray, reverse: bool) -> FloatArray:
         shaped = np.concatenate([a, np.zeros((pad, *a.shape[1:]))]).reshape(
-            (n_ep, length, *a.shape[1:]))
+            (n_ep, length, *a.shape[1:])
+        )
         if reverse:
             out = np.cumsum(shaped[:, ::-1], axis=1)[:, ::-1]
         else:
@@ -202,22 +224,40 @@ def range_moments(points: FloatArray, w: FloatArray, lo: np.ndarray, hi: np.ndar
         s0[span] = tot
         q[span] = qa + qb + f[:, None, None] * _outer(d, d)
         mean[span] = ref_b + sp * (mb + (sa0 / tot)[:, None] * d)
-        qabs[span] = (sa2a + p2a[b] + _outer(sa1a, np.abs(ma)) + _outer(p1a[b], np.abs(mb))
-                      + f[:, None, None] * _outer(np.abs(d), np.abs(d)))
+        qabs[span] = (
+            sa2a
+            + p2a[b]
+            + _outer(sa1a, np.abs(ma))
+            + _outer(p1a[b], np.abs(mb))
+            + f[:, None, None] * _outer(np.abs(d), np.abs(d))
+        )
     q = 0.5 * (q + np.swapaxes(q, -1, -2))
-    return Moments(s0=s0, mean=mean, q=q, qabs=qabs, count=(hi - lo + 1).astype(float),
-                   spread=sp, recomputed=recomputed)
+    return Moments(
+        s0=s0,
+        mean=mean,
+        q=q,
+        qabs=qabs,
+        count=(hi - lo + 1).astype(float),
+        spread=sp,
+        recomputed=recomputed,
+    )
 
 
 # =========================================================================== the window's unit
-_WINDOW_HELP = ('write window_seconds=40.0 (or window="40s") for the last 40 s, '
-                'window_points=100 (or window="100pts") for the last 100 measurements, or '
-                'nothing (window=None, "growing") for a growing window')
+_WINDOW_HELP = (
+    'write window_seconds=40.0 (or window="40s") for the last 40 s, '
+    'window_points=100 (or window="100pts") for the last 100 measurements, or '
+    'nothing (window=None, "growing") for a growing window'
+)
 
 
-def window_spec(window: str | None = None, *, window_points: int | None = None,
-                window_seconds: float | None = None, where: str = "plane.track"
-                ) -> float | int | None:
+def window_spec(
+    window: str | None = None,
+    *,
+    window_points: int | None = None,
+    window_seconds: float | None = None,
+    where: str = "plane.track",
+) -> float | int | None:
     """The sliding window of :func:`optmodels.plane.tracking.track`, with its unit
     stated: ``window_seconds`` (s), ``window_points`` (measurements), or ``window`` as
     text with a unit (``"40s"``, ``"100pts"``, ``"growing"``); at most one. A bare
@@ -231,26 +271,36 @@ def window_spec(window: str | None = None, *, window_points: int | None = None,
         A bare number, two of the three given, or a value out of range; the message says
         what to write.
     """
-    given = [k for k, v in (("window", window), ("window_points", window_points),
-                            ("window_seconds", window_seconds)) if v is not None]
+    given = [
+        k
+        for k, v in (
+            ("window", window),
+            ("window_points", window_points),
+            ("window_seconds", window_seconds),
+        )
+        if v is not None
+    ]
     if len(given) > 1:
         raise ProblemError(f"{where} {'/'.join(given)}: give one window, got {len(given)}")
     if window_points is not None:
         if isinstance(window_points, bool | np.bool_) or not isinstance(
-                window_points, int | np.integer):
-            raise ProblemError(f"{where} window_points: expected a whole number of "
-                               f"measurements (>= 4), got {window_points!r}")
+            window_points, int | np.integer
+        ):
+            raise ProblemError(
+                f"{where} window_points: expected a whole number of "
+                f"measurements (>= 4), got {window_points!r}"
+            )
         return as_count(f"{where} window_points", window_points, minimum=4)
     if window_seconds is not None:
         if isinstance(window_seconds, bool | np.bool_):
-            raise ProblemError(f"{where} window_seconds: expected seconds, got "
-                               f"{window_seconds!r}")
+            raise ProblemError(f"{where} window_seconds: expected seconds, got {window_seconds!r}")
         return as_positive(f"{where} window_seconds", window_seconds)
     if window is None:
         return None
     if not isinstance(window, str):
-        raise ProblemError(f"{where} window: {window!r} does not say its unit (points or "
-                           f"seconds?); {_WINDOW_HELP}")
+        raise ProblemError(
+            f"{where} window: {window!r} does not say its unit (points or seconds?); {_WINDOW_HELP}"
+        )
     return parse_window_text(window, where)
 
 
@@ -274,8 +324,9 @@ def parse_window_text(text: str, where: str) -> float | int | None:
             except ValueError:
                 break
             return as_count(f"{where} window (points)", count, minimum=4)
-    raise ProblemError(f"{where} window: {text!r} does not say its unit (points or "
-                       f"seconds?); {_WINDOW_HELP}")
+    raise ProblemError(
+        f"{where} window: {text!r} does not say its unit (points or seconds?); {_WINDOW_HELP}"
+    )
 
 
 def window_label(window: float | int | None) -> str:

@@ -47,8 +47,17 @@ from optmodels.core import (
     as_probability,
 )
 
-__all__ = ["TRAFFIC_KINDS", "Encounter", "RadarCell", "Scan", "encounter", "observe",
-           "polar_to_cartesian", "traffic_encounter", "traffic_sensor"]
+__all__ = [
+    "TRAFFIC_KINDS",
+    "Encounter",
+    "RadarCell",
+    "Scan",
+    "encounter",
+    "observe",
+    "polar_to_cartesian",
+    "traffic_encounter",
+    "traffic_sensor",
+]
 
 _W = "scenarios.encounter"
 
@@ -76,8 +85,7 @@ class RadarCell:
         self.sigma_range = as_positive(f"{w} sigma_range (m)", self.sigma_range)
         self.sigma_azimuth = as_positive(f"{w} sigma_azimuth (rad)", self.sigma_azimuth)
         self.pd = as_probability(f"{w} pd", self.pd, low_open=True)
-        self.clutter_mean = as_positive(f"{w} clutter_mean", self.clutter_mean,
-                                        allow_zero=True)
+        self.clutter_mean = as_positive(f"{w} clutter_mean", self.clutter_mean, allow_zero=True)
         self.site = as_finite_array(f"{w} site (m)", self.site, shape=(2,))
         if self.region is not None:
             r = as_finite_array(f"{w} region (m)", self.region, shape=(4,))
@@ -103,8 +111,9 @@ class RadarCell:
         the pairwise relation |Δr| < range_res and |Δaz| < azimuth_res."""
         pol = self.polar(xy)
         k = len(pol)
-        near = ((np.abs(pol[:, None, 0] - pol[None, :, 0]) < self.range_res)
-                & (np.abs(_wrap(pol[:, None, 1] - pol[None, :, 1])) < self.azimuth_res))
+        near = (np.abs(pol[:, None, 0] - pol[None, :, 0]) < self.range_res) & (
+            np.abs(_wrap(pol[:, None, 1] - pol[None, :, 1])) < self.azimuth_res
+        )
         label = list(range(k))
         for i in range(k):
             for j in range(i + 1, k):
@@ -121,8 +130,7 @@ def _wrap(a: FloatArray) -> FloatArray:
     return (a + np.pi) % (2 * np.pi) - np.pi
 
 
-def polar_to_cartesian(sensor: RadarCell, rng_az: FloatArray
-                       ) -> tuple[FloatArray, FloatArray]:
+def polar_to_cartesian(sensor: RadarCell, rng_az: FloatArray) -> tuple[FloatArray, FloatArray]:
     """Cartesian points (k, 2) and their covariances (k, 2, 2) = J diag(σ_r², σ_az²) Jᵀ of
     polar measurements (k, 2) (m, rad), J evaluated at each measurement."""
     ra = np.atleast_2d(rng_az)
@@ -172,8 +180,7 @@ class Encounter:
         return sum(any(len(g) > 1 for g in s.groups) for s in self.scans)
 
 
-def observe(sensor: RadarCell, xy: FloatArray, time: float,
-            rng: np.random.Generator) -> Scan:
+def observe(sensor: RadarCell, xy: FloatArray, time: float, rng: np.random.Generator) -> Scan:
     """One scan of the objects at ``xy`` (Q, 2) m (module docstring)."""
     groups = sensor.groups(xy)
     pts, sources = [], []
@@ -187,8 +194,7 @@ def observe(sensor: RadarCell, xy: FloatArray, time: float,
     x0, x1, y0, y1 = sensor.region
     for _ in range(int(rng.poisson(sensor.clutter_mean))):
         p = np.array([rng.uniform(x0, x1), rng.uniform(y0, y1)])
-        pts.append(sensor.polar(p)[0] + rng.normal(0.0, [sensor.sigma_range,
-                                                         sensor.sigma_azimuth]))
+        pts.append(sensor.polar(p)[0] + rng.normal(0.0, [sensor.sigma_range, sensor.sigma_azimuth]))
         sources.append(())
     if pts:
         meas, covs = polar_to_cartesian(sensor, np.array(pts))
@@ -198,11 +204,20 @@ def observe(sensor: RadarCell, xy: FloatArray, time: float,
     return Scan(float(time), meas[order], covs[order], [sources[i] for i in order], groups)
 
 
-def encounter(rng: np.random.Generator, *, kind: str = "crossing", q: int = 2,
-              separation: float = 100.0, sensor: RadarCell | None = None,
-              range_0: float = 50_000.0, speed: float = 250.0,
-              half_angle_deg: float = 5.0, scans: int = 24, dt: float = 5.0,
-              init_sigma: tuple[float, float] = (30.0, 5.0)) -> Encounter:
+def encounter(
+    rng: np.random.Generator,
+    *,
+    kind: str = "crossing",
+    q: int = 2,
+    separation: float = 100.0,
+    sensor: RadarCell | None = None,
+    range_0: float = 50_000.0,
+    speed: float = 250.0,
+    half_angle_deg: float = 5.0,
+    scans: int = 24,
+    dt: float = 5.0,
+    init_sigma: tuple[float, float] = (30.0, 5.0),
+) -> Encounter:
     """Simulate one encounter (module docstring).
 
     Parameters
@@ -242,9 +257,16 @@ def encounter(rng: np.random.Generator, *, kind: str = "crossing", q: int = 2,
     if sensor.region is None:
         pos = truth[:, :, [0, 2]].reshape(-1, 2)
         lo, hi = pos.min(axis=0) - 2000.0, pos.max(axis=0) + 2000.0
-        sensor = RadarCell(sensor.range_res, sensor.azimuth_res, sensor.sigma_range,
-                           sensor.sigma_azimuth, sensor.pd, sensor.clutter_mean,
-                           sensor.site.copy(), (lo[0], hi[0], lo[1], hi[1]))
+        sensor = RadarCell(
+            sensor.range_res,
+            sensor.azimuth_res,
+            sensor.sigma_range,
+            sensor.sigma_azimuth,
+            sensor.pd,
+            sensor.clutter_mean,
+            sensor.site.copy(),
+            (lo[0], hi[0], lo[1], hi[1]),
+        )
     p0 = np.diag([sp**2, sv**2, sp**2, sv**2])
     initial = truth[:, 0, :] + rng.multivariate_normal(np.zeros(4), p0, size=q)
     obs = [observe(sensor, truth[:, t, :][:, [0, 2]], times[t], rng) for t in range(scans)]
@@ -259,12 +281,25 @@ TRAFFIC_KINDS = ("fast_crossing", "formation", "long_merge")
 def traffic_sensor() -> RadarCell:
     """The issue-29 radar: cell 150 m × 1.4°, σ 50 m / 0.1°, P_D 0.9, 2 clutter returns
     per scan in the scene box."""
-    return RadarCell(range_res=150.0, azimuth_res=math.radians(1.4), sigma_range=50.0,
-                     sigma_azimuth=math.radians(0.1), pd=0.9, clutter_mean=2.0)
+    return RadarCell(
+        range_res=150.0,
+        azimuth_res=math.radians(1.4),
+        sigma_range=50.0,
+        sigma_azimuth=math.radians(0.1),
+        pd=0.9,
+        clutter_mean=2.0,
+    )
 
 
-def _pair_paths(rng: np.random.Generator, times: FloatArray, tc: float, centre: FloatArray,
-                v_rel: float, miss: float, speed: float) -> FloatArray:
+def _pair_paths(
+    rng: np.random.Generator,
+    times: FloatArray,
+    tc: float,
+    centre: FloatArray,
+    v_rel: float,
+    miss: float,
+    speed: float,
+) -> FloatArray:
     """Two constant-velocity paths: object 0 at ``speed`` with a random heading through
     ``centre`` at ``tc``; object 1 with relative velocity of magnitude ``v_rel`` at a
     random angle, passing object 0 at the miss distance ``miss`` at ``tc``."""
@@ -282,10 +317,16 @@ def _pair_paths(rng: np.random.Generator, times: FloatArray, tc: float, centre: 
     return truth
 
 
-def traffic_encounter(rng: np.random.Generator, kind: str = "fast_crossing", *,
-                      sensor: RadarCell | None = None, scans: int = 49, dt: float = 5.0,
-                      init_sigma: tuple[float, float] = (30.0, 5.0),
-                      max_tries: int = 200) -> Encounter:
+def traffic_encounter(
+    rng: np.random.Generator,
+    kind: str = "fast_crossing",
+    *,
+    sensor: RadarCell | None = None,
+    scans: int = 49,
+    dt: float = 5.0,
+    init_sigma: tuple[float, float] = (30.0, 5.0),
+    max_tries: int = 200,
+) -> Encounter:
     """A pair encounter drawn to look like real close encounters of air traffic (issue
     29), seen by :func:`traffic_sensor` (or ``sensor``) for ``scans`` scans ``dt`` apart.
 
@@ -319,8 +360,7 @@ def traffic_encounter(rng: np.random.Generator, kind: str = "fast_crossing", *,
     """
     w = "scenarios.traffic_encounter"
     kind = as_choice(f"{w} kind", kind, TRAFFIC_KINDS)
-    sensor = traffic_sensor() if sensor is None else as_instance(f"{w} sensor", sensor,
-                                                                 RadarCell)
+    sensor = traffic_sensor() if sensor is None else as_instance(f"{w} sensor", sensor, RadarCell)
     scans = as_count(f"{w} scans", scans, minimum=3)
     dt = as_positive(f"{w} dt (s)", dt)
     sp, sv = (as_positive(f"{w} init_sigma", v) for v in init_sigma)
@@ -338,19 +378,29 @@ def traffic_encounter(rng: np.random.Generator, kind: str = "fast_crossing", *,
         else:
             v_rel, miss = rng.uniform(3.0, 30.0), rng.uniform(0.0, 200.0)
         truth = _pair_paths(rng, times, tc, centre, v_rel, miss, speed)
-        merged = sum(any(len(g) > 1 for g in sensor.groups(truth[:, t][:, [0, 2]]))
-                     for t in range(scans))
-        if (kind == "fast_crossing" and 1 <= merged <= 3) or kind == "formation" or (
-                kind == "long_merge" and merged >= 8):
+        merged = sum(
+            any(len(g) > 1 for g in sensor.groups(truth[:, t][:, [0, 2]])) for t in range(scans)
+        )
+        if (
+            (kind == "fast_crossing" and 1 <= merged <= 3)
+            or kind == "formation"
+            or (kind == "long_merge" and merged >= 8)
+        ):
             break
     else:
-        raise ProblemError(f"{w}: no {kind} draw with the wanted merged scans in "
-                           f"{max_tries} tries")
+        raise ProblemError(f"{w}: no {kind} draw with the wanted merged scans in {max_tries} tries")
     pos = truth[:, :, [0, 2]].reshape(-1, 2)
     lo, hi = pos.min(axis=0) - 2000.0, pos.max(axis=0) + 2000.0
-    sensor = RadarCell(sensor.range_res, sensor.azimuth_res, sensor.sigma_range,
-                       sensor.sigma_azimuth, sensor.pd, sensor.clutter_mean,
-                       sensor.site.copy(), (lo[0], hi[0], lo[1], hi[1]))
+    sensor = RadarCell(
+        sensor.range_res,
+        sensor.azimuth_res,
+        sensor.sigma_range,
+        sensor.sigma_azimuth,
+        sensor.pd,
+        sensor.clutter_mean,
+        sensor.site.copy(),
+        (lo[0], hi[0], lo[1], hi[1]),
+    )
     p0 = np.diag([sp**2, sv**2, sp**2, sv**2])
     initial = truth[:, 0, :] + rng.multivariate_normal(np.zeros(4), p0, size=2)
     obs = [observe(sensor, truth[:, t, :][:, [0, 2]], times[t], rng) for t in range(scans)]

@@ -54,15 +54,26 @@ def _rng(seed: int | np.random.Generator | None, where: str) -> np.random.Genera
     return seeds.as_generator(f"{where} seed", seed, allow_none=True)
 
 
-def _measure(rng: np.random.Generator, times: list[FloatArray], start: FloatArray,
-             velocity: FloatArray, sigma2: float) -> list[FloatArray]:
-    return [start[j] + velocity[j] * t + rng.normal(0.0, np.sqrt(sigma2), t.size)
-            for j, t in enumerate(times)]
+def _measure(
+    rng: np.random.Generator,
+    times: list[FloatArray],
+    start: FloatArray,
+    velocity: FloatArray,
+    sigma2: float,
+) -> list[FloatArray]:
+    return [
+        start[j] + velocity[j] * t + rng.normal(0.0, np.sqrt(sigma2), t.size)
+        for j, t in enumerate(times)
+    ]
 
 
-def launcher_release(seed: int | np.random.Generator | None = None, *,
-                     family: Literal["diverging", "parallel"] = "diverging", q: int = 4,
-                     sigma: float = 150.0) -> TrajectoryScenario:
+def launcher_release(
+    seed: int | np.random.Generator | None = None,
+    *,
+    family: Literal["diverging", "parallel"] = "diverging",
+    q: int = 4,
+    sigma: float = 150.0,
+) -> TrajectoryScenario:
     """Objects of one launch seen by a radar with unequal, object-specific schedules.
 
     Diverging: released at ``t = 0`` from the along-track position 0 with relative
@@ -101,13 +112,20 @@ def launcher_release(seed: int | np.random.Generator | None = None, *,
     else:  # pragma: no cover - as_choice above
         raise ProblemError(f"family: expected 'diverging' or 'parallel', got {family!r}")
     s2 = sigma * sigma
-    return TrajectoryScenario(times, _measure(rng, times, start, velocity, s2), start,
-                              velocity, s2, family)
+    return TrajectoryScenario(
+        times, _measure(rng, times, start, velocity, s2), start, velocity, s2, family
+    )
 
 
-def equally_spaced(seed: int | np.random.Generator | None = None, *, n: int = 10,
-                   q: int = 2, dt: float = 1.0, family: str = "diverging",
-                   sigma2: float = 1.0) -> TrajectoryScenario:
+def equally_spaced(
+    seed: int | np.random.Generator | None = None,
+    *,
+    n: int = 10,
+    q: int = 2,
+    dt: float = 1.0,
+    family: str = "diverging",
+    sigma2: float = 1.0,
+) -> TrajectoryScenario:
     """The paper's setting of (15)-(20): ``Q`` objects measured together at
     ``t_i = (i − 1)·dt``, ``i = 1..N`` (the first measurement at the common start).
     ``dt`` in s, ``sigma2`` in m².
@@ -135,5 +153,6 @@ def equally_spaced(seed: int | np.random.Generator | None = None, *, n: int = 10
         start, velocity = np.linspace(0.0, 10.0, q), np.linspace(-1.0, 1.0, q)
     else:
         raise ProblemError(f"family: unknown {family!r}")
-    return TrajectoryScenario(times, _measure(rng, times, start, velocity, sigma2), start,
-                              velocity, sigma2, family)
+    return TrajectoryScenario(
+        times, _measure(rng, times, start, velocity, sigma2), start, velocity, sigma2, family
+    )

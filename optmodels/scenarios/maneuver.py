@@ -98,8 +98,10 @@ def paper_plane_example(
     duration = as_positive(f"{w} duration", duration)
     phase = as_number(f"{w} phase", phase)
     if round(rate_hz * duration) < 3 or rate_hz * duration > 1e8:
-        raise ProblemError(f"{w} rate_hz, duration: {rate_hz:g} Hz for {duration:g} s gives "
-                           f"{round(rate_hz * duration)} samples; need 3 ... 1e8")
+        raise ProblemError(
+            f"{w} rate_hz, duration: {rate_hz:g} Hz for {duration:g} s gives "
+            f"{round(rate_hz * duration)} samples; need 3 ... 1e8"
+        )
     rng = _rng(seed, w)
     eps = np.deg2rad(elevation_deg)
     centre = np.array([center_distance * np.cos(eps), 0.0, center_distance * np.sin(eps)])
@@ -109,12 +111,23 @@ def paper_plane_example(
     truth = centre + radius * np.column_stack([np.cos(ang), np.zeros(n), np.sin(ang)])
     cov = sigma2 * np.eye(3)
     points = truth + rng.normal(scale=np.sqrt(sigma2), size=truth.shape)
-    return ManeuverScenario(times=times, truth=truth, points=points, cov=cov,
-                            alpha2=np.ones(n), normal=np.array([0.0, 1.0, 0.0]), offset=0.0)
+    return ManeuverScenario(
+        times=times,
+        truth=truth,
+        points=points,
+        cov=cov,
+        alpha2=np.ones(n),
+        normal=np.array([0.0, 1.0, 0.0]),
+        offset=0.0,
+    )
 
 
 def _plane_patch(
-    rng: np.random.Generator, n: int, normal: FloatArray, offset: float, extent: float,
+    rng: np.random.Generator,
+    n: int,
+    normal: FloatArray,
+    offset: float,
+    extent: float,
     centre_in_plane: FloatArray | None = None,
 ) -> FloatArray:
     """N true points uniformly on a square patch of the plane ⟨normal, x⟩ = offset."""
@@ -126,8 +139,13 @@ def _plane_patch(
 
 
 def two_source_plane(
-    n: int, seed: int | np.random.Generator = 0, *, sigma: float = 10.0,
-    ratio2: float = 100.0, extent: float = 2000.0, tilt_deg: float = 30.0,
+    n: int,
+    seed: int | np.random.Generator = 0,
+    *,
+    sigma: float = 10.0,
+    ratio2: float = 100.0,
+    extent: float = 2000.0,
+    tilt_deg: float = 30.0,
     offset: float = 1000.0,
 ) -> ManeuverScenario:
     """Setting (a) of the comparison: two sources whose error variances differ by
@@ -149,12 +167,22 @@ def two_source_plane(
     alpha2 = np.where(np.arange(n) % 2 == 0, 1.0, ratio2)
     cov = sigma**2 * np.eye(3)
     points = truth + rng.normal(size=(n, 3)) * (sigma * np.sqrt(alpha2))[:, None]
-    return ManeuverScenario(times=np.arange(n, dtype=float), truth=truth, points=points,
-                            cov=cov, alpha2=alpha2, normal=normal, offset=offset)
+    return ManeuverScenario(
+        times=np.arange(n, dtype=float),
+        truth=truth,
+        points=points,
+        cov=cov,
+        alpha2=alpha2,
+        normal=normal,
+        offset=offset,
+    )
 
 
 def radar_covariances(
-    points: FloatArray, site: FloatArray, sigma_range: float, sigma_az: float,
+    points: FloatArray,
+    site: FloatArray,
+    sigma_range: float,
+    sigma_az: float,
     sigma_el: float,
 ) -> FloatArray:
     """Cartesian error covariances (N, 3, 3) of a radar at ``site`` measuring range,
@@ -166,8 +194,13 @@ def radar_covariances(
 
 
 def radar_plane(
-    n: int, seed: int | np.random.Generator = 0, *, sigma_range: float = 10.0,
-    sigma_angle: float = 2e-3, r_min: float = 20e3, r_max: float = 50e3,
+    n: int,
+    seed: int | np.random.Generator = 0,
+    *,
+    sigma_range: float = 10.0,
+    sigma_angle: float = 2e-3,
+    r_min: float = 20e3,
+    r_max: float = 50e3,
     geometry: str = "broadside",
 ) -> ManeuverScenario:
     """Setting (b) of the comparison: one radar at the origin, anisotropic errors
@@ -192,8 +225,9 @@ def radar_plane(
     los = centre / np.linalg.norm(centre)
     if geometry == "broadside":
         normal = los
-        truth = _plane_patch(rng, n, normal, float(normal @ centre), span,
-                             centre - (normal @ centre) * normal)
+        truth = _plane_patch(
+            rng, n, normal, float(normal @ centre), span, centre - (normal @ centre) * normal
+        )
     elif geometry == "edge-on":
         normal = np.array([1.0, 0.0, 0.0])
         _, _, vt = np.linalg.svd(normal[None, :])
@@ -207,8 +241,15 @@ def radar_plane(
     offset = float(normal @ truth[0])
     if offset < 0:
         normal, offset = -normal, -offset
-    return ManeuverScenario(times=np.arange(n, dtype=float), truth=truth, points=points,
-                            cov=cov, alpha2=None, normal=normal, offset=offset)
+    return ManeuverScenario(
+        times=np.arange(n, dtype=float),
+        truth=truth,
+        points=points,
+        cov=cov,
+        alpha2=None,
+        normal=normal,
+        offset=offset,
+    )
 
 
 @dataclass(frozen=True)
@@ -329,6 +370,15 @@ def climb_turn_track(
             nv, off = -nv, -off
         normals[k], offsets[k] = nv, off
     tilt = np.degrees(np.arccos(np.clip(np.abs(normals[:, 2]), 0.0, 1.0)))
-    return ManeuverTrack(times=times, truth=truth, points=points, cov=cov, site=site,
-                         transitions=np.array([t1, t2]), segment=seg, normals=normals,
-                         offsets=offsets, tilt_deg=tilt)
+    return ManeuverTrack(
+        times=times,
+        truth=truth,
+        points=points,
+        cov=cov,
+        site=site,
+        transitions=np.array([t1, t2]),
+        segment=seg,
+        normals=normals,
+        offsets=offsets,
+        tilt_deg=tilt,
+    )

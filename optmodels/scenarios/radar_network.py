@@ -31,8 +31,17 @@ from optmodels.biasfield.fields import BiasField
 from optmodels.biasfield.geometry import shift_from_bias, to_polar, wrap_angle
 from optmodels.core import FloatArray, ProblemError, as_finite_array, as_positive
 
-__all__ = ["AircraftPaths", "RadarNetworkScenario", "fly_paths", "fly_paths3d",
-           "grid_sites", "line_sites", "radar_network", "ring_sites", "simulate_plots"]
+__all__ = [
+    "AircraftPaths",
+    "RadarNetworkScenario",
+    "fly_paths",
+    "fly_paths3d",
+    "grid_sites",
+    "line_sites",
+    "radar_network",
+    "ring_sites",
+    "simulate_plots",
+]
 
 #: Default network: four radars on a ~200 km square, typical en-route accuracy.
 #: Default azimuth noise, 0.08° (rad).
@@ -48,8 +57,9 @@ EARTH_RADIUS = 6371e3
 MAX_ELEVATION = float(np.deg2rad(40.0))
 
 
-def _heading_profile(rng: np.random.Generator, nt: int, dt: float,
-                     turn_rate: tuple[float, float], holding: float) -> FloatArray:
+def _heading_profile(
+    rng: np.random.Generator, nt: int, dt: float, turn_rate: tuple[float, float], holding: float
+) -> FloatArray:
     """Turn rate (rad/s) per step: legs of 2-10 min joined by 20-90 s turns; with
     probability ``holding`` one holding pattern (a racetrack: two 180° rate-one turns of
     3°/s joined by 1-min legs, flown 1-3 times) after the first leg."""
@@ -59,22 +69,26 @@ def _heading_profile(rng: np.random.Generator, nt: int, dt: float,
     while k < nt:
         leg = int(rng.uniform(120, 600) / dt)
         turn = int(rng.uniform(20, 90) / dt)
-        rate[k + leg:k + leg + turn] = np.deg2rad(rng.uniform(*turn_rate)) * rng.choice([-1, 1])
+        rate[k + leg : k + leg + turn] = np.deg2rad(rng.uniform(*turn_rate)) * rng.choice([-1, 1])
         k += leg + turn
         if first and rng.uniform() < holding:
             side = rng.choice([-1, 1])
             half, straight = int(60 / dt), int(60 / dt)
             for _ in range(int(rng.integers(1, 4))):
                 for _ in range(2):
-                    rate[k:k + half] = side * np.deg2rad(3.0)
+                    rate[k : k + half] = side * np.deg2rad(3.0)
                     k += half + straight
         first = False
     return rate
 
 
-def _height_profile(rng: np.random.Generator, nt: int, dt: float,
-                    levels: tuple[float, float], vertical_rate: tuple[float, float]
-                    ) -> FloatArray:
+def _height_profile(
+    rng: np.random.Generator,
+    nt: int,
+    dt: float,
+    levels: tuple[float, float],
+    vertical_rate: tuple[float, float],
+) -> FloatArray:
     """Heights (m) per step: a level held 2-10 min, then a climb or descent at 5-15 m/s
     (``vertical_rate``) to a new level drawn in ``levels``; repeated."""
     h = np.empty(nt)
@@ -82,21 +96,28 @@ def _height_profile(rng: np.random.Generator, nt: int, dt: float,
     k = 0
     while k < nt:
         hold = int(rng.uniform(120, 600) / dt)
-        h[k:k + hold] = cur
+        h[k : k + hold] = cur
         k += hold
         new = rng.uniform(*levels)
         rate = rng.uniform(*vertical_rate)
         n = max(int(np.ceil(abs(new - cur) / (rate * dt))), 1)
         ramp = cur + (new - cur) * np.arange(1, n + 1) / n
-        h[k:k + n] = ramp[:max(0, min(n, nt - k))]
+        h[k : k + n] = ramp[: max(0, min(n, nt - k))]
         k += n
         cur = new
     return h
 
 
-def fly_paths(rng: np.random.Generator, n_aircraft: int, duration: float, *,
-              region: float = 150e3, speed: tuple[float, float] = (150.0, 250.0),
-              turn_rate: tuple[float, float] = (0.3, 1.0), dt: float = 1.0) -> AircraftPaths:
+def fly_paths(
+    rng: np.random.Generator,
+    n_aircraft: int,
+    duration: float,
+    *,
+    region: float = 150e3,
+    speed: tuple[float, float] = (150.0, 250.0),
+    turn_rate: tuple[float, float] = (0.3, 1.0),
+    dt: float = 1.0,
+) -> AircraftPaths:
     """Aircraft entering at random times and places in a square of half-side ``region``,
     flying legs of 2-10 min joined by turns of ``turn_rate`` °/s lasting 20-90 s
     (``turn_rate=(0, 0)``: straight paths)."""
@@ -114,8 +135,9 @@ def fly_paths(rng: np.random.Generator, n_aircraft: int, duration: float, *,
         while k < nt:
             leg = int(rng.uniform(120, 600) / dt)
             turn = int(rng.uniform(20, 90) / dt)
-            rate[k + leg:k + leg + turn] = np.deg2rad(rng.uniform(*turn_rate)) * rng.choice(
-                [-1, 1])
+            rate[k + leg : k + leg + turn] = np.deg2rad(rng.uniform(*turn_rate)) * rng.choice(
+                [-1, 1]
+            )
             k += leg + turn
         psi = heading + np.cumsum(rate) * dt
         vel = v * np.column_stack([np.sin(psi), np.cos(psi)])  # heading clockwise from North
@@ -125,13 +147,20 @@ def fly_paths(rng: np.random.Generator, n_aircraft: int, duration: float, *,
     return AircraftPaths(times, pos, active)
 
 
-def fly_paths3d(rng: np.random.Generator, n_aircraft: int, duration: float, *,
-                origin: ArrayLike = DEFAULT_ORIGIN, region: float = 150e3,
-                speed: tuple[float, float] = (150.0, 250.0),
-                turn_rate: tuple[float, float] = (0.3, 1.0),
-                levels: tuple[float, float] = (3e3, 12e3),
-                vertical_rate: tuple[float, float] = (5.0, 15.0), holding: float = 0.2,
-                dt: float = 1.0) -> AircraftPaths:
+def fly_paths3d(
+    rng: np.random.Generator,
+    n_aircraft: int,
+    duration: float,
+    *,
+    origin: ArrayLike = DEFAULT_ORIGIN,
+    region: float = 150e3,
+    speed: tuple[float, float] = (150.0, 250.0),
+    turn_rate: tuple[float, float] = (0.3, 1.0),
+    levels: tuple[float, float] = (3e3, 12e3),
+    vertical_rate: tuple[float, float] = (5.0, 15.0),
+    holding: float = 0.2,
+    dt: float = 1.0,
+) -> AircraftPaths:
     """3-D paths, each aircraft over its own span (:class:`AircraftPaths` per aircraft):
     entering at random times and plane positions in a square of half-side ``region`` (m)
     around ``origin`` (lat deg, lon deg, h m), flying the horizontal legs and turns of
@@ -178,14 +207,22 @@ def _visible(site: FloatArray, slant: FloatArray, h: FloatArray) -> np.ndarray:
     with np.errstate(invalid="ignore", divide="ignore"):
         sin_el = (rt**2 - rs**2 - slant**2) / (2.0 * slant * rs)
     foot = -rs * sin_el  # distance along the ray to the point closest to the centre
-    lowest = np.where((sin_el < 0) & (foot < slant), rs * np.sqrt(np.clip(1 - sin_el**2, 0, 1)),
-                      np.minimum(rs, rt))
+    lowest = np.where(
+        (sin_el < 0) & (foot < slant),
+        rs * np.sqrt(np.clip(1 - sin_el**2, 0, 1)),
+        np.minimum(rs, rt),
+    )
     return (lowest > EARTH_RADIUS) & (sin_el <= np.sin(MAX_ELEVATION))
 
 
-def _simulate_plots3d(rng: np.random.Generator, radars: RadarSet, paths: AircraftPaths,
-                      fields: Sequence[BiasField], per: FloatArray, phase: FloatArray
-                      ) -> tuple[PlotTable, FloatArray, FloatArray]:
+def _simulate_plots3d(
+    rng: np.random.Generator,
+    radars: RadarSet,
+    paths: AircraftPaths,
+    fields: Sequence[BiasField],
+    per: FloatArray,
+    phase: FloatArray,
+) -> tuple[PlotTable, FloatArray, FloatArray]:
     rows: list[tuple[FloatArray, ...]] = []
     geo_sites = radars.geodetic
     assert geo_sites is not None
@@ -196,8 +233,9 @@ def _simulate_plots3d(rng: np.random.Generator, radars: RadarSet, paths: Aircraf
                 continue
             _, az_all = g3.measure(geo_sites[i], geo[:, 0], geo[:, 1], geo[:, 2])
             psi = (phase[i] + 2 * np.pi * t / per[i] - az_all) / (2 * np.pi)
-            psi = psi[0] + np.cumsum(np.concatenate([[0.0], wrap_angle(
-                2 * np.pi * np.diff(psi)) / (2 * np.pi)]))
+            psi = psi[0] + np.cumsum(
+                np.concatenate([[0.0], wrap_angle(2 * np.pi * np.diff(psi)) / (2 * np.pi)])
+            )
             k = np.flatnonzero(np.floor(psi[1:]) > np.floor(psi[:-1]))
             if k.size == 0:
                 continue
@@ -207,25 +245,40 @@ def _simulate_plots3d(rng: np.random.Generator, radars: RadarSet, paths: Aircraf
             xk = g3.common_plane(gk[:, 0], gk[:, 1], radars.origin)
             rk, azk = g3.measure(geo_sites[i], gk[:, 0], gk[:, 1], gk[:, 2])
             f = fields[i](xk)
-            noise = rng.normal(size=(tk.size, 2)) * [radars.sigma_range[i],
-                                                     radars.sigma_azimuth[i]]
+            noise = rng.normal(size=(tk.size, 2)) * [radars.sigma_range[i], radars.sigma_azimuth[i]]
             meas = np.column_stack([rk, azk]) + f + noise
             meas[:, 0] = np.abs(meas[:, 0])
             meas[:, 1] = wrap_angle(meas[:, 1])
             seen = (meas[:, 0] <= radars.max_range[i]) & _visible(geo_sites[i], rk, gk[:, 2])
             if not seen.any():
                 continue
-            rows.append((tk[seen], np.full(int(seen.sum()), i), meas[seen, 0], meas[seen, 1],
-                         np.full(int(seen.sum()), a), xk[seen], f[seen], gk[seen, 2]))
+            rows.append(
+                (
+                    tk[seen],
+                    np.full(int(seen.sum()), i),
+                    meas[seen, 0],
+                    meas[seen, 1],
+                    np.full(int(seen.sum()), a),
+                    xk[seen],
+                    f[seen],
+                    gk[seen, 2],
+                )
+            )
     cols = _time_ordered(rows)
-    plots = PlotTable(cols[0], cols[1].astype(np.int64), cols[2], cols[3],
-                      cols[4].astype(np.int64), cols[7])
+    plots = PlotTable(
+        cols[0], cols[1].astype(np.int64), cols[2], cols[3], cols[4].astype(np.int64), cols[7]
+    )
     return plots, cols[5], cols[6]
 
 
-def simulate_plots(rng: np.random.Generator, radars: RadarSet, paths: AircraftPaths,
-                   fields: Sequence[BiasField], *, periods: ArrayLike | None = None
-                   ) -> tuple[PlotTable, FloatArray, FloatArray]:
+def simulate_plots(
+    rng: np.random.Generator,
+    radars: RadarSet,
+    paths: AircraftPaths,
+    fields: Sequence[BiasField],
+    *,
+    periods: ArrayLike | None = None,
+) -> tuple[PlotTable, FloatArray, FloatArray]:
     """Plots of every radar on every aircraft, and the truth at each plot: true position
     (n, 2) and true polar bias f_i(x) (n, 2).
 
@@ -244,16 +297,17 @@ def simulate_plots(rng: np.random.Generator, radars: RadarSet, paths: AircraftPa
     m = radars.m
     if len(fields) != m:
         raise ProblemError(f"fields: need one bias field per radar ({m}), got {len(fields)}")
-    per = (np.asarray(periods, dtype=float) if periods is not None
-           else rng.uniform(4.0, 12.0, m))
+    per = np.asarray(periods, dtype=float) if periods is not None else rng.uniform(4.0, 12.0, m)
     per = np.broadcast_to(per, (m,))
     if np.any(per < 4.0 * paths.sample_step()):
         raise ProblemError("periods: need scan periods of at least 4 path steps")
     phase = rng.uniform(-np.pi, np.pi, m)
     if radars.is_3d:
         if not paths.is_3d:
-            raise ProblemError("paths: a 3-D radar set needs 3-D paths (geodetic positions: "
-                               "fly_paths3d or AircraftPaths.from_reports)")
+            raise ProblemError(
+                "paths: a 3-D radar set needs 3-D paths (geodetic positions: "
+                "fly_paths3d or AircraftPaths.from_reports)"
+            )
         return _simulate_plots3d(rng, radars, paths, fields, per, phase)
     rows: list[tuple[FloatArray, ...]] = []
     for i in range(m):
@@ -264,8 +318,9 @@ def simulate_plots(rng: np.random.Generator, radars: RadarSet, paths: AircraftPa
                 continue
             pol = to_polar(p, radars.sites[i])
             psi = (phase[i] + 2 * np.pi * t / per[i] - pol[:, 1]) / (2 * np.pi)
-            psi = psi[0] + np.cumsum(np.concatenate([[0.0], wrap_angle(
-                2 * np.pi * np.diff(psi)) / (2 * np.pi)]))
+            psi = psi[0] + np.cumsum(
+                np.concatenate([[0.0], wrap_angle(2 * np.pi * np.diff(psi)) / (2 * np.pi)])
+            )
             k = np.flatnonzero(np.floor(psi[1:]) > np.floor(psi[:-1]))
             frac = (np.floor(psi[k + 1]) - psi[k]) / (psi[k + 1] - psi[k])
             tk = t[k] + frac * (t[k + 1] - t[k])
@@ -280,11 +335,11 @@ def simulate_plots(rng: np.random.Generator, radars: RadarSet, paths: AircraftPa
             if not seen.any():
                 continue
             tk, xk, f, meas = tk[seen], xk[seen], f[seen], meas[seen]
-            rows.append((tk, np.full(tk.size, i), meas[:, 0], meas[:, 1],
-                         np.full(tk.size, a), xk, f))
+            rows.append(
+                (tk, np.full(tk.size, i), meas[:, 0], meas[:, 1], np.full(tk.size, a), xk, f)
+            )
     cols = _time_ordered(rows)
-    plots = PlotTable(cols[0], cols[1].astype(np.int64), cols[2], cols[3],
-                      cols[4].astype(np.int64))
+    plots = PlotTable(cols[0], cols[1].astype(np.int64), cols[2], cols[3], cols[4].astype(np.int64))
     return plots, cols[5], cols[6]
 
 
@@ -309,8 +364,7 @@ class RadarNetworkScenario:
     true_position: FloatArray
     true_bias: FloatArray
 
-    def adsb_positions(self, seed: int | np.random.Generator, sigma: float = 10.0
-                       ) -> FloatArray:
+    def adsb_positions(self, seed: int | np.random.Generator, sigma: float = 10.0) -> FloatArray:
         """ADS-B positions of the aircraft at each plot time (n, 2) (m, common plane): the
         true position plus independent N(0, σ²) errors per axis and per report, ``sigma``
         (m, 1σ per horizontal axis; the default 10 m gives a 95 % radial error of 24 m,
@@ -318,8 +372,9 @@ class RadarNetworkScenario:
         random streams are left as they are). White per report: real ADS-B errors are
         correlated over minutes, which makes the referee's per-area means noisier than its
         χ² says (docs/formulations.md)."""
-        sig = as_positive("scenarios.RadarNetworkScenario.adsb_positions sigma (m)", sigma,
-                          allow_zero=True)
+        sig = as_positive(
+            "scenarios.RadarNetworkScenario.adsb_positions sigma (m)", sigma, allow_zero=True
+        )
         rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
         return self.true_position + sig * rng.normal(size=self.true_position.shape)
 
@@ -331,13 +386,17 @@ class RadarNetworkScenario:
             sel = self.plots.radar == i
             if self.radars.is_3d:
                 assert self.plots.height is not None
-                out[sel] = g3.shift_from_bias3d(self.true_position[sel],
-                                                self.plots.height[sel],
-                                                self.radars.geodetic[i],  # type: ignore
-                                                self.radars.origin, self.true_bias[sel])
+                out[sel] = g3.shift_from_bias3d(
+                    self.true_position[sel],
+                    self.plots.height[sel],
+                    self.radars.geodetic[i],  # type: ignore
+                    self.radars.origin,
+                    self.true_bias[sel],
+                )
             else:
-                out[sel] = shift_from_bias(self.true_position[sel], self.radars.sites[i],
-                                           self.true_bias[sel])
+                out[sel] = shift_from_bias(
+                    self.true_position[sel], self.radars.sites[i], self.true_bias[sel]
+                )
         return out
 
 
@@ -369,29 +428,44 @@ def line_sites(m: int, spacing: float) -> FloatArray:
     return np.column_stack([x, np.zeros(m)])
 
 
-def grid_sites(rows: int, cols: int, spacing: float, *, jitter: float = 0.0,
-               seed: int | np.random.Generator = 0) -> FloatArray:
+def grid_sites(
+    rows: int,
+    cols: int,
+    spacing: float,
+    *,
+    jitter: float = 0.0,
+    seed: int | np.random.Generator = 0,
+) -> FloatArray:
     """(rows·cols, 2) sites on a square grid ``spacing`` (m) apart about the origin,
     each moved by a uniform ±``jitter`` (m) per axis (a national network)."""
     rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
-    gx, gy = np.meshgrid((np.arange(cols) - (cols - 1) / 2) * float(spacing),
-                         (np.arange(rows) - (rows - 1) / 2) * float(spacing))
+    gx, gy = np.meshgrid(
+        (np.arange(cols) - (cols - 1) / 2) * float(spacing),
+        (np.arange(rows) - (rows - 1) / 2) * float(spacing),
+    )
     s = np.column_stack([gx.ravel(), gy.ravel()])
     return s + rng.uniform(-jitter, jitter, s.shape) if jitter > 0 else s
 
 
-def radar_network(seed: int | np.random.Generator, *, n_aircraft: int = 30,
-                  duration: float = 1800.0, sites: ArrayLike | None = None,
-                  fields: FieldKind | Sequence[BiasField] = "smooth",
-                  sigma_range: float | ArrayLike = 60.0,
-                  sigma_azimuth: float | ArrayLike = SIGMA_AZIMUTH,
-                  max_range: float | ArrayLike = 250e3,
-                  periods: ArrayLike | None = None, region: float = 150e3,
-                  turn_rate: tuple[float, float] = (0.3, 1.0),
-                  geometry: Literal["2d", "3d"] = "2d", origin: ArrayLike | None = None,
-                  site_heights: ArrayLike | None = None,
-                  levels: tuple[float, float] = (3e3, 12e3), holding: float = 0.2
-                  ) -> RadarNetworkScenario:
+def radar_network(
+    seed: int | np.random.Generator,
+    *,
+    n_aircraft: int = 30,
+    duration: float = 1800.0,
+    sites: ArrayLike | None = None,
+    fields: FieldKind | Sequence[BiasField] = "smooth",
+    sigma_range: float | ArrayLike = 60.0,
+    sigma_azimuth: float | ArrayLike = SIGMA_AZIMUTH,
+    max_range: float | ArrayLike = 250e3,
+    periods: ArrayLike | None = None,
+    region: float = 150e3,
+    turn_rate: tuple[float, float] = (0.3, 1.0),
+    geometry: Literal["2d", "3d"] = "2d",
+    origin: ArrayLike | None = None,
+    site_heights: ArrayLike | None = None,
+    levels: tuple[float, float] = (3e3, 12e3),
+    holding: float = 0.2,
+) -> RadarNetworkScenario:
     """A seeded radar network scenario.
 
     ``fields``: ``"zero"``; ``"constant"`` (an azimuth bias of ±0.1-0.3° per radar, no range
@@ -407,20 +481,33 @@ def radar_network(seed: int | np.random.Generator, *, n_aircraft: int = 30,
     """
     from optmodels.core import as_choice
 
-    geometry = as_choice("scenarios.radar_network geometry", geometry,  # type: ignore
-                         ("2d", "3d"))
+    geometry = as_choice(
+        "scenarios.radar_network geometry",
+        geometry,  # type: ignore
+        ("2d", "3d"),
+    )
     rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
     s = DEFAULT_SITES if sites is None else as_finite_array("sites", sites, ndim=2)
     m = s.shape[0] if s.ndim == 2 else 0
-    args = (np.broadcast_to(np.asarray(sigma_range, float), (m,)),
-            np.broadcast_to(np.asarray(sigma_azimuth, float), (m,)),
-            np.broadcast_to(np.asarray(max_range, float), (m,)))
+    args = (
+        np.broadcast_to(np.asarray(sigma_range, float), (m,)),
+        np.broadcast_to(np.asarray(sigma_azimuth, float), (m,)),
+        np.broadcast_to(np.asarray(max_range, float), (m,)),
+    )
     if geometry == "3d":
-        org = g3.site_geodetic("scenarios.radar_network origin",
-                               DEFAULT_ORIGIN if origin is None else origin)
-        hs = (np.resize(DEFAULT_SITE_HEIGHTS, m) if site_heights is None else
-              np.broadcast_to(as_finite_array("scenarios.radar_network site_heights (m)",
-                                              site_heights, ndim=(0, 1)), (m,)))
+        org = g3.site_geodetic(
+            "scenarios.radar_network origin", DEFAULT_ORIGIN if origin is None else origin
+        )
+        hs = (
+            np.resize(DEFAULT_SITE_HEIGHTS, m)
+            if site_heights is None
+            else np.broadcast_to(
+                as_finite_array(
+                    "scenarios.radar_network site_heights (m)", site_heights, ndim=(0, 1)
+                ),
+                (m,),
+            )
+        )
         if s.ndim != 2 or s.shape[1] != 2:
             raise ProblemError(f"sites: expected (m, 2) East-North (m), got {s.shape}")
         lat, lon = g3.plane_to_geodetic(s, org)
@@ -430,31 +517,54 @@ def radar_network(seed: int | np.random.Generator, *, n_aircraft: int = 30,
     if isinstance(fields, str):
         kinds = ("zero", "constant", "linear", "smooth")
         if fields not in kinds:
-            raise ProblemError(f"fields: expected one of {kinds} or a list of BiasField, "
-                               f"got {fields!r}")
+            raise ProblemError(
+                f"fields: expected one of {kinds} or a list of BiasField, got {fields!r}"
+            )
         flist: list[BiasField] = []
         for i in range(m):
             if fields == "zero":
                 flist.append(BiasField.constant(0.0, 0.0))
             elif fields == "constant":
-                flist.append(BiasField.constant(
-                    0.0, np.deg2rad(rng.uniform(0.1, 0.3)) * rng.choice([-1, 1])))
+                flist.append(
+                    BiasField.constant(0.0, np.deg2rad(rng.uniform(0.1, 0.3)) * rng.choice([-1, 1]))
+                )
             elif fields == "linear":
-                g = np.array([[rng.uniform(-1, 1) * 1e-3, rng.uniform(-1, 1) * 1e-3],
-                              [rng.uniform(-1, 1) * 2e-8, rng.uniform(-1, 1) * 2e-8]])
-                flist.append(BiasField.linear(
-                    [rng.uniform(-100, 100), np.deg2rad(rng.uniform(-0.2, 0.2))], g,
-                    radars.sites[i]))
+                g = np.array(
+                    [
+                        [rng.uniform(-1, 1) * 1e-3, rng.uniform(-1, 1) * 1e-3],
+                        [rng.uniform(-1, 1) * 2e-8, rng.uniform(-1, 1) * 2e-8],
+                    ]
+                )
+                flist.append(
+                    BiasField.linear(
+                        [rng.uniform(-100, 100), np.deg2rad(rng.uniform(-0.2, 0.2))],
+                        g,
+                        radars.sites[i],
+                    )
+                )
             else:
-                flist.append(BiasField.smooth(rng, center=np.zeros(2), scale=region,
-                                              range_amplitude=150.0,
-                                              azimuth_amplitude=np.deg2rad(0.3)))
+                flist.append(
+                    BiasField.smooth(
+                        rng,
+                        center=np.zeros(2),
+                        scale=region,
+                        range_amplitude=150.0,
+                        azimuth_amplitude=np.deg2rad(0.3),
+                    )
+                )
     else:
         flist = list(fields)
     if geometry == "3d":
-        paths = fly_paths3d(rng, n_aircraft, duration, origin=radars.origin,  # type: ignore
-                            region=region, turn_rate=turn_rate, levels=levels,
-                            holding=holding)
+        paths = fly_paths3d(
+            rng,
+            n_aircraft,
+            duration,
+            origin=radars.origin,  # type: ignore
+            region=region,
+            turn_rate=turn_rate,
+            levels=levels,
+            holding=holding,
+        )
     else:
         paths = fly_paths(rng, n_aircraft, duration, region=region, turn_rate=turn_rate)
     plots, xs, fs = simulate_plots(rng, radars, paths, flist, periods=periods)

@@ -78,10 +78,16 @@ class SimulatedRecording:
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready summary (paths, radars, counts)."""
         r = self.scenario.radars
-        return {"recording": str(self.recording), "sites": str(self.sites),
-                "radars": list(r.names), "sac_sic": [list(i) for i in self.ids],
-                "aircraft": int(self.addresses.size), "start_s": self.start,
-                "plots": len(self.scenario.plots), **self.counts}
+        return {
+            "recording": str(self.recording),
+            "sites": str(self.sites),
+            "radars": list(r.names),
+            "sac_sic": [list(i) for i in self.ids],
+            "aircraft": int(self.addresses.size),
+            "start_s": self.start,
+            "plots": len(self.scenario.plots),
+            **self.counts,
+        }
 
 
 def _flight_level(height: FloatArray) -> FloatArray:
@@ -96,12 +102,20 @@ def _write_sites(path: Path, radars: Any, sac: int, first_sic: int) -> None:
     from optmodels.io import write_csv
 
     assert radars.geodetic is not None
-    rows = [{"name": radars.names[i], "sac": sac, "sic": first_sic + i,
-             "lat": float(radars.geodetic[i, 0]), "lon": float(radars.geodetic[i, 1]),
-             "alt": float(radars.geodetic[i, 2]),
-             "sigma_range": float(radars.sigma_range[i]),
-             "sigma_azimuth": float(np.rad2deg(radars.sigma_azimuth[i])),
-             "max_range": float(radars.max_range[i])} for i in range(radars.m)]
+    rows = [
+        {
+            "name": radars.names[i],
+            "sac": sac,
+            "sic": first_sic + i,
+            "lat": float(radars.geodetic[i, 0]),
+            "lon": float(radars.geodetic[i, 1]),
+            "alt": float(radars.geodetic[i, 2]),
+            "sigma_range": float(radars.sigma_range[i]),
+            "sigma_azimuth": float(np.rad2deg(radars.sigma_azimuth[i])),
+            "max_range": float(radars.max_range[i]),
+        }
+        for i in range(radars.m)
+    ]
     write_csv(path, rows)
 
 
@@ -114,15 +128,27 @@ def _by_minute(t: FloatArray) -> list[np.ndarray]:
     return np.split(np.arange(t.size), cuts)
 
 
-def simulate_recording(folder: str | os.PathLike[str], *, seed: int = 0, radars: int = 4,
-                       aircraft: int = 30, duration: float = 1800.0,
-                       spacing: float = 150e3, max_range: float = 250e3,
-                       region: float = 150e3, biases: str = "smooth",
-                       sigma_range: float = 60.0, sigma_azimuth_deg: float = 0.08,
-                       origin: tuple[float, float, float] = (55.0, 83.0, 150.0),
-                       start: float = 36000.0, adsb_interval: float = 1.0,
-                       adsb_spikes: int = 0, sac: int = 25, first_sic: int = 1,
-                       first_address: int = 0x3C0000) -> SimulatedRecording:
+def simulate_recording(
+    folder: str | os.PathLike[str],
+    *,
+    seed: int = 0,
+    radars: int = 4,
+    aircraft: int = 30,
+    duration: float = 1800.0,
+    spacing: float = 150e3,
+    max_range: float = 250e3,
+    region: float = 150e3,
+    biases: str = "smooth",
+    sigma_range: float = 60.0,
+    sigma_azimuth_deg: float = 0.08,
+    origin: tuple[float, float, float] = (55.0, 83.0, 150.0),
+    start: float = 36000.0,
+    adsb_interval: float = 1.0,
+    adsb_spikes: int = 0,
+    sac: int = 25,
+    first_sic: int = 1,
+    first_address: int = 0x3C0000,
+) -> SimulatedRecording:
     """Simulate a radar network and write it as ASTERIX (module docstring).
 
     Parameters
@@ -176,20 +202,29 @@ def simulate_recording(folder: str | os.PathLike[str], *, seed: int = 0, radars:
     duration = as_positive(f"{fn} duration (s)", duration)
     spacing = as_positive(f"{fn} spacing (m)", spacing)
     biases = as_choice(f"{fn} biases", biases, ("smooth", "linear", "constant", "zero"))
-    start = as_number(f"{fn} start (s after UTC midnight)", start, low=0.0, high=86400.0,
-                      high_open=True)
+    start = as_number(
+        f"{fn} start (s after UTC midnight)", start, low=0.0, high=86400.0, high_open=True
+    )
     step = as_count(f"{fn} adsb_interval (s)", adsb_interval, minimum=1, maximum=3600)
     spikes = as_count(f"{fn} adsb_spikes", adsb_spikes, minimum=0)
     sac = as_count(f"{fn} sac", sac, minimum=0, maximum=255)
     first_sic = as_count(f"{fn} first_sic", first_sic, minimum=0, maximum=255 - (m - 1))
-    first_address = as_count(f"{fn} first_address", first_address, minimum=0,
-                             maximum=2**24 - n_air)
-    sc = radar_network(seed, n_aircraft=n_air, duration=duration,
-                       sites=ring_sites(m, spacing), fields=biases,  # type: ignore[arg-type]
-                       sigma_range=sigma_range,
-                       sigma_azimuth=np.deg2rad(as_positive(
-                           f"{fn} sigma_azimuth_deg", sigma_azimuth_deg, allow_zero=True)),
-                       max_range=max_range, region=region, geometry="3d", origin=origin)
+    first_address = as_count(f"{fn} first_address", first_address, minimum=0, maximum=2**24 - n_air)
+    sc = radar_network(
+        seed,
+        n_aircraft=n_air,
+        duration=duration,
+        sites=ring_sites(m, spacing),
+        fields=biases,  # type: ignore[arg-type]
+        sigma_range=sigma_range,
+        sigma_azimuth=np.deg2rad(
+            as_positive(f"{fn} sigma_azimuth_deg", sigma_azimuth_deg, allow_zero=True)
+        ),
+        max_range=max_range,
+        region=region,
+        geometry="3d",
+        origin=origin,
+    )
     r, p = sc.radars, sc.plots
     addr = first_address + np.arange(n_air, dtype=np.int64)
     assert p.height is not None
@@ -200,9 +235,20 @@ def simulate_recording(folder: str | os.PathLike[str], *, seed: int = 0, radars:
         fl = _flight_level(p.height[sel])
         for rows in _by_minute(t):
             k = sel[rows]
-            sources.append((float(t[rows[0]]), encode_cat048(
-                t[rows], sac, first_sic + i, p.range[k], p.azimuth[k],
-                flight_level=fl[rows], address=addr[p.object[k]])))
+            sources.append(
+                (
+                    float(t[rows[0]]),
+                    encode_cat048(
+                        t[rows],
+                        sac,
+                        first_sic + i,
+                        p.range[k],
+                        p.azimuth[k],
+                        flight_level=fl[rows],
+                        address=addr[p.object[k]],
+                    ),
+                )
+            )
     parts = [sc.paths.track(a) for a in range(len(sc.paths))]
     t21 = np.concatenate([q[0][::step] for q in parts]) + start
     geo = np.vstack([q[2][::step] for q in parts if q[2] is not None])
@@ -211,13 +257,28 @@ def simulate_recording(folder: str | os.PathLike[str], *, seed: int = 0, radars:
     t21, geo, who = t21[order], geo[order], who[order]
     height = geo[:, 2].copy()
     rng = np.random.default_rng([int(seed), 21])
-    spike_idx = (np.sort(rng.choice(t21.size, size=min(spikes, t21.size), replace=False))
-                 if spikes else np.zeros(0, np.int64))
+    spike_idx = (
+        np.sort(rng.choice(t21.size, size=min(spikes, t21.size), replace=False))
+        if spikes
+        else np.zeros(0, np.int64)
+    )
     height[spike_idx] += SPIKE
     for rows in _by_minute(t21):
-        sources.append((float(t21[rows[0]]), encode_cat021(
-            t21[rows], sac, 200, geo[rows, 0], geo[rows, 1], height=height[rows],
-            flight_level=_flight_level(geo[rows, 2]), address=addr[who[rows]])))
+        sources.append(
+            (
+                float(t21[rows[0]]),
+                encode_cat021(
+                    t21[rows],
+                    sac,
+                    200,
+                    geo[rows, 0],
+                    geo[rows, 1],
+                    height=height[rows],
+                    flight_level=_flight_level(geo[rows, 2]),
+                    address=addr[who[rows]],
+                ),
+            )
+        )
     sources.sort(key=lambda s: s[0])
     rec = out / "recording.ast"
     with atomic_write(rec, name=f"{fn} folder", binary=True) as fh:  # OSError -> ProblemError
@@ -226,7 +287,12 @@ def simulate_recording(folder: str | os.PathLike[str], *, seed: int = 0, radars:
     sites = out / "sites.csv"
     _write_sites(sites, r, sac, first_sic)
     return SimulatedRecording(
-        rec, sites, sc, addr, start,
+        rec,
+        sites,
+        sc,
+        addr,
+        start,
         {"cat048": len(p), "cat021": int(t21.size), "spikes": int(spike_idx.size)},
         tuple((int(who[j]), float(t21[j])) for j in spike_idx),
-        tuple((sac, first_sic + i) for i in range(r.m)))
+        tuple((sac, first_sic + i) for i in range(r.m)),
+    )

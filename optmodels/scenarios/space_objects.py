@@ -19,8 +19,14 @@ from scipy.spatial.distance import pdist, squareform
 from optmodels import seeds
 from optmodels.core import FloatArray, ProblemError, as_count, as_positive, as_probability
 
-__all__ = ["MAX_CLUTTER", "MAX_OBJECTS", "MAX_SESSIONS", "Session", "SpaceScenario",
-           "space_objects"]
+__all__ = [
+    "MAX_CLUTTER",
+    "MAX_OBJECTS",
+    "MAX_SESSIONS",
+    "Session",
+    "SpaceScenario",
+    "space_objects",
+]
 
 #: Size guards: objects (the pairwise distances are Q × Q per session), sessions, and the
 #: mean number of clutter measurements per session.
@@ -52,10 +58,19 @@ class SpaceScenario:
     resolution: float
 
 
-def space_objects(seed: int | np.random.Generator, *, q: int = 4, sessions: int = 12,
-                  separation: float = 100.0, resolution: float = 150.0,
-                  sigma: float = 30.0, pd: float = 0.9, clutter: float = 2.0,
-                  dt: float = 60.0, window: float = 2000.0) -> SpaceScenario:
+def space_objects(
+    seed: int | np.random.Generator,
+    *,
+    q: int = 4,
+    sessions: int = 12,
+    separation: float = 100.0,
+    resolution: float = 150.0,
+    sigma: float = 30.0,
+    pd: float = 0.9,
+    clutter: float = 2.0,
+    dt: float = 60.0,
+    window: float = 2000.0,
+) -> SpaceScenario:
     """Q objects released in a line with spacing ``separation`` (m) and relative drifts of
     ±0.2 m/s, observed every ``dt`` s with noise σ = ``sigma`` m per axis.
 
@@ -104,14 +119,18 @@ def space_objects(seed: int | np.random.Generator, *, q: int = 4, sessions: int 
         for lab in np.unique(label):
             members = tuple(int(j) for j in np.flatnonzero(label == lab))
             if rng.random() < pd:
-                meas.append(pos[list(members)].mean(axis=0) + rng.multivariate_normal(
-                    np.zeros(2), cov))
+                meas.append(
+                    pos[list(members)].mean(axis=0) + rng.multivariate_normal(np.zeros(2), cov)
+                )
                 truth.append(members)
         centre = pos.mean(axis=0)
         for _ in range(rng.poisson(clutter)):
             meas.append(centre + rng.uniform(-window, window, 2))
             truth.append(())
         order = rng.permutation(len(meas))
-        out.append(Session(t, np.array(meas, dtype=float).reshape(-1, 2)[order],
-                           [truth[k] for k in order], pos))
+        out.append(
+            Session(
+                t, np.array(meas, dtype=float).reshape(-1, 2)[order], [truth[k] for k in order], pos
+            )
+        )
     return SpaceScenario(out, cov, pd, (2 * window) ** 2, x0, resolution)

@@ -8,6 +8,11 @@ PROBLEM = {
     "title": "Least-squares estimation of dependent linear trajectories (Simonova)",
     "original": "(1)",
     "closed_form": "(8)-(9), (12)-(13)",
-    "api": {"data": "TrajectoryData", "residuals": ("objective", "constraint_residuals"),
-            "solve": "solve", "closed_form": "closed_form", "estimate": "theta"},
+    "api": {
+        "data": "TrajectoryData",
+        "residuals": ("objective", "constraint_residuals"),
+        "solve": "solve",
+        "closed_form": "closed_form",
+        "estimate": "theta",
+    },
 }

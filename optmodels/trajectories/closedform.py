@@ -19,8 +19,9 @@ from optmodels.trajectories.verify import REJECT_TOL, VERIFY_TOL, _recheck
 
 
 # --------------------------------------------------------------------------- closed forms
-def closed_form(data: TrajectoryData, family: FamilyName | Family = "diverging", *,
-                printed: bool = False) -> TrajectorySolution:
+def closed_form(
+    data: TrajectoryData, family: FamilyName | Family = "diverging", *, printed: bool = False
+) -> TrajectorySolution:
     """The paper's closed forms, in its own notation (weighted sums where variances differ).
 
     * diverging (8)-(9): :math:`y_0 = (D - A_C)/(E - B_C)`, :math:`V_j = (A_j - y_0B_j)/C_j`
@@ -62,16 +63,33 @@ def closed_form(data: TrajectoryData, family: FamilyName | Family = "diverging",
         ref = _fit(data, fam) if printed else fit
         obj, stat, diag = _recheck(data, fam, ref, fit.theta)
     residuals = {"shared_start": 0.0, "shared_velocity": 0.0, "stationarity": stat}
-    message = {"diverging": "(8)-(9)", "parallel": "(12)-(13)",
-               "independent": "single-line LSQ"}.get(kind, "normal equations (3)")
-    common: dict[str, Any] = {"status": Status.OPTIMAL, "method": "closed_form",
-                              "solve_time": tm.elapsed,
-                              "message": message + (" as printed" if printed else "")}
+    message = {
+        "diverging": "(8)-(9)",
+        "parallel": "(12)-(13)",
+        "independent": "single-line LSQ",
+    }.get(kind, "normal equations (3)")
+    common: dict[str, Any] = {
+        "status": Status.OPTIMAL,
+        "method": "closed_form",
+        "solve_time": tm.elapsed,
+        "message": message + (" as printed" if printed else ""),
+    }
 
     def note(v: Verdict) -> str:
         if v.status is Status.ERROR:
             return f"verification failed: stationarity = {stat:.2e} > {REJECT_TOL:g}"
         return f"stationarity = {stat:.2e} > {VERIFY_TOL:g}"
 
-    return _finish(data, fam, fit, fit.theta, residuals, obj, diag, common, strict=False,
-                   note=note, keep=ref if printed else None)
+    return _finish(
+        data,
+        fam,
+        fit,
+        fit.theta,
+        residuals,
+        obj,
+        diag,
+        common,
+        strict=False,
+        note=note,
+        keep=ref if printed else None,
+    )

@@ -54,12 +54,17 @@ def independent_variances(n: int, dt: float = 1.0, sigma2: float = 1.0) -> tuple
     n = as_count("trajectories.independent_variances n", n, minimum=2)
     dt = as_positive("trajectories.independent_variances dt", dt)
     sigma2 = as_positive("trajectories.independent_variances sigma2", sigma2)
-    return (sigma2 * 2 * (2 * n - 1) / (n * (n + 1)),
-            sigma2 * 12 / (n * (n * n - 1) * dt * dt))
+    return (sigma2 * 2 * (2 * n - 1) / (n * (n + 1)), sigma2 * 12 / (n * (n * n - 1) * dt * dt))
 
 
-def paper_covariance(family: Literal["diverging", "parallel"], n: int, dt: float = 1.0,
-                     sigma2: float = 1.0, *, printed: bool = False) -> FloatArray:
+def paper_covariance(
+    family: Literal["diverging", "parallel"],
+    n: int,
+    dt: float = 1.0,
+    sigma2: float = 1.0,
+    *,
+    printed: bool = False,
+) -> FloatArray:
     """Ψ* of two objects measured together at ``t_i = (i − 1)·dt``, ``i = 1..N``:
     (18) for the diverging family (θ = y0, V1, V2), (20) for the parallel one
     (θ = y01, y02, V).
@@ -84,9 +89,11 @@ def paper_covariance(family: Literal["diverging", "parallel"], n: int, dt: float
         d0 = (2 * nn - 1) / (nn * (nn + 1))
         dv = 3 * (5 * nn - 1) / (t * t * nn * (nn * nn - 1) * (2 * nn - 1))
         if printed:
-            m = [[d0, -k, -k],
-                 [k, dv, k],
-                 [k, 3 * (5 * nn - 1) / (t * t * nn * (nn + 1) * (2 * nn - 1)), dv]]
+            m = [
+                [d0, -k, -k],
+                [k, dv, k],
+                [k, 3 * (5 * nn - 1) / (t * t * nn * (nn + 1) * (2 * nn - 1)), dv],
+            ]
         else:
             c = 9 / (t * t * nn * (nn + 1) * (2 * nn - 1))
             m = [[d0, -k, -k], [-k, dv, c], [-k, c, dv]]
@@ -134,8 +141,8 @@ def variance_ratios(data: TrajectoryData, family: FamilyName | Family) -> dict[s
     q = data.n_objects
     dep = _fit(data, fam).cov
     ind = _fit(data, Family.independent(q)).cov
-    dv = np.diagonal(dep, axis1=1, axis2=2)   # (d, R)
-    iv = np.diagonal(ind, axis1=1, axis2=2)   # (d, 2Q)
+    dv = np.diagonal(dep, axis1=1, axis2=2)  # (d, R)
+    iv = np.diagonal(ind, axis1=1, axis2=2)  # (d, 2Q)
     rs = dv[:, fam.start_index] / iv[:, :q]
     rv = dv[:, fam.velocity_index] / iv[:, q:]
     return {"start": _shape(data, rs.T), "velocity": _shape(data, rv.T)}

@@ -79,12 +79,15 @@ class TrajectoryData:
     def __post_init__(self) -> None:
         where = "trajectories.TrajectoryData"
         if isinstance(self.times, np.ndarray) and self.times.ndim == 1:
-            raise ProblemError(f"{where} times: expected a sequence of per-object arrays, "
-                               "got one array")
+            raise ProblemError(
+                f"{where} times: expected a sequence of per-object arrays, got one array"
+            )
         for name, seq in (("times", self.times), ("values", self.values)):
             if isinstance(seq, str | bytes) or not hasattr(seq, "__len__"):
-                raise ProblemError(f"{where} {name}: expected a sequence of per-object "
-                                   f"arrays, got {type(seq).__name__}")
+                raise ProblemError(
+                    f"{where} {name}: expected a sequence of per-object "
+                    f"arrays, got {type(seq).__name__}"
+                )
         q = len(self.times)
         if q == 0:
             raise ProblemError(f"{where} times: no objects (Q = 0)")
@@ -96,8 +99,7 @@ class TrajectoryData:
         dims = set()
         for j in range(q):
             t = as_finite_array(f"times[{j}]", self.times[j], ndim=1, max_abs=MAX_MAGNITUDE)
-            y = as_finite_array(f"values[{j}]", self.values[j], ndim=(1, 2),
-                                max_abs=MAX_MAGNITUDE)
+            y = as_finite_array(f"values[{j}]", self.values[j], ndim=(1, 2), max_abs=MAX_MAGNITUDE)
             if t.size == 0:
                 raise ProblemError(f"times[{j}]: object {j} has no measurements")
             if y.shape[0] != t.size:
@@ -120,13 +122,17 @@ class TrajectoryData:
         d = dims.pop()
         scalar = None
         s2_in = self.sigma2
-        if isinstance(s2_in, str | bytes | bool | np.bool_) or np.isscalar(s2_in) or (
-            isinstance(s2_in, np.ndarray) and s2_in.ndim == 0
+        if (
+            isinstance(s2_in, str | bytes | bool | np.bool_)
+            or np.isscalar(s2_in)
+            or (isinstance(s2_in, np.ndarray) and s2_in.ndim == 0)
         ):
             s2 = as_number(f"{where} sigma2", s2_in)
             if not 1 / MAX_MAGNITUDE <= s2 <= MAX_MAGNITUDE:
-                raise ProblemError(f"{where} sigma2: must be positive, in [1e-100, 1e100] "
-                                   f"(its inverse is a usable weight), got {s2:g}")
+                raise ProblemError(
+                    f"{where} sigma2: must be positive, in [1e-100, 1e100] "
+                    f"(its inverse is a usable weight), got {s2:g}"
+                )
             scalar = s2
             ws = [np.full((t.size, d), 1.0 / s2) for t in ts]
         else:
@@ -136,15 +142,17 @@ class TrajectoryData:
             for j in range(q):
                 s2 = as_finite_array(f"sigma2[{j}]", s2_in[j], ndim=(0, 1, 2))
                 try:
-                    s2 = np.broadcast_to(s2.reshape(s2.shape + (1,) * (s2.ndim == 1)),
-                                         (ts[j].size, d))
+                    s2 = np.broadcast_to(
+                        s2.reshape(s2.shape + (1,) * (s2.ndim == 1)), (ts[j].size, d)
+                    )
                 except ValueError:
                     raise ProblemError(
                         f"sigma2[{j}]: shape {s2.shape} does not match ({ts[j].size}, {d})"
                     ) from None
                 if np.any(s2 < 1 / MAX_MAGNITUDE) or np.any(s2 > MAX_MAGNITUDE):
                     raise ProblemError(
-                        f"sigma2[{j}]: variances must be positive, in [1e-100, 1e100]")
+                        f"sigma2[{j}]: variances must be positive, in [1e-100, 1e100]"
+                    )
                 ws.append(1.0 / s2)
         raw = np.concatenate(ts)
         object.__setattr__(self, "raw_t", raw)
@@ -207,12 +215,17 @@ class Family:
     def independent(cls, q: int) -> Family:
         """Nothing shared: Q separate lines."""
         q = as_count("trajectories.Family.independent q", q, minimum=1)
-        return cls("independent", q, tuple((j,) for j in range(q)),
-                   tuple((j,) for j in range(q)))
+        return cls("independent", q, tuple((j,) for j in range(q)), tuple((j,) for j in range(q)))
 
     @classmethod
-    def custom(cls, q: int, *, shared_start: Sequence[Sequence[int]] = (),
-               shared_velocity: Sequence[Sequence[int]] = (), name: str = "custom") -> Family:
+    def custom(
+        cls,
+        q: int,
+        *,
+        shared_start: Sequence[Sequence[int]] = (),
+        shared_velocity: Sequence[Sequence[int]] = (),
+        name: str = "custom",
+    ) -> Family:
         """Objects in each group of ``shared_start`` share a start, in each group of
         ``shared_velocity`` a velocity; every other object has its own.
 
@@ -224,10 +237,15 @@ class Family:
         """
         q = as_count("trajectories.Family.custom q", q, minimum=1)
         if not isinstance(name, str):
-            raise ProblemError(f"trajectories.Family.custom name: expected a string, got "
-                               f"{type(name).__name__}")
-        return cls(name, q, _partition(q, shared_start, "shared_start"),
-                   _partition(q, shared_velocity, "shared_velocity"))
+            raise ProblemError(
+                f"trajectories.Family.custom name: expected a string, got {type(name).__name__}"
+            )
+        return cls(
+            name,
+            q,
+            _partition(q, shared_start, "shared_start"),
+            _partition(q, shared_velocity, "shared_velocity"),
+        )
 
     @property
     def n_params(self) -> int:
@@ -282,12 +300,16 @@ def resolve_family(family: FamilyName | Family, q: int) -> Family:
     if isinstance(family, Family):
         if family.n_objects != q:
             raise ProblemError(f"family: built for {family.n_objects} objects, data has {q}")
-        for kind, groups in (("start_groups", family.start_groups),
-                             ("velocity_groups", family.velocity_groups)):
+        for kind, groups in (
+            ("start_groups", family.start_groups),
+            ("velocity_groups", family.velocity_groups),
+        ):
             flat = sorted(i for g in groups for i in g)
             if flat != list(range(q)) or any(len(g) == 0 for g in groups):
-                raise ProblemError(f"family: {kind} {groups} is not a partition of the "
-                                   f"{q} objects (build it with Family.custom)")
+                raise ProblemError(
+                    f"family: {kind} {groups} is not a partition of the "
+                    f"{q} objects (build it with Family.custom)"
+                )
         return family
     if family == "diverging":
         return Family.diverging(q)

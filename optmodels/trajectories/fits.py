@@ -57,8 +57,10 @@ def _fit(data: TrajectoryData, fam: Family, *, printed: bool = False) -> _Fit:
         else:
             fit = _generic(st, fam)
     if not (np.all(np.isfinite(fit.theta)) and np.all(np.isfinite(fit.cov))):
-        raise ProblemError("family: the data cannot identify this family (the least-squares "
-                           "sums over- or underflow float64); change units")
+        raise ProblemError(
+            "family: the data cannot identify this family (the least-squares "
+            "sums over- or underflow float64); change units"
+        )
     data._cache[key] = fit
     return fit
 
@@ -72,22 +74,26 @@ def _diverging(st: _Stats) -> _Fit:
     weighted mean of each object's own line extrapolated to the epoch, no cancellation.
     """
     s0, m2, u = st.s0, st.m2, st.u
-    c = s0 * u * u + m2                          # C_j
-    k = s0 * m2 / c                              # N_j − B_j²/C_j
-    z = st.p - u * st.vhat                       # object j's own start at the epoch
-    kk = k.sum(axis=0)                           # E − B_C
-    y0 = (k * z).sum(axis=0) / kk                # (8)
-    g = s0 * u / c                               # B_j/C_j
-    v = st.vhat + g * (z - y0)                   # (9): (A_j − y0 B_j)/C_j
+    c = s0 * u * u + m2  # C_j
+    k = s0 * m2 / c  # N_j − B_j²/C_j
+    z = st.p - u * st.vhat  # object j's own start at the epoch
+    kk = k.sum(axis=0)  # E − B_C
+    y0 = (k * z).sum(axis=0) / kk  # (8)
+    g = s0 * u / c  # B_j/C_j
+    v = st.vhat + g * (z - y0)  # (9): (A_j − y0 B_j)/C_j
     q, d = s0.shape
-    var0 = 1.0 / kk                              # Var(y0): Schur complement
+    var0 = 1.0 / kk  # Var(y0): Schur complement
     cov = np.zeros((d, q + 1, q + 1))
     for i in range(d):
         cov[i, 0, 0] = var0[i]
         cov[i, 0, 1:] = cov[i, 1:, 0] = -g[:, i] * var0[i]
         cov[i, 1:, 1:] = np.diag(1.0 / c[:, i]) + np.outer(g[:, i], g[:, i]) * var0[i]
-    return _Fit(np.vstack([y0, v]), cov, "diverging",
-                {"c": c, "g": g, "var0": var0, "lam": (k * (z - y0) ** 2).sum()})
+    return _Fit(
+        np.vstack([y0, v]),
+        cov,
+        "diverging",
+        {"c": c, "g": g, "var0": var0, "lam": (k * (z - y0) ** 2).sum()},
+    )
 
 
 def _parallel(st: _Stats, *, printed: bool = False) -> _Fit:
@@ -97,10 +103,10 @@ def _parallel(st: _Stats, *, printed: bool = False) -> _Fit:
     printed, E = ΣΣ w(t − epoch), so E − B_N = Σ_j N_j u_j (1 − u_j).
     """
     s0, m2, u = st.s0, st.m2, st.u
-    num = (m2 * st.vhat).sum(axis=0)             # D − A_N
+    num = (m2 * st.vhat).sum(axis=0)  # D − A_N
     den = (s0 * u * (1.0 - u)).sum(axis=0) if printed else m2.sum(axis=0)
     v = num / den
-    y0 = st.p - u * v                            # (12): (A_j − V B_j)/N_j
+    y0 = st.p - u * v  # (12): (A_j − V B_j)/N_j
     q, d = s0.shape
     varv = 1.0 / m2.sum(axis=0)
     cov = np.zeros((d, q + 1, q + 1))
@@ -108,8 +114,7 @@ def _parallel(st: _Stats, *, printed: bool = False) -> _Fit:
         cov[i, q, q] = varv[i]
         cov[i, q, :q] = cov[i, :q, q] = -u[:, i] * varv[i]
         cov[i, :q, :q] = np.diag(1.0 / s0[:, i]) + np.outer(u[:, i], u[:, i]) * varv[i]
-    return _Fit(np.vstack([y0, v]), cov, "parallel",
-                {"lam": (m2 * (st.vhat - v) ** 2).sum()})
+    return _Fit(np.vstack([y0, v]), cov, "parallel", {"lam": (m2 * (st.vhat - v) ** 2).sum()})
 
 
 def _independent(st: _Stats) -> _Fit:
@@ -174,7 +179,8 @@ def _generic(st: _Stats, fam: Family) -> _Fit:
         if not cond < 1e13:
             raise ProblemError(
                 f"family: AᵀA is singular (condition {cond:.2g} of the scaled design); the "
-                "data cannot identify this family -- are the times far from the epoch?")
+                "data cannot identify this family -- are the times far from the epoch?"
+            )
         rinv = linalg.solve_triangular(rm, np.eye(r))
         thc = (rinv @ (qm.T @ rhs)) / cs
         psic = (rinv @ rinv.T) / np.outer(cs, cs)

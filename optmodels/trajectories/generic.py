@@ -41,8 +41,7 @@ SOLVER_DEFAULTS: dict[str, dict[str, Any]] = DEFAULTS["lsq"]
 
 
 # --------------------------------------------------------------------------- generic solve
-def _cvxpy_problem(data: TrajectoryData, fam: Family, formulation: str
-                   ) -> tuple[cp.Problem, Any]:
+def _cvxpy_problem(data: TrajectoryData, fam: Family, formulation: str) -> tuple[cp.Problem, Any]:
     """The CVXPY model in centred, scaled units, and a function mapping the solved
     variables to (θ (R, d), lines (p, v, u, dt) or None).
 
@@ -62,10 +61,16 @@ def _cvxpy_problem(data: TrajectoryData, fam: Family, formulation: str
     sw = np.sqrt(data.w / np.mean(data.w) / (n * d))
     ts = float(np.max(np.abs(tau0))) or 1.0
     if formulation == "constrained":
-        off = st.p                                          # (Q, d)
+        off = st.p  # (Q, d)
         yo = data.y - off[data.obj]
-        ys = max(float(np.max(np.abs(yo))), float(np.max(np.abs(off - off[0]))),
-                 float(np.max(np.abs(st.vhat))) * ts) or 1.0
+        ys = (
+            max(
+                float(np.max(np.abs(yo))),
+                float(np.max(np.abs(off - off[0]))),
+                float(np.max(np.abs(st.vhat))) * ts,
+            )
+            or 1.0
+        )
         sel0 = sp.csr_matrix((np.ones(n), (np.arange(n), data.obj)), shape=(n, q))
         sel1 = sp.csr_matrix((tau0 / ts, (np.arange(n), data.obj)), shape=(n, q))
         pv = cp.Variable((q, d), name="position")
@@ -81,8 +86,7 @@ def _cvxpy_problem(data: TrajectoryData, fam: Family, formulation: str
                 if vi[j] == vi[r]:
                     cons.append(pv[j] - pv[r] + const == ((dt0[j] - dt0[r]) / ts) * v[r])
                 else:
-                    cons.append(pv[j] - pv[r] + const == (u0[j] / ts) * v[j]
-                                - (u0[r] / ts) * v[r])
+                    cons.append(pv[j] - pv[r] + const == (u0[j] / ts) * v[j] - (u0[r] / ts) * v[r])
         obj = cp.sum_squares(cp.multiply(sw, yo / ys - sel0 @ pv - sel1 @ v))
 
         def back_c() -> tuple[FloatArray, Any]:
@@ -106,8 +110,9 @@ def _cvxpy_problem(data: TrajectoryData, fam: Family, formulation: str
         ys = float(np.max(np.abs(yo))) or 1.0
         rows = np.concatenate([np.arange(n), np.arange(n)])
         cols = np.concatenate([si[data.obj], vi[data.obj]])
-        am = sp.csr_matrix((np.concatenate([np.ones(n), col / tsr]), (rows, cols)),
-                           shape=(n, fam.n_params))
+        am = sp.csr_matrix(
+            (np.concatenate([np.ones(n), col / tsr]), (rows, cols)), shape=(n, fam.n_params)
+        )
         th = cp.Variable((fam.n_params, d), name="theta")
         obj = cp.sum_squares(cp.multiply(sw, yo / ys - am @ th))
 
@@ -140,8 +145,9 @@ def _digest(*arrays: Any) -> str:
     return h.hexdigest()
 
 
-def _parametric_model(data: TrajectoryData, fam: Family, formulation: str
-                      ) -> tuple[cp.Problem, Any, Any, bool]:
+def _parametric_model(
+    data: TrajectoryData, fam: Family, formulation: str
+) -> tuple[cp.Problem, Any, Any, bool]:
     """The model of :func:`_cvxpy_problem` with the data as CVXPY parameters (DPP), and a
     function ``set_values()`` that writes this data's values into the parameters and
     returns the back-transform (θ, lines). Models are cached by their structure (what the
@@ -182,15 +188,17 @@ def _parametric_model(data: TrajectoryData, fam: Family, formulation: str
                 if vi[j] == vi[r]:
                     cons.append(pv[j] - pv[r] + offs[k] == ((dt0[j] - dt0[r]) / ts) * v[r])
                 else:
-                    cons.append(pv[j] - pv[r] + offs[k] == (u0[j] / ts) * v[j]
-                                - (u0[r] / ts) * v[r])
+                    cons.append(
+                        pv[j] - pv[r] + offs[k] == (u0[j] / ts) * v[j] - (u0[r] / ts) * v[r]
+                    )
             obj = cp.sum_squares(cp.multiply(sw, target - sel0 @ pv - sel1 @ v))
             model = (cp.Problem(cp.Minimize(obj), cons), target, offs, (pv, v))
         else:
             rows = np.concatenate([np.arange(n), np.arange(n)])
             cols = np.concatenate([si[data.obj], vi[data.obj]])
-            am = sp.csr_matrix((np.concatenate([np.ones(n), col / tsr]), (rows, cols)),
-                               shape=(n, fam.n_params))
+            am = sp.csr_matrix(
+                (np.concatenate([np.ones(n), col / tsr]), (rows, cols)), shape=(n, fam.n_params)
+            )
             th = cp.Variable((fam.n_params, d), name="theta")
             obj = cp.sum_squares(cp.multiply(sw, target - am @ th))
             model = (cp.Problem(cp.Minimize(obj)), target, None, (th,))
@@ -204,8 +212,14 @@ def _parametric_model(data: TrajectoryData, fam: Family, formulation: str
     if formulation == "constrained":
         off = st.p
         yo = data.y - off[data.obj]
-        ys = max(float(np.max(np.abs(yo))), float(np.max(np.abs(off - off[0]))),
-                 float(np.max(np.abs(st.vhat))) * ts) or 1.0
+        ys = (
+            max(
+                float(np.max(np.abs(yo))),
+                float(np.max(np.abs(off - off[0]))),
+                float(np.max(np.abs(st.vhat))) * ts,
+            )
+            or 1.0
+        )
 
         def set_values() -> Any:
             target.value = yo / ys
@@ -221,9 +235,9 @@ def _parametric_model(data: TrajectoryData, fam: Family, formulation: str
                 vel = np.vstack([vl[list(g)].mean(axis=0) for g in fam.velocity_groups])
                 vj = vel[vi - len(fam.start_groups)]
                 s = pl - vj * u0[:, None]
-                theta = np.vstack([[s[list(g)].mean(axis=0) for g in fam.start_groups],
-                                   vel])
+                theta = np.vstack([[s[list(g)].mean(axis=0) for g in fam.start_groups], vel])
                 return theta, (pl, vl, u0[:, None], dt0)
+
             return back_c
     else:
         ns = len(fam.start_groups)
@@ -242,14 +256,21 @@ def _parametric_model(data: TrajectoryData, fam: Family, formulation: str
                     if a[gi] != 0.0:
                         thc[gi] -= a[gi] * thc[vi[g[0]]]
                 return thc, None
+
             return back_r
+
     return prob, set_values, variables[0], cached
 
 
-def solve(data: TrajectoryData, family: FamilyName | Family = "diverging", *,
-          formulation: Literal["constrained", "reduced"] = "constrained",
-          solver: str | None = None, reuse_model: bool = True,
-          **solver_options: Any) -> TrajectorySolution:
+def solve(
+    data: TrajectoryData,
+    family: FamilyName | Family = "diverging",
+    *,
+    formulation: Literal["constrained", "reduced"] = "constrained",
+    solver: str | None = None,
+    reuse_model: bool = True,
+    **solver_options: Any,
+) -> TrajectorySolution:
     """Least squares of the family, written as is and solved by a CVXPY solver.
 
     Parameters
@@ -295,8 +316,9 @@ def solve(data: TrajectoryData, family: FamilyName | Family = "diverging", *,
     elif isinstance(solver, str):
         name = solver.upper()
     else:
-        raise ProblemError(f"trajectories.solve solver: expected a solver name (str), got "
-                           f"{type(solver).__name__}")
+        raise ProblemError(
+            f"trajectories.solve solver: expected a solver name (str), got {type(solver).__name__}"
+        )
     opts = backend_options("lsq", name, solver_options)
     if not reuse_model:
         with timed() as tb:

@@ -47,9 +47,13 @@ class FamilyTest:
         return dict(self.__dict__)
 
 
-def family_test(data: TrajectoryData, family: FamilyName | Family = "diverging", *,
-                level: float = 0.95, sigma2: Literal["known", "estimated"] = "known"
-                ) -> FamilyTest:
+def family_test(
+    data: TrajectoryData,
+    family: FamilyName | Family = "diverging",
+    *,
+    level: float = 0.95,
+    sigma2: Literal["known", "estimated"] = "known",
+) -> FamilyTest:
     """Likelihood-ratio test of the family's equality constraints against independent lines.
 
     The family imposes ``q = 2Q − R`` linear constraints per coordinate. Under the family
@@ -69,8 +73,7 @@ def family_test(data: TrajectoryData, family: FamilyName | Family = "diverging",
         independent lines fit exactly (W_independent at the rounding level: σ² cannot be
         estimated and F is undefined), or a fit that fails its re-check.
     """
-    level = as_probability("trajectories.family_test level", level, low_open=True,
-                           high_open=True)
+    level = as_probability("trajectories.family_test level", level, low_open=True, high_open=True)
     mode = as_choice("trajectories.family_test sigma2", sigma2, ("known", "estimated"))
     as_instance("trajectories.family_test data", data, TrajectoryData)
     fam = resolve_family(family, data.n_objects)
@@ -81,8 +84,10 @@ def family_test(data: TrajectoryData, family: FamilyName | Family = "diverging",
     for key, f in (("family", fam), ("independent", Family.independent(data.n_objects))):
         sol = closed_form(data, f)
         if not sol.ok:
-            raise ProblemError(f"family: the {key} fit fails its re-check ({sol.message}); "
-                               "the test would be meaningless")
+            raise ProblemError(
+                f"family: the {key} fit fails its re-check ({sol.message}); "
+                "the test would be meaningless"
+            )
         if sol.status is not Status.OPTIMAL:
             notes.append(f"{key} fit {sol.status.value}: {sol.message}")
         fits[key] = sol
@@ -96,23 +101,36 @@ def family_test(data: TrajectoryData, family: FamilyName | Family = "diverging",
     else:
         dof2 = (data.n_measurements - 2 * data.n_objects) * data.dim
         if dof2 <= 0:
-            raise ProblemError("sigma2: estimating σ² needs more than 2 measurements on "
-                               "some object (Σ N_j > 2Q)")
+            raise ProblemError(
+                "sigma2: estimating σ² needs more than 2 measurements on some object (Σ N_j > 2Q)"
+            )
         st = _stats(data)
-        resid_scale = float(np.sum(data.w * (np.abs(st.ry) + np.abs(st.vhat[data.obj]
-                                                                     * st.tau)) ** 2))
+        resid_scale = float(
+            np.sum(data.w * (np.abs(st.ry) + np.abs(st.vhat[data.obj] * st.tau)) ** 2)
+        )
         if not wi > (1e3 * EPS) ** 2 * resid_scale:
             raise ProblemError(
                 f"trajectories.family_test sigma2: the independent lines fit the data "
                 f"exactly (W_independent = {wi:.3g}, at the float64 rounding level of the "
                 "data), so σ² cannot be estimated and the F test is undefined; use "
-                "sigma2='known' with the measurement variances")
+                "sigma2='known' with the measurement variances"
+            )
         stat, dist = (lam / dof) / (wi / dof2), stats.f(dof, dof2)
     thr = float(dist.ppf(level))
-    return FamilyTest(family=fam.name, sigma2=mode, statistic=float(stat), dof=dof,
-                      dof2=dof2, threshold=thr, p_value=float(dist.sf(stat)), level=level,
-                      reject=bool(stat > thr), objective_family=wf, objective_independent=wi,
-                      message="; ".join(notes))
+    return FamilyTest(
+        family=fam.name,
+        sigma2=mode,
+        statistic=float(stat),
+        dof=dof,
+        dof2=dof2,
+        threshold=thr,
+        p_value=float(dist.sf(stat)),
+        level=level,
+        reject=bool(stat > thr),
+        objective_family=wf,
+        objective_independent=wi,
+        message="; ".join(notes),
+    )
 
 
 def _custom_penalty(data: TrajectoryData, fam: Family) -> float:

@@ -94,11 +94,13 @@ def _stats(data: TrajectoryData) -> _Stats:
         kappa = EPS * tmax[:, None] / np.sqrt(m2 / s0)
     arrays = (s0, tbar, tcorr, u, m2, p, vhat, tau, ry, kappa)
     if not all(np.all(np.isfinite(a)) for a in arrays) or np.any(
-            m2 < np.finfo(float).tiny * 1e16 * s0):
+        m2 < np.finfo(float).tiny * 1e16 * s0
+    ):
         raise ProblemError(
             "times/values: the least-squares moments over- or underflow float64 (times "
             f"spread down to {np.min(span):.3g} s, weights {np.min(w):.3g}..{np.max(w):.3g}, "
-            f"|values| up to {np.max(np.abs(y)):.3g}); change units")
+            f"|values| up to {np.max(np.abs(y)):.3g}); change units"
+        )
     worst = int(np.argmax(np.max(kappa, axis=1)))
     if float(np.max(kappa)) > TIME_RESOLUTION_MAX:
         raise ProblemError(
@@ -106,7 +108,8 @@ def _stats(data: TrajectoryData) -> _Stats:
             f"object {worst}'s times spread over {span[worst]:.3g} s at |t| up to "
             f"{float(tmax[worst]):.3g} s, which float64 resolves only to "
             f"{float(np.max(kappa[worst])):.2g} relative; measure time from an origin nearer "
-            "the data")
+            "the data"
+        )
     st = _Stats(s0, tbar, tcorr, u, m2, p, vhat, tau, ry, span, kappa)
     data._cache["stats"] = st
     return st

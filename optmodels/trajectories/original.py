@@ -40,8 +40,9 @@ def objective(data: TrajectoryData, start: ArrayLike, velocity: ArrayLike) -> fl
     return float(np.sum(data.w * r * r))
 
 
-def constraint_residuals(data: TrajectoryData, family: FamilyName | Family,
-                         start: ArrayLike, velocity: ArrayLike) -> dict[str, float]:
+def constraint_residuals(
+    data: TrajectoryData, family: FamilyName | Family, start: ArrayLike, velocity: ArrayLike
+) -> dict[str, float]:
     """Largest violation of the family's equalities (y0_j = y0_k, V_j = V_k in a group),
     relative to the size of the parameters."""
     fam = resolve_family(family, data.n_objects)

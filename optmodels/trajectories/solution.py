@@ -78,9 +78,15 @@ class TrajectorySolution(Solution):
         out = super().to_dict()
         out.pop("_data", None)
         fam = self.family
-        out["family"] = None if fam is None else {
-            "name": fam.name, "start_groups": fam.start_groups,
-            "velocity_groups": fam.velocity_groups}
+        out["family"] = (
+            None
+            if fam is None
+            else {
+                "name": fam.name,
+                "start_groups": fam.start_groups,
+                "velocity_groups": fam.velocity_groups,
+            }
+        )
         return out
 
 
@@ -89,20 +95,38 @@ def _shape(data: TrajectoryData, arr: FloatArray) -> FloatArray:
     return arr if data.vector else arr[:, 0]
 
 
-def _package(data: TrajectoryData, fam: Family, fit: _Fit, theta: FloatArray,
-             residuals: dict[str, float], objective: float, common: dict[str, Any]
-             ) -> TrajectorySolution:
+def _package(
+    data: TrajectoryData,
+    fam: Family,
+    fit: _Fit,
+    theta: FloatArray,
+    residuals: dict[str, float],
+    objective: float,
+    common: dict[str, Any],
+) -> TrajectorySolution:
     cov = fit.cov
     return TrajectorySolution(
-        objective=objective, residuals=residuals, family=fam, theta=_shape(data, theta),
+        objective=objective,
+        residuals=residuals,
+        family=fam,
+        theta=_shape(data, theta),
         start=_shape(data, theta[fam.start_index]),
         velocity=_shape(data, theta[fam.velocity_index]),
         covariance=cov if data.vector else cov[0],
-        dof=(data.n_measurements - fam.n_params) * data.dim, _data=data, **common)
+        dof=(data.n_measurements - fam.n_params) * data.dim,
+        _data=data,
+        **common,
+    )
 
 
-def _failure(data: TrajectoryData, fam: Family, fit: _Fit, residuals: dict[str, float],
-                  common: dict[str, Any], rejected: FloatArray | None) -> TrajectorySolution:
+def _failure(
+    data: TrajectoryData,
+    fam: Family,
+    fit: _Fit,
+    residuals: dict[str, float],
+    common: dict[str, Any],
+    rejected: FloatArray | None,
+) -> TrajectorySolution:
     nan = np.full((fam.n_params, data.dim), np.nan)
     sol = _package(data, fam, fit, nan, residuals, float("nan"), common)
     sol.status = Status.ERROR if common["status"].ok else common["status"]
@@ -112,10 +136,20 @@ def _failure(data: TrajectoryData, fam: Family, fit: _Fit, residuals: dict[str, 
 
 
 # --------------------------------------------------------------------------- the gate
-def _finish(data: TrajectoryData, fam: Family, fit: _Fit, theta: FloatArray,
-            residuals: dict[str, float], objective: float, diag: dict[str, Any],
-            common: dict[str, Any], *, strict: bool, note: Any,
-            keep: _Fit | None = None) -> TrajectorySolution:
+def _finish(
+    data: TrajectoryData,
+    fam: Family,
+    fit: _Fit,
+    theta: FloatArray,
+    residuals: dict[str, float],
+    objective: float,
+    diag: dict[str, Any],
+    common: dict[str, Any],
+    *,
+    strict: bool,
+    note: Any,
+    keep: _Fit | None = None,
+) -> TrajectorySolution:
     """Pack θ and pass it through the one gate (:func:`optmodels.core.finish`, ``strict``
     for a solver's claim, see :func:`optmodels.core.gate`). Refused: the failure form
     (:func:`_failure`, θ kept in ``info["rejected_theta"]``), or with ``keep`` (the
@@ -147,10 +181,14 @@ def _solve_note(v: Verdict) -> str:
     return f"verification failed: {v.key} = {v.worst:.2e} > {VERIFY_TOL:g}"
 
 
-def _finish_solve(data: TrajectoryData, fam: Family, fit: _Fit, theta: FloatArray,
-                  lines: tuple[FloatArray, FloatArray, FloatArray, FloatArray] | None,
-                  common: dict[str, Any]
-                  ) -> TrajectorySolution:
+def _finish_solve(
+    data: TrajectoryData,
+    fam: Family,
+    fit: _Fit,
+    theta: FloatArray,
+    lines: tuple[FloatArray, FloatArray, FloatArray, FloatArray] | None,
+    common: dict[str, Any],
+) -> TrajectorySolution:
     """End of :func:`~.generic.solve` for a finite solver point θ (and the solver's own
     lines, constrained formulation): the re-check against the original problem
     (stationarity; the equalities of the family by the lines), the one gate in its strict
@@ -158,12 +196,19 @@ def _finish_solve(data: TrajectoryData, fam: Family, fit: _Fit, theta: FloatArra
     stays within REJECT_TOL, else refused), then the downgrades of :func:`_finish`."""
     obj, stat, diag = _recheck(data, fam, fit, theta)
     std = np.sqrt(np.diagonal(fit.cov, axis1=1, axis2=2)).T
-    residuals = ({"shared_start": 0.0, "shared_velocity": 0.0} if lines is None
-                 else _line_residuals(_stats(data), fam, *lines, std))
+    residuals = (
+        {"shared_start": 0.0, "shared_velocity": 0.0}
+        if lines is None
+        else _line_residuals(_stats(data), fam, *lines, std)
+    )
     residuals["stationarity"] = stat
-    sol = _finish(data, fam, fit, theta, residuals, obj, diag, common, strict=True,
-                  note=_solve_note)
+    sol = _finish(
+        data, fam, fit, theta, residuals, obj, diag, common, strict=True, note=_solve_note
+    )
     if lines is not None and sol.ok:
-        sol.info["lines"] = {"position": lines[0], "velocity": lines[1],
-                             "at_time": (lines[2][:, 0] + data.epoch)}
+        sol.info["lines"] = {
+            "position": lines[0],
+            "velocity": lines[1],
+            "at_time": (lines[2][:, 0] + data.epoch),
+        }
     return sol

@@ -43,8 +43,7 @@ def _lines(st: _Stats, fam: Family, theta: FloatArray) -> tuple[FloatArray, Floa
     return theta[fam.start_index] + v * st.u, v
 
 
-def _newton(st: _Stats, fam: Family, fit: _Fit, gp: FloatArray, gv: FloatArray
-            ) -> FloatArray:
+def _newton(st: _Stats, fam: Family, fit: _Fit, gp: FloatArray, gv: FloatArray) -> FloatArray:
     """Ψ·∇(−W/2) at a point whose per-object gradients are ``gp = Σw r``,
     ``gv = Σw(t − T_j) r``: the exact step to the family's least-squares optimum (W is
     quadratic), computed without forming the ill-conditioned products of θ's basis."""
@@ -70,8 +69,9 @@ def _newton(st: _Stats, fam: Family, fit: _Fit, gp: FloatArray, gv: FloatArray
     return out
 
 
-def _recheck(data: TrajectoryData, fam: Family, fit: _Fit, theta: FloatArray
-             ) -> tuple[float, float, dict[str, Any]]:
+def _recheck(
+    data: TrajectoryData, fam: Family, fit: _Fit, theta: FloatArray
+) -> tuple[float, float, dict[str, Any]]:
     """Objective, stationarity and diagnostics of θ against the original problem, in
     centred times. Stationarity: max over θ of |Δθ_k| / max(max |θ| of its kind, std_k),
     Δθ the exact step to the optimum."""
@@ -83,7 +83,7 @@ def _recheck(data: TrajectoryData, fam: Family, fit: _Fit, theta: FloatArray
         obj = float(np.sum(w * r * r))
         gp, gv = _per(data, w * r), _per(data, w * r * st.tau)
         step = _newton(st, fam, fit, gp, gv)
-        std = np.sqrt(np.diagonal(fit.cov, axis1=1, axis2=2)).T      # (R, d)
+        std = np.sqrt(np.diagonal(fit.cov, axis1=1, axis2=2)).T  # (R, d)
         ns = len(fam.start_groups)
         size = np.empty_like(theta)
         size[:ns] = np.max(np.abs(theta[:ns]))
@@ -93,13 +93,15 @@ def _recheck(data: TrajectoryData, fam: Family, fit: _Fit, theta: FloatArray
         xr = np.where(far, EPS * np.abs(v * st.u) * np.sqrt(st.s0), 0.0)
     if not (np.isfinite(stat) and np.isfinite(obj)):
         stat = float("inf")
-    diag = {"time_resolution": float(np.max(st.kappa)), "extrapolation": float(np.max(xr)),
-            "extrapolation_object": int(np.argmax(np.max(xr, axis=1)))}
+    diag = {
+        "time_resolution": float(np.max(st.kappa)),
+        "extrapolation": float(np.max(xr)),
+        "extrapolation_object": int(np.argmax(np.max(xr, axis=1))),
+    }
     return obj, stat, diag
 
 
-def _downgrade(data: TrajectoryData, status: Status, diag: dict[str, Any]
-               ) -> tuple[Status, str]:
+def _downgrade(data: TrajectoryData, status: Status, diag: dict[str, Any]) -> tuple[Status, str]:
     """OPTIMAL → OPTIMAL_INACCURATE for coarse times or a far epoch; refuse an epoch whose
     start cannot carry the line."""
     notes = []
@@ -109,21 +111,33 @@ def _downgrade(data: TrajectoryData, status: Status, diag: dict[str, Any]
             f"trajectories epoch: {data.epoch:.6g} s is so far from the data that the start "
             f"there cannot carry the fitted line: rounding the reported start of object {j} "
             f"moves its line at the data by {diag['extrapolation']:.3g} standard deviations; "
-            "use an epoch nearer the data")
+            "use an epoch nearer the data"
+        )
     if diag["extrapolation"] > EXTRAPOLATION_WARN:
-        notes.append(f"epoch {data.epoch:.6g} s is far from the data: the reported starts are "
-                     f"extrapolations whose rounding moves the lines at the data by up to "
-                     f"{diag['extrapolation']:.2g} standard deviations")
+        notes.append(
+            f"epoch {data.epoch:.6g} s is far from the data: the reported starts are "
+            f"extrapolations whose rounding moves the lines at the data by up to "
+            f"{diag['extrapolation']:.2g} standard deviations"
+        )
     if diag["time_resolution"] > TIME_RESOLUTION_WARN:
-        notes.append(f"float64 resolves the times' spread only to "
-                     f"{diag['time_resolution']:.2g} relative (|t| large against the spread)")
+        notes.append(
+            f"float64 resolves the times' spread only to "
+            f"{diag['time_resolution']:.2g} relative (|t| large against the spread)"
+        )
     if notes and status is Status.OPTIMAL:
         status = Status.OPTIMAL_INACCURATE
     return status, "; ".join(notes)
 
 
-def _line_residuals(st: _Stats, fam: Family, p: FloatArray, v: FloatArray, u: FloatArray,
-                    dt: FloatArray, std: FloatArray) -> dict[str, float]:
+def _line_residuals(
+    st: _Stats,
+    fam: Family,
+    p: FloatArray,
+    v: FloatArray,
+    u: FloatArray,
+    dt: FloatArray,
+    std: FloatArray,
+) -> dict[str, float]:
     """Violation of the family's equalities by Q lines given at reference times
     (position ``p`` at T0_j, velocity ``v``; ``u = T0_j − epoch``, ``dt`` (Q,) T0_j − T0_0):
     velocities relative to max(|V|, σ_V); starts of objects that also share a velocity as
@@ -135,8 +149,17 @@ def _line_residuals(st: _Stats, fam: Family, p: FloatArray, v: FloatArray, u: Fl
     sp_ = max(float(np.max(np.abs(p))), float(np.max(1.0 / np.sqrt(st.s0))))
     s = p - v * u
     ss = max(float(np.max(np.abs(s))), float(np.max(std[:ns])))
-    wv = max((float(np.max(np.abs(v[list(g)] - v[g[0]]))) for g in fam.velocity_groups
-              if len(g) > 1), default=0.0) / sv
+    wv = (
+        max(
+            (
+                float(np.max(np.abs(v[list(g)] - v[g[0]])))
+                for g in fam.velocity_groups
+                if len(g) > 1
+            ),
+            default=0.0,
+        )
+        / sv
+    )
     ws = 0.0
     for g in fam.start_groups:
         r = g[0]

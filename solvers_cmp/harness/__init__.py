@@ -74,6 +74,18 @@ from solvers_cmp.harness.worker import _prepare as _prepare
 from solvers_cmp.harness.worker import _State as _State
 from solvers_cmp.harness.worker import _worker_loop as _worker_loop
 
-__all__ = ["COLUMNS", "KEY", "PROFILES", "Case", "Profile", "Sizes", "Worker", "plan",
-           "read_results", "run_sweep", "shifted_geometric_mean", "solver_version",
-           "summarise"]
+__all__ = [
+    "COLUMNS",
+    "KEY",
+    "PROFILES",
+    "Case",
+    "Profile",
+    "Sizes",
+    "Worker",
+    "plan",
+    "read_results",
+    "run_sweep",
+    "shifted_geometric_mean",
+    "solver_version",
+    "summarise",
+]

@@ -31,8 +31,14 @@ def shifted_geometric_mean(times: Iterable[float], shift: float = SHIFT) -> floa
     return float(np.exp(np.mean(np.log(t + shift))) - shift)
 
 
-def sgm_interval(times: Sequence[float], *, shift: float = SHIFT, n_boot: int = N_BOOT,
-                 level: float = LEVEL, seed: int = 0) -> tuple[float, float]:
+def sgm_interval(
+    times: Sequence[float],
+    *,
+    shift: float = SHIFT,
+    n_boot: int = N_BOOT,
+    level: float = LEVEL,
+    seed: int = 0,
+) -> tuple[float, float]:
     """Percentile bootstrap interval (``level``) of the shifted geometric mean of
     ``times`` (s), resampling the cases with replacement (seeded: the same data give the
     same interval). One time: a zero-width interval."""
@@ -95,6 +101,7 @@ def efficiency(rows: Sequence[dict[str, Any]]) -> tuple[float, int]:
     ``Σ crb / Σ estimate_sq_error`` and the number of draws. 1 for an efficient estimator
     (up to the Monte Carlo spread of the draws, which every solver of the problem shares:
     the same draws), below 1 for one that pays for an early stop; NaN without draws."""
+
     def num(v: Any) -> float:
         try:
             return float(v)
@@ -110,9 +117,14 @@ def efficiency(rows: Sequence[dict[str, Any]]) -> tuple[float, int]:
     return (bound / err if err > 0 else float("inf")), len(pairs)
 
 
-def summarise(rows: Sequence[dict[str, Any]], time_limit: float, *,
-              n_boot: int = N_BOOT, seed: int = 0,
-              skipped: Sequence[dict[str, Any]] = ()) -> list[dict[str, Any]]:
+def summarise(
+    rows: Sequence[dict[str, Any]],
+    time_limit: float,
+    *,
+    n_boot: int = N_BOOT,
+    seed: int = 0,
+    skipped: Sequence[dict[str, Any]] = (),
+) -> list[dict[str, Any]]:
     """Per (problem, formulation, solver): runs, success rate, shifted geometric means of
     solve and build time (failures charged ``time_limit``) and of their sum ``total``
     with its bootstrap interval (``sgm_total_lo``/``_hi``, over the cases), each also
@@ -128,7 +140,8 @@ def summarise(rows: Sequence[dict[str, Any]], time_limit: float, *,
         groups.setdefault((r["problem"], r["formulation"], r["solver"]), []).append(r)
     for k in skipped:
         groups.setdefault((k["problem"], k["formulation"], k["solver"]), []).append(
-            {**k, "success": False, "seed": k.get("seed"), "skipped": True})
+            {**k, "success": False, "seed": k.get("seed"), "skipped": True}
+        )
     # a case that another solver of the same (problem, formulation) ran but this one
     # did not (left out, or a sweep with --solvers on part of the cases) counts as its
     # failure too: every solver of a ranking is measured on the same cases
@@ -138,9 +151,18 @@ def summarise(rows: Sequence[dict[str, Any]], time_limit: float, *,
     for (problem, form, solver), rs in groups.items():
         have = {_case_key(r) for r in rs}
         for c in sorted(forms[(problem, form)] - have, key=str):
-            rs.append({"problem": problem, "formulation": form, "solver": solver,
-                       "instance": c[0], "size": c[1], "seed": c[2], "success": False,
-                       "skipped": True})
+            rs.append(
+                {
+                    "problem": problem,
+                    "formulation": form,
+                    "solver": solver,
+                    "instance": c[0],
+                    "size": c[1],
+                    "seed": c[2],
+                    "success": False,
+                    "skipped": True,
+                }
+            )
     out = []
     per_case: dict[tuple[str, str, str], dict[tuple[Any, ...], float]] = {}
     for (problem, form, solver), rs in groups.items():
@@ -148,23 +170,31 @@ def summarise(rows: Sequence[dict[str, Any]], time_limit: float, *,
         solve = [r["solve_time"] if r["success"] else time_limit for r in rs]
         build = [r["build_time"] if r["success"] else time_limit for r in rs]
         total = [_total(r, time_limit) for r in rs]
-        per_case[(problem, form, solver)] = {_case_key(r): t
-                                             for r, t in zip(rs, total, strict=True)}
+        per_case[(problem, form, solver)] = {
+            _case_key(r): t for r, t in zip(rs, total, strict=True)
+        }
         lo, hi = sgm_interval(total, n_boot=n_boot, seed=seed)
         eff, draws = efficiency([r for r in rs if not r.get("skipped")])
-        out.append({
-            "problem": problem, "kind": formulation_kind(problem, form),
-            "formulation": form, "solver": solver, "runs": len(rs),
-            "skipped": sum(bool(r.get("skipped")) for r in rs),
-            "success_rate": len(succ) / len(rs),
-            "sgm_solve_time": shifted_geometric_mean(solve),
-            "sgm_build_time": shifted_geometric_mean(build),
-            "sgm_total_time": shifted_geometric_mean(total),
-            "sgm_total_lo": lo, "sgm_total_hi": hi,
-            "max_error": max((r["solution_error"] for r in succ), default=float("nan")),
-            "max_violation": max((r["max_violation"] for r in succ), default=float("nan")),
-            "efficiency": eff, "draws": draws,
-        })
+        out.append(
+            {
+                "problem": problem,
+                "kind": formulation_kind(problem, form),
+                "formulation": form,
+                "solver": solver,
+                "runs": len(rs),
+                "skipped": sum(bool(r.get("skipped")) for r in rs),
+                "success_rate": len(succ) / len(rs),
+                "sgm_solve_time": shifted_geometric_mean(solve),
+                "sgm_build_time": shifted_geometric_mean(build),
+                "sgm_total_time": shifted_geometric_mean(total),
+                "sgm_total_lo": lo,
+                "sgm_total_hi": hi,
+                "max_error": max((r["solution_error"] for r in succ), default=float("nan")),
+                "max_violation": max((r["max_violation"] for r in succ), default=float("nan")),
+                "efficiency": eff,
+                "draws": draws,
+            }
+        )
     for problem in {o["problem"] for o in out}:
         mine = [o for o in out if o["problem"] == problem]
         for key in ("sgm_solve_time", "sgm_build_time", "sgm_total_time"):
@@ -175,20 +205,34 @@ def summarise(rows: Sequence[dict[str, Any]], time_limit: float, *,
         # three problems): ranks within (problem, formulation), paired over its cases
         for form in {o["formulation"] for o in mine if o["kind"] == "original"}:
             grp = [o for o in mine if o["kind"] == "original" and o["formulation"] == form]
-            cases = sorted({c for o in grp
-                            for c in per_case[(problem, form, o["solver"])]}, key=str)
-            logs = {o["solver"]: np.log(np.array(
-                [per_case[(problem, form, o["solver"])].get(c, time_limit) for c in cases])
-                + SHIFT) for o in grp}
+            cases = sorted(
+                {c for o in grp for c in per_case[(problem, form, o["solver"])]}, key=str
+            )
+            logs = {
+                o["solver"]: np.log(
+                    np.array(
+                        [per_case[(problem, form, o["solver"])].get(c, time_limit) for c in cases]
+                    )
+                    + SHIFT
+                )
+                for o in grp
+            }
             rank_rows(grp, paired=_paired_boot(logs, n_boot, seed))
     order = {"original": 0, "reduction": 1, "reference": 2}
-    out.sort(key=lambda o: (o["problem"], order[o["kind"]], o["formulation"],
-                            o.get("rank", 0), -o["success_rate"], o["sgm_total_time"]))
+    out.sort(
+        key=lambda o: (
+            o["problem"],
+            order[o["kind"]],
+            o["formulation"],
+            o.get("rank", 0),
+            -o["success_rate"],
+            o["sgm_total_time"],
+        )
+    )
     return out
 
 
-def _paired_boot(logs: dict[str, np.ndarray], n_boot: int, seed: int
-                 ) -> dict[str, np.ndarray]:
+def _paired_boot(logs: dict[str, np.ndarray], n_boot: int, seed: int) -> dict[str, np.ndarray]:
     """Per solver, the bootstrap means of log(total + shift) over the *same* resampled
     cases for every solver (a paired bootstrap: the spread of case difficulty -- sizes
     that differ 10× -- cancels in the ratios)."""
@@ -199,9 +243,12 @@ def _paired_boot(logs: dict[str, np.ndarray], n_boot: int, seed: int
     return {k: v[idx].mean(axis=1) for k, v in logs.items()}
 
 
-def rank_rows(rows: list[dict[str, Any]], *,
-              paired: dict[str, np.ndarray] | None = None,
-              margin: float = TIE_MARGIN) -> list[dict[str, Any]]:
+def rank_rows(
+    rows: list[dict[str, Any]],
+    *,
+    paired: dict[str, np.ndarray] | None = None,
+    margin: float = TIE_MARGIN,
+) -> list[dict[str, Any]]:
     """Rank rows of one (problem, original formulation) in place: by success rate, then
     ``sgm_total_time``; rank 1 is the leader and every row *tied* with it.
 
@@ -246,9 +293,11 @@ def rank_rows(rows: list[dict[str, Any]], *,
 
 
 def _overlap(a: dict[str, Any], b: dict[str, Any]) -> bool:
-    return (a["success_rate"] == b["success_rate"]
-            and a["sgm_total_lo"] <= b["sgm_total_hi"]
-            and b["sgm_total_lo"] <= a["sgm_total_hi"])
+    return (
+        a["success_rate"] == b["success_rate"]
+        and a["sgm_total_lo"] <= b["sgm_total_hi"]
+        and b["sgm_total_lo"] <= a["sgm_total_hi"]
+    )
 
 
 def headline(summary: Sequence[dict[str, Any]]) -> dict[str, tuple[str, ...]]:

@@ -32,7 +32,8 @@ def _names(what: str, v: Any) -> list[str] | None:
         return None
     items = [v] if isinstance(v, str) else v
     if not isinstance(items, Sequence | set | frozenset) or not all(
-            isinstance(x, str) for x in items):
+        isinstance(x, str) for x in items
+    ):
         raise ProblemError(f"{what}: expected a list of names, got {v!r}"[:200])
     items = [x.strip() for x in items if x.strip()]
     if not items:
@@ -49,9 +50,13 @@ def _counts(what: str, v: Any, minimum: int) -> list[int]:
     return out
 
 
-def plan(problems: Sequence[str], sizes: Sizes = None,
-         solvers: Sequence[str] | None = None, seeds: Sequence[int] = (0,),
-         instances: Sequence[str] | None = None) -> list[tuple[str, Case, list[cs.Run]]]:
+def plan(
+    problems: Sequence[str],
+    sizes: Sizes = None,
+    solvers: Sequence[str] | None = None,
+    seeds: Sequence[int] = (0,),
+    instances: Sequence[str] | None = None,
+) -> list[tuple[str, Case, list[cs.Run]]]:
     """The sweep: (adapter path, case, runs) for every problem × instance × size × seed.
     ``sizes``: one list for every problem, or a list per problem name (missing names and
     ``None``: the adapter's default sizes). ``solvers`` filters runs by solver name
@@ -69,8 +74,11 @@ def plan(problems: Sequence[str], sizes: Sizes = None,
     instances = _names("compare instances", instances)
     seeds = _counts("compare seeds", seeds, 0)
     if isinstance(sizes, Mapping):
-        sizes = {str(k): _counts(f"compare sizes[{k!r}]", v, 1) for k, v in sizes.items()
-                 if v is not None}
+        sizes = {
+            str(k): _counts(f"compare sizes[{k!r}]", v, 1)
+            for k, v in sizes.items()
+            if v is not None
+        }
     elif sizes is not None:
         sizes = _counts("compare sizes", sizes, 1)
     ads = {p: cs.adapter(p) for p in problems}  # ProblemError for an unknown problem
@@ -78,16 +86,25 @@ def plan(problems: Sequence[str], sizes: Sizes = None,
         known_inst = {i for ad in ads.values() for i in ad.instances}
         bad = [i for i in instances if i not in known_inst]
         if bad:
-            raise ProblemError(f"compare instances: unknown instance(s) {bad} of "
-                               f"{', '.join(problems)} (known: {sorted(known_inst)})")
+            raise ProblemError(
+                f"compare instances: unknown instance(s) {bad} of "
+                f"{', '.join(problems)} (known: {sorted(known_inst)})"
+            )
     want = {x.lower() for x in solvers} if solvers else None
     if want is not None:
-        known = {r.solver for ad in ads.values() for inst in ad.instances
-                 if not instances or inst in instances for r in ad.runs(inst)}
+        known = {
+            r.solver
+            for ad in ads.values()
+            for inst in ad.instances
+            if not instances or inst in instances
+            for r in ad.runs(inst)
+        }
         bad = [x for x in solvers or () if x.lower() not in {k.lower() for k in known}]
         if bad:
-            raise ProblemError(f"compare solvers: unknown solver(s) {bad} for "
-                               f"{', '.join(problems)} (available here: {sorted(known)})")
+            raise ProblemError(
+                f"compare solvers: unknown solver(s) {bad} for "
+                f"{', '.join(problems)} (available here: {sorted(known)})"
+            )
     out = []
     for p, ad in ads.items():
         path = cs.REGISTRY.get(p)
@@ -95,10 +112,13 @@ def plan(problems: Sequence[str], sizes: Sizes = None,
         for inst in ad.instances:
             if instances and inst not in instances:
                 continue
-            runs = [r for r in ad.runs(inst) if want is None or r.formulation == "closed_form"
-                    or r.solver.lower() in want]
+            runs = [
+                r
+                for r in ad.runs(inst)
+                if want is None or r.formulation == "closed_form" or r.solver.lower() in want
+            ]
             own = sizes.get(p) if isinstance(sizes, Mapping) else sizes
-            for size in (own or ad.sizes):
+            for size in own or ad.sizes:
                 for seed in seeds:
                     out.append((path, Case(p, inst, int(size), int(seed)), runs))
     return out

@@ -74,8 +74,10 @@ def options_key(prof: Profile, solver: str) -> str:
     (:data:`optmodels.backends.profiles.DEFAULTS`) -- so that a change of either
     recomputes the rows instead of reusing them."""
     up = solver.upper()
-    doc = {"profile": prof.options(solver),
-           "defaults": {c: t[up] for c, t in DEFAULTS.items() if up in t}}
+    doc = {
+        "profile": prof.options(solver),
+        "defaults": {c: t[up] for c, t in DEFAULTS.items() if up in t},
+    }
     return json.dumps(doc, sort_keys=True, separators=(",", ":"), default=str)
 
 
@@ -85,33 +87,55 @@ def options_key(prof: Profile, solver: str) -> str:
 #: shared): each of these runs sat at the time limit, 18 runs = 90 s of the 151 s
 #: comparison. A full ``optmodels compare`` runs them all.
 TOO_SLOW: dict[tuple[str, str, str | None, str | None], tuple[int, str]] = {
-    ("trajectories", "CASADI_QPOASES", None, None):
-        (100, "dense active set: > 5 s at Q = 10 × 100 points (1000-variable QP)"),
-    ("fusion", "CASADI_QPOASES", "min-trace W", None):
-        (20, "dense active set: > 5 s on the m = 20 minimum-trace QP"),
-    ("biasfield", "CASADI_QPOASES", None, None):
-        (100, "dense active set: > 5 s from K = 100 cells"),
-    ("biasfield", "CASADI_DAQP", None, None):
-        (500, "> 5 s from K = 500 cells (and fails the singular sum_squares Hessian)"),
-    ("biasfield", "CASADI_QRQP", "constrained", "box"):
-        (100, "> 5 s on the constrained box QP from K = 100"),
-    ("biasfield", "CASADI_PROXQP", "constrained", "box"):
-        (500, "> 5 s on the constrained box QP from K = 500"),
-    ("biasfield", "OSQP", "constrained", "box"):
-        (100, "> 5 s on the constrained box QP from K = 100 at eps 1e-6 as at 1e-9 (ADMM "
-              "converges slowly once bounds bind; the reduced form solves)"),
-    ("biasfield", "CASADI_OSQP", "constrained", "box"):
-        (100, "as OSQP through CVXPY: > 5 s on the constrained box QP from K = 100"),
-    ("plane", "feasiblesqpmethod", "full", "radar"):
-        (100, "> 5 s on the full NLP with general covariances from N = 100"),
+    ("trajectories", "CASADI_QPOASES", None, None): (
+        100,
+        "dense active set: > 5 s at Q = 10 × 100 points (1000-variable QP)",
+    ),
+    ("fusion", "CASADI_QPOASES", "min-trace W", None): (
+        20,
+        "dense active set: > 5 s on the m = 20 minimum-trace QP",
+    ),
+    ("biasfield", "CASADI_QPOASES", None, None): (
+        100,
+        "dense active set: > 5 s from K = 100 cells",
+    ),
+    ("biasfield", "CASADI_DAQP", None, None): (
+        500,
+        "> 5 s from K = 500 cells (and fails the singular sum_squares Hessian)",
+    ),
+    ("biasfield", "CASADI_QRQP", "constrained", "box"): (
+        100,
+        "> 5 s on the constrained box QP from K = 100",
+    ),
+    ("biasfield", "CASADI_PROXQP", "constrained", "box"): (
+        500,
+        "> 5 s on the constrained box QP from K = 500",
+    ),
+    ("biasfield", "OSQP", "constrained", "box"): (
+        100,
+        "> 5 s on the constrained box QP from K = 100 at eps 1e-6 as at 1e-9 (ADMM "
+        "converges slowly once bounds bind; the reduced form solves)",
+    ),
+    ("biasfield", "CASADI_OSQP", "constrained", "box"): (
+        100,
+        "as OSQP through CVXPY: > 5 s on the constrained box QP from K = 100",
+    ),
+    ("plane", "feasiblesqpmethod", "full", "radar"): (
+        100,
+        "> 5 s on the full NLP with general covariances from N = 100",
+    ),
 }
 
 
 def too_slow(case: Any, run: Any) -> str | None:
     """Why the quick sweep leaves ``run`` on ``case`` out (:data:`TOO_SLOW`), or None."""
     for (problem, solver, form, inst), (size, why) in TOO_SLOW.items():
-        if (case.problem == problem and run.solver == solver
-                and form in (None, run.formulation) and inst in (None, case.instance)
-                and case.size >= size):
+        if (
+            case.problem == problem
+            and run.solver == solver
+            and form in (None, run.formulation)
+            and inst in (None, case.instance)
+            and case.size >= size
+        ):
             return why
     return None

@@ -21,8 +21,9 @@ from solvers_cmp.harness.worker import Worker, run_prepared
 _REMOTE = threading.local()
 
 
-def _remote_run(ad_path: str, case: Case, run: cs.Run, options: dict[str, Any],
-                limit: float, repeats: int = 1) -> tuple[str, Any, float, str, str]:
+def _remote_run(
+    ad_path: str, case: Case, run: cs.Run, options: dict[str, Any], limit: float, repeats: int = 1
+) -> tuple[str, Any, float, str, str]:
     """One comparison run as a Dask task (``run_sweep(scheduler=ADDRESS)``): on the Dask
     worker, in a child process (one per worker thread, kept across tasks, restarted after
     a crash or a time-out) with the time limit enforced there, exactly as the local
@@ -33,6 +34,8 @@ def _remote_run(ad_path: str, case: Case, run: cs.Run, options: dict[str, Any],
     if worker is None:
         worker = _REMOTE.worker = Worker("-")
         _REMOTE.prepared = [None, None]
-    return (*run_prepared(worker, _REMOTE.prepared, ad_path, case, run, options, limit,
-                          repeats),
-            solver_version(run.solver), cpu_name())
+    return (
+        *run_prepared(worker, _REMOTE.prepared, ad_path, case, run, options, limit, repeats),
+        solver_version(run.solver),
+        cpu_name(),
+    )

@@ -20,18 +20,53 @@ from optmodels.execution import LineLog, report_skipped
 from optmodels.io import csv_cell
 
 #: Fixed columns of ``results.csv`` (DESIGN.md, "Solver comparison"), in order.
-COLUMNS = ("problem", "instance", "size", "seed", "formulation", "solver", "settings",
-           "status", "success", "reason", "objective", "objective_gap", "solution_error",
-           "max_violation", "build_time", "solve_time", "iterations", "message",
-           "solver_version", "cpu", "time_limit", "options", "repeats", "build_again",
-           "repeats_done", "estimate_sq_error", "crb")
+COLUMNS = (
+    "problem",
+    "instance",
+    "size",
+    "seed",
+    "formulation",
+    "solver",
+    "settings",
+    "status",
+    "success",
+    "reason",
+    "objective",
+    "objective_gap",
+    "solution_error",
+    "max_violation",
+    "build_time",
+    "solve_time",
+    "iterations",
+    "message",
+    "solver_version",
+    "cpu",
+    "time_limit",
+    "options",
+    "repeats",
+    "build_again",
+    "repeats_done",
+    "estimate_sq_error",
+    "crb",
+)
 #: What identifies a run for resume: the case, the formulation and solver, the settings
 #: profile, the time limit (s), the options that reach the solver (JSON: the profile's and
 #: the back-end's class defaults, :func:`solvers_cmp.harness.profiles.options_key`), the
 #: solver's version and the timing repetitions. A rerun recomputes every row whose key
 #: differs (issue 27: a rerun with ``--time-limit 5`` used to return the 60 s rows).
-KEY = ("problem", "instance", "size", "seed", "formulation", "solver", "settings",
-       "time_limit", "options", "solver_version", "repeats")
+KEY = (
+    "problem",
+    "instance",
+    "size",
+    "seed",
+    "formulation",
+    "solver",
+    "settings",
+    "time_limit",
+    "options",
+    "solver_version",
+    "repeats",
+)
 
 
 def _header_line() -> str:
@@ -74,8 +109,10 @@ def _load_results(rl: LineLog) -> list[dict[str, Any]]:
         report_skipped(rl.what, rl.path, len(lines) - 1, len(tail), moved)
         return []
     if first != head:
-        raise ProblemError(f"{rl.what}: {rl.path} has other columns than this harness "
-                           f"writes ({', '.join(COLUMNS)}); use another --out or delete it")
+        raise ProblemError(
+            f"{rl.what}: {rl.path} has other columns than this harness "
+            f"writes ({', '.join(COLUMNS)}); use another --out or delete it"
+        )
     rows, keep, dropped = [], [head], []
     for raw in lines[1:]:
         if not raw.strip():
@@ -97,8 +134,9 @@ def _older_header(first: str) -> bool:
         cols = next(csv.reader([first]))
     except (csv.Error, StopIteration):
         return False
-    return 0 < len(cols) < len(COLUMNS) and tuple(cols) == COLUMNS[:len(cols)] \
-        and "message" in cols
+    return (
+        0 < len(cols) < len(COLUMNS) and tuple(cols) == COLUMNS[: len(cols)] and "message" in cols
+    )
 
 
 def read_results(path: Path) -> list[dict[str, Any]]:
@@ -110,7 +148,7 @@ def read_results(path: Path) -> list[dict[str, Any]]:
     if path.is_dir():
         raise ProblemError(f"compare results: {path} is a directory, expected a file")
     data = path.read_bytes()
-    lines = data[:data.rfind(b"\n") + 1].split(b"\n")[:-1]  # without a cut-short tail
+    lines = data[: data.rfind(b"\n") + 1].split(b"\n")[:-1]  # without a cut-short tail
     rows = [_parse_line(raw) for raw in lines[1:] if raw.strip()]
     return [r for r in rows if r is not None]
 
@@ -126,9 +164,18 @@ def _parse(key: str, v: str) -> Any:
         if v not in ("True", "False"):
             raise ValueError(f"success: {v!r}")
         return v == "True"
-    if key in ("objective", "objective_gap", "solution_error", "max_violation",
-               "build_time", "solve_time", "time_limit", "build_again",
-               "estimate_sq_error", "crb"):
+    if key in (
+        "objective",
+        "objective_gap",
+        "solution_error",
+        "max_violation",
+        "build_time",
+        "solve_time",
+        "time_limit",
+        "build_again",
+        "estimate_sq_error",
+        "crb",
+    ):
         return float(v) if v not in ("", "None") else float("nan")
     return v
 

@@ -27,13 +27,23 @@ from solvers_cmp.harness.versions import solver_version
 from solvers_cmp.harness.worker import Worker, _InProcess, run_prepared
 
 
-def run_sweep(problems: Sequence[str], out: Path, *, sizes: Sizes = None,
-              solvers: Sequence[str] | None = None, profile: str = "default",
-              seeds: Sequence[int] = (0,), instances: Sequence[str] | None = None,
-              time_limit: float | None = None, isolate: bool = True,
-              progress: bool = False, scheduler: Any = None,
-              connect_timeout: float = CONNECT_TIMEOUT, repeats: int = 3,
-              skip_slow: bool = False) -> list[dict[str, Any]]:
+def run_sweep(
+    problems: Sequence[str],
+    out: Path,
+    *,
+    sizes: Sizes = None,
+    solvers: Sequence[str] | None = None,
+    profile: str = "default",
+    seeds: Sequence[int] = (0,),
+    instances: Sequence[str] | None = None,
+    time_limit: float | None = None,
+    isolate: bool = True,
+    progress: bool = False,
+    scheduler: Any = None,
+    connect_timeout: float = CONNECT_TIMEOUT,
+    repeats: int = 3,
+    skip_slow: bool = False,
+) -> list[dict[str, Any]]:
     """Run (or resume) a sweep; append rows to ``out/results.csv`` and return all rows of
     this sweep (the finished ones read back included), in the sweep's order.
 
@@ -66,8 +76,7 @@ def run_sweep(problems: Sequence[str], out: Path, *, sizes: Sizes = None,
     """
     profile = as_choice("compare profile", profile, sorted(PROFILES))
     prof = PROFILES[profile]
-    limit = (prof.time_limit if time_limit is None
-             else as_positive("compare time_limit", time_limit))
+    limit = prof.time_limit if time_limit is None else as_positive("compare time_limit", time_limit)
     scheduler = as_scheduler("compare scheduler", scheduler, default="processes")
     connect_timeout = as_positive("compare connect_timeout", connect_timeout)
     repeats = as_count("compare repeats", repeats, minimum=1)
@@ -88,29 +97,61 @@ def run_sweep(problems: Sequence[str], out: Path, *, sizes: Sizes = None,
     rl = LineLog(path, "compare results")
     try:
         done = {_key(r): r for r in _load_results(rl)}
-        return _sweep(rl, done, sweep, out, profile, prof, limit, isolate, progress,
-                      scheduler, connect_timeout, repeats)
+        return _sweep(
+            rl,
+            done,
+            sweep,
+            out,
+            profile,
+            prof,
+            limit,
+            isolate,
+            progress,
+            scheduler,
+            connect_timeout,
+            repeats,
+        )
     finally:
         rl.close()
 
 
-def _sweep(rl: LineLog, done: dict[tuple[Any, ...], dict[str, Any]],
-           sweep: list[tuple[str, Case, list[cs.Run]]], out: Path, profile: str,
-           prof: Profile, limit: float, isolate: bool, progress: bool,
-           scheduler: Any = None, connect_timeout: float = CONNECT_TIMEOUT,
-           repeats: int = 1) -> list[dict[str, Any]]:
+def _sweep(
+    rl: LineLog,
+    done: dict[tuple[Any, ...], dict[str, Any]],
+    sweep: list[tuple[str, Case, list[cs.Run]]],
+    out: Path,
+    profile: str,
+    prof: Profile,
+    limit: float,
+    isolate: bool,
+    progress: bool,
+    scheduler: Any = None,
+    connect_timeout: float = CONNECT_TIMEOUT,
+    repeats: int = 1,
+) -> list[dict[str, Any]]:
     total = sum(len(runs) for _, _, runs in sweep)
     cpu = cpu_name()
     slots: list[dict[str, Any] | None] = []  # the sweep's rows, in order
     tasks: list[tuple[int, dict[str, Any], str, Case, cs.Run]] = []
     for ad_path, case, runs in sweep:
-        base = {"problem": case.problem, "instance": case.instance, "size": case.size,
-                "seed": case.seed, "settings": profile, "cpu": cpu,
-                "time_limit": float(limit), "repeats": repeats}
+        base = {
+            "problem": case.problem,
+            "instance": case.instance,
+            "size": case.size,
+            "seed": case.seed,
+            "settings": profile,
+            "cpu": cpu,
+            "time_limit": float(limit),
+            "repeats": repeats,
+        }
         for run in runs:
-            mine = {**base, "formulation": run.formulation, "solver": run.solver,
-                    "options": options_key(prof, run.solver),
-                    "solver_version": solver_version(run.solver)}
+            mine = {
+                **base,
+                "formulation": run.formulation,
+                "solver": run.solver,
+                "options": options_key(prof, run.solver),
+                "solver_version": solver_version(run.solver),
+            }
             k = _key(mine)
             if k in done:
                 slots.append(done[k])
@@ -118,8 +159,9 @@ def _sweep(rl: LineLog, done: dict[tuple[Any, ...], dict[str, Any]],
                 tasks.append((len(slots), mine, ad_path, case, run))
                 slots.append(None)
     new = 0
-    bar = tqdm(total=total, initial=total - len(tasks), desc=f"compare ({profile})",
-               disable=not progress)
+    bar = tqdm(
+        total=total, initial=total - len(tasks), desc=f"compare ({profile})", disable=not progress
+    )
 
     def record(t: int, outcome: tuple[str, Any, float, str, str]) -> None:
         nonlocal new
@@ -129,17 +171,32 @@ def _sweep(rl: LineLog, done: dict[tuple[Any, ...], dict[str, Any]],
         if kind == "ok":
             row.update(res)
         else:
-            row.update({"status": kind, "ok": False, "objective": float("nan"),
-                        "objective_gap": float("nan"), "solution_error": float("nan"),
-                        "max_violation": float("nan"), "build_time": float("nan"),
-                        "solve_time": wall if kind != "error" else float("nan"),
-                        "iterations": None, "estimate_sq_error": float("nan"),
-                        "crb": float("nan"),
-                        "message": (f"killed after the {limit:g} s time limit"
-                                    if kind == "time_limit" else
-                                    (f"worker died ({res})" if isinstance(res, str)
-                                     else f"worker died (exit code {res})")
-                                    if kind == "crashed" else str(res))})
+            row.update(
+                {
+                    "status": kind,
+                    "ok": False,
+                    "objective": float("nan"),
+                    "objective_gap": float("nan"),
+                    "solution_error": float("nan"),
+                    "max_violation": float("nan"),
+                    "build_time": float("nan"),
+                    "solve_time": wall if kind != "error" else float("nan"),
+                    "iterations": None,
+                    "estimate_sq_error": float("nan"),
+                    "crb": float("nan"),
+                    "message": (
+                        f"killed after the {limit:g} s time limit"
+                        if kind == "time_limit"
+                        else (
+                            f"worker died ({res})"
+                            if isinstance(res, str)
+                            else f"worker died (exit code {res})"
+                        )
+                        if kind == "crashed"
+                        else str(res)
+                    ),
+                }
+            )
         _judge(row, prof)
         rl.append([_csv_line(row)])
         new += 1
@@ -149,36 +206,56 @@ def _sweep(rl: LineLog, done: dict[tuple[Any, ...], dict[str, Any]],
     worker: Worker | _InProcess | None = None
     prepared: list[Any] = [None, None]  # (path, case) last prepared, its failure
 
-    def local_run(ad_path: str, case: Case, run: cs.Run, options: dict[str, Any],
-                  limit: float, repeats: int = 1) -> tuple[str, Any, float, str, str]:
+    def local_run(
+        ad_path: str,
+        case: Case,
+        run: cs.Run,
+        options: dict[str, Any],
+        limit: float,
+        repeats: int = 1,
+    ) -> tuple[str, Any, float, str, str]:
         """One run on this machine: the instance and its reference once per case (their
         own, longer, time limit), then the run in the worker with the time limit."""
         assert worker is not None
-        return (*run_prepared(worker, prepared, ad_path, case, run, options, limit,
-                              repeats),
-                solver_version(run.solver), cpu)
+        return (
+            *run_prepared(worker, prepared, ad_path, case, run, options, limit, repeats),
+            solver_version(run.solver),
+            cpu,
+        )
 
     def lost(t: int, msg: str) -> None:
-        record(t, ("crashed", msg, float("nan"), solver_version(tasks[t][4].solver),
-                   "unknown"))
+        record(t, ("crashed", msg, float("nan"), solver_version(tasks[t][4].solver), "unknown"))
 
-    args = [(ad_path, case, run, prof.options(run.solver), limit, repeats)
-            for _, _, ad_path, case, run in tasks]
+    args = [
+        (ad_path, case, run, prof.options(run.solver), limit, repeats)
+        for _, _, ad_path, case, run in tasks
+    ]
     try:
         if scheduler in ("serial", "processes"):
-            worker = (Worker(out / "worker.log") if isolate and scheduler == "processes"
-                      else _InProcess())
+            worker = (
+                Worker(out / "worker.log") if isolate and scheduler == "processes" else _InProcess()
+            )
             execute(local_run, args, on_result=record, scheduler="serial")
         else:
-            execute(_remote_run, args, on_result=record, on_lost=lost,
-                    scheduler=scheduler, connect_timeout=connect_timeout, what="compare")
+            execute(
+                _remote_run,
+                args,
+                on_result=record,
+                on_lost=lost,
+                scheduler=scheduler,
+                connect_timeout=connect_timeout,
+                what="compare",
+            )
     except KeyboardInterrupt:
         if worker is not None:
             worker.stop(kill=True)
         rows = [r for r in slots if r is not None]
-        raise Interrupted(f"compare: interrupted after {new} new run(s) of {total} "
-                          f"({len(rows)} rows of this sweep saved in {rl.path}); rerun the "
-                          f"same command to resume", rows) from None
+        raise Interrupted(
+            f"compare: interrupted after {new} new run(s) of {total} "
+            f"({len(rows)} rows of this sweep saved in {rl.path}); rerun the "
+            f"same command to resume",
+            rows,
+        ) from None
     finally:
         bar.close()
         if worker is not None:

@@ -53,8 +53,9 @@ def _prepare(state: _State, path: str, case: Case) -> dict[str, Any]:
 REPEAT_BUDGET = 1.0
 
 
-def _execute(state: _State, path: str, case: Case, run: cs.Run,
-             options: dict[str, Any], repeats: int = 1) -> dict[str, Any]:
+def _execute(
+    state: _State, path: str, case: Case, run: cs.Run, options: dict[str, Any], repeats: int = 1
+) -> dict[str, Any]:
     """One run: ``ad.solve`` up to ``repeats`` times (stopping once the repetitions have
     taken :data:`REPEAT_BUDGET` s), the last result judged. Times (issue 27, item 5):
     ``build_time`` is the *first* call's build -- its wall time minus the solver's time,
@@ -78,13 +79,20 @@ def _execute(state: _State, path: str, case: Case, run: cs.Run,
     assert out is not None
     builds = [max(w - s, 0.0) for w, s in zip(walls, solves, strict=True)]
     row: dict[str, Any] = {
-        "status": out.status, "objective": out.objective, "max_violation": out.max_violation,
-        "build_time": builds[0], "solve_time": float(np.median(solves)),
-        "iterations": out.iterations, "message": out.message, "ok": out.ok,
-        "solution_error": float("nan"), "objective_gap": float("nan"),
+        "status": out.status,
+        "objective": out.objective,
+        "max_violation": out.max_violation,
+        "build_time": builds[0],
+        "solve_time": float(np.median(solves)),
+        "iterations": out.iterations,
+        "message": out.message,
+        "ok": out.ok,
+        "solution_error": float("nan"),
+        "objective_gap": float("nan"),
         "build_again": float(np.median(builds[1:])) if len(builds) > 1 else float("nan"),
         "repeats_done": len(walls),
-        "estimate_sq_error": float("nan"), "crb": float("nan"),
+        "estimate_sq_error": float("nan"),
+        "crb": float("nan"),
     }
     if out.ok and out.x is not None and state.truth is not None:
         # the estimate against the truth of the draw (any estimate the solver calls
@@ -157,8 +165,9 @@ class Worker:
 
     def _start(self) -> None:
         parent, child = self._ctx.Pipe()
-        self._proc = self._ctx.Process(target=_worker_loop,
-                                       args=(child, self._log, os.getpid()), daemon=True)
+        self._proc = self._ctx.Process(
+            target=_worker_loop, args=(child, self._log, os.getpid()), daemon=True
+        )
         with sigint_ignored(), _children_allowed():  # the child starts with SIGINT ignored
             self._proc.start()
         child.close()
@@ -229,9 +238,16 @@ class _InProcess:
         pass
 
 
-def run_prepared(worker: Worker | _InProcess, prepared: list[Any], ad_path: str, case: Case,
-                 run: cs.Run, options: dict[str, Any], limit: float, repeats: int = 1
-                 ) -> tuple[str, Any, float]:
+def run_prepared(
+    worker: Worker | _InProcess,
+    prepared: list[Any],
+    ad_path: str,
+    case: Case,
+    run: cs.Run,
+    options: dict[str, Any],
+    limit: float,
+    repeats: int = 1,
+) -> tuple[str, Any, float]:
     """One run in ``worker``, the local and the Dask engine alike: the case's instance and
     reference first (their own, longer, time limit ``4 * limit``; once per case, remembered
     in ``prepared`` = [(path, case), failure message or None], a failure kept for the case's
@@ -239,8 +255,10 @@ def run_prepared(worker: Worker | _InProcess, prepared: list[Any], ad_path: str,
     Returns ``(kind, result, wall seconds)``."""
     if prepared[0] != (ad_path, case):
         kind, res = worker.call("prepare", (ad_path, case), 4 * limit)
-        prepared[:] = [(ad_path, case),
-                       None if kind == "ok" else f"instance/reference {kind}: {res}"]
+        prepared[:] = [
+            (ad_path, case),
+            None if kind == "ok" else f"instance/reference {kind}: {res}",
+        ]
     if prepared[1] is not None:
         return "error", prepared[1], 0.0
     t0 = time.perf_counter()

@@ -36,5 +36,4 @@ def modules() -> list[ModuleType]:
 def with_hook(hook: str) -> dict[str, ModuleType]:
     """The problem modules defining ``hook`` (``run_demo``, ``run_details``) by problem
     name, in the order of :func:`names`."""
-    return {p: m for p in names()
-            if hasattr(m := registry.face_module(__name__, p), hook)}
+    return {p: m for p in names() if hasattr(m := registry.face_module(__name__, p), hook)}

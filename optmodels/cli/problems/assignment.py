@@ -14,16 +14,28 @@ from optmodels.cli.contract import _OK_STATUSES, Outcome, _group, _leaf, _readin
 from optmodels.core import ProblemError, json_document
 
 #: This problem's line in the demo's report/index.md.
-DEMO_TITLE = ("- [Joint assignment with unresolved groups (paper 004)]"
-              "(assignment/report.md): MAP by one MILP vs resolved-only "
-              "association, closely spaced space objects")
+DEMO_TITLE = (
+    "- [Joint assignment with unresolved groups (paper 004)]"
+    "(assignment/report.md): MAP by one MILP vs resolved-only "
+    "association, closely spaced space objects"
+)
 
 
 #: ``hypotheses_total`` (and the dense ``pair_unresolved``) are reported up to this Q, N.
 COUNTED = 400
 
-_CASE_FIELDS = ("means", "covs", "measurements", "meas_cov", "volume", "pd", "rho",
-                "max_group_size", "group_gate", "sensor")
+_CASE_FIELDS = (
+    "means",
+    "covs",
+    "measurements",
+    "meas_cov",
+    "volume",
+    "pd",
+    "rho",
+    "max_group_size",
+    "group_gate",
+    "sensor",
+)
 #: Required in every case; ``rho`` too unless a ``sensor`` block is given (then not).
 _REQUIRED = ("means", "covs", "measurements", "meas_cov", "volume", "pd")
 _SENSOR_KEYS = ("range", "azimuth_deg", "site", "ellipse", "weights")
@@ -38,18 +50,21 @@ def _read_case(path_text: str) -> dict[str, Any]:
         text = read_text(path_text, what="JSON assignment case", name="case")
         case = json_document(text, where=path_text)  # the one strict reader
     if not isinstance(case, dict):
-        raise ProblemError(f"{path_text}: expected a JSON object with the fields "
-                           f"{', '.join(_CASE_FIELDS[:7])}, got a JSON "
-                           f"{type(case).__name__.replace('NoneType', 'null')}")
+        raise ProblemError(
+            f"{path_text}: expected a JSON object with the fields "
+            f"{', '.join(_CASE_FIELDS[:7])}, got a JSON "
+            f"{type(case).__name__.replace('NoneType', 'null')}"
+        )
     unknown = sorted(set(case) - set(_CASE_FIELDS))
     if unknown:
         raise ProblemError(f"{path_text}: unknown fields {unknown} (expected {_CASE_FIELDS})")
     required = _REQUIRED if case.get("sensor") is not None else (*_REQUIRED, "rho")
     missing = sorted(set(required) - set(case))
     if missing:
-        raise ProblemError(f"{path_text}: missing fields {missing}"
-                           + (" (or a sensor block instead of rho)" if "rho" in missing
-                              else ""))
+        raise ProblemError(
+            f"{path_text}: missing fields {missing}"
+            + (" (or a sensor block instead of rho)" if "rho" in missing else "")
+        )
     if case.get("sensor") is not None:
         case["sensor"] = _sensor(path_text, case["sensor"])
     return case
@@ -67,8 +82,10 @@ def _sensor(path_text: str, block: Any) -> Any:
 
     where = f"{path_text}: sensor"
     if not isinstance(block, dict):
-        raise ProblemError(f"{where}: expected a JSON object with range and azimuth_deg, or "
-                           f"ellipse; got a JSON {type(block).__name__}")
+        raise ProblemError(
+            f"{where}: expected a JSON object with range and azimuth_deg, or "
+            f"ellipse; got a JSON {type(block).__name__}"
+        )
     unknown = sorted(set(block) - set(_SENSOR_KEYS))
     if unknown:
         raise ProblemError(f"{where}: unknown keys {unknown} (expected {_SENSOR_KEYS})")
@@ -76,8 +93,13 @@ def _sensor(path_text: str, block: Any) -> Any:
     if az is not None:
         az = math.radians(as_number(f"{where} azimuth_deg", az))
     with _reading(where):
-        return Resolution(range=block.get("range"), azimuth=az, site=block.get("site"),
-                          ellipse=block.get("ellipse"), weights=block.get("weights", "equal"))
+        return Resolution(
+            range=block.get("range"),
+            azimuth=az,
+            site=block.get("site"),
+            ellipse=block.get("ellipse"),
+            weights=block.get("weights", "equal"),
+        )
 
 
 def _assignment_solve(args: argparse.Namespace) -> Outcome:
@@ -94,16 +116,24 @@ def _assignment_solve(args: argparse.Namespace) -> Outcome:
     elif args.method == "brute-force":
         if total is None or total > 10_000_000:
             shown = f"{total:.3g}" if total is not None else f"Q = {data.q}, N = {data.n}: far"
-            raise ProblemError(f"--method brute-force: {shown} hypotheses (more than "
-                               "10⁷); use milp")
+            raise ProblemError(
+                f"--method brute-force: {shown} hypotheses (more than 10⁷); use milp"
+            )
         sol = asg.brute_force(data)
     else:
         sol = asg.linear_assignment(data)
-    res: dict[str, Any] = {"status": sol.status.value, "method": sol.method,
-                           "message": sol.message, "partition": sol.partition,
-                           "assignment": sol.assignment, "log_score": sol.log_score,
-                           "mip_gap": sol.mip_gap, "solve_time": sol.solve_time,
-                           "build_time": sol.build_time, "hypotheses_total": total}
+    res: dict[str, Any] = {
+        "status": sol.status.value,
+        "method": sol.method,
+        "message": sol.message,
+        "partition": sol.partition,
+        "assignment": sol.assignment,
+        "log_score": sol.log_score,
+        "mip_gap": sol.mip_gap,
+        "solve_time": sol.solve_time,
+        "build_time": sol.build_time,
+        "hypotheses_total": total,
+    }
     if data.sensor is not None:
         if data.q <= COUNTED:
             res["pair_unresolved"] = data.pair_unresolved()
@@ -111,24 +141,35 @@ def _assignment_solve(args: argparse.Namespace) -> Outcome:
             table = data.pair_table
             assert table is not None  # a sensor model is given (the branch's condition)
             res["pair_unresolved"] = None
-            res["unresolved_pairs"] = [[int(a), int(b), float(u)] for a, b, u in
-                                       zip(table.ii, table.jj, table.u, strict=True)]
+            res["unresolved_pairs"] = [
+                [int(a), int(b), float(u)]
+                for a, b, u in zip(table.ii, table.jj, table.u, strict=True)
+            ]
     if args.k and sol.ok:
         kb = asg.k_best(data, args.k, solver=args.solver)
-        res["k_best"] = [{"partition": h.partition, "assignment": h.assignment,
-                          "log_score": h.log_score} for h in kb.hypotheses]
-        res["marginals"] = [{("background" if not k else ",".join(map(str, k))): v
-                             for k, v in b.items()} for b in kb.beta]
+        res["k_best"] = [
+            {"partition": h.partition, "assignment": h.assignment, "log_score": h.log_score}
+            for h in kb.hypotheses
+        ]
+        res["marginals"] = [
+            {("background" if not k else ",".join(map(str, k))): v for k, v in b.items()}
+            for b in kb.beta
+        ]
         res["neglected_mass_bound"] = kb.neglected
     return res, sol.ok
 
 
 def _print_assignment_solve(res: dict[str, Any]) -> None:
     total = res["hypotheses_total"]
-    print(f"{res['method']}: {res['status']} ({res['message']}); log score "
-          f"{res['log_score']:.6f}; "
-          + (f"{total} hypotheses in total" if total is not None else
-             "hypotheses not counted (Q or N above " + str(COUNTED) + ")"))
+    print(
+        f"{res['method']}: {res['status']} ({res['message']}); log score "
+        f"{res['log_score']:.6f}; "
+        + (
+            f"{total} hypotheses in total"
+            if total is not None
+            else "hypotheses not counted (Q or N above " + str(COUNTED) + ")"
+        )
+    )
     if res["status"] not in _OK_STATUSES:
         return
     blocks = ["+".join(map(str, b)) for b in res["partition"]]
@@ -136,23 +177,30 @@ def _print_assignment_solve(res: dict[str, Any]) -> None:
     for i, a in enumerate(res["assignment"]):
         print(f"  measurement {i}: {'background' if a < 0 else blocks[a]}")
     if "k_best" in res:
-        print(f"{len(res['k_best'])} best hypotheses; neglected mass ≤ "
-              f"{res['neglected_mass_bound']:.3g} of the listed")
+        print(
+            f"{len(res['k_best'])} best hypotheses; neglected mass ≤ "
+            f"{res['neglected_mass_bound']:.3g} of the listed"
+        )
 
 
 def _assignment_count(args: argparse.Namespace) -> Outcome:
     from optmodels import assignment as asg
 
     per = asg.count_per_variant(args.q, args.n)
-    return {"q": args.q, "n": args.n, "total": asg.count_hypotheses(args.q, args.n),
-            "variants": sum(v[0] for v in per.values()),
-            "per_blocks": {b: {"variants": v[0], "hypotheses_each": v[1]}
-                           for b, v in per.items()}}, True
+    return {
+        "q": args.q,
+        "n": args.n,
+        "total": asg.count_hypotheses(args.q, args.n),
+        "variants": sum(v[0] for v in per.values()),
+        "per_blocks": {b: {"variants": v[0], "hypotheses_each": v[1]} for b, v in per.items()},
+    }, True
 
 
 def _print_assignment_count(res: dict[str, Any]) -> None:
-    print(f"Q = {res['q']} objects, N = {res['n']} measurements: {res['variants']} unresolved "
-          f"variants, {res['total']} hypotheses")
+    print(
+        f"Q = {res['q']} objects, N = {res['n']} measurements: {res['variants']} unresolved "
+        f"variants, {res['total']} hypotheses"
+    )
     for b, v in res["per_blocks"].items():
         print(f"  {b} blocks: {v['variants']} variants × {v['hypotheses_each']} hypotheses")
 
@@ -165,8 +213,9 @@ def run_demo(out: Path, args: argparse.Namespace, progress: bool) -> dict[str, A
     return run_assignment_demo(out / "assignment", seed=args.seed, progress=progress)
 
 
-def run_details(out: Path, *, sizes: list[int], runs: int, repeats: int, seed: int,
-                progress: bool) -> tuple[str, dict[str, Any]]:
+def run_details(
+    out: Path, *, sizes: list[int], runs: int, repeats: int, seed: int, progress: bool
+) -> tuple[str, dict[str, Any]]:
     """``optmodels compare --details``: :mod:`solvers_cmp.assignment`'s rows; the report
     section and the result entry."""
     from solvers_cmp import assignment as cmp_as
@@ -182,14 +231,20 @@ def register(sub: Any) -> None:
     positive, count0, count1 = _positive(), _count(0), _count(1)
     asub = _group(sub, "assignment", "joint assignment with merges (paper 004)")
     aso = _leaf(asub, "solve", "the MAP hypothesis of a CASE.json")
-    aso.add_argument("case", help="JSON with means, covs, measurements, meas_cov (one d×d or "
-                                  "a list of N), volume, pd, and rho or a sensor block "
-                                  "({range: m, azimuth_deg: deg, site: [x, y]} or "
-                                  "{ellipse: [[m²]]}, weights) [, max_group_size, "
-                                  "group_gate]")
-    aso.add_argument("--method", choices=("milp", "brute-force", "linear"), default="milp",
-                     help="one MILP, enumeration (13)-(14), or the linear assignment "
-                          "without merges")
+    aso.add_argument(
+        "case",
+        help="JSON with means, covs, measurements, meas_cov (one d×d or "
+        "a list of N), volume, pd, and rho or a sensor block "
+        "({range: m, azimuth_deg: deg, site: [x, y]} or "
+        "{ellipse: [[m²]]}, weights) [, max_group_size, "
+        "group_gate]",
+    )
+    aso.add_argument(
+        "--method",
+        choices=("milp", "brute-force", "linear"),
+        default="milp",
+        help="one MILP, enumeration (13)-(14), or the linear assignment without merges",
+    )
     aso.add_argument("--solver", default="HIGHS", help="MILP solver (HIGHS, SCIP, ...)")
     aso.add_argument("--time-limit", type=positive, help="MILP time limit, s (> 0)")
     aso.add_argument("--k", type=count0, default=0, help="also list the k best and marginals")

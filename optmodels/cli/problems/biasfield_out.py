@@ -47,8 +47,7 @@ def _probe(flag: str, folder: Path) -> None:
     try:
         fd, name = tempfile.mkstemp(prefix=".optmodels-probe.", dir=folder)
     except OSError as exc:
-        raise ProblemError(f"{flag}: cannot write in {folder} ({exc.strerror or exc})"
-                           ) from None
+        raise ProblemError(f"{flag}: cannot write in {folder} ({exc.strerror or exc})") from None
     os.close(fd)
     with contextlib.suppress(OSError):
         os.unlink(name)
@@ -61,8 +60,9 @@ def writable_file(flag: str, path: str | os.PathLike[str]) -> Path:
 
     p = Path(path)
     if p.is_dir():
-        raise ProblemError(f"{flag}: {p} is an existing folder; give a file name (this "
-                           "flag names a FILE)")
+        raise ProblemError(
+            f"{flag}: {p} is an existing folder; give a file name (this flag names a FILE)"
+        )
     try:
         p = output_file(p, name=flag)
     except ProblemError as exc:
@@ -93,7 +93,8 @@ def interrupt_note(stage: list[str], out: Path, written: list[str]) -> Iterator[
         done = f"written: {', '.join(written)}" if written else "nothing written"
         raise KeyboardInterrupt(
             f"interrupted while {stage[0]}: {out} not written (a previous {out.name}, if "
-            f"any, is unchanged); {done}") from None
+            f"any, is unchanged); {done}"
+        ) from None
 
 
 def say(args: argparse.Namespace, text: str) -> None:
@@ -109,8 +110,9 @@ def _fmt(fmt: str, v: np.ndarray) -> np.ndarray:
     return np.where(np.isfinite(v), s, "")
 
 
-def corrected_columns(inp: dict[str, Any], rng: np.ndarray, az: np.ndarray,
-                      covered: np.ndarray, reason: np.ndarray) -> dict[str, np.ndarray]:
+def corrected_columns(
+    inp: dict[str, Any], rng: np.ndarray, az: np.ndarray, covered: np.ndarray, reason: np.ndarray
+) -> dict[str, np.ndarray]:
     """The columns of ``corrected.csv`` (:data:`CORRECTED_COLUMNS`), as string arrays, for
     the plots of ``inp`` (``_read_input``'s result, one row per plot read)."""
     from optmodels.biasfield.recording import HEIGHT_SOURCES
@@ -148,7 +150,7 @@ def corrected_columns(inp: dict[str, Any], rng: np.ndarray, az: np.ndarray,
     deg = np.mod(np.rad2deg(az), 360.0)
     deg = np.where(deg >= 360.0 - 5e-10, 0.0, deg)  # what "%.9f" would print as 360
     cols["azimuth"] = np.char.mod("%.9f", deg)
-    h = (np.full(n, np.nan) if plots.height is None else np.asarray(plots.height, float))
+    h = np.full(n, np.nan) if plots.height is None else np.asarray(plots.height, float)
     cols["height"] = _fmt("%.2f", h)
     if rec is not None:
         cols["height_source"] = np.asarray(HEIGHT_SOURCES)[rec.height_source]
@@ -172,7 +174,7 @@ def write_corrected(out: Path, cols: dict[str, np.ndarray], chunk: int = 200_000
         w = csv.writer(fh, lineterminator="\n")
         w.writerow(names)
         for a in range(0, n, chunk):
-            w.writerows(zip(*(cols[c][a:a + chunk].tolist() for c in names), strict=True))
+            w.writerows(zip(*(cols[c][a : a + chunk].tolist() for c in names), strict=True))
 
 
 # --------------------------------------------------------------------------- solve
@@ -184,20 +186,28 @@ def field_rows(fd: Any, sol: Any, names: tuple[str, ...]) -> list[dict[str, Any]
     rows = []
     for k in range(fd.k):
         for i in np.flatnonzero(seen[k]):
-            rows.append({"cell": k, "x_m": float(fd.centers[k, 0]),
-                         "y_m": float(fd.centers[k, 1]), "radar": labels[int(i)],
-                         "range_bias_m": float(sol.field[k, i, 0]),
-                         "azimuth_bias_deg": float(np.rad2deg(sol.field[k, i, 1])),
-                         "active_range": int(sol.active[k, i, 0]),
-                         "active_azimuth": int(sol.active[k, i, 1])})
+            rows.append(
+                {
+                    "cell": k,
+                    "x_m": float(fd.centers[k, 0]),
+                    "y_m": float(fd.centers[k, 1]),
+                    "radar": labels[int(i)],
+                    "range_bias_m": float(sol.field[k, i, 0]),
+                    "azimuth_bias_deg": float(np.rad2deg(sol.field[k, i, 1])),
+                    "active_range": int(sol.active[k, i, 0]),
+                    "active_azimuth": int(sol.active[k, i, 1]),
+                }
+            )
     return rows
 
 
 #: What ``objective`` in ``solve --json`` is.
-OBJECTIVE_NOTE = ("J of (9): the smoothness functional, Σ over neighbouring cells of the "
-                  "squared bias differences in the metric P divided by the squared centre "
-                  "distance (P-weighted (m, rad)² per m²); a figure of merit for comparing "
-                  "methods on the same data, not an error in metres")
+OBJECTIVE_NOTE = (
+    "J of (9): the smoothness functional, Σ over neighbouring cells of the "
+    "squared bias differences in the metric P divided by the squared centre "
+    "distance (P-weighted (m, rad)² per m²); a figure of merit for comparing "
+    "methods on the same data, not an error in metres"
+)
 
 
 def print_solve(res: dict[str, Any]) -> None:
@@ -206,54 +216,71 @@ def print_solve(res: dict[str, Any]) -> None:
     print(f"{res['method']}: {res['status']} ({res['message']})")
     if res["status"] not in _OK_STATUSES:
         return
-    lip = f", Lipschitz constant {res['lipschitz']:.4g}" if res["lipschitz"] is not None \
-        else ""
-    print(f"{res['cells']} cells{lip}, {res.get('active_bounds', 0)} active bounds; wrote "
-          f"{', '.join(res['files'])} to {res['out']}")
-    print("per radar, the constant-plus-gain baseline fitted to the field (± its fit's "
-          "standard error) and the field's spread over the radar's cells:")
-    print(f"  {'radar':<8}{'cells':>6}  {'range bias m':>16}  {'gain ppm':>14}  "
-          f"{'azimuth bias deg':>20}  {'spread m':>9}  {'spread deg':>10}")
+    lip = f", Lipschitz constant {res['lipschitz']:.4g}" if res["lipschitz"] is not None else ""
+    print(
+        f"{res['cells']} cells{lip}, {res.get('active_bounds', 0)} active bounds; wrote "
+        f"{', '.join(res['files'])} to {res['out']}"
+    )
+    print(
+        "per radar, the constant-plus-gain baseline fitted to the field (± its fit's "
+        "standard error) and the field's spread over the radar's cells:"
+    )
+    print(
+        f"  {'radar':<8}{'cells':>6}  {'range bias m':>16}  {'gain ppm':>14}  "
+        f"{'azimuth bias deg':>20}  {'spread m':>9}  {'spread deg':>10}"
+    )
     for r in res.get("radars", []):
         if not r.get("cells"):
             print(f"  {r['radar']:<8}{0:>6}  (no cell)")
             continue
-        print(f"  {r['radar']:<8}{r['cells']:>6}  "
-              f"{r['range_bias_m']:>8.1f} ± {r['range_bias_sigma_m']:<5.1f}  "
-              f"{r['range_gain_ppm']:>6.0f} ± {r['range_gain_sigma_ppm']:<5.0f}  "
-              f"{r['azimuth_bias_deg']:>9.4f} ± {r['azimuth_bias_sigma_deg']:<7.4f}  "
-              f"{r['range_spread_m']:>9.1f}  {r['azimuth_spread_deg']:>10.4f}")
+        print(
+            f"  {r['radar']:<8}{r['cells']:>6}  "
+            f"{r['range_bias_m']:>8.1f} ± {r['range_bias_sigma_m']:<5.1f}  "
+            f"{r['range_gain_ppm']:>6.0f} ± {r['range_gain_sigma_ppm']:<5.0f}  "
+            f"{r['azimuth_bias_deg']:>9.4f} ± {r['azimuth_bias_sigma_deg']:<7.4f}  "
+            f"{r['range_spread_m']:>9.1f}  {r['azimuth_spread_deg']:>10.4f}"
+        )
 
 
 # --------------------------------------------------------------------------- build
 def print_build(res: dict[str, Any]) -> None:
     print(f"wrote {res['out']}")
-    print(f"  {res['cells']} cells ({res['coverage']} coverage), radars "
-          f"{', '.join(res['radars'])} ({res['geometry']} chain, {res['source']} input)")
+    print(
+        f"  {res['cells']} cells ({res['coverage']} coverage), radars "
+        f"{', '.join(res['radars'])} ({res['geometry']} chain, {res['source']} input)"
+    )
     print(f"  plots: {res['plots']} read, {res['plots_used']} used in the track fits")
     for reason, n in (res["dropped_plots"] or {}).items():
         print(f"    dropped {n}: {reason}")
     if res.get("cells_per_radar"):
-        print("  cells per radar: " + ", ".join(f"{k} {v}" for k, v in
-                                                res["cells_per_radar"].items()))
-        print("  radars per cell: " + ", ".join(f"{v} cells seen by {k}" for k, v in
-                                                res["radars_per_cell"].items()))
+        print(
+            "  cells per radar: " + ", ".join(f"{k} {v}" for k, v in res["cells_per_radar"].items())
+        )
+        print(
+            "  radars per cell: "
+            + ", ".join(f"{v} cells seen by {k}" for k, v in res["radars_per_cell"].items())
+        )
     if res["dropped_cells"]:
         print(f"  cells dropped for lack of data: {res['dropped_cells']}")
     if res["origin"] is not None:
         lat, lon, h = res["origin"]
-        print(f"  common plane origin {lat:.6f}° N, {lon:.6f}° E, {h:.1f} m "
-              f"({res['origin_source']})")
+        print(
+            f"  common plane origin {lat:.6f}° N, {lon:.6f}° E, {h:.1f} m ({res['origin_source']})"
+        )
     ad = res.get("adsb")
     if ad:
         hs = ", ".join(f"{k} {v}" for k, v in ad.get("heights", {}).items())
-        print(f"  ASTERIX: {ad.get('plots_read', 0)} CAT048 plots, {ad.get('reports', 0)} "
-              f"CAT021 reports ({ad.get('adsb_heights_rejected', 0)} height spikes "
-              f"rejected); plot heights from {hs or 'n/a'}")
-    print("  track model χ²/dof per radar (≈ 1 when the noise model fits): "
-          + ", ".join(f"{n} {v:.2f}" for n, v in zip(res["radars"],
-                                                     res["track_chi2_per_dof"],
-                                                     strict=False)))
+        print(
+            f"  ASTERIX: {ad.get('plots_read', 0)} CAT048 plots, {ad.get('reports', 0)} "
+            f"CAT021 reports ({ad.get('adsb_heights_rejected', 0)} height spikes "
+            f"rejected); plot heights from {hs or 'n/a'}"
+        )
+    print(
+        "  track model χ²/dof per radar (≈ 1 when the noise model fits): "
+        + ", ".join(
+            f"{n} {v:.2f}" for n, v in zip(res["radars"], res["track_chi2_per_dof"], strict=False)
+        )
+    )
     for w in res.get("warnings", []):
         print(f"  warning: {w}")
 
@@ -266,24 +293,39 @@ def _simulate(args: argparse.Namespace) -> tuple[dict[str, Any], bool]:
     for f in ("recording.ast", "sites.csv"):
         if (out / f).is_dir():
             raise ProblemError(f"--out: {out / f} is a folder; cannot write the {f} there")
-    say(args, f"simulating {args.n_radars} radars, {args.aircraft} aircraft, "
-              f"{args.duration:g} s and encoding ASTERIX ...")
-    sim = simulate_recording(out, seed=args.seed, radars=args.n_radars, aircraft=args.aircraft,
-                             duration=args.duration, spacing=args.spacing,
-                             max_range=args.max_range, biases=args.biases,
-                             start=args.start,
-                             adsb_interval=args.adsb_interval, adsb_spikes=args.adsb_spikes)
+    say(
+        args,
+        f"simulating {args.n_radars} radars, {args.aircraft} aircraft, "
+        f"{args.duration:g} s and encoding ASTERIX ...",
+    )
+    sim = simulate_recording(
+        out,
+        seed=args.seed,
+        radars=args.n_radars,
+        aircraft=args.aircraft,
+        duration=args.duration,
+        spacing=args.spacing,
+        max_range=args.max_range,
+        biases=args.biases,
+        start=args.start,
+        adsb_interval=args.adsb_interval,
+        adsb_spikes=args.adsb_spikes,
+    )
     res = sim.to_dict()
     res["recording"], res["sites"] = str(sim.recording.resolve()), str(sim.sites.resolve())
-    res["next"] = (f"optmodels biasfield build {sim.recording} --radars {sim.sites} "
-                   f"--out {out / 'fielddata.npz'}")
+    res["next"] = (
+        f"optmodels biasfield build {sim.recording} --radars {sim.sites} "
+        f"--out {out / 'fielddata.npz'}"
+    )
     return res, True
 
 
 def _print_simulate(res: dict[str, Any]) -> None:
-    print(f"wrote {res['recording']} ({res['cat048']} CAT048 plots of radars "
-          f"{', '.join(res['radars'])}, {res['cat021']} CAT021 reports of {res['aircraft']} "
-          f"aircraft, {res['spikes']} height spikes) and {res['sites']}")
+    print(
+        f"wrote {res['recording']} ({res['cat048']} CAT048 plots of radars "
+        f"{', '.join(res['radars'])}, {res['cat021']} CAT021 reports of {res['aircraft']} "
+        f"aircraft, {res['spikes']} height spikes) and {res['sites']}"
+    )
     print(f"next: {res['next']}")
 
 
@@ -305,24 +347,44 @@ def register_simulate(bsub: Any, positive: Any, count: Any, finite: Any) -> None
     """``optmodels biasfield simulate``."""
     p = _leaf(bsub, "simulate", "a simulated ASTERIX recording and its sites CSV")
     p.description = SIMULATE_HELP
-    p.add_argument("--out", default="biasfield_sim", metavar="FOLDER",
-                   help="output FOLDER: recording.ast and sites.csv")
+    p.add_argument(
+        "--out",
+        default="biasfield_sim",
+        metavar="FOLDER",
+        help="output FOLDER: recording.ast and sites.csv",
+    )
     p.add_argument("--seed", type=count(0), default=0, help="seed of every random draw")
-    p.add_argument("--n-radars", type=count(2), default=4,
-                   help="number of radars, on a ring about the origin")
-    p.add_argument("--spacing", type=positive, default=150e3,
-                   help="radius of the ring of sites, m")
-    p.add_argument("--max-range", type=positive, default=250e3,
-                   help="each radar's maximum slant range, m")
+    p.add_argument(
+        "--n-radars", type=count(2), default=4, help="number of radars, on a ring about the origin"
+    )
+    p.add_argument("--spacing", type=positive, default=150e3, help="radius of the ring of sites, m")
+    p.add_argument(
+        "--max-range", type=positive, default=250e3, help="each radar's maximum slant range, m"
+    )
     p.add_argument("--aircraft", type=count(1), default=30, help="number of aircraft")
     p.add_argument("--duration", type=positive, default=1800.0, help="simulated span, s")
-    p.add_argument("--biases", choices=("smooth", "linear", "constant", "zero"),
-                   default="smooth", help="each radar's bias field")
-    p.add_argument("--start", type=finite, default=36000.0,
-                   help="UTC time of day of simulated time 0, s after midnight (36000: 10:00)")
-    p.add_argument("--adsb-interval", type=count(1), default=1,
-                   help="seconds between two ADS-B reports of an aircraft")
-    p.add_argument("--adsb-spikes", type=count(0), default=0,
-                   help="CAT021 reports given a +7.8 km altitude spike (to see the "
-                        "reader's cleaning at work)")
+    p.add_argument(
+        "--biases",
+        choices=("smooth", "linear", "constant", "zero"),
+        default="smooth",
+        help="each radar's bias field",
+    )
+    p.add_argument(
+        "--start",
+        type=finite,
+        default=36000.0,
+        help="UTC time of day of simulated time 0, s after midnight (36000: 10:00)",
+    )
+    p.add_argument(
+        "--adsb-interval",
+        type=count(1),
+        default=1,
+        help="seconds between two ADS-B reports of an aircraft",
+    )
+    p.add_argument(
+        "--adsb-spikes",
+        type=count(0),
+        default=0,
+        help="CAT021 reports given a +7.8 km altitude spike (to see the reader's cleaning at work)",
+    )
     p.set_defaults(func=_simulate, printer=_print_simulate)

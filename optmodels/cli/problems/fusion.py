@@ -16,8 +16,10 @@ from optmodels.cli.contract import Outcome, _group, _leaf, _reading
 from optmodels.core import ProblemError
 
 #: This problem's line in the demo's report/index.md.
-DEMO_TITLE = ("- [Fusion of two estimates (paper 003)](fusion/report.md): accuracy of Ŵ "
-              "vs n, the two-site system with the joint ML")
+DEMO_TITLE = (
+    "- [Fusion of two estimates (paper 003)](fusion/report.md): accuracy of Ŵ "
+    "vs n, the two-site system with the joint ML"
+)
 
 
 def _matrix_arg(flag: str, text: str) -> np.ndarray:
@@ -30,9 +32,10 @@ def _matrix_arg(flag: str, text: str) -> np.ndarray:
             return np.asarray(json.loads(path.read_text(encoding="utf-8")), dtype=float)
         return np.asarray(json.loads(text), dtype=float)
     except (ValueError, TypeError, OSError) as exc:  # UnicodeDecodeError is a ValueError
-        raise ProblemError(f"{flag}: expected a JSON matrix like '[[1,0],[0,2]]' or a path "
-                           f"to an existing .npy/.json file, got {text!r:.80} ({exc})"
-                           ) from None
+        raise ProblemError(
+            f"{flag}: expected a JSON matrix like '[[1,0],[0,2]]' or a path "
+            f"to an existing .npy/.json file, got {text!r:.80} ({exc})"
+        ) from None
 
 
 def _fusion_weights(args: argparse.Namespace) -> Outcome:
@@ -68,11 +71,19 @@ def _fusion_weights(args: argparse.Namespace) -> Outcome:
         flag = f"--{which}" if getattr(args, which) is not None else "--n"
         raise ProblemError(f"{flag}: {msg}") from None
     p1, p2 = fusion.weight_jacobians(s1, s2)
-    return {"W": w, "P1": p1, "P2": p2, "cov_vec_W": cov,
-            "std_W": np.sqrt(np.clip(np.diag(cov), 0, None)).reshape(m, m, order="F"),
-            "n1": n1, "n2": n2, "mean": args.mean, "shared_snapshots": args.s12 is not None,
-            "note": "vec stacks columns (12); Cov(vec W) is the first-order (10), "
-                    "accurate to a few per cent from n ~ 100 (docs/errata.md)"}, True
+    return {
+        "W": w,
+        "P1": p1,
+        "P2": p2,
+        "cov_vec_W": cov,
+        "std_W": np.sqrt(np.clip(np.diag(cov), 0, None)).reshape(m, m, order="F"),
+        "n1": n1,
+        "n2": n2,
+        "mean": args.mean,
+        "shared_snapshots": args.s12 is not None,
+        "note": "vec stacks columns (12); Cov(vec W) is the first-order (10), "
+        "accurate to a few per cent from n ~ 100 (docs/errata.md)",
+    }, True
 
 
 def _print_fusion_weights(res: dict[str, Any]) -> None:
@@ -87,19 +98,23 @@ def run_demo(out: Path, args: argparse.Namespace, progress: bool) -> dict[str, A
     ``out/fusion``."""
     from optmodels.demo import run_fusion_demo
 
-    return run_fusion_demo(out / "fusion", trials=args.fusion_trials,
-                           positions=args.fusion_positions, seed=args.seed,
-                           progress=progress)
+    return run_fusion_demo(
+        out / "fusion",
+        trials=args.fusion_trials,
+        positions=args.fusion_positions,
+        seed=args.seed,
+        progress=progress,
+    )
 
 
-def run_details(out: Path, *, sizes: list[int], runs: int, repeats: int, seed: int,
-                progress: bool) -> tuple[str, dict[str, Any]]:
+def run_details(
+    out: Path, *, sizes: list[int], runs: int, repeats: int, seed: int, progress: bool
+) -> tuple[str, dict[str, Any]]:
     """``optmodels compare --details``: :mod:`solvers_cmp.fusion`'s rows and benchmark;
     the report section and the result entry."""
     from solvers_cmp import fusion as cmp_fusion
 
-    rows = cmp_fusion.rows(seed=seed, repeats=max(1, min(repeats, 3)),
-                           progress=progress)
+    rows = cmp_fusion.rows(seed=seed, repeats=max(1, min(repeats, 3)), progress=progress)
     bench = cmp_fusion.benchmark(repeats=repeats, seed=seed)
     md = cmp_fusion.write_report(out, rows, bench)
     return md, {"results": rows, "benchmark": bench}
@@ -110,16 +125,26 @@ def register(sub: Any) -> None:
     count1 = _count(1)
     fsub = _group(sub, "fusion", "fusion of two estimates (paper 003)")
     fw = _leaf(fsub, "weights", "W, the Jacobians P1, P2 (13)-(14) and Cov(vec W) (10)")
-    fw.add_argument("--s1", required=True,
-                    help="error covariance of estimate 1: JSON '[[..],[..]]' or .npy/.json path")
+    fw.add_argument(
+        "--s1",
+        required=True,
+        help="error covariance of estimate 1: JSON '[[..],[..]]' or .npy/.json path",
+    )
     fw.add_argument("--s2", required=True, help="error covariance of estimate 2 (as --s1)")
     fw.add_argument("--n", type=count1, help="snapshots behind both sample covariances")
     fw.add_argument("--n1", type=count1, help="snapshots behind S1 (overrides --n)")
     fw.add_argument("--n2", type=count1, help="snapshots behind S2 (overrides --n)")
-    fw.add_argument("--mean", choices=("sample", "known"), default="sample",
-                    help="sample covariances about the sample mean, or about the known "
-                         "mean (the paper's literal (3))")
-    fw.add_argument("--s12", help="Cov(a1, a2) when both sample covariances come from the "
-                                   "same snapshots of correlated estimators (adds the cross "
-                                   "block to (10); needs n1 = n2)")
+    fw.add_argument(
+        "--mean",
+        choices=("sample", "known"),
+        default="sample",
+        help="sample covariances about the sample mean, or about the known "
+        "mean (the paper's literal (3))",
+    )
+    fw.add_argument(
+        "--s12",
+        help="Cov(a1, a2) when both sample covariances come from the "
+        "same snapshots of correlated estimators (adds the cross "
+        "block to (10); needs n1 = n2)",
+    )
     fw.set_defaults(func=_fusion_weights, printer=_print_fusion_weights)

@@ -23,8 +23,10 @@ from optmodels.core import VERIFY_TOL, ProblemError
 # problem (issue 23 item 4)
 
 #: This problem's line in the demo's report/index.md.
-DEMO_TITLE = ("- [Plane of maneuver (paper 000)](plane/report.md): figures 1-4, Monte "
-              "Carlo vs the Cramér–Rao bound")
+DEMO_TITLE = (
+    "- [Plane of maneuver (paper 000)](plane/report.md): figures 1-4, Monte "
+    "Carlo vs the Cramér–Rao bound"
+)
 
 
 def _parse_cov(text: str) -> np.ndarray:
@@ -63,8 +65,10 @@ def _method(args: argparse.Namespace) -> str:
     import sys
 
     if args.formulation == "closed-form":
-        print("optmodels: note: --formulation closed-form is now --method closed-form",
-              file=sys.stderr)
+        print(
+            "optmodels: note: --formulation closed-form is now --method closed-form",
+            file=sys.stderr,
+        )
         return "closed-form"
     return str(args.method)
 
@@ -75,13 +79,13 @@ def _plane_fit(args: argparse.Namespace) -> Outcome:
 
     method = _method(args)
     formulation: Literal["full", "reduced"] = (
-        "full" if args.formulation == "closed-form" else args.formulation)
+        "full" if args.formulation == "closed-form" else args.formulation
+    )
     with _reading(str(args.file)):
         cols = _time_range(read_plane_csv(args.file), args.file, args.start, args.end)
         if "cov" in cols:
             if args.sigma2 is not None or args.cov is not None:
-                raise ProblemError("--sigma2/--cov: the file has per-point covariances "
-                                   "already")
+                raise ProblemError("--sigma2/--cov: the file has per-point covariances already")
             cov = cols["cov"]
         elif args.cov is not None:
             cov = _parse_cov(args.cov)
@@ -99,8 +103,7 @@ def _plane_fit(args: argparse.Namespace) -> Outcome:
     out: dict[str, Any] = {
         "file": str(args.file),
         "n_points": data.n_points,
-        "time_span": ([float(cols["t"][0]), float(cols["t"][-1])] if "t" in cols
-                      else None),
+        "time_span": ([float(cols["t"][0]), float(cols["t"][-1])] if "t" in cols else None),
         "method_flag": method,
         "formulation": None if method == "closed-form" else formulation,
         "status": "unresolved" if sol.resolved is False else sol.status.value,
@@ -109,8 +112,9 @@ def _plane_fit(args: argparse.Namespace) -> Outcome:
         "normal": np.asarray(sol.normal, dtype=float).tolist(),
         "offset": sol.offset,
         **_orientation(sol.normal),
-        "line_direction": (np.asarray(sol.line_direction, dtype=float).tolist()
-                           if sol.resolved is False else None),
+        "line_direction": (
+            np.asarray(sol.line_direction, dtype=float).tolist() if sol.resolved is False else None
+        ),
         "line_test": sol.info.get("line_test"),
         "objective": sol.objective,
         "residuals": sol.residuals,
@@ -118,10 +122,13 @@ def _plane_fit(args: argparse.Namespace) -> Outcome:
         "solve_time": sol.solve_time,
         "iterations": sol.iterations,
         "message": sol.message,
-        "units": {"offset": "m", "normal": "unit vector in the file's frame",
-                  "tilt_deg": "deg from the horizontal (z up)",
-                  "tilt_azimuth_deg": "deg clockwise from north (y) of the steepest rise",
-                  "time_span": "s"},
+        "units": {
+            "offset": "m",
+            "normal": "unit vector in the file's frame",
+            "tilt_deg": "deg from the horizontal (z up)",
+            "tilt_azimuth_deg": "deg clockwise from north (y) of the steepest rise",
+            "time_span": "s",
+        },
     }
     if (sol.ok or sol.resolved is False) and data.n_points >= 4:
         # the same line test as the fit (exact under general covariances)
@@ -144,25 +151,39 @@ def _print_plane_fit(res: dict[str, Any]) -> None:
     print(f"  normal  = ({n[0]:.9f}, {n[1]:.9f}, {n[2]:.9f})")
     print(f"  offset  = {res['offset']:.6f} m")
     az = res["tilt_azimuth_deg"]
-    print(f"  tilt    = {res['tilt_deg']:.3f}° from the horizontal"
-          + (f", rising towards azimuth {az:.1f}° (clockwise from north)"
-             if az == az else " (a level plane)"))
-    print(f"  objective (1.2) = {res['objective']:.6g}; max residual (1.3) = "
-          f"{max(res['residuals'].values(), default=0.0):.1e}")
+    print(
+        f"  tilt    = {res['tilt_deg']:.3f}° from the horizontal"
+        + (
+            f", rising towards azimuth {az:.1f}° (clockwise from north)"
+            if az == az
+            else " (a level plane)"
+        )
+    )
+    print(
+        f"  objective (1.2) = {res['objective']:.6g}; max residual (1.3) = "
+        f"{max(res['residuals'].values(), default=0.0):.1e}"
+    )
     t = res.get("planarity_test")
     if t:
         verdict = "planar" if t["planar"] else "NOT planar"
-        print(f"  χ² test: Λ = {t['statistic']:.6g}, dof = {t['dof']}, threshold "
-              f"{t['threshold']:.6g} at level {t['level']} -> {verdict} (p = {t['p_value']:.3g})")
-        print(f"  line test: {t['line_statistic']:.6g} > {t['line_threshold']:.6g} "
-              f"(χ²({t['line_dof']})) -> the plane is resolved")
+        print(
+            f"  χ² test: Λ = {t['statistic']:.6g}, dof = {t['dof']}, threshold "
+            f"{t['threshold']:.6g} at level {t['level']} -> {verdict} (p = {t['p_value']:.3g})"
+        )
+        print(
+            f"  line test: {t['line_statistic']:.6g} > {t['line_threshold']:.6g} "
+            f"(χ²({t['line_dof']})) -> the plane is resolved"
+        )
         pv = "planar" if t["paper_planar"] else "NOT planar"
-        print(f"  paper (1.17): √(2Λ) = {t['paper_statistic']:.4f} vs √(2N)+2 = "
-              f"{t['paper_threshold']:.4f} -> {pv}")
+        print(
+            f"  paper (1.17): √(2Λ) = {t['paper_statistic']:.4f} vs √(2N)+2 = "
+            f"{t['paper_threshold']:.4f} -> {pv}"
+        )
 
 
-def _time_range(cols: dict[str, Any], file: Path, start: float | None,
-                end: float | None) -> dict[str, Any]:
+def _time_range(
+    cols: dict[str, Any], file: Path, start: float | None, end: float | None
+) -> dict[str, Any]:
     """The rows with ``start <= t <= end`` (s) when ``--start``/``--end`` are given."""
     if start is None and end is None:
         return cols
@@ -175,11 +196,15 @@ def _time_range(cols: dict[str, Any], file: Path, start: float | None,
     if end is not None:
         keep &= t <= end
     if int(np.sum(keep)) < 3:
-        raise ProblemError(f"--start/--end: {int(np.sum(keep))} rows of {file} have "
-                           f"{start if start is not None else '-inf'} <= t <= "
-                           f"{end if end is not None else 'inf'} s; a plane needs 3")
-    out = {k: (v[keep] if isinstance(v, np.ndarray) and len(v) == len(t) else v)
-           for k, v in cols.items()}
+        raise ProblemError(
+            f"--start/--end: {int(np.sum(keep))} rows of {file} have "
+            f"{start if start is not None else '-inf'} <= t <= "
+            f"{end if end is not None else 'inf'} s; a plane needs 3"
+        )
+    out = {
+        k: (v[keep] if isinstance(v, np.ndarray) and len(v) == len(t) else v)
+        for k, v in cols.items()
+    }
     return out
 
 
@@ -193,7 +218,8 @@ def _parse_window(text: str) -> float | int | None:
     except ProblemError:
         raise argparse.ArgumentTypeError(
             f"{text!r} does not say its unit: write seconds like 40s, a number of "
-            "points like 100pts, or growing") from None
+            "points like 100pts, or growing"
+        ) from None
 
 
 def _parse_site(text: str) -> np.ndarray:
@@ -203,38 +229,52 @@ def _parse_site(text: str) -> np.ndarray:
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected x,y,z in metres, got {text!r}") from None
     if len(v) != 3 or not np.all(np.isfinite(v)):
-        raise argparse.ArgumentTypeError(f"expected three finite numbers x,y,z (m), got "
-                                         f"{text!r}")
+        raise argparse.ArgumentTypeError(f"expected three finite numbers x,y,z (m), got {text!r}")
     return np.array(v)
 
 
-def _track_cov(args: argparse.Namespace, cols: dict[str, Any]
-               ) -> tuple[np.ndarray, np.ndarray | None, str]:
+def _track_cov(
+    args: argparse.Namespace, cols: dict[str, Any]
+) -> tuple[np.ndarray, np.ndarray | None, str]:
     """The covariances of ``plane track``: the file's columns, a radar (``--site`` and
     the three sigmas), ``--cov`` or ``--sigma2``; exactly one source."""
     radar = [args.sigma_range, args.sigma_azimuth, args.sigma_elevation]
-    given = [name for name, on in (("the file's cxx..czz columns", "cov" in cols),
-                                   ("--site", args.site is not None),
-                                   ("--cov", args.cov is not None),
-                                   ("--sigma2", args.sigma2 is not None)) if on]
+    given = [
+        name
+        for name, on in (
+            ("the file's cxx..czz columns", "cov" in cols),
+            ("--site", args.site is not None),
+            ("--cov", args.cov is not None),
+            ("--sigma2", args.sigma2 is not None),
+        )
+        if on
+    ]
     if len(given) > 1:
         raise ProblemError(f"covariance: give one source, got {' and '.join(given)}")
     if args.site is None and any(v is not None for v in radar):
-        raise ProblemError("--sigma-range/--sigma-azimuth/--sigma-elevation: need --site "
-                           "x,y,z (the radar, m)")
+        raise ProblemError(
+            "--sigma-range/--sigma-azimuth/--sigma-elevation: need --site x,y,z (the radar, m)"
+        )
     alpha2 = cols.get("alpha2")
     if args.site is not None:
         if any(v is None for v in radar):
-            raise ProblemError("--site: give all of --sigma-range (m), --sigma-azimuth (deg)"
-                               " and --sigma-elevation (deg)")
+            raise ProblemError(
+                "--site: give all of --sigma-range (m), --sigma-azimuth (deg)"
+                " and --sigma-elevation (deg)"
+            )
         from optmodels.plane.radar import radar_covariances
 
         if alpha2 is not None:
-            raise ProblemError("--site: the file's alpha2 column applies to a common --cov/"
-                               "--sigma2 only")
-        cov = radar_covariances(cols["points"], args.site, args.sigma_range,
-                                np.deg2rad(args.sigma_azimuth),
-                                np.deg2rad(args.sigma_elevation))
+            raise ProblemError(
+                "--site: the file's alpha2 column applies to a common --cov/--sigma2 only"
+            )
+        cov = radar_covariances(
+            cols["points"],
+            args.site,
+            args.sigma_range,
+            np.deg2rad(args.sigma_azimuth),
+            np.deg2rad(args.sigma_elevation),
+        )
         return cov, None, "radar"
     if "cov" in cols:
         return cols["cov"], None, "file"
@@ -242,9 +282,11 @@ def _track_cov(args: argparse.Namespace, cols: dict[str, Any]
         return _parse_cov(args.cov), alpha2, "cov"
     if args.sigma2 is not None:
         return float(args.sigma2) * np.eye(3), alpha2, "sigma2"
-    raise ProblemError("covariance: give --site x,y,z with --sigma-range/--sigma-azimuth/"
-                       "--sigma-elevation, --cov ..., --sigma2 S, or cxx..czz columns in "
-                       "the file")
+    raise ProblemError(
+        "covariance: give --site x,y,z with --sigma-range/--sigma-azimuth/"
+        "--sigma-elevation, --cov ..., --sigma2 S, or cxx..czz columns in "
+        "the file"
+    )
 
 
 def _step_status(trk: Any) -> list[str]:
@@ -255,8 +297,9 @@ def _step_status(trk: Any) -> list[str]:
     out = []
     for k in range(trk.n_steps):
         if bool(trk.resolved[k]):
-            out.append("optimal" if float(trk.numerical_error[k]) <= VERIFY_TOL
-                       else "optimal_inaccurate")
+            out.append(
+                "optimal" if float(trk.numerical_error[k]) <= VERIFY_TOL else "optimal_inaccurate"
+            )
         elif not float(trk.line_statistic[k]) > float(trk.line_threshold[k]):
             out.append("unresolved")
         else:
@@ -278,8 +321,10 @@ def _csv_text(rows: list[dict[str, Any]]) -> str:
 
 
 #: The step columns that are angles: written in degrees, the unit in the name.
-_DEG_COLUMNS = {"detectable_tilt": "detectable_tilt_deg",
-                "detectable_tilt_any": "detectable_tilt_any_deg"}
+_DEG_COLUMNS = {
+    "detectable_tilt": "detectable_tilt_deg",
+    "detectable_tilt_any": "detectable_tilt_any_deg",
+}
 
 
 def _cli_row(row: dict[str, Any]) -> dict[str, Any]:
@@ -306,31 +351,56 @@ def _plane_track(args: argparse.Namespace) -> Outcome:
         cols = read_plane_csv(args.file, require_time=True)
         cov, alpha2, source = _track_cov(args, cols)
     win = args.window
-    trk = track(cols["t"], cols["points"], cov,
-                window_points=win if isinstance(win, int) else None,
-                window_seconds=win if isinstance(win, float) else None, level=args.level,
-                false_alarm_rate_per_h=args.false_alarm_rate_per_h, alpha2=alpha2,
-                power=args.power, start=args.start)
+    trk = track(
+        cols["t"],
+        cols["points"],
+        cov,
+        window_points=win if isinstance(win, int) else None,
+        window_seconds=win if isinstance(win, float) else None,
+        level=args.level,
+        false_alarm_rate_per_h=args.false_alarm_rate_per_h,
+        alpha2=alpha2,
+        power=args.power,
+        start=args.start,
+    )
     status = _step_status(trk)
     rows = [{**_cli_row(r), "status": s} for r, s in zip(trk.to_rows(), status, strict=True)]
     if out_path is not None:
         with atomic_write(out_path, name="--out", newline="") as fh:
             fh.write(_csv_text(rows))
-    counts = {s: status.count(s) for s in ("optimal", "optimal_inaccurate", "unresolved",
-                                           "error")}
+    counts = {s: status.count(s) for s in ("optimal", "optimal_inaccurate", "unresolved", "error")}
     ok = counts["error"] == 0
-    settings = {k: v for k, v in trk.to_dict().items()
-                if k in ("level", "false_alarm_rate_per_h", "power", "scales",
-                         "method", "test_level", "solve_time", "n_steps", "change_times")}
+    settings = {
+        k: v
+        for k, v in trk.to_dict().items()
+        if k
+        in (
+            "level",
+            "false_alarm_rate_per_h",
+            "power",
+            "scales",
+            "method",
+            "test_level",
+            "solve_time",
+            "n_steps",
+            "change_times",
+        )
+    }
     doc: dict[str, Any] = {
         "file": str(args.file),
         "n_points": len(cols["t"]),
         "covariance": source,
         "window": window_label(win),
-        "units": {"time": "s", "offset": "m", "normal": "unit vector in the file's frame",
-                  "detectable_tilt_deg": "deg", "false_alarm_rate_per_h": "per hour",
-                  "numerical_error_rad": "rad", "scales": "s, or points with a points "
-                  "window", "statistic": "dimensionless, chi2(n_points - 3) if planar"},
+        "units": {
+            "time": "s",
+            "offset": "m",
+            "normal": "unit vector in the file's frame",
+            "detectable_tilt_deg": "deg",
+            "false_alarm_rate_per_h": "per hour",
+            "numerical_error_rad": "rad",
+            "scales": "s, or points with a points window",
+            "statistic": "dimensionless, chi2(n_points - 3) if planar",
+        },
         **settings,
         "status_counts": counts,
         "status": "optimal" if ok else "error",
@@ -346,12 +416,18 @@ def _print_plane_track(res: dict[str, Any]) -> None:
         return
     c = res["status_counts"]
     ch = ", ".join(f"{t:g}" for t in res["change_times"]) or "none"
-    print(f"{res['file']}: N = {res['n_points']}, {res['n_steps']} steps ({res['method']}, "
-          f"window {res['window']}); wrote {res['out']}")
-    print(f"  steps: {c['optimal']} optimal, {c['optimal_inaccurate']} inaccurate, "
-          f"{c['unresolved']} unresolved (on a line), {c['error']} error")
-    print(f"  plane changes detected at t = {ch} s (bound: "
-          f"{res['false_alarm_rate_per_h']:g} false alarms per hour)")
+    print(
+        f"{res['file']}: N = {res['n_points']}, {res['n_steps']} steps ({res['method']}, "
+        f"window {res['window']}); wrote {res['out']}"
+    )
+    print(
+        f"  steps: {c['optimal']} optimal, {c['optimal_inaccurate']} inaccurate, "
+        f"{c['unresolved']} unresolved (on a line), {c['error']} error"
+    )
+    print(
+        f"  plane changes detected at t = {ch} s (bound: "
+        f"{res['false_alarm_rate_per_h']:g} false alarms per hour)"
+    )
 
 
 def run_demo(out: Path, args: argparse.Namespace, progress: bool) -> dict[str, Any]:
@@ -361,8 +437,9 @@ def run_demo(out: Path, args: argparse.Namespace, progress: bool) -> dict[str, A
     return run_plane_demo(out / "plane", runs=args.runs, seed=args.seed, progress=progress)
 
 
-def run_details(out: Path, *, sizes: list[int], runs: int, repeats: int, seed: int,
-                progress: bool) -> tuple[str, dict[str, Any]]:
+def run_details(
+    out: Path, *, sizes: list[int], runs: int, repeats: int, seed: int, progress: bool
+) -> tuple[str, dict[str, Any]]:
     """``optmodels compare --details``: timing and Monte Carlo accuracy per size, the
     benchmark and the full NLP's scaling (:mod:`solvers_cmp.plane`); the report section
     and the result entry."""
@@ -383,62 +460,109 @@ def register(sub: Any) -> None:
     positive = _positive()
     plsub = _group(sub, "plane", "plane of maneuver (paper 000)")
     fit = _leaf(plsub, "fit", "fit the ML plane to a CSV of positions; prints its tilt")
-    fit.epilog = ("Exit 0: a resolved plane; 1: not OK, or unresolved (the points lie on a "
-                  "line at --level: the line's direction is reported, no plane); 2: bad "
-                  "input.")
+    fit.epilog = (
+        "Exit 0: a resolved plane; 1: not OK, or unresolved (the points lie on a "
+        "line at --level: the line's direction is reported, no plane); 2: bad "
+        "input."
+    )
     fit.add_argument("file", type=Path, help="CSV with x,y,z [,t] [,alpha2] [,cxx..czz]")
     g = fit.add_mutually_exclusive_group()
     g.add_argument("--sigma2", type=positive, help="error variance per axis, m² (D = σ² I)")
     g.add_argument("--cov", help="common D, m²: cxx,cxy,cxz,cyy,cyz,czz (or 9 numbers)")
-    fit.add_argument("--method", choices=("ipopt", "closed-form"), default="ipopt",
-                     help="closed-form (1.5)-(1.8), valid under D_i = α_i² D, or the "
-                          "generic NLP (CasADi + IPOPT) on --formulation")
-    fit.add_argument("--formulation", choices=("full", "reduced", "closed-form"),
-                     default="full",
-                     help="the generic NLP's form: full (1.2)-(1.3) or reduced "
-                          "(1.12)-(1.13) (closed-form: the former spelling of --method "
-                          "closed-form)")
-    fit.add_argument("--level", type=_level(), default=0.997,
-                     help="level of the χ² planarity and line tests, in (0, 1)")
+    fit.add_argument(
+        "--method",
+        choices=("ipopt", "closed-form"),
+        default="ipopt",
+        help="closed-form (1.5)-(1.8), valid under D_i = α_i² D, or the "
+        "generic NLP (CasADi + IPOPT) on --formulation",
+    )
+    fit.add_argument(
+        "--formulation",
+        choices=("full", "reduced", "closed-form"),
+        default="full",
+        help="the generic NLP's form: full (1.2)-(1.3) or reduced "
+        "(1.12)-(1.13) (closed-form: the former spelling of --method "
+        "closed-form)",
+    )
+    fit.add_argument(
+        "--level",
+        type=_level(),
+        default=0.997,
+        help="level of the χ² planarity and line tests, in (0, 1)",
+    )
     fit.add_argument("--start", type=_finite(), help="fit only rows with t >= START (s)")
     fit.add_argument("--end", type=_finite(), help="fit only rows with t <= END (s)")
     fit.set_defaults(func=_plane_fit, printer=_print_plane_fit)
 
-    tr = _leaf(plsub, "track", "the plane along a track: sliding windows, plane-change "
-               "detection, one row per step")
-    tr.epilog = ("One row per step: time (s), nx, ny, nz (unit normal, the file's frame; "
-                 "empty/nan where not resolved), offset (m), statistic and threshold (χ², "
-                 "dimensionless), resolved, planar, change, detector, detector_threshold, "
-                 "change_time (s), detectable_tilt_deg, detectable_tilt_any_deg (deg), "
-                 "n_points, window_start (s), line_x..line_z, numerical_error_rad, "
-                 "p_value, status. Exit 0: no step in error; 1: some step's plane failed "
-                 "its re-check; 2: bad input.")
-    tr.add_argument("file", type=Path,
-                    help="CSV with t (s, increasing), x,y,z (m) [,alpha2] [,cxx..czz (m²)]")
-    tr.add_argument("--window", type=_parse_window, required=True,
-                    metavar="40s|100pts|growing",
-                    help="window with its unit: seconds like 40s, a number of points like "
-                         "100pts, or growing (a bare 40 is refused: points or seconds?)")
-    tr.add_argument("--level", type=_level(), default=0.997,
-                    help="level of the χ² planarity and line tests, in (0, 1)")
-    tr.add_argument("--false-alarm-rate-per-h", type=positive, default=1.0,
-                    metavar="PER_HOUR", help="detector false alarms per HOUR of planar track")
-    tr.add_argument("--false-alarm-rate", type=positive, dest="false_alarm_rate_per_h",
-                    default=argparse.SUPPRESS, help=argparse.SUPPRESS)  # the former name
-    tr.add_argument("--power", type=_level(), default=0.9,
-                    help="detection probability behind detectable_tilt_deg, in (0, 1)")
+    tr = _leaf(
+        plsub,
+        "track",
+        "the plane along a track: sliding windows, plane-change detection, one row per step",
+    )
+    tr.epilog = (
+        "One row per step: time (s), nx, ny, nz (unit normal, the file's frame; "
+        "empty/nan where not resolved), offset (m), statistic and threshold (χ², "
+        "dimensionless), resolved, planar, change, detector, detector_threshold, "
+        "change_time (s), detectable_tilt_deg, detectable_tilt_any_deg (deg), "
+        "n_points, window_start (s), line_x..line_z, numerical_error_rad, "
+        "p_value, status. Exit 0: no step in error; 1: some step's plane failed "
+        "its re-check; 2: bad input."
+    )
+    tr.add_argument(
+        "file", type=Path, help="CSV with t (s, increasing), x,y,z (m) [,alpha2] [,cxx..czz (m²)]"
+    )
+    tr.add_argument(
+        "--window",
+        type=_parse_window,
+        required=True,
+        metavar="40s|100pts|growing",
+        help="window with its unit: seconds like 40s, a number of points like "
+        "100pts, or growing (a bare 40 is refused: points or seconds?)",
+    )
+    tr.add_argument(
+        "--level",
+        type=_level(),
+        default=0.997,
+        help="level of the χ² planarity and line tests, in (0, 1)",
+    )
+    tr.add_argument(
+        "--false-alarm-rate-per-h",
+        type=positive,
+        default=1.0,
+        metavar="PER_HOUR",
+        help="detector false alarms per HOUR of planar track",
+    )
+    tr.add_argument(
+        "--false-alarm-rate",
+        type=positive,
+        dest="false_alarm_rate_per_h",
+        default=argparse.SUPPRESS,
+        help=argparse.SUPPRESS,
+    )  # the former name
+    tr.add_argument(
+        "--power",
+        type=_level(),
+        default=0.9,
+        help="detection probability behind detectable_tilt_deg, in (0, 1)",
+    )
     tr.add_argument("--start", type=_finite(), help="first reported time, s")
-    tr.add_argument("--site", type=_parse_site,
-                    help="radar position x,y,z (m, the file's local flat ENU frame): "
-                         "covariances from range/azimuth/elevation errors (first order, at "
-                         "the measured points)")
+    tr.add_argument(
+        "--site",
+        type=_parse_site,
+        help="radar position x,y,z (m, the file's local flat ENU frame): "
+        "covariances from range/azimuth/elevation errors (first order, at "
+        "the measured points)",
+    )
     tr.add_argument("--sigma-range", type=positive, help="radar range error std, m")
-    tr.add_argument("--sigma-azimuth", type=positive,
-                    help="radar azimuth error std, DEGREES (azimuth clockwise from north)")
-    tr.add_argument("--sigma-elevation", type=positive,
-                    help="radar elevation error std, DEGREES")
+    tr.add_argument(
+        "--sigma-azimuth",
+        type=positive,
+        help="radar azimuth error std, DEGREES (azimuth clockwise from north)",
+    )
+    tr.add_argument("--sigma-elevation", type=positive, help="radar elevation error std, DEGREES")
     tr.add_argument("--cov", help="common D, m²: cxx,cxy,cxz,cyy,cyz,czz (or 9 numbers)")
     tr.add_argument("--sigma2", type=positive, help="error variance per axis, m² (D = σ² I)")
-    tr.add_argument("--out", metavar="FILE",
-                    help="write the steps to this CSV FILE (else the CSV on stdout)")
+    tr.add_argument(
+        "--out", metavar="FILE", help="write the steps to this CSV FILE (else the CSV on stdout)"
+    )
     tr.set_defaults(func=_plane_track, printer=_print_plane_track)

@@ -16,9 +16,11 @@ from optmodels.cli.contract import _OK_STATUSES, Outcome, _group, _leaf, _readin
 from optmodels.core import ProblemError
 
 #: This problem's line in the demo's report/index.md.
-DEMO_TITLE = ("- [Dependent linear trajectories (paper 002)]"
-              "(trajectories/report.md): launcher and parallel scenarios, η "
-              "against Monte Carlo")
+DEMO_TITLE = (
+    "- [Dependent linear trajectories (paper 002)]"
+    "(trajectories/report.md): launcher and parallel scenarios, η "
+    "against Monte Carlo"
+)
 
 
 def _trajectories_fit(args: argparse.Namespace) -> Outcome:
@@ -36,8 +38,7 @@ def _trajectories_fit(args: argparse.Namespace) -> Outcome:
             sigma2: Any = cols["sigma2"]
         else:
             sigma2 = 1.0 if args.sigma2 is None else args.sigma2
-        data = trajectories.TrajectoryData(cols["times"], cols["values"], sigma2,
-                                           epoch=args.epoch)
+        data = trajectories.TrajectoryData(cols["times"], cols["values"], sigma2, epoch=args.epoch)
     q = data.n_objects
     if args.family == "custom":
         index = {lab: k for k, lab in enumerate(labels)}
@@ -53,8 +54,10 @@ def _trajectories_fit(args: argparse.Namespace) -> Outcome:
             return out
 
         family: Any = trajectories.Family.custom(
-            q, shared_start=groups(args.shared_start, "--shared-start"),
-            shared_velocity=groups(args.shared_velocity, "--shared-velocity"))
+            q,
+            shared_start=groups(args.shared_start, "--shared-start"),
+            shared_velocity=groups(args.shared_velocity, "--shared-velocity"),
+        )
     else:
         if args.shared_start or args.shared_velocity:
             raise ProblemError("--shared-start/--shared-velocity need --family custom")
@@ -68,45 +71,65 @@ def _trajectories_fit(args: argparse.Namespace) -> Outcome:
         raise RuntimeError("trajectories: the solution carries no family")
     std = sol.std
     out: dict[str, Any] = {
-        "file": str(args.file), "objects": labels, "coordinates": cols["coordinates"],
-        "n_measurements": data.counts.tolist(), "family": fam.name,
+        "file": str(args.file),
+        "objects": labels,
+        "coordinates": cols["coordinates"],
+        "n_measurements": data.counts.tolist(),
+        "family": fam.name,
         "start_groups": [[labels[i] for i in g] for g in fam.start_groups],
         "velocity_groups": [[labels[i] for i in g] for g in fam.velocity_groups],
-        "epoch": args.epoch, "status": sol.status.value, "method": sol.method,
-        "theta": sol.theta, "theta_std": std, "covariance": sol.covariance,
+        "epoch": args.epoch,
+        "status": sol.status.value,
+        "method": sol.method,
+        "theta": sol.theta,
+        "theta_std": std,
+        "covariance": sol.covariance,
         "start": {lab: sol.start[k] for k, lab in enumerate(labels)},
         "velocity": {lab: sol.velocity[k] for k, lab in enumerate(labels)},
-        "objective": sol.objective, "dof": sol.dof,
+        "objective": sol.objective,
+        "dof": sol.dof,
         "fit_p_value": float(stats.chi2.sf(sol.objective, sol.dof))
-        if sol.dof > 0 and sol.ok else None,
-        "residuals": sol.residuals, "build_time": sol.build_time,
-        "solve_time": sol.solve_time, "iterations": sol.iterations, "message": sol.message,
+        if sol.dof > 0 and sol.ok
+        else None,
+        "residuals": sol.residuals,
+        "build_time": sol.build_time,
+        "solve_time": sol.solve_time,
+        "iterations": sol.iterations,
+        "message": sol.message,
     }
     if sol.ok and fam.n_constraints > 0:
         out["family_test"] = trajectories.family_test(
-            data, fam, level=args.level,
-            sigma2="estimated" if args.sigma2_unknown else "known").to_dict()
+            data, fam, level=args.level, sigma2="estimated" if args.sigma2_unknown else "known"
+        ).to_dict()
     return out, sol.ok
 
 
 def _print_trajectories_fit(res: dict[str, Any]) -> None:
-    print(f"{res['file']}: Q = {len(res['objects'])}, N = {res['n_measurements']}, "
-          f"family {res['family']}, {res['method']} -> {res['status']}")
+    print(
+        f"{res['file']}: Q = {len(res['objects'])}, N = {res['n_measurements']}, "
+        f"family {res['family']}, {res['method']} -> {res['status']}"
+    )
     if res["status"] not in _OK_STATUSES:
         print(f"  {res['message']}")
         return
     for lab in res["objects"]:
-        print(f"  {lab}: start = {np.round(res['start'][lab], 6)}, "
-              f"velocity = {np.round(res['velocity'][lab], 6)}")
+        print(
+            f"  {lab}: start = {np.round(res['start'][lab], 6)}, "
+            f"velocity = {np.round(res['velocity'][lab], 6)}"
+        )
     print(f"  θ std = {np.round(res['theta_std'], 6).tolist()}")
     pv = res["fit_p_value"]
-    print(f"  χ² = {res['objective']:.6g} on {res['dof']} dof"
-          + (f" (p = {pv:.3g})" if pv is not None else ""))
+    print(
+        f"  χ² = {res['objective']:.6g} on {res['dof']} dof"
+        + (f" (p = {pv:.3g})" if pv is not None else "")
+    )
     t = res.get("family_test")
     if t:
         verdict = "REJECTED" if t["reject"] else "not rejected"
-        print(f"  vs independent lines: statistic {t['statistic']:.4g}, dof {t['dof']}, "
-              f"p = {t['p_value']:.3g} -> {res['family']} {verdict} at level {t['level']}")
+        print(
+            f"  vs independent lines: statistic {t['statistic']:.4g}, dof {t['dof']}, "
+            f"p = {t['p_value']:.3g} -> {res['family']} {verdict} at level {t['level']}"
+        )
 
 
 def run_demo(out: Path, args: argparse.Namespace, progress: bool) -> dict[str, Any]:
@@ -115,12 +138,13 @@ def run_demo(out: Path, args: argparse.Namespace, progress: bool) -> dict[str, A
     from optmodels.demo import run_trajectories_demo
 
     return run_trajectories_demo(
-        out / "trajectories", runs=args.trajectory_runs, seed=args.seed,
-        progress=progress)
+        out / "trajectories", runs=args.trajectory_runs, seed=args.seed, progress=progress
+    )
 
 
-def run_details(out: Path, *, sizes: list[int], runs: int, repeats: int, seed: int,
-                progress: bool) -> tuple[str, dict[str, Any]]:
+def run_details(
+    out: Path, *, sizes: list[int], runs: int, repeats: int, seed: int, progress: bool
+) -> tuple[str, dict[str, Any]]:
     """``optmodels compare --details``: :mod:`solvers_cmp.trajectories`' rows and
     benchmark; the report section and the result entry."""
     from solvers_cmp import trajectories as cmp_traj
@@ -136,28 +160,49 @@ def register(sub: Any) -> None:
     positive = _positive()
     tsub = _group(sub, "trajectories", "dependent linear trajectories (paper 002)")
     tfit = _leaf(tsub, "fit", "fit a family of lines to a CSV of measurements")
-    tfit.add_argument("file", type=Path,
-                      help="CSV with object,t,y or object,t,x,y[,z] [,sigma2]")
-    tfit.add_argument("--family", default="diverging",
-                      choices=("diverging", "parallel", "independent", "custom"),
-                      help="the family of lines: shared start (diverging), shared velocity "
-                           "(parallel), none, or --shared-start/--shared-velocity groups")
-    tfit.add_argument("--shared-start", action="append", metavar="A,B,..",
-                      help="custom family: objects sharing a start (repeatable)")
-    tfit.add_argument("--shared-velocity", action="append", metavar="A,B,..",
-                      help="custom family: objects sharing a velocity (repeatable)")
-    tfit.add_argument("--sigma2", type=positive,
-                      help="error variance, (unit of y)² (when absent: 1, or the file's "
-                           "sigma2 column)")
-    tfit.add_argument("--sigma2-unknown", action="store_true",
-                      help="family test with σ² estimated (F test) instead of known (χ²)")
-    tfit.add_argument("--epoch", type=_finite(), default=0.0,
-                      help="time at which the start is defined, s")
-    tfit.add_argument("--method", default="closed-form",
-                      help="closed-form (8)-(9)/(12)-(13), or a CVXPY solver: CLARABEL, "
-                           "OSQP, SCS, ...")
-    tfit.add_argument("--formulation", choices=("constrained", "reduced"),
-                      default="constrained", help="generic formulation (with --method SOLVER)")
-    tfit.add_argument("--level", type=_level(), default=0.95,
-                      help="family test level, in (0, 1)")
+    tfit.add_argument("file", type=Path, help="CSV with object,t,y or object,t,x,y[,z] [,sigma2]")
+    tfit.add_argument(
+        "--family",
+        default="diverging",
+        choices=("diverging", "parallel", "independent", "custom"),
+        help="the family of lines: shared start (diverging), shared velocity "
+        "(parallel), none, or --shared-start/--shared-velocity groups",
+    )
+    tfit.add_argument(
+        "--shared-start",
+        action="append",
+        metavar="A,B,..",
+        help="custom family: objects sharing a start (repeatable)",
+    )
+    tfit.add_argument(
+        "--shared-velocity",
+        action="append",
+        metavar="A,B,..",
+        help="custom family: objects sharing a velocity (repeatable)",
+    )
+    tfit.add_argument(
+        "--sigma2",
+        type=positive,
+        help="error variance, (unit of y)² (when absent: 1, or the file's sigma2 column)",
+    )
+    tfit.add_argument(
+        "--sigma2-unknown",
+        action="store_true",
+        help="family test with σ² estimated (F test) instead of known (χ²)",
+    )
+    tfit.add_argument(
+        "--epoch", type=_finite(), default=0.0, help="time at which the start is defined, s"
+    )
+    tfit.add_argument(
+        "--method",
+        default="closed-form",
+        help="closed-form (8)-(9)/(12)-(13), or a CVXPY solver: CLARABEL, OSQP, SCS, ...",
+    )
+    tfit.add_argument(
+        "--formulation",
+        choices=("constrained", "reduced"),
+        default="constrained",
+        help="generic formulation (with --method SOLVER)",
+    )
+    tfit.add_argument("--level", type=_level(), default=0.95, help="family test level, in (0, 1)")
     tfit.set_defaults(func=_trajectories_fit, printer=_print_trajectories_fit)

@@ -58,8 +58,10 @@ def _dpkt() -> Any:
     try:
         import dpkt
     except ImportError:  # pragma: no cover - depends on the installation
-        raise ProblemError("asterix: reading a pcap/pcapng capture needs dpkt "
-                           "(pip install 'optmodels[recordings]')") from None
+        raise ProblemError(
+            "asterix: reading a pcap/pcapng capture needs dpkt "
+            "(pip install 'optmodels[recordings]')"
+        ) from None
     return dpkt
 
 
@@ -97,7 +99,7 @@ def _chains(payload: bytes, cats: Any) -> bool:
     while pos < n:
         if pos + 3 > n:
             return False
-        ln = int.from_bytes(payload[pos + 1:pos + 3], "big")
+        ln = int.from_bytes(payload[pos + 1 : pos + 3], "big")
         if ln < 3 or payload[pos] not in cats:
             return False
         pos += ln
@@ -124,8 +126,9 @@ def read_capture(path: Path, *, limit: int | None = None) -> Capture:
         try:
             reader = (dpkt.pcapng.Reader if kind == "pcapng" else dpkt.pcap.Reader)(fh)
         except (ValueError, dpkt.Error) as exc:
-            raise ProblemError(f"asterix.read {path}: not a {kind} file dpkt reads ({exc})"
-                               ) from None
+            raise ProblemError(
+                f"asterix.read {path}: not a {kind} file dpkt reads ({exc})"
+            ) from None
         linktype = int(reader.datalink())
         parts: list[bytes] = []
         starts: list[int] = []
@@ -150,7 +153,10 @@ def read_capture(path: Path, *, limit: int | None = None) -> Capture:
                 if limit is not None and len(parts) >= limit:
                     break
         except (ValueError, dpkt.Error, EOFError) as exc:
-            raise ProblemError(f"asterix.read {path}: damaged {kind} capture after "
-                               f"{sum(counts.values())} packets ({exc})") from None
-    return Capture(kind, b"".join(parts), np.asarray(starts, np.int64),
-                   np.asarray(times, float), counts)
+            raise ProblemError(
+                f"asterix.read {path}: damaged {kind} capture after "
+                f"{sum(counts.values())} packets ({exc})"
+            ) from None
+    return Capture(
+        kind, b"".join(parts), np.asarray(starts, np.int64), np.asarray(times, float), counts
+    )

@@ -43,8 +43,9 @@ def _frn(spec: Any, name: str) -> int:
     for j, it in enumerate(spec.cv_uap.cv_record.cv_items_list):
         if issubclass(it, base.UapItem) and it.cv_non_spare.cv_name == name:
             return j
-    raise ProblemError(f"asterix.encode: CAT{spec.cv_category:03d} edition "
-                       f"{spec.cv_edition} has no item I{name}")
+    raise ProblemError(
+        f"asterix.encode: CAT{spec.cv_category:03d} edition {spec.cv_edition} has no item I{name}"
+    )
 
 
 @cache
@@ -54,24 +55,34 @@ def _const(spec: Any, name: str, value: Any) -> tuple[int, bytes]:
     q = 0
     while b[q] & 1:
         q += 1
-    return _frn(spec, name), bytes(b[q + 1:])
+    return _frn(spec, name), bytes(b[q + 1 :])
 
 
 def _where(spec: Any, path: tuple[str, ...]) -> _Field:
     f = _field(spec.cv_uap.cv_record, "/".join(path), path)
     if f is None:
-        raise ProblemError(f"asterix.encode: CAT{spec.cv_category:03d} edition "
-                           f"{spec.cv_edition} has no field I{'/'.join(path)}")
+        raise ProblemError(
+            f"asterix.encode: CAT{spec.cv_category:03d} edition "
+            f"{spec.cv_edition} has no field I{'/'.join(path)}"
+        )
     return f
 
 
-def _raw(fn: str, arg: str, x: np.ndarray, f: _Field, *, unit: str, per: float,
-         quantity: bool = True, wrap: bool = False) -> np.ndarray:
+def _raw(
+    fn: str,
+    arg: str,
+    x: np.ndarray,
+    f: _Field,
+    *,
+    unit: str,
+    per: float,
+    quantity: bool = True,
+    wrap: bool = False,
+) -> np.ndarray:
     """Raw field values of ``x`` (in the field's unit, i.e. the argument / ``per``): a
     quantity is rounded to its LSB; range checked (``wrap``: modulo the field, for an
     angle); two's complement for a signed field."""
-    lo, hi = (-(1 << (f.size - 1)), (1 << (f.size - 1)) - 1) if f.signed else \
-        (0, (1 << f.size) - 1)
+    lo, hi = (-(1 << (f.size - 1)), (1 << (f.size - 1)) - 1) if f.signed else (0, (1 << f.size) - 1)
     r = np.rint(x / f.lsb) if quantity else x
     if wrap:  # an angle: modulo the field's span (360° for THETA and I130 LON)
         r = np.mod(r - lo, hi - lo + 1) + lo
@@ -79,17 +90,27 @@ def _raw(fn: str, arg: str, x: np.ndarray, f: _Field, *, unit: str, per: float,
     if bad.any():
         lsb = f.lsb * per
         kind = f"{f.size}-bit {'signed' if f.signed else 'unsigned'}"
-        what = f"integers {lo} to {hi}" if not quantity else \
-            f"{lo * lsb:.8g} to {hi * lsb:.8g} {unit}".rstrip()
+        what = (
+            f"integers {lo} to {hi}"
+            if not quantity
+            else f"{lo * lsb:.8g} to {hi * lsb:.8g} {unit}".rstrip()
+        )
         lsb_text = f", LSB {lsb:.6g} {unit}".rstrip() if quantity else ""
         raise ProblemError(
             f"asterix.{fn} {arg}: need {what} (I{'/'.join(f.path)}, {kind}{lsb_text}), got "
-            f"{float((x * per)[bad][0]):.8g} ({int(bad.sum())} values outside)")
+            f"{float((x * per)[bad][0]):.8g} ({int(bad.sum())} values outside)"
+        )
     return r.astype(np.int64) & ((1 << f.size) - 1)
 
 
-def _item(frn: int, nbytes: int, parts: list[tuple[_Field, np.ndarray]],
-          present: np.ndarray | None = None, *, base: int = 0) -> _Item:
+def _item(
+    frn: int,
+    nbytes: int,
+    parts: list[tuple[_Field, np.ndarray]],
+    present: np.ndarray | None = None,
+    *,
+    base: int = 0,
+) -> _Item:
     """The item's integer value from its fields' raw values (``base``: the constant bits)."""
     v = np.full(parts[0][1].shape, base, np.uint64)
     for f, r in parts:
@@ -121,9 +142,11 @@ def _assemble(fn: str, cat: int, n: int, items: list[_Item], per_block: int) -> 
     nblocks = int(block[-1]) + 1
     blen = 3 + np.bincount(block, weights=length, minlength=nblocks).astype(np.int64)
     if blen.max() > 0xFFFF:
-        raise ProblemError(f"asterix.{fn} per_block: a datablock of {int(blen.max())} bytes "
-                           f"exceeds the 65 535 its LEN field holds; use a smaller per_block "
-                           f"(≤ {int(0xFFFF // max(1, length.max()))})")
+        raise ProblemError(
+            f"asterix.{fn} per_block: a datablock of {int(blen.max())} bytes "
+            f"exceeds the 65 535 its LEN field holds; use a smaller per_block "
+            f"(≤ {int(0xFFFF // max(1, length.max()))})"
+        )
     start = np.cumsum(length) - length + 3 * (block + 1)
     out = np.zeros(int(length.sum()) + 3 * nblocks, np.uint8)
     hs = start[::per_block] - 3
@@ -156,11 +179,13 @@ def _cols(fn: str, **arrays: Any) -> dict[str, np.ndarray]:
         try:
             a = np.asarray(v, dtype=float)
         except (TypeError, ValueError) as exc:
-            raise ProblemError(f"asterix.{fn} {name}: expected numbers, got "
-                               f"{type(v).__name__}") from exc
+            raise ProblemError(
+                f"asterix.{fn} {name}: expected numbers, got {type(v).__name__}"
+            ) from exc
         if a.ndim > 1:
-            raise ProblemError(f"asterix.{fn} {name}: expected one value per record, got "
-                               f"shape {a.shape}")
+            raise ProblemError(
+                f"asterix.{fn} {name}: expected one value per record, got shape {a.shape}"
+            )
         bad = ~np.isfinite(a) if name not in ("flight_level", "height") else np.isinf(a)
         if bad.any():
             raise ProblemError(f"asterix.{fn} {name}: {int(bad.sum())} non-finite values")
@@ -181,8 +206,9 @@ def _ints(fn: str, c: dict[str, np.ndarray], names: tuple[str, ...]) -> None:
             v = c[name]
             bad = v != np.round(v)
             if bad.any():
-                raise ProblemError(f"asterix.{fn} {name}: need integers, got "
-                                   f"{float(v[bad][0]):.10g}")
+                raise ProblemError(
+                    f"asterix.{fn} {name}: need integers, got {float(v[bad][0]):.10g}"
+                )
 
 
 def _optional(c: dict[str, np.ndarray], name: str, nan: bool) -> np.ndarray | None:
@@ -195,23 +221,43 @@ def _optional(c: dict[str, np.ndarray], name: str, nan: bool) -> np.ndarray | No
 
 def _sacsic(fn: str, spec: Any, c: dict[str, np.ndarray]) -> _Item:
     fs, ft = _where(spec, ("010", "SAC")), _where(spec, ("010", "SIC"))
-    return _item(_frn(spec, "010"), 2, [
-        (fs, _raw(fn, "sac", c["sac"], fs, unit="", per=1.0, quantity=False)),
-        (ft, _raw(fn, "sic", c["sic"], ft, unit="", per=1.0, quantity=False))])
+    return _item(
+        _frn(spec, "010"),
+        2,
+        [
+            (fs, _raw(fn, "sac", c["sac"], fs, unit="", per=1.0, quantity=False)),
+            (ft, _raw(fn, "sic", c["sic"], ft, unit="", per=1.0, quantity=False)),
+        ],
+    )
 
 
-def _whole(fn: str, spec: Any, c: dict[str, np.ndarray], arg: str, item: str,
-           p: np.ndarray) -> _Item:
+def _whole(
+    fn: str, spec: Any, c: dict[str, np.ndarray], arg: str, item: str, p: np.ndarray
+) -> _Item:
     """A whole-item integer (an address) on the records ``p``."""
     f = _where(spec, (item,))
     v = np.where(p, c[arg], 0)
-    return _item(_frn(spec, item), f.size // 8,
-                 [(f, _raw(fn, arg, v, f, unit="", per=1.0, quantity=False))], p)
+    return _item(
+        _frn(spec, item),
+        f.size // 8,
+        [(f, _raw(fn, arg, v, f, unit="", per=1.0, quantity=False))],
+        p,
+    )
 
 
-def encode_cat048(time_of_day: Any, sac: Any, sic: Any, range: Any, azimuth: Any, *,
-                  flight_level: Any = None, address: Any = None, mode3a: Any = None,
-                  per_block: int = 20, edition: tuple[int, int] = EDITIONS[48]) -> bytes:
+def encode_cat048(
+    time_of_day: Any,
+    sac: Any,
+    sic: Any,
+    range: Any,
+    azimuth: Any,
+    *,
+    flight_level: Any = None,
+    address: Any = None,
+    mode3a: Any = None,
+    per_block: int = 20,
+    edition: tuple[int, int] = EDITIONS[48],
+) -> bytes:
     """CAT048 datablocks (``per_block`` records each), byte for byte what libasterix writes.
 
     ``time_of_day`` s since UTC midnight (I140, wrapped into [0, 86400)), ``range`` slant
@@ -230,37 +276,65 @@ def encode_cat048(time_of_day: Any, sac: Any, sic: Any, range: Any, azimuth: Any
         ``per_block`` if a datablock would exceed 65 535 bytes.
     """
     fn = "encode_cat048"
-    c = _cols(fn, time_of_day=time_of_day, sac=sac, sic=sic, range=range,
-              azimuth=azimuth, flight_level=flight_level, address=address, mode3a=mode3a)
+    c = _cols(
+        fn,
+        time_of_day=time_of_day,
+        sac=sac,
+        sic=sic,
+        range=range,
+        azimuth=azimuth,
+        flight_level=flight_level,
+        address=address,
+        mode3a=mode3a,
+    )
     _ints(fn, c, ("sac", "sic", "address", "mode3a"))
     if np.any(c["range"] < 0):
-        raise ProblemError(f"asterix.{fn} range: need slant ranges ≥ 0 m, got "
-                           f"{float(c['range'][c['range'] < 0][0]):.8g}")
+        raise ProblemError(
+            f"asterix.{fn} range: need slant ranges ≥ 0 m, got "
+            f"{float(c['range'][c['range'] < 0][0]):.8g}"
+        )
     spec = _spec(48, {48: edition})
     n = c["time_of_day"].size
     f140, frho = _where(spec, ("140",)), _where(spec, ("040", "RHO"))
     fth = _where(spec, ("040", "THETA"))
     tod = np.mod(c["time_of_day"], DAY)
     az = np.degrees(np.mod(c["azimuth"], 2 * math.pi))
-    items = [_sacsic(fn, spec, c),
-             _item(_frn(spec, "140"), 3, [(f140, _raw(fn, "time_of_day", tod, f140,
-                                                      unit="s", per=1.0))]),
-             _const_item(spec, "020", ((5, 0, 0, 0, 0, 0),), n),
-             _item(_frn(spec, "040"), 4, [
-                 (frho, _raw(fn, "range", c["range"] / NM, frho, unit="m", per=NM)),
-                 (fth, _raw(fn, "azimuth", az, fth, unit="°", per=1.0, wrap=True))])]
+    items = [
+        _sacsic(fn, spec, c),
+        _item(
+            _frn(spec, "140"), 3, [(f140, _raw(fn, "time_of_day", tod, f140, unit="s", per=1.0))]
+        ),
+        _const_item(spec, "020", ((5, 0, 0, 0, 0, 0),), n),
+        _item(
+            _frn(spec, "040"),
+            4,
+            [
+                (frho, _raw(fn, "range", c["range"] / NM, frho, unit="m", per=NM)),
+                (fth, _raw(fn, "azimuth", az, fth, unit="°", per=1.0, wrap=True)),
+            ],
+        ),
+    ]
     p = _optional(c, "mode3a", nan=False)
     if p is not None:
         f = _where(spec, ("070", "MODE3A"))
         v = np.where(p, c["mode3a"], 0)
-        items.append(_item(_frn(spec, "070"), 2, [
-            (f, _raw(fn, "mode3a", v, f, unit="", per=1.0, quantity=False))], p))
+        items.append(
+            _item(
+                _frn(spec, "070"),
+                2,
+                [(f, _raw(fn, "mode3a", v, f, unit="", per=1.0, quantity=False))],
+                p,
+            )
+        )
     p = _optional(c, "flight_level", nan=True)
     if p is not None:
         f = _where(spec, ("090", "FL"))
         v = np.where(p, c["flight_level"], 0.0)
-        items.append(_item(_frn(spec, "090"), 2, [
-            (f, _raw(fn, "flight_level", v, f, unit="FL", per=1.0))], p))
+        items.append(
+            _item(
+                _frn(spec, "090"), 2, [(f, _raw(fn, "flight_level", v, f, unit="FL", per=1.0))], p
+            )
+        )
     p = _optional(c, "address", nan=False)
     if p is not None:
         items.append(_whole(fn, spec, c, "address", "220", p))
@@ -272,10 +346,20 @@ def _const_item(spec: Any, name: str, value: Any, n: int) -> _Item:
     return _Item(frn, len(b), np.full(n, int.from_bytes(b, "big"), np.uint64))
 
 
-def encode_cat021(time_of_day: Any, sac: Any, sic: Any, latitude: Any, longitude: Any, *,
-                  height: Any = None, flight_level: Any = None, address: Any = None,
-                  high_resolution: bool = True, per_block: int = 20,
-                  edition: tuple[int, int] = EDITIONS[21]) -> bytes:
+def encode_cat021(
+    time_of_day: Any,
+    sac: Any,
+    sic: Any,
+    latitude: Any,
+    longitude: Any,
+    *,
+    height: Any = None,
+    flight_level: Any = None,
+    address: Any = None,
+    high_resolution: bool = True,
+    per_block: int = 20,
+    edition: tuple[int, int] = EDITIONS[21],
+) -> bytes:
     """CAT021 datablocks, byte for byte what libasterix writes.
 
     ``time_of_day`` s (I073 time of message reception for position, wrapped into
@@ -293,38 +377,68 @@ def encode_cat021(time_of_day: Any, sac: Any, sic: Any, latitude: Any, longitude
         address, arrays of different lengths; ``per_block`` as for :func:`encode_cat048`.
     """
     fn = "encode_cat021"
-    c = _cols(fn, time_of_day=time_of_day, sac=sac, sic=sic, latitude=latitude,
-              longitude=longitude, height=height, flight_level=flight_level, address=address)
+    c = _cols(
+        fn,
+        time_of_day=time_of_day,
+        sac=sac,
+        sic=sic,
+        latitude=latitude,
+        longitude=longitude,
+        height=height,
+        flight_level=flight_level,
+        address=address,
+    )
     _ints(fn, c, ("sac", "sic", "address"))
     if np.any(np.abs(c["latitude"]) > 90) or np.any(np.abs(c["longitude"]) > 180):
-        raise ProblemError(f"asterix.{fn} latitude/longitude: need |lat| ≤ 90°, "
-                           "|lon| ≤ 180°")
+        raise ProblemError(f"asterix.{fn} latitude/longitude: need |lat| ≤ 90°, |lon| ≤ 180°")
     spec = _spec(21, {21: edition})
     n = c["time_of_day"].size
     pos = "131" if as_flag(f"asterix.{fn} high_resolution", high_resolution) else "130"
     f073 = _where(spec, ("073",))
     flat, flon = _where(spec, (pos, "LAT")), _where(spec, (pos, "LON"))
     tod = np.mod(c["time_of_day"], DAY)
-    items = [_sacsic(fn, spec, c),
-             _const_item(spec, "040", ((0, 0, 0, 0, 0),), n),
-             _item(_frn(spec, "073"), 3, [(f073, _raw(fn, "time_of_day", tod, f073,
-                                                      unit="s", per=1.0))]),
-             _item(_frn(spec, pos), (flat.size + flon.size) // 8, [
-                 (flat, _raw(fn, "latitude", c["latitude"], flat, unit="°", per=1.0)),
-                 (flon, _raw(fn, "longitude", c["longitude"], flon, unit="°", per=1.0,
-                             wrap=abs((1 << flon.size) * flon.lsb - 360.0) < 1e-9))])]
+    items = [
+        _sacsic(fn, spec, c),
+        _const_item(spec, "040", ((0, 0, 0, 0, 0),), n),
+        _item(
+            _frn(spec, "073"), 3, [(f073, _raw(fn, "time_of_day", tod, f073, unit="s", per=1.0))]
+        ),
+        _item(
+            _frn(spec, pos),
+            (flat.size + flon.size) // 8,
+            [
+                (flat, _raw(fn, "latitude", c["latitude"], flat, unit="°", per=1.0)),
+                (
+                    flon,
+                    _raw(
+                        fn,
+                        "longitude",
+                        c["longitude"],
+                        flon,
+                        unit="°",
+                        per=1.0,
+                        wrap=abs((1 << flon.size) * flon.lsb - 360.0) < 1e-9,
+                    ),
+                ),
+            ],
+        ),
+    ]
     p = _optional(c, "height", nan=True)
     if p is not None:
         f = _where(spec, ("140",))
         v = np.where(p, c["height"] / FT, 0.0)
-        items.append(_item(_frn(spec, "140"), 2, [
-            (f, _raw(fn, "height", v, f, unit="m", per=FT))], p))
+        items.append(
+            _item(_frn(spec, "140"), 2, [(f, _raw(fn, "height", v, f, unit="m", per=FT))], p)
+        )
     p = _optional(c, "flight_level", nan=True)
     if p is not None:
         f = _where(spec, ("145",))
         v = np.where(p, c["flight_level"], 0.0)
-        items.append(_item(_frn(spec, "145"), 2, [
-            (f, _raw(fn, "flight_level", v, f, unit="FL", per=1.0))], p))
+        items.append(
+            _item(
+                _frn(spec, "145"), 2, [(f, _raw(fn, "flight_level", v, f, unit="FL", per=1.0))], p
+            )
+        )
     p = _optional(c, "address", nan=False)
     if p is not None:
         items.append(_whole(fn, spec, c, "address", "080", p))

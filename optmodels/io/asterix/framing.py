@@ -23,8 +23,9 @@ from optmodels.io.asterix.layout import (
 )
 
 
-def is_asterix(path: str | Path, *, blocks: int = 4,
-               editions: dict[int, tuple[int, int]] | None = None) -> bool:
+def is_asterix(
+    path: str | Path, *, blocks: int = 4, editions: dict[int, tuple[int, int]] | None = None
+) -> bool:
     """Whether a file's content is an ASTERIX recording.
 
     Raw datablocks: the first ``blocks`` datablocks (CAT byte, LEN ≥ 4 bytes) chain exactly
@@ -62,8 +63,9 @@ def is_asterix(path: str | Path, *, blocks: int = 4,
     return is_asterix_bytes(head, size, blocks, editions)
 
 
-def is_asterix_bytes(head: bytes, size: int, blocks: int,
-                     editions: dict[int, tuple[int, int]] | None) -> bool:
+def is_asterix_bytes(
+    head: bytes, size: int, blocks: int, editions: dict[int, tuple[int, int]] | None
+) -> bool:
     """The test of :func:`is_asterix` on the first bytes ``head`` of a stream of ``size``
     bytes."""
     if len(head) < 4 or head[:4] == b"PAR1" or head[:2] == b"PK":
@@ -74,7 +76,7 @@ def is_asterix_bytes(head: bytes, size: int, blocks: int,
     while pos < len(head) and len(found) < blocks:
         if pos + 3 > len(head):
             break
-        cat, n = head[pos], int.from_bytes(head[pos + 1:pos + 3], "big")
+        cat, n = head[pos], int.from_bytes(head[pos + 1 : pos + 3], "big")
         if n < 4:
             return False
         if pos + n > size:  # truncated after complete blocks: still ASTERIX
@@ -91,16 +93,19 @@ def is_asterix_bytes(head: bytes, size: int, blocks: int,
     for cat, pos, n in found:
         if cat in _FIELDS and pos + n <= len(head):
             rec = _spec(cat, editions).cv_uap.cv_record
-            res = rec.parse(base.ParsingMode.StrictParsing,
-                            base.Bits(head, 8 * (pos + 3), 8 * (pos + n)))
+            res = rec.parse(
+                base.ParsingMode.StrictParsing, base.Bits(head, 8 * (pos + 3), 8 * (pos + n))
+            )
             return not isinstance(res, ValueError)
     return True
 
 
 #: the binary formats the package reads, for the refusals of the text readers
-BINARY_ACCEPTED = ("accepted binary inputs: ASTERIX recordings (raw CAT048/CAT021 "
-                   "datablocks, pcap/pcapng captures of ASTERIX over UDP) where plots are "
-                   "read, Parquet (.parquet), NumPy .npz/.npy")
+BINARY_ACCEPTED = (
+    "accepted binary inputs: ASTERIX recordings (raw CAT048/CAT021 "
+    "datablocks, pcap/pcapng captures of ASTERIX over UDP) where plots are "
+    "read, Parquet (.parquet), NumPy .npz/.npy"
+)
 
 
 def describe_binary(data: bytes) -> str | None:
@@ -108,8 +113,10 @@ def describe_binary(data: bytes) -> str | None:
     capture, or ASTERIX damaged from its first datablock on), else None."""
     kind = capture_kind(data)
     if kind:
-        return (f"a {kind} capture without readable ASTERIX over UDP (a capture is read "
-                "as a recording when its UDP payloads are ASTERIX datablocks), not text")
+        return (
+            f"a {kind} capture without readable ASTERIX over UDP (a capture is read "
+            "as a recording when its UDP payloads are ASTERIX datablocks), not text"
+        )
     why = diagnose(data)
     return None if why is None else f"damaged ASTERIX recording: {why}"
 
@@ -141,9 +148,15 @@ def diagnose(data: bytes) -> str | None:
 CHUNK = 1 << 20
 
 
-def _frame(buf: Any, name: str, layouts: dict[int, _Layout], check: str,
-           skipped: dict[int, int], *, limit: int | None = None
-           ) -> Iterator[dict[int, tuple[Any, Any]]]:
+def _frame(
+    buf: Any,
+    name: str,
+    layouts: dict[int, _Layout],
+    check: str,
+    skipped: dict[int, int],
+    *,
+    limit: int | None = None,
+) -> Iterator[dict[int, tuple[Any, Any]]]:
     """Walk the datablocks and records of one file (bytes or a read-only mmap); yield,
     every :data:`CHUNK` records and at the end, per category the record offsets and the
     flat item offsets (−1 absent), ``len(layout.items)`` per record (``array('q')``).
@@ -157,16 +170,22 @@ def _frame(buf: Any, name: str, layouts: dict[int, _Layout], check: str,
     while pos < size and (limit is None or nblocks < limit):
         nblocks += 1
         if pos + 3 > size:
-            raise ProblemError(f"asterix.read {name}: truncated datablock header at byte "
-                               f"{pos} ({size - pos} bytes left)")
-        cat, n = buf[pos], int.from_bytes(buf[pos + 1:pos + 3], "big")
+            raise ProblemError(
+                f"asterix.read {name}: truncated datablock header at byte "
+                f"{pos} ({size - pos} bytes left)"
+            )
+        cat, n = buf[pos], int.from_bytes(buf[pos + 1 : pos + 3], "big")
         if n < 3:
-            raise ProblemError(f"asterix.read {name}: not ASTERIX or corrupt: datablock at "
-                               f"byte {pos} has length {n} (< 3)")
+            raise ProblemError(
+                f"asterix.read {name}: not ASTERIX or corrupt: datablock at "
+                f"byte {pos} has length {n} (< 3)"
+            )
         end = pos + n
         if end > size:
-            raise ProblemError(f"asterix.read {name}: truncated: the CAT{cat:03d} datablock "
-                               f"at byte {pos} announces {n} bytes, {size - pos} left")
+            raise ProblemError(
+                f"asterix.read {name}: truncated: the CAT{cat:03d} datablock "
+                f"at byte {pos} announces {n} bytes, {size - pos} left"
+            )
         lay = layouts.get(cat)
         if lay is None:
             skipped[cat] = skipped.get(cat, 0) + 1
@@ -202,11 +221,14 @@ def _frame(buf: Any, name: str, layouts: dict[int, _Layout], check: str,
                 recs.append(r0)
                 flat.extend(offs)
         except _Bad as exc:
-            raise ProblemError(f"asterix.read {name}: corrupt CAT{cat:03d} record at byte "
-                               f"{r0}: {exc}") from None
+            raise ProblemError(
+                f"asterix.read {name}: corrupt CAT{cat:03d} record at byte {r0}: {exc}"
+            ) from None
         except IndexError:
-            raise ProblemError(f"asterix.read {name}: truncated CAT{cat:03d} record at byte "
-                               f"{r0} (file ends at byte {size})") from None
+            raise ProblemError(
+                f"asterix.read {name}: truncated CAT{cat:03d} record at byte "
+                f"{r0} (file ends at byte {size})"
+            ) from None
         pos = end
         if sum(len(r) for r, _ in out.values()) >= CHUNK:
             yield out
@@ -214,8 +236,9 @@ def _frame(buf: Any, name: str, layouts: dict[int, _Layout], check: str,
     yield out
 
 
-def _validate(buf: bytes, r0: int, q: int, end: int, lay: _Layout, offs: list[int],
-              name: str) -> None:
+def _validate(
+    buf: bytes, r0: int, q: int, end: int, lay: _Layout, offs: list[int], name: str
+) -> None:
     """libasterix's strict parse of the record at ``r0`` must end at ``q`` and give the
     same raw value of every field read here."""
     base, _ = _lib()
@@ -225,8 +248,7 @@ def _validate(buf: bytes, r0: int, q: int, end: int, lay: _Layout, offs: list[in
         raise _Bad(f"libasterix refuses it ({res})")
     rec, rest = res
     if rest.bit_offset1 != 8 * (q - r0):
-        raise _Bad(f"libasterix ends it at byte {r0 + rest.bit_offset1 // 8}, the framing "
-                   f"at {q}")
+        raise _Bad(f"libasterix ends it at byte {r0 + rest.bit_offset1 // 8}, the framing at {q}")
     for f in lay.fields:
         item = rec.get_item(f.item)
         o = offs[lay.slot[f.item]]
@@ -235,17 +257,17 @@ def _validate(buf: bytes, r0: int, q: int, end: int, lay: _Layout, offs: list[in
         if item is None:
             continue
         node = item if len(f.path) == 1 else item.variation.get_item(f.path[1])
-        lib_raw = node.unparse().to_uinteger() if len(f.path) > 1 else \
-            item.unparse().to_uinteger()
+        lib_raw = node.unparse().to_uinteger() if len(f.path) > 1 else item.unparse().to_uinteger()
         mine = _raw_at(buf, o, f)
         if int(lib_raw) != mine:
-            raise _Bad(f"I{f.item} {'/'.join(f.path[1:])}: raw {mine} here, {lib_raw} by "
-                       "libasterix")
+            raise _Bad(
+                f"I{f.item} {'/'.join(f.path[1:])}: raw {mine} here, {lib_raw} by libasterix"
+            )
 
 
 def _raw_at(buf: bytes, o: int, f: _Field) -> int:
     nb = (f.offset + f.size + 7) // 8
-    v = int.from_bytes(buf[o:o + nb], "big")
+    v = int.from_bytes(buf[o : o + nb], "big")
     return (v >> (8 * nb - f.offset - f.size)) & ((1 << f.size) - 1)
 
 
@@ -263,5 +285,3 @@ def _gather(arr: np.ndarray, offs: np.ndarray, f: _Field) -> tuple[np.ndarray, n
     if f.signed:
         out = np.where(out >= (1 << (f.size - 1)), out - (1 << f.size), out)
     return out, have
-
-

@@ -11,10 +11,10 @@ from typing import Any
 
 from optmodels.core import ProblemError
 
-NM = 1852.0            # m per nautical mile (exact)
-FT = 0.3048            # m per foot (exact)
-FL = 100.0 * FT        # m of pressure altitude per flight level
-DAY = 86400.0          # s
+NM = 1852.0  # m per nautical mile (exact)
+FT = 0.3048  # m per foot (exact)
+FL = 100.0 * FT  # m of pressure altitude per flight level
+DAY = 86400.0  # s
 #: default editions read and written (category → (major, minor)); any edition libasterix
 #: ships can be asked for through ``editions=``.
 EDITIONS: dict[int, tuple[int, int]] = {48: (1, 32), 21: (2, 7)}
@@ -26,11 +26,14 @@ def _lib() -> tuple[Any, Any]:
         import asterix.base as base
         import asterix.generated as gen
     except ImportError as exc:  # pragma: no cover - depends on the installation
-        raise ProblemError("asterix: reading ASTERIX needs the libasterix package "
-                           "(pip install 'libasterix>=0.36')") from exc
+        raise ProblemError(
+            "asterix: reading ASTERIX needs the libasterix package (pip install 'libasterix>=0.36')"
+        ) from exc
     if not hasattr(gen, "manifest"):  # pragma: no cover - the C++ asterix-decoder
-        raise ProblemError("asterix: the installed module 'asterix' is not libasterix "
-                           "(asterix-decoder installs the same name); install libasterix")
+        raise ProblemError(
+            "asterix: the installed module 'asterix' is not libasterix "
+            "(asterix-decoder installs the same name); install libasterix"
+        )
     return base, gen
 
 
@@ -41,8 +44,9 @@ def _spec(cat: int, editions: dict[int, tuple[int, int]] | None) -> Any:
         if s.cv_edition == tuple(ed or ()):
             return s
     known = [s.cv_edition for s in gen.manifest["CATS"].get(cat, [])]
-    raise ProblemError(f"asterix editions: CAT{cat:03d} edition {ed} is not in libasterix "
-                       f"(known: {known})")
+    raise ProblemError(
+        f"asterix editions: CAT{cat:03d} edition {ed} is not in libasterix (known: {known})"
+    )
 
 
 Sizer = int | Callable[[bytes, int], int]
@@ -64,36 +68,46 @@ def _variation_sizer(var: Any, nsp: Any) -> Sizer:
             nbytes = [b // 8 for b in sizes]
             fx_ends = [grp[-1] is None for grp in var.cv_items_list]
 
-            def extended(buf: bytes, q: int, _n: list[int] = nbytes,
-                         _fx: list[bool] = fx_ends) -> int:
+            def extended(
+                buf: bytes, q: int, _n: list[int] = nbytes, _fx: list[bool] = fx_ends
+            ) -> int:
                 p = q
                 for nb, fx in zip(_n, _fx, strict=True):
                     p += nb
                     if not fx or not (buf[p - 1] & 1):
                         return p - q
                 raise _Bad("extended item: FX set in its last part")
+
             return extended
     if issubclass(var, base.Repetitive):
         elem = _variation_sizer(var.cv_variation, nsp)
         rb = var.cv_rep_bytes
         if isinstance(elem, int) and rb is not None:
+
             def repetitive(buf: bytes, q: int, _e: int = elem, _rb: int = rb) -> int:
-                return _rb + _e * int.from_bytes(buf[q:q + _rb], "big")
+                return _rb + _e * int.from_bytes(buf[q : q + _rb], "big")
+
             return repetitive
     if issubclass(var, base.Explicit):
+
         def explicit(buf: bytes, q: int) -> int:
             n = buf[q]
             if n < 1:
                 raise _Bad("explicit item with length 0")
             return n
+
         return explicit
     if issubclass(var, base.Compound):
         subs = [None if s is None else _rule_sizer(s) for s in var.cv_items_list]
 
         memo: dict[bytes, tuple[int, list[Sizer]]] = {}
 
-        def compound(buf: bytes, q: int, _subs: list[Sizer | None] = subs,
-                     _memo: dict[bytes, tuple[int, list[Sizer]]] = memo) -> int:
+        def compound(
+            buf: bytes,
+            q: int,
+            _subs: list[Sizer | None] = subs,
+            _memo: dict[bytes, tuple[int, list[Sizer]]] = memo,
+        ) -> int:
             p = q
             while buf[p] & 1:
                 p += 1
@@ -101,8 +115,9 @@ def _variation_sizer(var: Any, nsp: Any) -> Sizer:
             fs = buf[q:p]
             hit = _memo.get(fs)
             if hit is None:  # sub-FSPEC seen first: its fixed part and variable subitems
-                present = [7 * k + bit for k, b in enumerate(fs) for bit in range(7)
-                           if b & (0x80 >> bit)]
+                present = [
+                    7 * k + bit for k, b in enumerate(fs) for bit in range(7) if b & (0x80 >> bit)
+                ]
                 fixed, var = 0, []
                 for frn in present:
                     if frn >= len(_subs) or _subs[frn] is None:
@@ -118,12 +133,14 @@ def _variation_sizer(var: Any, nsp: Any) -> Sizer:
             fixed, var = hit
             if not var:
                 return p - q + fixed
-            present = [7 * k + bit for k, b in enumerate(fs) for bit in range(7)
-                       if b & (0x80 >> bit)]
+            present = [
+                7 * k + bit for k, b in enumerate(fs) for bit in range(7) if b & (0x80 >> bit)
+            ]
             for frn in present:
                 sz = _subs[frn]
                 p += sz if isinstance(sz, int) else sz(buf, p)  # type: ignore[operator,misc]
             return p - q
+
         return compound
     return _library_sizer(nsp)
 
@@ -144,11 +161,12 @@ def _library_sizer(nsp: Any) -> Sizer:
     base, _ = _lib()
 
     def by_library(buf: Any, q: int) -> int:
-        chunk = bytes(buf[q:q + 65536])  # an item never exceeds its datablock
+        chunk = bytes(buf[q : q + 65536])  # an item never exceeds its datablock
         res = nsp.parse(base.Bits(chunk, 0, 8 * len(chunk)))
         if isinstance(res, ValueError):
             raise _Bad(f"item I{nsp.cv_name}: {res}")
         return res[1].bit_offset1 // 8
+
     return by_library
 
 
@@ -160,12 +178,12 @@ class _Bad(Exception):
 class _Field:
     name: str
     item: str
-    offset: int          # bit offset inside the item
-    size: int            # bits
+    offset: int  # bit offset inside the item
+    size: int  # bits
     signed: bool
-    scale: float         # raw → SI
+    scale: float  # raw → SI
     path: tuple[str, ...]
-    lsb: float = 1.0     # raw → the specification's unit (``unit``)
+    lsb: float = 1.0  # raw → the specification's unit (``unit``)
     unit: str = ""
 
 
@@ -198,13 +216,31 @@ def _field(record: Any, name: str, path: tuple[str, ...]) -> _Field | None:
 
 
 _FIELDS = {
-    48: {"sac": ("010", "SAC"), "sic": ("010", "SIC"), "tod": ("140",),
-         "rho": ("040", "RHO"), "theta": ("040", "THETA"), "fl": ("090", "FL"),
-         "fl_v": ("090", "V"), "fl_g": ("090", "G"), "address": ("220",),
-         "mode3a": ("070", "MODE3A")},
-    21: {"sac": ("010", "SAC"), "sic": ("010", "SIC"), "t073": ("073",), "t071": ("071",),
-         "lat_hi": ("131", "LAT"), "lon_hi": ("131", "LON"), "lat_lo": ("130", "LAT"),
-         "lon_lo": ("130", "LON"), "gh": ("140",), "fl": ("145",), "address": ("080",)},
+    48: {
+        "sac": ("010", "SAC"),
+        "sic": ("010", "SIC"),
+        "tod": ("140",),
+        "rho": ("040", "RHO"),
+        "theta": ("040", "THETA"),
+        "fl": ("090", "FL"),
+        "fl_v": ("090", "V"),
+        "fl_g": ("090", "G"),
+        "address": ("220",),
+        "mode3a": ("070", "MODE3A"),
+    },
+    21: {
+        "sac": ("010", "SAC"),
+        "sic": ("010", "SIC"),
+        "t073": ("073",),
+        "t071": ("071",),
+        "lat_hi": ("131", "LAT"),
+        "lon_hi": ("131", "LON"),
+        "lat_lo": ("130", "LAT"),
+        "lon_lo": ("130", "LON"),
+        "gh": ("140",),
+        "fl": ("145",),
+        "address": ("080",),
+    },
 }
 
 
@@ -214,8 +250,9 @@ class _Layout:
     def __init__(self, spec: Any) -> None:
         base, _ = _lib()
         if not issubclass(spec.cv_uap, base.UapSingle):
-            raise ProblemError(f"asterix: CAT{spec.cv_category:03d} has several UAPs; "
-                               "not supported")
+            raise ProblemError(
+                f"asterix: CAT{spec.cv_category:03d} has several UAPs; not supported"
+            )
         self.spec = spec
         self.record = spec.cv_uap.cv_record
         self.max_fspec = self.record.cv_fspec_max_bytes
@@ -233,15 +270,16 @@ class _Layout:
         self.cache: dict[bytes, tuple[list[Sizer], list[int]]] = {}
 
     def plan(self, fspec: bytes) -> tuple[list[Sizer], list[int]]:
-        frns = [7 * k + bit for k, b in enumerate(fspec) for bit in range(7)
-                if b & (0x80 >> bit)]
+        frns = [7 * k + bit for k, b in enumerate(fspec) for bit in range(7) if b & (0x80 >> bit)]
         sizes: list[Sizer] = []
         need: list[int] = []
         for frn in frns:
             if frn >= len(self.uap) or self.uap[frn][0] is None:
-                raise _Bad(f"FSPEC announces FRN {frn + 1}, which CAT"
-                           f"{self.spec.cv_category:03d} edition {self.spec.cv_edition} "
-                           "does not define")
+                raise _Bad(
+                    f"FSPEC announces FRN {frn + 1}, which CAT"
+                    f"{self.spec.cv_category:03d} edition {self.spec.cv_edition} "
+                    "does not define"
+                )
             name, s = self.uap[frn]
             sizes.append(s)  # type: ignore[arg-type]
             need.append(self.slot.get(name, -1))  # type: ignore[arg-type]
@@ -250,22 +288,28 @@ class _Layout:
         return out
 
 
-
-
 def as_editions(name: str, editions: Any) -> dict[int, tuple[int, int]] | None:
     """``editions`` checked: None or a dict category (int) → (major, minor) ints."""
     if editions is None:
         return None
     if not isinstance(editions, dict):
-        raise ProblemError(f"{name}: expected a dict category → (major, minor), e.g. "
-                           f"{{48: (1, 32)}}, got {type(editions).__name__} {editions!r:.40}")
+        raise ProblemError(
+            f"{name}: expected a dict category → (major, minor), e.g. "
+            f"{{48: (1, 32)}}, got {type(editions).__name__} {editions!r:.40}"
+        )
     out: dict[int, tuple[int, int]] = {}
     for cat, ed in editions.items():
-        ok = (isinstance(cat, int) and not isinstance(cat, bool)
-              and isinstance(ed, tuple | list) and len(ed) == 2
-              and all(isinstance(v, int) and not isinstance(v, bool) for v in ed))
+        ok = (
+            isinstance(cat, int)
+            and not isinstance(cat, bool)
+            and isinstance(ed, tuple | list)
+            and len(ed) == 2
+            and all(isinstance(v, int) and not isinstance(v, bool) for v in ed)
+        )
         if not ok:
-            raise ProblemError(f"{name}: expected category (int) → (major, minor) ints, got "
-                               f"{cat!r:.20}: {ed!r:.20}")
+            raise ProblemError(
+                f"{name}: expected category (int) → (major, minor) ints, got "
+                f"{cat!r:.20}: {ed!r:.20}"
+            )
         out[cat] = (int(ed[0]), int(ed[1]))
     return out

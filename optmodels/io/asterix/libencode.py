@@ -15,8 +15,10 @@ from optmodels.io.asterix.layout import DAY, EDITIONS, FT, NM, _spec
 
 def _blocks(spec: Any, records: list[Any], per_block: int) -> bytes:
     per_block = as_count("asterix.encode per_block", per_block, minimum=1)
-    return b"".join(spec.create(records[i:i + per_block]).unparse().to_bytes()
-                    for i in range(0, len(records), per_block))
+    return b"".join(
+        spec.create(records[i : i + per_block]).unparse().to_bytes()
+        for i in range(0, len(records), per_block)
+    )
 
 
 def _cols(fn: str, **arrays: Any) -> dict[str, np.ndarray]:
@@ -29,11 +31,13 @@ def _cols(fn: str, **arrays: Any) -> dict[str, np.ndarray]:
         try:
             a = np.asarray(v, dtype=float)
         except (TypeError, ValueError) as exc:
-            raise ProblemError(f"asterix.{fn} {name}: expected numbers, got "
-                               f"{type(v).__name__}") from exc
+            raise ProblemError(
+                f"asterix.{fn} {name}: expected numbers, got {type(v).__name__}"
+            ) from exc
         if a.ndim > 1:
-            raise ProblemError(f"asterix.{fn} {name}: expected one value per record, got "
-                               f"shape {a.shape}")
+            raise ProblemError(
+                f"asterix.{fn} {name}: expected one value per record, got shape {a.shape}"
+            )
         bad = ~np.isfinite(a) if name not in ("flight_level", "height") else np.isinf(a)
         if bad.any():
             raise ProblemError(f"asterix.{fn} {name}: {int(bad.sum())} non-finite values")
@@ -57,13 +61,22 @@ def _ints(fn: str, c: dict[str, np.ndarray], limits: dict[str, int]) -> None:
         low = -np.inf if name in ("address", "mode3a") else 0
         bad = (v != np.round(v)) | (v < low) | (v > top)
         if bad.any():
-            raise ProblemError(f"asterix.{fn} {name}: need integers 0-{top}, got "
-                               f"{v[bad][0]!r}")
+            raise ProblemError(f"asterix.{fn} {name}: need integers 0-{top}, got {v[bad][0]!r}")
 
 
-def encode_cat048(time_of_day: Any, sac: Any, sic: Any, range: Any, azimuth: Any, *,
-                  flight_level: Any = None, address: Any = None, mode3a: Any = None,
-                  per_block: int = 20, edition: tuple[int, int] = EDITIONS[48]) -> bytes:
+def encode_cat048(
+    time_of_day: Any,
+    sac: Any,
+    sic: Any,
+    range: Any,
+    azimuth: Any,
+    *,
+    flight_level: Any = None,
+    address: Any = None,
+    mode3a: Any = None,
+    per_block: int = 20,
+    edition: tuple[int, int] = EDITIONS[48],
+) -> bytes:
     """CAT048 datablocks through libasterix (``per_block`` records each).
 
     ``time_of_day`` s since UTC midnight (I140, wrapped into [0, 86400)), ``range`` slant
@@ -73,13 +86,20 @@ def encode_cat048(time_of_day: Any, sac: Any, sic: Any, range: Any, azimuth: Any
     Values are rounded to the format's LSB by libasterix. Every record also carries I020
     (target report descriptor: single Mode S roll-call, an extended item).
     """
-    c = _cols("encode_cat048", time_of_day=time_of_day, sac=sac, sic=sic, range=range,
-              azimuth=azimuth, flight_level=flight_level, address=address, mode3a=mode3a)
-    _ints("encode_cat048", c, {"sac": 255, "sic": 255, "address": 2**24 - 1,
-                                "mode3a": 4095})
+    c = _cols(
+        "encode_cat048",
+        time_of_day=time_of_day,
+        sac=sac,
+        sic=sic,
+        range=range,
+        azimuth=azimuth,
+        flight_level=flight_level,
+        address=address,
+        mode3a=mode3a,
+    )
+    _ints("encode_cat048", c, {"sac": 255, "sic": 255, "address": 2**24 - 1, "mode3a": 4095})
     if np.any(c["range"] < 0) or np.any(c["range"] >= 256 * NM):
-        raise ProblemError("asterix.encode_cat048 range: need 0 ≤ range < 256 NM "
-                           "(474 112 m)")
+        raise ProblemError("asterix.encode_cat048 range: need 0 ≤ range < 256 NM (474 112 m)")
     spec = _spec(48, {48: edition})
     tod = np.mod(c["time_of_day"], DAY)
     az = np.degrees(np.mod(c["azimuth"], 2 * math.pi))
@@ -89,8 +109,7 @@ def encode_cat048(time_of_day: Any, sac: Any, sic: Any, range: Any, azimuth: Any
             "010": (("SAC", int(c["sac"][i])), ("SIC", int(c["sic"][i]))),
             "140": (float(tod[i]), "s"),
             "020": ((5, 0, 0, 0, 0, 0),),
-            "040": (("RHO", (float(c["range"][i]) / NM, "NM")),
-                    ("THETA", (float(az[i]), "°"))),
+            "040": (("RHO", (float(c["range"][i]) / NM, "NM")), ("THETA", (float(az[i]), "°"))),
         }
         if "mode3a" in c and c["mode3a"][i] >= 0:
             items["070"] = (0, 0, 0, 0, ("MODE3A", f"{int(c['mode3a'][i]):04o}"))
@@ -102,10 +121,20 @@ def encode_cat048(time_of_day: Any, sac: Any, sic: Any, range: Any, azimuth: Any
     return _blocks(spec, recs, per_block)
 
 
-def encode_cat021(time_of_day: Any, sac: Any, sic: Any, latitude: Any, longitude: Any, *,
-                  height: Any = None, flight_level: Any = None, address: Any = None,
-                  high_resolution: bool = True, per_block: int = 20,
-                  edition: tuple[int, int] = EDITIONS[21]) -> bytes:
+def encode_cat021(
+    time_of_day: Any,
+    sac: Any,
+    sic: Any,
+    latitude: Any,
+    longitude: Any,
+    *,
+    height: Any = None,
+    flight_level: Any = None,
+    address: Any = None,
+    high_resolution: bool = True,
+    per_block: int = 20,
+    edition: tuple[int, int] = EDITIONS[21],
+) -> bytes:
     """CAT021 datablocks through libasterix.
 
     ``time_of_day`` s (I073 time of message reception for position), ``latitude`` /
@@ -114,24 +143,35 @@ def encode_cat021(time_of_day: Any, sac: Any, sic: Any, latitude: Any, longitude
     (I145; NaN: absent), ``address`` (I080; < 0: absent). Every record carries I040
     (target report descriptor, extended).
     """
-    c = _cols("encode_cat021", time_of_day=time_of_day, sac=sac, sic=sic, latitude=latitude,
-              longitude=longitude, height=height, flight_level=flight_level, address=address)
+    c = _cols(
+        "encode_cat021",
+        time_of_day=time_of_day,
+        sac=sac,
+        sic=sic,
+        latitude=latitude,
+        longitude=longitude,
+        height=height,
+        flight_level=flight_level,
+        address=address,
+    )
     _ints("encode_cat021", c, {"sac": 255, "sic": 255, "address": 2**24 - 1})
     if np.any(np.abs(c["latitude"]) > 90) or np.any(np.abs(c["longitude"]) > 180):
-        raise ProblemError("asterix.encode_cat021 latitude/longitude: need |lat| ≤ 90°, "
-                           "|lon| ≤ 180°")
+        raise ProblemError(
+            "asterix.encode_cat021 latitude/longitude: need |lat| ≤ 90°, |lon| ≤ 180°"
+        )
     spec = _spec(21, {21: edition})
     tod = np.mod(c["time_of_day"], DAY)
-    pos_item = "131" if as_flag("asterix.encode_cat021 high_resolution",
-                                high_resolution) else "130"
+    pos_item = "131" if as_flag("asterix.encode_cat021 high_resolution", high_resolution) else "130"
     recs = []
     for i in np.arange(tod.size):
         items: dict[str, Any] = {
             "010": (("SAC", int(c["sac"][i])), ("SIC", int(c["sic"][i]))),
             "040": ((0, 0, 0, 0, 0),),
             "073": (float(tod[i]), "s"),
-            pos_item: (("LAT", (float(c["latitude"][i]), "°")),
-                       ("LON", (float(c["longitude"][i]), "°"))),
+            pos_item: (
+                ("LAT", (float(c["latitude"][i]), "°")),
+                ("LON", (float(c["longitude"][i]), "°")),
+            ),
         }
         if "height" in c and np.isfinite(c["height"][i]):
             items["140"] = (float(c["height"][i]) / FT, "ft")

@@ -26,15 +26,19 @@ def _as_date(date: Any) -> np.datetime64 | None:
     if date is None:
         return None
     if isinstance(date, bool | int | float | np.number):
-        raise ProblemError(f"asterix.read date: expected a date (YYYY-MM-DD, datetime.date "
-                           f"or numpy datetime64), got the number {date!r:.60}")
+        raise ProblemError(
+            f"asterix.read date: expected a date (YYYY-MM-DD, datetime.date "
+            f"or numpy datetime64), got the number {date!r:.60}"
+        )
     try:
         if isinstance(date, _dt.datetime):
             date = date.date()
         d = np.datetime64(date, "D")
     except (TypeError, ValueError) as exc:
-        raise ProblemError(f"asterix.read date: expected a date (YYYY-MM-DD, datetime.date "
-                           f"or numpy datetime64), got {date!r:.60}") from exc
+        raise ProblemError(
+            f"asterix.read date: expected a date (YYYY-MM-DD, datetime.date "
+            f"or numpy datetime64), got {date!r:.60}"
+        ) from exc
     if np.isnat(d):
         raise ProblemError("asterix.read date: NaT is not a date")
     return d.astype("datetime64[ns]")
@@ -47,17 +51,17 @@ def _paths(paths: Any) -> list[Path]:
     if isinstance(paths, str | Path) or hasattr(paths, "__fspath__"):
         paths = [paths]
     elif paths is None or isinstance(paths, bytes) or not isinstance(paths, Iterable):
-        raise ProblemError(f"{name}: expected a file path or a list of them, got "
-                           f"{type(paths).__name__} {paths!r:.60}")
-    files = [input_file(as_path(name, p), what="recording (ASTERIX)", name=name)
-             for p in paths]
+        raise ProblemError(
+            f"{name}: expected a file path or a list of them, got "
+            f"{type(paths).__name__} {paths!r:.60}"
+        )
+    files = [input_file(as_path(name, p), what="recording (ASTERIX)", name=name) for p in paths]
     if not files:
         raise ProblemError(f"{name}: no file given")
     return files
 
 
-def _source(path: Path, editions: dict[int, tuple[int, int]] | None
-            ) -> tuple[Any, Capture | None]:
+def _source(path: Path, editions: dict[int, tuple[int, int]] | None) -> tuple[Any, Capture | None]:
     """The ASTERIX byte stream of one file (memory-mapped raw datablocks, or a capture's
     UDP payloads) after the content check."""
     buf = _map(path)
@@ -65,23 +69,30 @@ def _source(path: Path, editions: dict[int, tuple[int, int]] | None
         cap = read_capture(path)
         if not cap.stream:
             counts = ", ".join(f"{v} {k}" for k, v in cap.counts.items()) or "no packets"
-            raise ProblemError(f"asterix.read {path}: a {cap.kind} capture without ASTERIX "
-                               f"over UDP ({counts})")
+            raise ProblemError(
+                f"asterix.read {path}: a {cap.kind} capture without ASTERIX over UDP ({counts})"
+            )
         return cap.stream, cap
     if len(buf) and not is_asterix(path, editions=editions):
-        why = diagnose(bytes(buf[:1 << 16]))
+        why = diagnose(bytes(buf[: 1 << 16]))
         if why:
             raise ProblemError(f"asterix.read {path}: damaged ASTERIX: {why}")
-        raise ProblemError(f"asterix.read {path}: not ASTERIX (byte 0: CAT {buf[0]}, the "
-                           "datablock lengths do not chain or the first record does not "
-                           "parse); accepted: raw ASTERIX datablocks (CAT048/CAT021) and "
-                           "pcap/pcapng captures of ASTERIX over UDP")
+        raise ProblemError(
+            f"asterix.read {path}: not ASTERIX (byte 0: CAT {buf[0]}, the "
+            "datablock lengths do not chain or the first record does not "
+            "parse); accepted: raw ASTERIX datablocks (CAT048/CAT021) and "
+            "pcap/pcapng captures of ASTERIX over UDP"
+        )
     return buf, None
 
 
-def read_asterix(paths: str | Path | Iterable[str | Path], *, date: Any = None,
-                 editions: dict[int, tuple[int, int]] | None = None,
-                 check: str = "layouts") -> AsterixData:
+def read_asterix(
+    paths: str | Path | Iterable[str | Path],
+    *,
+    date: Any = None,
+    editions: dict[int, tuple[int, int]] | None = None,
+    check: str = "layouts",
+) -> AsterixData:
     """Read CAT048 and CAT021 records of one or more ASTERIX recordings: raw datablocks as
     recorded, or pcap/pcapng captures of ASTERIX over UDP (detected from content, read
     through dpkt: the UDP payloads that are whole datablocks, in capture order). Other
@@ -128,8 +139,9 @@ def read_asterix(paths: str | Path | Iterable[str | Path], *, date: Any = None,
     dropped: dict[str, int] = {}
     captures: dict[str, int] = {}
     timeline = Timeline()
-    epoch_s: float | None = None if epoch is None else \
-        float(epoch.astype("datetime64[s]").astype(np.int64))
+    epoch_s: float | None = (
+        None if epoch is None else float(epoch.astype("datetime64[s]").astype(np.int64))
+    )
     for k, path in enumerate(files):
         buf, cap = _source(path, editions)
         if cap is not None:
@@ -146,14 +158,28 @@ def read_asterix(paths: str | Path | Iterable[str | Path], *, date: Any = None,
                 per_cat[cat].append(r)
     cat048 = Cat048Reports(**_join(per_cat[48], Cat048Reports))
     cat021 = Cat021Reports(**_join(per_cat[21], Cat021Reports))
-    return AsterixData(cat048, cat021, epoch, tuple(str(p) for p in files),
-                       dict(sorted(counts.items())), dropped, dict(sorted(skipped.items())),
-                       captures)
+    return AsterixData(
+        cat048,
+        cat021,
+        epoch,
+        tuple(str(p) for p in files),
+        dict(sorted(counts.items())),
+        dropped,
+        dict(sorted(skipped.items())),
+        captures,
+    )
 
 
-def _chunks(buf: Any, k: int, name: str, layouts: dict[int, _Layout], check: str,
-            skipped: dict[int, int], counts: dict[int, int], dropped: dict[str, int]
-            ) -> Any:
+def _chunks(
+    buf: Any,
+    k: int,
+    name: str,
+    layouts: dict[int, _Layout],
+    check: str,
+    skipped: dict[int, int],
+    counts: dict[int, int],
+    dropped: dict[str, int],
+) -> Any:
     """Per framing chunk, the kept rows of each category in SI (``time``: time of day)."""
     arr = np.frombuffer(buf, dtype=np.uint8) if len(buf) else np.zeros(0, np.uint8)
     rows_of = {48: _cat048, 21: _cat021}
@@ -162,8 +188,11 @@ def _chunks(buf: Any, k: int, name: str, layouts: dict[int, _Layout], check: str
         for cat, (recs, flat) in framed.items():
             lay = layouts[cat]
             counts[cat] += len(recs)
-            offs = np.frombuffer(flat, dtype=np.int64).reshape(-1, len(lay.items)) \
-                if len(flat) else np.zeros((0, len(lay.items)), np.int64)
+            offs = (
+                np.frombuffer(flat, dtype=np.int64).reshape(-1, len(lay.items))
+                if len(flat)
+                else np.zeros((0, len(lay.items)), np.int64)
+            )
             cols: dict[str, Any] = {}
             for f in lay.fields:
                 cols[f.name] = (*_gather(arr, offs[:, lay.slot[f.item]], f), f.scale)
@@ -175,9 +204,14 @@ def _chunks(buf: Any, k: int, name: str, layouts: dict[int, _Layout], check: str
     del arr
 
 
-def _place(rows: dict[int, dict[str, np.ndarray]], timeline: Timeline,
-           cap: Capture | None, epoch_s: float | None) -> None:
+def _place(
+    rows: dict[int, dict[str, np.ndarray]],
+    timeline: Timeline,
+    cap: Capture | None,
+    epoch_s: float | None,
+) -> None:
     """Times of day of one chunk → the recording's time axis (in place)."""
+
     def hint(r: dict[str, np.ndarray]) -> np.ndarray | None:
         if cap is None or epoch_s is None:
             return None
@@ -190,15 +224,18 @@ def _place(rows: dict[int, dict[str, np.ndarray]], timeline: Timeline,
         cat = min(firsts)[1]
         r = rows[cat]
         h = hint({"offset": r["offset"][:1]})
-        timeline.reference(cat, int(256 * r["sac"][0] + r["sic"][0]), float(r["time"][0]),
-                           None if h is None else float(h[0]))
+        timeline.reference(
+            cat,
+            int(256 * r["sac"][0] + r["sic"][0]),
+            float(r["time"][0]),
+            None if h is None else float(h[0]),
+        )
     for cat, r in rows.items():
         if r["time"].size:
             r["time"] = timeline.place(cat, 256 * r["sac"] + r["sic"], r["time"], hint(r))
 
 
-def _join(parts: list[dict[str, np.ndarray]], cls: type | None = None
-          ) -> dict[str, np.ndarray]:
+def _join(parts: list[dict[str, np.ndarray]], cls: type | None = None) -> dict[str, np.ndarray]:
     """Column-wise concatenation (no copy for a single part); empty tables typed."""
     if len(parts) == 1:
         return parts[0]
@@ -209,8 +246,10 @@ def _join(parts: list[dict[str, np.ndarray]], cls: type | None = None
         return out
     assert cls is not None
     ints = ("sac", "sic", "address", "mode3a", "offset", "file")
-    return {name: np.zeros(0, np.int64 if name in ints else float)
-            for name in (f.name for f in dataclasses.fields(cls))}
+    return {
+        name: np.zeros(0, np.int64 if name in ints else float)
+        for name in (f.name for f in dataclasses.fields(cls))
+    }
 
 
 def _map(path: Path) -> Any:
@@ -221,8 +260,9 @@ def _map(path: Path) -> Any:
                 return b""
             return mmap.mmap(fh.fileno(), 0, access=mmap.ACCESS_READ)
     except OSError as exc:
-        raise ProblemError(f"{path}: cannot read the recording (ASTERIX) "
-                           f"({exc.strerror or exc})") from None
+        raise ProblemError(
+            f"{path}: cannot read the recording (ASTERIX) ({exc.strerror or exc})"
+        ) from None
 
 
 def _tod(cat: int, cols: dict[str, Any], n: int) -> np.ndarray:
@@ -254,8 +294,9 @@ def _count(dropped: dict[str, int], reason: str, mask: np.ndarray) -> None:
         dropped[reason] = dropped.get(reason, 0) + int(mask.sum())
 
 
-def _cat048(k: int, recs: np.ndarray, cols: dict[str, Any],
-            dropped: dict[str, int]) -> dict[str, np.ndarray]:
+def _cat048(
+    k: int, recs: np.ndarray, cols: dict[str, Any], dropped: dict[str, int]
+) -> dict[str, np.ndarray]:
     """The kept CAT048 rows of one chunk in SI (``time``: the time of day, unwrapped
     later); drops counted."""
     n = recs.size
@@ -268,20 +309,31 @@ def _cat048(k: int, recs: np.ndarray, cols: dict[str, Any],
     _count(dropped, "cat048 no I040 (polar position)", ~have_r)
     fl, have_fl = _val(cols, "fl", n)
     bad_fl = (_int(cols, "fl_v", n) == 1) | (_int(cols, "fl_g", n) == 1)
-    _count(dropped, "cat048 I090 not validated or garbled (flight level unused)",
-           bad_fl & have_fl & keep)
+    _count(
+        dropped,
+        "cat048 I090 not validated or garbled (flight level unused)",
+        bad_fl & have_fl & keep,
+    )
     fl[bad_fl] = np.nan
     sel = slice(None) if keep.all() else keep
-    out = {"time": t[sel], "sac": sac[sel], "sic": _int(cols, "sic", n)[sel],
-           "range": rng[sel], "azimuth": _val(cols, "theta", n)[0][sel],
-           "pressure_altitude": fl[sel], "address": _int(cols, "address", n)[sel],
-           "mode3a": _int(cols, "mode3a", n)[sel], "offset": recs[sel]}
+    out = {
+        "time": t[sel],
+        "sac": sac[sel],
+        "sic": _int(cols, "sic", n)[sel],
+        "range": rng[sel],
+        "azimuth": _val(cols, "theta", n)[0][sel],
+        "pressure_altitude": fl[sel],
+        "address": _int(cols, "address", n)[sel],
+        "mode3a": _int(cols, "mode3a", n)[sel],
+        "offset": recs[sel],
+    }
     out["file"] = np.full(out["time"].size, k, np.int64)
     return out
 
 
-def _cat021(k: int, recs: np.ndarray, cols: dict[str, Any],
-            dropped: dict[str, int]) -> dict[str, np.ndarray]:
+def _cat021(
+    k: int, recs: np.ndarray, cols: dict[str, Any], dropped: dict[str, int]
+) -> dict[str, np.ndarray]:
     """The kept CAT021 rows of one chunk in SI (``time``: the time of day)."""
     n = recs.size
     lat_hi, have_hi = _val(cols, "lat_hi", n)
@@ -295,12 +347,16 @@ def _cat021(k: int, recs: np.ndarray, cols: dict[str, Any],
     deg = 180.0 / math.pi
     lat = np.where(have_hi, lat_hi, lat_lo)[sel] * deg
     lon = np.where(have_hi, _val(cols, "lon_hi", n)[0], _val(cols, "lon_lo", n)[0])[sel] * deg
-    out = {"time": t[sel], "sac": _int(cols, "sac", n)[sel],
-           "sic": _int(cols, "sic", n)[sel], "latitude": lat, "longitude": lon,
-           "height": _val(cols, "gh", n)[0][sel],
-           "pressure_altitude": _val(cols, "fl", n)[0][sel],
-           "address": _int(cols, "address", n)[sel], "offset": recs[sel]}
+    out = {
+        "time": t[sel],
+        "sac": _int(cols, "sac", n)[sel],
+        "sic": _int(cols, "sic", n)[sel],
+        "latitude": lat,
+        "longitude": lon,
+        "height": _val(cols, "gh", n)[0][sel],
+        "pressure_altitude": _val(cols, "fl", n)[0][sel],
+        "address": _int(cols, "address", n)[sel],
+        "offset": recs[sel],
+    }
     out["file"] = np.full(out["time"].size, k, np.int64)
     return out
-
-

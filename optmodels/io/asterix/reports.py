@@ -95,5 +95,3 @@ class AsterixData:
     dropped: dict[str, int] = field(default_factory=dict)
     skipped: dict[int, int] = field(default_factory=dict)
     captures: dict[str, int] = field(default_factory=dict)
-
-

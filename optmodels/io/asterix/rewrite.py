@@ -19,39 +19,50 @@ from optmodels.io.asterix.read import _paths, _source
 from optmodels.io.asterix.reports import RECORD_SHIFT
 
 
-def _ids(fn: str, record_id: Any, range_m: Any, azimuth_rad: Any
-         ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _ids(
+    fn: str, record_id: Any, range_m: Any, azimuth_rad: Any
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     try:
         ids = np.asarray(record_id)
         rng = np.asarray(range_m, dtype=float)
         az = np.asarray(azimuth_rad, dtype=float)
     except (TypeError, ValueError) as exc:
-        raise ProblemError(f"asterix.{fn} range_m/azimuth_rad: expected numbers ({exc})"
-                           ) from None
+        raise ProblemError(f"asterix.{fn} range_m/azimuth_rad: expected numbers ({exc})") from None
     if ids.ndim != 1 or not (ids.size == 0 or np.issubdtype(ids.dtype, np.integer)):
-        raise ProblemError(f"asterix.{fn} record_id: expected a 1-D integer array "
-                           "(Cat048Reports.record_id), got "
-                           f"{ids.dtype} shape {ids.shape}")
+        raise ProblemError(
+            f"asterix.{fn} record_id: expected a 1-D integer array "
+            "(Cat048Reports.record_id), got "
+            f"{ids.dtype} shape {ids.shape}"
+        )
     for name, a in (("range_m", rng), ("azimuth_rad", az)):
         if a.shape != ids.shape:
-            raise ProblemError(f"asterix.{fn} {name}: expected {ids.size} values (one per "
-                               f"record_id), got shape {a.shape}")
+            raise ProblemError(
+                f"asterix.{fn} {name}: expected {ids.size} values (one per "
+                f"record_id), got shape {a.shape}"
+            )
         if not np.all(np.isfinite(a)):
-            raise ProblemError(f"asterix.{fn} {name}: {int((~np.isfinite(a)).sum())} "
-                               "non-finite values")
+            raise ProblemError(
+                f"asterix.{fn} {name}: {int((~np.isfinite(a)).sum())} non-finite values"
+            )
     if np.any(rng < 0):
-        raise ProblemError(f"asterix.{fn} range_m: need slant ranges ≥ 0 m, got "
-                           f"{float(rng[rng < 0][0]):.8g}")
+        raise ProblemError(
+            f"asterix.{fn} range_m: need slant ranges ≥ 0 m, got {float(rng[rng < 0][0]):.8g}"
+        )
     ids = ids.astype(np.int64)
     if ids.size and (ids.min() < 0 or np.unique(ids).size != ids.size):
         raise ProblemError(f"asterix.{fn} record_id: negative or repeated identifiers")
     return ids, rng, az
 
 
-def rewrite_cat048_positions(paths: str | os.PathLike[str] | Iterable[str | os.PathLike[str]],
-                             out_path: str | os.PathLike[str], record_id: Any, range_m: Any,
-                             azimuth_rad: Any, *,
-                             editions: dict[int, tuple[int, int]] | None = None) -> Path:
+def rewrite_cat048_positions(
+    paths: str | os.PathLike[str] | Iterable[str | os.PathLike[str]],
+    out_path: str | os.PathLike[str],
+    record_id: Any,
+    range_m: Any,
+    azimuth_rad: Any,
+    *,
+    editions: dict[int, tuple[int, int]] | None = None,
+) -> Path:
     """Write the recording ``paths`` again to ``out_path`` with new polar positions.
 
     Every datablock and record of ``paths`` (as :func:`~optmodels.io.asterix.read_asterix`
@@ -100,24 +111,42 @@ def rewrite_cat048_positions(paths: str | os.PathLike[str] | Iterable[str | os.P
     spec = _spec(48, editions)
     frho, fth = _where(spec, ("040", "RHO")), _where(spec, ("040", "THETA"))
     rho = _raw(fn, "range_m", rng / NM, frho, unit="m", per=NM)
-    theta = _raw(fn, "azimuth_rad", np.degrees(np.mod(az, 2 * math.pi)), fth, unit="°",
-                 per=1.0, wrap=True)
+    theta = _raw(
+        fn, "azimuth_rad", np.degrees(np.mod(az, 2 * math.pi)), fth, unit="°", per=1.0, wrap=True
+    )
     which = ids >> RECORD_SHIFT
     if ids.size and which.max() >= len(files):
-        raise ProblemError(f"asterix.{fn} record_id: file index {int(which.max())} but "
-                           f"{len(files)} file(s) given")
+        raise ProblemError(
+            f"asterix.{fn} record_id: file index {int(which.max())} but {len(files)} file(s) given"
+        )
     layouts = {c: _Layout(_spec(c, editions)) for c in (48, 21)}
     with atomic_write(out_path, name=f"asterix.{fn} out_path", binary=True) as fh:
         for k, path in enumerate(files):
             buf, _ = _source(path, editions)
             mine = which == k
-            fh.write(_patched(fn, buf, str(path), layouts, ids[mine] & ((1 << RECORD_SHIFT) - 1),
-                              rho[mine], theta[mine]))
+            fh.write(
+                _patched(
+                    fn,
+                    buf,
+                    str(path),
+                    layouts,
+                    ids[mine] & ((1 << RECORD_SHIFT) - 1),
+                    rho[mine],
+                    theta[mine],
+                )
+            )
     return Path(out_path)
 
 
-def _patched(fn: str, buf: Any, name: str, layouts: dict[int, _Layout], offsets: np.ndarray,
-             rho: np.ndarray, theta: np.ndarray) -> bytes:
+def _patched(
+    fn: str,
+    buf: Any,
+    name: str,
+    layouts: dict[int, _Layout],
+    offsets: np.ndarray,
+    rho: np.ndarray,
+    theta: np.ndarray,
+) -> bytes:
     """The stream ``buf`` with the I040 of the records at ``offsets`` replaced."""
     out = np.frombuffer(bytes(buf), np.uint8).copy()
     if offsets.size == 0:
@@ -133,17 +162,23 @@ def _patched(fn: str, buf: Any, name: str, layouts: dict[int, _Layout], offsets:
     rec = np.concatenate(recs) if recs else np.zeros(0, np.int64)
     at = np.concatenate(i040) if i040 else np.zeros(0, np.int64)
     j = np.searchsorted(rec, offsets)
-    ok = (j < rec.size) & (rec[np.minimum(j, rec.size - 1)] == offsets) if rec.size else \
-        np.zeros(offsets.shape, bool)
+    ok = (
+        (j < rec.size) & (rec[np.minimum(j, rec.size - 1)] == offsets)
+        if rec.size
+        else np.zeros(offsets.shape, bool)
+    )
     ok[ok] &= at[j[ok]] >= 0
     if not ok.all():
-        raise ProblemError(f"asterix.{fn} record_id: {int((~ok).sum())} identifiers name no "
-                           f"CAT048 record with I040 in {name} (e.g. offset "
-                           f"{int(offsets[~ok][0])})")
+        raise ProblemError(
+            f"asterix.{fn} record_id: {int((~ok).sum())} identifiers name no "
+            f"CAT048 record with I040 in {name} (e.g. offset "
+            f"{int(offsets[~ok][0])})"
+        )
     q = at[j]
     spec = lay.spec
-    val = _item(0, 4, [(_where(spec, ("040", "RHO")), rho),
-                       (_where(spec, ("040", "THETA")), theta)]).raw
+    val = _item(
+        0, 4, [(_where(spec, ("040", "RHO")), rho), (_where(spec, ("040", "THETA")), theta)]
+    ).raw
     for b in range(4):
         out[q + b] = (val >> np.uint64(8 * (3 - b))) & np.uint64(0xFF)
     return out.tobytes()

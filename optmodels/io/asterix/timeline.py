@@ -47,11 +47,11 @@ class Timeline:
     """The placing state across the files of one :func:`read_asterix` call."""
 
     def __init__(self) -> None:
-        self.last: dict[tuple[int, int], float] = {}   # (cat, 256·SAC+SIC) → last time
-        self.ref: float | None = None                  # reference of the current file
-        self.prev: float | None = None                 # of the previous file
+        self.last: dict[tuple[int, int], float] = {}  # (cat, 256·SAC+SIC) → last time
+        self.ref: float | None = None  # reference of the current file
+        self.prev: float | None = None  # of the previous file
         self.name = ""
-        self.seen: set[tuple[int, int]] = set()        # streams met in the current file
+        self.seen: set[tuple[int, int]] = set()  # streams met in the current file
 
     def start_file(self, name: str) -> None:
         if self.ref is not None:
@@ -69,8 +69,9 @@ class Timeline:
         else:
             self.ref = tod
 
-    def place(self, cat: int, key: np.ndarray, tod: np.ndarray,
-              hint: np.ndarray | None) -> np.ndarray:
+    def place(
+        self, cat: int, key: np.ndarray, tod: np.ndarray, hint: np.ndarray | None
+    ) -> np.ndarray:
         """Times (s from midnight of day 0) of one chunk's rows of category ``cat``, in file
         order; ``key`` = 256·SAC + SIC; ``hint``: capture times in the same axis."""
         assert self.ref is not None
@@ -107,9 +108,11 @@ class Timeline:
             raise ProblemError(
                 f"asterix.read {self.name}: cannot place its times: {who} starts at "
                 f"{_clock(start)}, {last - start:.0f} s before its last report in the files "
-                f"before ({_clock(last)}); give the files in time order")
+                f"before ({_clock(last)}); give the files in time order"
+            )
         if abs(start - self.ref) > DAY / 2:
             raise ProblemError(
                 f"asterix.read {self.name}: cannot place its times: {who} continues at "
                 f"{_clock(start)}, more than 12 h from the file's first record "
-                f"({_clock(self.ref)}); read the files of that period separately")
+                f"({_clock(self.ref)}); read the files of that period separately"
+            )

@@ -39,8 +39,16 @@ from optmodels.montecarlo.studies.fusion import FusionWeight
 from optmodels.montecarlo.studies.plane import PlaneAngle
 from optmodels.montecarlo.studies.trajectories import TrajectoriesEta
 
-__all__ = ["STUDIES", "AssignmentSeparation", "BiasfieldRecovery", "FusionWeight",
-           "PlaneAngle", "Study", "TrajectoriesEta", "study"]
+__all__ = [
+    "STUDIES",
+    "AssignmentSeparation",
+    "BiasfieldRecovery",
+    "FusionWeight",
+    "PlaneAngle",
+    "Study",
+    "TrajectoriesEta",
+    "study",
+]
 
 
 Study = Callable[[np.random.Generator], Mapping[str, float]]
@@ -60,9 +68,14 @@ def _declared() -> dict[str, Callable[..., Study]]:
         mod = registry.face_module(__name__, problem)
         if mod is None:
             continue
-        found += [c for c in vars(mod).values() if isinstance(c, type)
-                  and c.__module__ == mod.__name__
-                  and isinstance(c.__dict__.get("name"), str) and "problem" in c.__dict__]
+        found += [
+            c
+            for c in vars(mod).values()
+            if isinstance(c, type)
+            and c.__module__ == mod.__name__
+            and isinstance(c.__dict__.get("name"), str)
+            and "problem" in c.__dict__
+        ]
     found.sort(key=lambda c: (order.get(c.__dict__["problem"], len(order)), c.__dict__["name"]))
     return {c.__dict__["name"]: c for c in found}
 
@@ -79,15 +92,20 @@ def study(name: str, **params: Any) -> Study:
 
 def _builtin(name: str, params: Any) -> Study:
     if not isinstance(name, str) or name not in STUDIES:
-        raise ProblemError(f"montecarlo.run study: unknown study {name!r} "
-                           f"(built-in: {sorted(STUDIES)})")
+        raise ProblemError(
+            f"montecarlo.run study: unknown study {name!r} (built-in: {sorted(STUDIES)})"
+        )
     if not isinstance(params, Mapping) or not all(isinstance(k, str) for k in params):
-        raise ProblemError(f"montecarlo.run params: expected a mapping of parameter "
-                           f"names to values, got {type(params).__name__}")
+        raise ProblemError(
+            f"montecarlo.run params: expected a mapping of parameter "
+            f"names to values, got {type(params).__name__}"
+        )
     cls = STUDIES[name]
     known = [f.name for f in fields(cls)]  # type: ignore[arg-type]
     unknown = sorted(set(params) - set(known))
     if unknown:
-        raise ProblemError(f"montecarlo.run params: unknown parameter(s) {unknown} of "
-                           f"study {name!r} (it takes {known})")
+        raise ProblemError(
+            f"montecarlo.run params: unknown parameter(s) {unknown} of "
+            f"study {name!r} (it takes {known})"
+        )
     return cls(**params)

@@ -37,10 +37,18 @@ class AssignmentSeparation:
 
     def __post_init__(self) -> None:
         for key in ("separation", "resolution"):
-            _set(self, key, as_positive(f"montecarlo.AssignmentSeparation {key}",
-                                        getattr(self, key), allow_zero=True))
-        _set(self, "prior_sigma", as_positive("montecarlo.AssignmentSeparation prior_sigma",
-                                              self.prior_sigma))
+            _set(
+                self,
+                key,
+                as_positive(
+                    f"montecarlo.AssignmentSeparation {key}", getattr(self, key), allow_zero=True
+                ),
+            )
+        _set(
+            self,
+            "prior_sigma",
+            as_positive("montecarlo.AssignmentSeparation prior_sigma", self.prior_sigma),
+        )
 
     def __call__(self, rng: np.random.Generator) -> dict[str, float]:
         from optmodels import assignment as asg
@@ -49,7 +57,7 @@ class AssignmentSeparation:
         means = truth + rng.normal(0, self.prior_sigma, (2, 2))
         covs = np.stack([np.eye(2) * self.prior_sigma**2] * 2)
         merged = self.separation < self.resolution
-        marks = (truth.mean(axis=0, keepdims=True) if merged else truth)
+        marks = truth.mean(axis=0, keepdims=True) if merged else truth
         meas = marks + rng.normal(0, 1.0, marks.shape)
         side = 20.0
         data = asg.AssignmentData(means, covs, meas, np.eye(2), side**2, 0.95, 0.05)
@@ -59,7 +67,8 @@ class AssignmentSeparation:
             ok = blocks == [(0, 1)] and int(sol.assignment[0]) == 0
         else:
             ok = sorted(blocks) == [(0,), (1,)] and all(
-                int(sol.assignment[k]) == b[0] for k, b in enumerate(sol.partition))
+                int(sol.assignment[k]) == b[0] for k, b in enumerate(sol.partition)
+            )
         return {"correct": float(ok)}
 
     @staticmethod

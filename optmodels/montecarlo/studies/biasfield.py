@@ -32,10 +32,12 @@ class BiasfieldRecovery:
     noise: float = 20.0
 
     def __post_init__(self) -> None:
-        _set(self, "cells", as_count("montecarlo.BiasfieldRecovery cells", self.cells,
-                                     minimum=3))
-        _set(self, "noise", as_positive("montecarlo.BiasfieldRecovery noise", self.noise,
-                                        allow_zero=True))
+        _set(self, "cells", as_count("montecarlo.BiasfieldRecovery cells", self.cells, minimum=3))
+        _set(
+            self,
+            "noise",
+            as_positive("montecarlo.BiasfieldRecovery noise", self.noise, allow_zero=True),
+        )
 
     def __call__(self, rng: np.random.Generator) -> dict[str, float]:
         from optmodels import biasfield as bf
@@ -43,5 +45,7 @@ class BiasfieldRecovery:
         data, truth = bf.synthetic_field_data(rng, cells=self.cells, noise=self.noise)
         f = bf.closed_form(data).require_ok().field
         err = f - truth
-        return {"range_rms_m": float(np.sqrt(np.mean(err[..., 0] ** 2))),
-                "azimuth_rms_mrad": float(np.sqrt(np.mean(err[..., 1] ** 2)) * 1e3)}
+        return {
+            "range_rms_m": float(np.sqrt(np.mean(err[..., 0] ** 2))),
+            "azimuth_rms_mrad": float(np.sqrt(np.mean(err[..., 1] ** 2)) * 1e3),
+        }

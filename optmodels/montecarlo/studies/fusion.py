@@ -40,17 +40,19 @@ class FusionWeight:
         for key in ("s1", "s2"):
             m = as_finite_array(f"montecarlo.FusionWeight {key}", getattr(self, key), ndim=2)
             if m.shape[0] != m.shape[1] or m.shape[0] < 1:
-                raise ProblemError(f"montecarlo.FusionWeight {key}: expected a square "
-                                   f"matrix, got shape {m.shape}")
+                raise ProblemError(
+                    f"montecarlo.FusionWeight {key}: expected a square matrix, got shape {m.shape}"
+                )
             check_spd(f"montecarlo.FusionWeight {key}", m)
             mats.append(m)
             _set(self, key, tuple(tuple(float(x) for x in row) for row in m))
         if mats[0].shape != mats[1].shape:
-            raise ProblemError(f"montecarlo.FusionWeight s2: shape {mats[1].shape} differs "
-                               f"from s1's {mats[0].shape}")
+            raise ProblemError(
+                f"montecarlo.FusionWeight s2: shape {mats[1].shape} differs "
+                f"from s1's {mats[0].shape}"
+            )
         # sample covariances about the sample mean need n > m snapshots
-        _set(self, "n", as_count("montecarlo.FusionWeight n", self.n,
-                                 minimum=mats[0].shape[0] + 1))
+        _set(self, "n", as_count("montecarlo.FusionWeight n", self.n, minimum=mats[0].shape[0] + 1))
 
     def __call__(self, rng: np.random.Generator) -> dict[str, float]:
         from optmodels import fusion as fu
@@ -69,5 +71,8 @@ class FusionWeight:
         w = np.column_stack([v[f"w{k}"] for k in range(s1.size)])
         emp = np.diag(np.cov(w, rowvar=False))
         lin = np.diag(fu.weight_covariance(s1, s2, self.n, self.n, mean="sample"))
-        return {"max_rel_diff_diag": float(np.max(np.abs(emp - lin) / lin)),
-                "var_mc_mean": float(np.mean(emp)), "var_linear_mean": float(np.mean(lin))}
+        return {
+            "max_rel_diff_diag": float(np.max(np.abs(emp - lin) / lin)),
+            "var_mc_mean": float(np.mean(emp)),
+            "var_linear_mean": float(np.mean(lin)),
+        }

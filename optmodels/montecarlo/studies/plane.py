@@ -37,26 +37,38 @@ class PlaneAngle:
     def __post_init__(self) -> None:
         _set(self, "n", as_count("montecarlo.PlaneAngle n", self.n, minimum=3))
         if self.setting not in ("radar", "two-source"):
-            raise ProblemError(f"montecarlo.PlaneAngle setting: expected 'radar' or "
-                               f"'two-source', got {self.setting!r}")
+            raise ProblemError(
+                f"montecarlo.PlaneAngle setting: expected 'radar' or "
+                f"'two-source', got {self.setting!r}"
+            )
 
     def __call__(self, rng: np.random.Generator) -> dict[str, float]:
         from optmodels import plane, scenarios
 
-        sc = (scenarios.two_source_plane(self.n, rng) if self.setting == "two-source"
-              else scenarios.radar_plane(self.n, rng, geometry="broadside"))
+        sc = (
+            scenarios.two_source_plane(self.n, rng)
+            if self.setting == "two-source"
+            else scenarios.radar_plane(self.n, rng, geometry="broadside")
+        )
         data = plane.PlaneData(sc.points, sc.cov, sc.alpha2)
-        ml = (plane.closed_form(data) if data.proportional
-              else plane.solve(data, "reduced")).require_ok()
-        crb = plane.cramer_rao_bound(plane.PlaneData(sc.truth, sc.cov, sc.alpha2),
-                                     sc.normal, sc.offset)
-        return {"ml": float(plane.angle_error(ml.normal, sc.normal)),
-                "svd": float(plane.angle_error(plane.svd_fit(data).normal, sc.normal)),
-                "crb2": float(crb.angle_rms ** 2)}
+        ml = (
+            plane.closed_form(data) if data.proportional else plane.solve(data, "reduced")
+        ).require_ok()
+        crb = plane.cramer_rao_bound(
+            plane.PlaneData(sc.truth, sc.cov, sc.alpha2), sc.normal, sc.offset
+        )
+        return {
+            "ml": float(plane.angle_error(ml.normal, sc.normal)),
+            "svd": float(plane.angle_error(plane.svd_fit(data).normal, sc.normal)),
+            "crb2": float(crb.angle_rms**2),
+        }
 
     @staticmethod
     def summarise(v: Mapping[str, np.ndarray]) -> dict[str, float]:
         crb = float(np.sqrt(np.mean(v["crb2"])))
-        return {"rmse_ml": float(np.sqrt(np.mean(v["ml"] ** 2))),
-                "rmse_svd": float(np.sqrt(np.mean(v["svd"] ** 2))), "crb": crb,
-                "ml_over_crb": float(np.sqrt(np.mean(v["ml"] ** 2))) / crb}
+        return {
+            "rmse_ml": float(np.sqrt(np.mean(v["ml"] ** 2))),
+            "rmse_svd": float(np.sqrt(np.mean(v["svd"] ** 2))),
+            "crb": crb,
+            "ml_over_crb": float(np.sqrt(np.mean(v["ml"] ** 2))) / crb,
+        }

@@ -46,11 +46,15 @@ class TrajectoriesEta:
         data = tr.TrajectoryData([t] * self.q, vals, 1.0)
         dep = tr.closed_form(data, "diverging")
         ind = tr.closed_form(data, "independent")
-        return {"dep": float((dep.velocity[0] - v[0]) ** 2),
-                "ind": float((ind.velocity[0] - v[0]) ** 2)}
+        return {
+            "dep": float((dep.velocity[0] - v[0]) ** 2),
+            "ind": float((ind.velocity[0] - v[0]) ** 2),
+        }
 
     def summarise(self, v: Mapping[str, np.ndarray]) -> dict[str, float]:
         from optmodels import trajectories as tr
 
-        return {"eta_mc": float(np.mean(v["dep"]) / np.mean(v["ind"])),
-                "eta_formula": tr.eta(self.n, self.q)}
+        return {
+            "eta_mc": float(np.mean(v["dep"]) / np.mean(v["ind"])),
+            "eta_formula": tr.eta(self.n, self.q),
+        }

@@ -182,10 +182,6 @@ def test_cli_verb_demo_and_adapter(name: str) -> None:
 #: with what is left to do; the test fails when an entry is no longer a deviation, so that
 #: the list only shrinks.
 PENDING_SKELETON = {
-    ("trajectories", "verify._finish"): "the gate _finish/_finish_solve is in solution.py; "
-    "move it to verify.py with tests/test_gate.py's tr.solution._finish_solve",
-    ("fusion", "generic.solve"): "fuse (closed form and CVXPY) is in estimate.py; split into "
-    "closedform.py / generic.py with tests/test_gate.py's patches of fu.estimate",
     ("biasfield", "data"): "FieldData is in cells.py (issue 23 item 2)",
     ("biasfield", "solution"): "FieldSolution is in problem.py (issue 23 item 2)",
     ("biasfield", "verify._finish"): "the gate is verify._verify (issue 23 item 2)",

@@ -199,7 +199,7 @@ def test_trajectories_solve_corrupted_point(
     reuse: bool,
 ) -> None:
     """The solver's θ shifted: downgraded, then refused. The decision is the strict gate
-    of :func:`optmodels.trajectories.solution._finish_solve` (the same point through it
+    of :func:`optmodels.trajectories.verify._finish_solve` (the same point through it
     gives the same solution); ``generic.solve`` still decides inline until it calls that
     function (see the gate slice's report)."""
     data = trajectory_data(np.random.default_rng(4))
@@ -243,7 +243,7 @@ def test_trajectories_solve_corrupted_point(
     assert sol.residuals["stationarity"] == pytest.approx(rel, rel=1e-2)
     verdicts.clear()
     common = {"status": Status.OPTIMAL, "method": sol.method, "message": "", "solve_time": 0.0}
-    via_gate = tr.solution._finish_solve(
+    via_gate = tr.verify._finish_solve(
         data, fam, tr.fits._fit(data, fam), seen["theta"], None, common
     )
     decided(verdicts, via_gate, expect)
@@ -265,13 +265,13 @@ def test_fusion_closed_form_corrupted_kernel(
     s1, s2 = spd(rng, m), spd(rng, m)
     a1, a2 = rng.normal(size=m), rng.normal(size=m)
     w_exact = np.linalg.solve(s1 + s2, s1.T).T  # W (2): W (S1 + S2) = S1
-    real = fu.estimate._weight
+    real = fu.closedform._weight
 
     def corrupted(x: Any, y: Any) -> np.ndarray:
         w = real(x, y)
         return w + eps * float(np.max(np.abs(w))) * np.eye(m)
 
-    monkeypatch.setattr(fu.estimate, "_weight", corrupted)
+    monkeypatch.setattr(fu.closedform, "_weight", corrupted)
     sol = fu.fuse(a1, s1, a2, s2)
     decided(verdicts, sol, expect)
     # the actual relative error of W is eps (independently: W_exact by np.linalg.solve);
@@ -297,7 +297,7 @@ def test_fusion_cvxpy_corrupted_point(
     a1, a2 = rng.normal(size=m), rng.normal(size=m)
     c1, c2 = np.linalg.inv(s1), np.linalg.inv(s2)
     exact = np.linalg.solve(c1 + c2, c1 @ a1 + c2 @ a2)  # (1), independently
-    real = fu.estimate.solve_problem
+    real = fu.generic.solve_problem
     d = float(np.max(np.abs(a2 - a1)))
 
     def corrupted(prob: Any, *args: Any, **kwargs: Any) -> Any:
@@ -306,7 +306,7 @@ def test_fusion_cvxpy_corrupted_point(
         u.value = u.value + eps * float(np.max(np.abs(exact))) / d * np.ones(m)
         return res
 
-    monkeypatch.setattr(fu.estimate, "solve_problem", corrupted)
+    monkeypatch.setattr(fu.generic, "solve_problem", corrupted)
     sol = fu.fuse(a1, s1, a2, s2, method="cvxpy")
     decided(verdicts, sol, expect)
     size = max(np.max(np.abs(exact)), np.max(np.abs(a1)), np.max(np.abs(a2)))

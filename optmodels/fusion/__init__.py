@@ -36,9 +36,12 @@ Layout (one idea per module; each imports only :mod:`optmodels.core`,
 * :mod:`~optmodels.fusion.inputs`: argument checks (S_μ, n, ``mean``, the size guard);
 * :mod:`~optmodels.fusion.solution`: :class:`FusionSolution` and its failure form;
 * :mod:`~optmodels.fusion.verify`: the NumPy re-check (forward error bounds, the WLS
-  objective (1), the status gate);
+  objective (1), the status gate, the end of every :func:`fuse`);
 * :mod:`~optmodels.fusion.weights`: W (2), (6), the correlated W, the fused covariance;
-* :mod:`~optmodels.fusion.estimate`: :func:`fuse` (1)-(2), closed form or CVXPY;
+* :mod:`~optmodels.fusion.closedform`: the closed forms of :func:`fuse` (1)-(2), (6) and
+  the correlated (Bar-Shalom-Campo) W;
+* :mod:`~optmodels.fusion.generic`: :func:`fuse` (1)-(2), closed form or CVXPY (the
+  generic formulations);
 * :mod:`~optmodels.fusion.accuracy`: the Jacobians (13)-(14), the moments (4)-(5), (10);
 * :mod:`~optmodels.fusion.sampling`: the Monte Carlo law of Ŵ and Ŵ from snapshots;
 * :mod:`~optmodels.fusion.two_site`: the two-site system (geometry, estimators,
@@ -57,7 +60,7 @@ from optmodels.fusion.accuracy import (
     weight_covariance,
     weight_jacobians,
 )
-from optmodels.fusion.estimate import fuse
+from optmodels.fusion.generic import fuse
 from optmodels.fusion.sampling import monte_carlo_weight, weight_from_samples
 from optmodels.fusion.solution import FusionSolution
 from optmodels.fusion.two_site import TwoSiteSystem

@@ -51,8 +51,8 @@ class JointMLMixin:
     :meth:`joint_ml`, ``_whitened``, ``_gauss_newton``), kept here with its NLP and cache;
     TwoSiteSystem inherits them."""
 
-    def joint_ml(
-        self: TwoSiteSystem,  # type: ignore[misc]
+    def joint_ml(  # type: ignore[misc]  # self: the subclass that inherits this mixin
+        self: TwoSiteSystem,
         z: ArrayLike,
         *,
         x0: ArrayLike | None = None,
@@ -166,10 +166,10 @@ class JointMLMixin:
         )
         return finish(sol, note=note, reject=no_estimate)  # the one gate
 
-    def _whitened(
+    def _whitened(  # type: ignore[misc]
         self: TwoSiteSystem,
         z: FloatArray,
-        x: FloatArray,  # type: ignore[misc]
+        x: FloatArray,
     ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
         """Whitened Jacobian (T, 3, 2), residuals (T, 3), gradient J_tᵀR⁻¹r_t (T, 2) and the
         relative stationarity ‖g_t‖ / (‖J_t‖‖r_t‖ + 1) per row, at positions x (NaN rows
@@ -183,8 +183,8 @@ class JointMLMixin:
             )
         return jw, r, g, np.where(np.isfinite(stat), stat, np.inf)
 
-    def _gauss_newton(
-        self: TwoSiteSystem,  # type: ignore[misc]
+    def _gauss_newton(  # type: ignore[misc]
+        self: TwoSiteSystem,
         z: FloatArray,
         start: FloatArray,
         max_iter: int = 50,

@@ -78,7 +78,7 @@ Package layout
 (the per-object centred moments, the time-resolution refusal), ``original`` (the original
 problem in NumPy: :func:`predict`, :func:`objective`, :func:`constraint_residuals`,
 :func:`design_matrix`), ``fits`` (the closed-form algebra (8)-(9), (12)-(13), (3) and Ψ),
-``verify`` (the re-check and the downgrade rules), ``solution``
+``verify`` (the re-check, the downgrade rules and the gate), ``solution``
 (:class:`TrajectorySolution`), ``generic`` (:func:`solve`), ``closedform``
 (:func:`closed_form`), ``covariances`` (Ψ (14)-(20), η, η0), ``model_choice``
 (:func:`family_test`). Every name is re-exported here; import from

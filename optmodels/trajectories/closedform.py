@@ -14,8 +14,8 @@ from typing import Any
 from optmodels.core import ProblemError, Status, Verdict, as_flag, as_instance, timed
 from optmodels.trajectories.data import Family, FamilyName, TrajectoryData, resolve_family
 from optmodels.trajectories.fits import _fit, _kind
-from optmodels.trajectories.solution import TrajectorySolution, _finish
-from optmodels.trajectories.verify import REJECT_TOL, VERIFY_TOL, _recheck
+from optmodels.trajectories.solution import TrajectorySolution
+from optmodels.trajectories.verify import REJECT_TOL, VERIFY_TOL, _finish, _recheck
 
 
 # --------------------------------------------------------------------------- closed forms

@@ -8,7 +8,7 @@ grouping (:meth:`Family.custom`) -- and :func:`resolve_family` turns a name into
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Sequence, Sized
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
@@ -95,7 +95,8 @@ class TrajectoryData:
             raise ProblemError(f"{where} values: {len(self.values)} objects, times has {q}")
         epoch = as_number(f"{where} epoch", self.epoch, low=-MAX_MAGNITUDE, high=MAX_MAGNITUDE)
         object.__setattr__(self, "epoch", epoch)
-        ts, ys, ws = [], [], []
+        ts: list[FloatArray] = []
+        ys: list[FloatArray] = []
         dims = set()
         for j in range(q):
             t = as_finite_array(f"times[{j}]", self.times[j], ndim=1, max_abs=MAX_MAGNITUDE)
@@ -120,40 +121,7 @@ class TrajectoryData:
             raise ProblemError(f"values: objects have different numbers of coordinates {dims}")
         vector = any(np.ndim(v) == 2 for v in self.values)
         d = dims.pop()
-        scalar = None
-        s2_in = self.sigma2
-        if (
-            isinstance(s2_in, str | bytes | bool | np.bool_)
-            or np.isscalar(s2_in)
-            or (isinstance(s2_in, np.ndarray) and s2_in.ndim == 0)
-        ):
-            s2 = as_number(f"{where} sigma2", s2_in)
-            if not 1 / MAX_MAGNITUDE <= s2 <= MAX_MAGNITUDE:
-                raise ProblemError(
-                    f"{where} sigma2: must be positive, in [1e-100, 1e100] "
-                    f"(its inverse is a usable weight), got {s2:g}"
-                )
-            scalar = s2
-            ws = [np.full((t.size, d), 1.0 / s2) for t in ts]
-        else:
-            if not hasattr(s2_in, "__len__") or len(s2_in) != q:
-                n_s2 = len(s2_in) if hasattr(s2_in, "__len__") else type(s2_in).__name__
-                raise ProblemError(f"sigma2: {n_s2} objects, times has {q}")
-            for j in range(q):
-                s2 = as_finite_array(f"sigma2[{j}]", s2_in[j], ndim=(0, 1, 2))
-                try:
-                    s2 = np.broadcast_to(
-                        s2.reshape(s2.shape + (1,) * (s2.ndim == 1)), (ts[j].size, d)
-                    )
-                except ValueError:
-                    raise ProblemError(
-                        f"sigma2[{j}]: shape {s2.shape} does not match ({ts[j].size}, {d})"
-                    ) from None
-                if np.any(s2 < 1 / MAX_MAGNITUDE) or np.any(s2 > MAX_MAGNITUDE):
-                    raise ProblemError(
-                        f"sigma2[{j}]: variances must be positive, in [1e-100, 1e100]"
-                    )
-                ws.append(1.0 / s2)
+        ws, scalar = _weights(where, self.sigma2, ts, d)
         raw = np.concatenate(ts)
         object.__setattr__(self, "raw_t", raw)
         object.__setattr__(self, "t", raw - epoch)
@@ -318,3 +286,40 @@ def resolve_family(family: FamilyName | Family, q: int) -> Family:
     if family == "independent":
         return Family.independent(q)
     raise ProblemError(f"family: expected one of {FAMILIES} or a Family, got {family!r}")
+
+
+def _weights(
+    where: str, sigma2: float | Sequence[ArrayLike], ts: list[FloatArray], d: int
+) -> tuple[list[FloatArray], float | None]:
+    """The weights 1/σ² of (4), (10) per object, (N_j, d) each, from ``sigma2``: one
+    variance for every measurement (returned as the second value too), or one entry per
+    object (a scalar, (N_j,) or (N_j, d)); every variance in [1e-100, 1e100]."""
+    q = len(ts)
+    if (
+        isinstance(sigma2, str | bytes | bool | np.bool_)
+        or np.isscalar(sigma2)
+        or (isinstance(sigma2, np.ndarray) and sigma2.ndim == 0)
+    ):
+        s2 = as_number(f"{where} sigma2", sigma2)
+        if not 1 / MAX_MAGNITUDE <= s2 <= MAX_MAGNITUDE:
+            raise ProblemError(
+                f"{where} sigma2: must be positive, in [1e-100, 1e100] "
+                f"(its inverse is a usable weight), got {s2:g}"
+            )
+        return [np.full((t.size, d), 1.0 / s2) for t in ts], s2
+    if not isinstance(sigma2, Sized) or len(sigma2) != q:
+        n_s2 = len(sigma2) if isinstance(sigma2, Sized) else type(sigma2).__name__
+        raise ProblemError(f"sigma2: {n_s2} objects, times has {q}")
+    ws: list[FloatArray] = []
+    for j in range(q):
+        var = as_finite_array(f"sigma2[{j}]", sigma2[j], ndim=(0, 1, 2))
+        try:
+            var = np.broadcast_to(var.reshape(var.shape + (1,) * (var.ndim == 1)), (ts[j].size, d))
+        except ValueError:
+            raise ProblemError(
+                f"sigma2[{j}]: shape {var.shape} does not match ({ts[j].size}, {d})"
+            ) from None
+        if np.any(var < 1 / MAX_MAGNITUDE) or np.any(var > MAX_MAGNITUDE):
+            raise ProblemError(f"sigma2[{j}]: variances must be positive, in [1e-100, 1e100]")
+        ws.append(1.0 / var)
+    return ws, None

@@ -33,7 +33,8 @@ from optmodels.core import FloatArray, ProblemError, as_choice, as_instance, tim
 from optmodels.trajectories.data import Family, FamilyName, TrajectoryData, resolve_family
 from optmodels.trajectories.fits import _anchors, _fit
 from optmodels.trajectories.moments import _stats
-from optmodels.trajectories.solution import TrajectorySolution, _failure, _finish_solve
+from optmodels.trajectories.solution import TrajectorySolution, _failure
+from optmodels.trajectories.verify import _finish_solve
 
 #: Default solver options: the back-end's table for equality-constrained least squares
 #: (the same object; the reasons for each value are given there).

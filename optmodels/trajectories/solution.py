@@ -1,9 +1,7 @@
 """The solution of paper 002's problem (:class:`TrajectorySolution`: θ, each object's line,
-Ψ (14), the re-check's residuals), the packing of a fit -- or of a failure, with NaN
-estimates -- into it (:func:`_package`, :func:`_failure`), and the end of every
-solve and closed form: :func:`_finish` (the one gate :func:`optmodels.core.finish` on the
-NumPy residuals of :mod:`.verify`, then the coarse-time / far-epoch downgrade) and
-:func:`_finish_solve` (a generic solve's point: re-check, line residuals, gate).
+Ψ (14), the re-check's residuals) and the packing of a fit -- or of a failure, with NaN
+estimates -- into it (:func:`_package`, :func:`_failure`). The gate that decides between
+the two is :func:`optmodels.trajectories.verify._finish`.
 """
 
 from __future__ import annotations
@@ -14,12 +12,10 @@ from typing import Any
 import numpy as np
 import scipy.sparse as sp
 
-from optmodels.core import VERIFY_TOL, FloatArray, Solution, Status, Verdict, finish
+from optmodels.core import FloatArray, Solution, Status
 from optmodels.trajectories.data import Family, TrajectoryData
 from optmodels.trajectories.fits import _Fit
-from optmodels.trajectories.moments import _stats
 from optmodels.trajectories.original import design_matrix
-from optmodels.trajectories.verify import _downgrade, _line_residuals, _recheck
 
 
 # --------------------------------------------------------------------------- solution
@@ -132,83 +128,4 @@ def _failure(
     sol.status = Status.ERROR if common["status"].ok else common["status"]
     if rejected is not None:
         sol.info["rejected_theta"] = rejected
-    return sol
-
-
-# --------------------------------------------------------------------------- the gate
-def _finish(
-    data: TrajectoryData,
-    fam: Family,
-    fit: _Fit,
-    theta: FloatArray,
-    residuals: dict[str, float],
-    objective: float,
-    diag: dict[str, Any],
-    common: dict[str, Any],
-    *,
-    strict: bool,
-    note: Any,
-    keep: _Fit | None = None,
-) -> TrajectorySolution:
-    """Pack θ and pass it through the one gate (:func:`optmodels.core.finish`, ``strict``
-    for a solver's claim, see :func:`optmodels.core.gate`). Refused: the failure form
-    (:func:`_failure`, θ kept in ``info["rejected_theta"]``), or with ``keep`` (the
-    misprinted (13)) the numbers under status ERROR, packed with the fit ``keep``.
-    Accepted: :func:`~.verify._downgrade` (coarse times, far epoch). ``diag`` goes to
-    ``info`` except for a refused solver point."""
-    sol = _package(data, fam, fit, theta, residuals, objective, common)
-
-    def reject(s: TrajectorySolution) -> TrajectorySolution:
-        failed = dict(common, status=s.status, message=s.message)
-        if keep is not None:
-            out = _package(data, fam, keep, theta, residuals, objective, failed)
-        else:
-            out = _failure(data, fam, fit, residuals, failed, theta)
-        if not strict:
-            out.info.update(diag)
-        return out
-
-    sol = finish(sol, strict=strict, note=note, reject=reject)
-    if sol.ok:
-        sol.status, text = _downgrade(data, sol.status, diag)
-        if text:
-            sol.message += "; " + text
-        sol.info.update(diag)
-    return sol
-
-
-def _solve_note(v: Verdict) -> str:
-    return f"verification failed: {v.key} = {v.worst:.2e} > {VERIFY_TOL:g}"
-
-
-def _finish_solve(
-    data: TrajectoryData,
-    fam: Family,
-    fit: _Fit,
-    theta: FloatArray,
-    lines: tuple[FloatArray, FloatArray, FloatArray, FloatArray] | None,
-    common: dict[str, Any],
-) -> TrajectorySolution:
-    """End of :func:`~.generic.solve` for a finite solver point θ (and the solver's own
-    lines, constrained formulation): the re-check against the original problem
-    (stationarity; the equalities of the family by the lines), the one gate in its strict
-    form (a claimed optimum above VERIFY_TOL is OPTIMAL_INACCURATE if it was OPTIMAL and
-    stays within REJECT_TOL, else refused), then the downgrades of :func:`_finish`."""
-    obj, stat, diag = _recheck(data, fam, fit, theta)
-    std = np.sqrt(np.diagonal(fit.cov, axis1=1, axis2=2)).T
-    residuals = (
-        {"shared_start": 0.0, "shared_velocity": 0.0}
-        if lines is None
-        else _line_residuals(_stats(data), fam, *lines, std)
-    )
-    residuals["stationarity"] = stat
-    sol = _finish(
-        data, fam, fit, theta, residuals, obj, diag, common, strict=True, note=_solve_note
-    )
-    if lines is not None and sol.ok:
-        sol.info["lines"] = {
-            "position": lines[0],
-            "velocity": lines[1],
-            "at_time": (lines[2][:, 0] + data.epoch),
-        }
     return sol

@@ -3,7 +3,10 @@ notes): the exact Newton step to the least-squares optimum ("stationarity"), the
 violation of the family's equalities by a generic solve's lines, the tolerances
 :data:`VERIFY_TOL` / :data:`REJECT_TOL`, and the downgrade rules for coarse times
 (:data:`~optmodels.trajectories.moments.TIME_RESOLUTION_WARN`) and a far epoch
-(:data:`EXTRAPOLATION_WARN`, :data:`EXTRAPOLATION_MAX`).
+(:data:`EXTRAPOLATION_WARN`, :data:`EXTRAPOLATION_MAX`); and the end of every solve and
+closed form: :func:`_finish` (the one gate :func:`optmodels.core.finish` on these NumPy
+residuals, then the coarse-time / far-epoch downgrade) and :func:`_finish_solve` (a
+generic solve's point: re-check, line residuals, strict gate).
 """
 
 from __future__ import annotations
@@ -14,10 +17,11 @@ import numpy as np
 
 from optmodels.core import REJECT_TOL as REJECT_TOL
 from optmodels.core import VERIFY_TOL as VERIFY_TOL
-from optmodels.core import FloatArray, ProblemError, Status
+from optmodels.core import FloatArray, ProblemError, Status, Verdict, finish
 from optmodels.trajectories.data import Family, TrajectoryData
 from optmodels.trajectories.fits import _Fit
 from optmodels.trajectories.moments import EPS, TIME_RESOLUTION_WARN, _per, _Stats, _stats
+from optmodels.trajectories.solution import TrajectorySolution, _failure, _package
 
 #: Relative violation (equalities, stationarity) above which a solver's claimed optimum
 #: is downgraded by :func:`solve`: OPTIMAL → OPTIMAL_INACCURATE, and OPTIMAL_INACCURATE →
@@ -170,3 +174,82 @@ def _line_residuals(
                 gap = np.abs(s[j] - s[r]) / ss
             ws = max(ws, float(np.max(gap)))
     return {"shared_start": ws, "shared_velocity": wv}
+
+
+# --------------------------------------------------------------------------- the gate
+def _finish(
+    data: TrajectoryData,
+    fam: Family,
+    fit: _Fit,
+    theta: FloatArray,
+    residuals: dict[str, float],
+    objective: float,
+    diag: dict[str, Any],
+    common: dict[str, Any],
+    *,
+    strict: bool,
+    note: Any,
+    keep: _Fit | None = None,
+) -> TrajectorySolution:
+    """Pack θ and pass it through the one gate (:func:`optmodels.core.finish`, ``strict``
+    for a solver's claim, see :func:`optmodels.core.gate`). Refused: the failure form
+    (:func:`_failure`, θ kept in ``info["rejected_theta"]``), or with ``keep`` (the
+    misprinted (13)) the numbers under status ERROR, packed with the fit ``keep``.
+    Accepted: :func:`_downgrade` (coarse times, far epoch). ``diag`` goes to
+    ``info`` except for a refused solver point."""
+    sol = _package(data, fam, fit, theta, residuals, objective, common)
+
+    def reject(s: TrajectorySolution) -> TrajectorySolution:
+        failed = dict(common, status=s.status, message=s.message)
+        if keep is not None:
+            out = _package(data, fam, keep, theta, residuals, objective, failed)
+        else:
+            out = _failure(data, fam, fit, residuals, failed, theta)
+        if not strict:
+            out.info.update(diag)
+        return out
+
+    sol = finish(sol, strict=strict, note=note, reject=reject)
+    if sol.ok:
+        sol.status, text = _downgrade(data, sol.status, diag)
+        if text:
+            sol.message += "; " + text
+        sol.info.update(diag)
+    return sol
+
+
+def _solve_note(v: Verdict) -> str:
+    return f"verification failed: {v.key} = {v.worst:.2e} > {VERIFY_TOL:g}"
+
+
+def _finish_solve(
+    data: TrajectoryData,
+    fam: Family,
+    fit: _Fit,
+    theta: FloatArray,
+    lines: tuple[FloatArray, FloatArray, FloatArray, FloatArray] | None,
+    common: dict[str, Any],
+) -> TrajectorySolution:
+    """End of :func:`~.generic.solve` for a finite solver point θ (and the solver's own
+    lines, constrained formulation): the re-check against the original problem
+    (stationarity; the equalities of the family by the lines), the one gate in its strict
+    form (a claimed optimum above VERIFY_TOL is OPTIMAL_INACCURATE if it was OPTIMAL and
+    stays within REJECT_TOL, else refused), then the downgrades of :func:`_finish`."""
+    obj, stat, diag = _recheck(data, fam, fit, theta)
+    std = np.sqrt(np.diagonal(fit.cov, axis1=1, axis2=2)).T
+    residuals = (
+        {"shared_start": 0.0, "shared_velocity": 0.0}
+        if lines is None
+        else _line_residuals(_stats(data), fam, *lines, std)
+    )
+    residuals["stationarity"] = stat
+    sol = _finish(
+        data, fam, fit, theta, residuals, obj, diag, common, strict=True, note=_solve_note
+    )
+    if lines is not None and sol.ok:
+        sol.info["lines"] = {
+            "position": lines[0],
+            "velocity": lines[1],
+            "at_time": (lines[2][:, 0] + data.epoch),
+        }
+    return sol

@@ -3,6 +3,7 @@ the plane along a radar track with plane-change detection (issue 19)."""
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -157,50 +158,61 @@ def _crb(sc: scenarios.ManeuverScenario, n: int | None = None) -> tuple[float, f
     return c.angle_rms, c.offset_std
 
 
-def run_plane_demo(
-    out: Path, *, runs: int = 200, seed: int = 0, progress: bool = False
-) -> dict[str, Any]:
-    """Paper 000's example end to end: figures 1-4, Monte Carlo against the CRB.
+@dataclass
+class _MonteCarlo:
+    """The errors of ``runs`` whole sequences (runs × steps) and their alarms."""
 
-    Writes ``out/fig1_trajectory.png`` ... ``out/fig4_offset_error.png``,
-    ``out/radius_bound.png``, ``out/report.md`` and ``out/summary.json``; returns the
-    summary. ``runs`` Monte Carlo runs of the whole 10 s sequence (seeded from ``seed``).
-    """
-    out.mkdir(parents=True, exist_ok=True)
-    rng = np.random.default_rng(seed)
-    sc = scenarios.paper_plane_example(rng)
-    seq = plane.identify_sequence(sc.times, sc.points, sc.cov, start=2.0, resolve_every=100)
-    ang1, off1 = plane.plane_errors(seq.normal, seq.offset, sc.normal, sc.offset)
-    crb_ang, crb_off = np.array([_crb(sc, int(n)) for n in seq.n_points]).T
+    ang: np.ndarray
+    off: np.ndarray
+    paper_alarm: np.ndarray
+    chi2_alarm: np.ndarray
+    seq_time: np.ndarray
 
-    # Monte Carlo over whole sequences
-    ang = np.empty((runs, len(seq.times)))
-    off = np.empty_like(ang)
-    paper_alarm = np.zeros(runs, dtype=bool)
-    chi2_alarm = np.zeros(runs, dtype=bool)
-    seq_time = np.empty(runs)
+    @property
+    def runs(self) -> int:
+        return len(self.seq_time)
+
+    @property
+    def rms_ang(self) -> np.ndarray:
+        return np.sqrt(np.mean(self.ang**2, axis=0))
+
+    @property
+    def rms_off(self) -> np.ndarray:
+        return np.sqrt(np.mean(self.off**2, axis=0))
+
+
+def _monte_carlo(rng: np.random.Generator, runs: int, steps: int, progress: bool) -> _MonteCarlo:
+    """``runs`` sequences of the paper's example (closed form at every step from 2 s)."""
+    mc = _MonteCarlo(
+        ang=np.empty((runs, steps)),
+        off=np.empty((runs, steps)),
+        paper_alarm=np.zeros(runs, dtype=bool),
+        chi2_alarm=np.zeros(runs, dtype=bool),
+        seq_time=np.empty(runs),
+    )
     for k in tqdm(range(runs), desc="plane Monte Carlo", disable=not progress):
         s = scenarios.paper_plane_example(rng)
         q = plane.identify_sequence(s.times, s.points, s.cov, start=2.0)
-        ang[k], off[k] = plane.plane_errors(q.normal, q.offset, s.normal, s.offset)
-        paper_alarm[k] = not np.all(q.paper_planar)
-        chi2_alarm[k] = not np.all(q.planar)
-        seq_time[k] = q.solve_time
-    rms_ang = np.sqrt(np.mean(ang**2, axis=0))
-    rms_off = np.sqrt(np.mean(off**2, axis=0))
+        mc.ang[k], mc.off[k] = plane.plane_errors(q.normal, q.offset, s.normal, s.offset)
+        mc.paper_alarm[k] = not np.all(q.paper_planar)
+        mc.chi2_alarm[k] = not np.all(q.planar)
+        mc.seq_time[k] = q.solve_time
+    return mc
 
-    # the full NLP and the closed form on the first run at 10 s
-    data = plane.PlaneData(sc.points, sc.cov)
-    cf = plane.closed_form(data)
-    full = plane.solve(data, "full")
-    red = plane.solve(data, "reduced")
-    test = plane.planarity_test(data, cf)
 
-    # CRB at 10 s against the radius the paper does not give
+def _figures(
+    out: Path,
+    sc: scenarios.ManeuverScenario,
+    seq: plane.PlaneSequence,
+    mc: _MonteCarlo,
+    crb: tuple[np.ndarray, np.ndarray],
+) -> dict[str, Path]:
+    """Figures 1-4 (the first run's errors against the CRB and the Monte Carlo RMS) and
+    the CRB at 10 s against the radius the paper does not give."""
+    ang1, off1 = plane.plane_errors(seq.normal, seq.offset, sc.normal, sc.offset)
     radii = np.linspace(500, 5000, 46)
     rb = np.array([_crb(scenarios.paper_plane_example(0, radius=r)) for r in radii])
-
-    figs = {
+    return {
         "fig1": plots.plane_trajectory(out / "fig1_trajectory.png", sc.truth, sc.points),
         "fig2": plots.plane_statistic(
             out / "fig2_statistic.png",
@@ -214,8 +226,8 @@ def run_plane_demo(
             out / "fig3_angle_error.png",
             seq.times,
             ang1 * 1e3,
-            crb_ang * 1e3,
-            mc_rms=rms_ang * 1e3,
+            crb[0] * 1e3,
+            mc_rms=mc.rms_ang * 1e3,
             ylabel="normal angle error, mrad",
             title="Fig. 3: error of the normal's direction",
         ),
@@ -223,8 +235,8 @@ def run_plane_demo(
             out / "fig4_offset_error.png",
             seq.times,
             np.abs(off1),
-            crb_off,
-            mc_rms=rms_off,
+            crb[1],
+            mc_rms=mc.rms_off,
             ylabel="|error of a|, m",
             title="Fig. 4: error of the offset a",
         ),
@@ -232,25 +244,38 @@ def run_plane_demo(
             out / "radius_bound.png", radii, rb[:, 0], rb[:, 1], scenarios.PAPER_RADIUS
         ),
     }
-    mc_rows = [
+
+
+def _mc_rows(mc: _MonteCarlo, crb: tuple[np.ndarray, np.ndarray]) -> list[dict[str, Any]]:
+    """The Monte Carlo at 10 s next to the CRB and the paper's numbers."""
+    runs = mc.runs
+    return [
         {
             "quantity": "normal angle error, mrad",
-            "MC RMS": rms_ang[-1] * 1e3,
-            "MC mean": float(np.mean(ang[:, -1])) * 1e3,
-            "MC RMS std. error": rms_ang[-1] * 1e3 / np.sqrt(2 * runs),
-            "CRB (RMS)": crb_ang[-1] * 1e3,
+            "MC RMS": mc.rms_ang[-1] * 1e3,
+            "MC mean": float(np.mean(mc.ang[:, -1])) * 1e3,
+            "MC RMS std. error": mc.rms_ang[-1] * 1e3 / np.sqrt(2 * runs),
+            "CRB (RMS)": crb[0][-1] * 1e3,
             "paper": 1.4,
         },
         {
             "quantity": "offset error, m",
-            "MC RMS": rms_off[-1],
-            "MC mean": float(np.mean(np.abs(off[:, -1]))),
-            "MC RMS std. error": rms_off[-1] / np.sqrt(2 * runs),
-            "CRB (RMS)": crb_off[-1],
+            "MC RMS": mc.rms_off[-1],
+            "MC mean": float(np.mean(np.abs(mc.off[:, -1]))),
+            "MC RMS std. error": mc.rms_off[-1] / np.sqrt(2 * runs),
+            "CRB (RMS)": crb[1][-1],
             "paper": 2.0,
         },
     ]
-    solver_rows = [
+
+
+def _solver_rows(data: plane.PlaneData) -> tuple[list[dict[str, Any]], plane.PlanarityTest]:
+    """The closed form, the reduced and the full NLP on one data set, and the planarity
+    test there."""
+    cf = plane.closed_form(data)
+    full = plane.solve(data, "full")
+    red = plane.solve(data, "reduced")
+    rows = [
         {
             "method": s.method,
             "status": s.status.value,
@@ -263,6 +288,28 @@ def run_plane_demo(
         }
         for s in (cf, red, full)
     ]
+    return rows, plane.planarity_test(data, cf)
+
+
+def run_plane_demo(
+    out: Path, *, runs: int = 200, seed: int = 0, progress: bool = False
+) -> dict[str, Any]:
+    """Paper 000's example end to end: figures 1-4, Monte Carlo against the CRB.
+
+    Writes ``out/fig1_trajectory.png`` ... ``out/fig4_offset_error.png``,
+    ``out/radius_bound.png``, ``out/report.md`` and ``out/summary.json``; returns the
+    summary. ``runs`` Monte Carlo runs of the whole 10 s sequence (seeded from ``seed``).
+    """
+    out.mkdir(parents=True, exist_ok=True)
+    rng = np.random.default_rng(seed)
+    sc = scenarios.paper_plane_example(rng)
+    seq = plane.identify_sequence(sc.times, sc.points, sc.cov, start=2.0, resolve_every=100)
+    crb_ang, crb_off = np.array([_crb(sc, int(n)) for n in seq.n_points]).T
+    mc = _monte_carlo(rng, runs, len(seq.times), progress)
+    # the full NLP and the closed form on the first run at 10 s
+    solver_rows, test = _solver_rows(plane.PlaneData(sc.points, sc.cov))
+    figs = _figures(out, sc, seq, mc, (crb_ang, crb_off))
+    mc_rows = _mc_rows(mc, (crb_ang, crb_off))
     gen = seq.generic or {}
     gen_err = float(np.nanmax(plane.angle_error(gen["normal"], seq.normal[gen["index"]])))
     summary = {
@@ -272,12 +319,28 @@ def run_plane_demo(
         "monte_carlo": mc_rows,
         "solvers": solver_rows,
         "planarity_at_10s": test.to_dict(),
-        "false_alarm_paper_rule": float(np.mean(paper_alarm)),
-        "false_alarm_chi2": float(np.mean(chi2_alarm)),
-        "sequence_closed_form_time_median_s": float(np.median(seq_time)),
+        "false_alarm_paper_rule": float(np.mean(mc.paper_alarm)),
+        "false_alarm_chi2": float(np.mean(mc.chi2_alarm)),
+        "sequence_closed_form_time_median_s": float(np.median(mc.seq_time)),
         "sequence_generic_vs_closed_form_max_angle_rad": gen_err,
         "figures": {k: str(v.name) for k, v in figs.items()},
     }
+    report = _report(mc, mc_rows, solver_rows, gen_err)
+    track_md, track_summary = run_track_demo(out, seed=seed)
+    summary["track"] = track_summary
+    write_json(out / "summary.json", summary)
+    (out / "report.md").write_text(report + track_md)
+    return summary
+
+
+def _report(
+    mc: _MonteCarlo,
+    mc_rows: list[dict[str, Any]],
+    solver_rows: list[dict[str, Any]],
+    gen_err: float,
+) -> str:
+    """The report's section of the paper's example (Markdown)."""
+    runs = mc.runs
     fmt = {
         "MC RMS": ".3f",
         "MC mean": ".3f",
@@ -285,7 +348,7 @@ def run_plane_demo(
         "CRB (RMS)": ".3f",
         "paper": ".1f",
     }
-    report = f"""# Plane of maneuver (paper 000): the paper's example
+    return f"""# Plane of maneuver (paper 000): the paper's example
 
 Circle at 500 m/s in the vertical plane OXZ, centre 5000 m away at 45° elevation,
 σ² = 625 m² per axis, 100 Hz for 10 s, identification from 2 s on. Radius (not given in
@@ -301,8 +364,8 @@ on the normal after 10 s (see `radius_bound.png`).
 The statistic Λ_min is χ² with N − 3 degrees of freedom. The paper's rule (1.17)
 √(2Λ) > √(2N) + 2 has a false-alarm probability of about 2 %, not 0.3 %; the corrected
 threshold is χ²_(N−3)(0.997). Over the {runs} runs, the paper's rule raised an alarm at
-some step of the 8 s sequence in {100 * np.mean(paper_alarm):.1f} % of the runs, the
-corrected one in {100 * np.mean(chi2_alarm):.1f} % (each step is a test, so a sequence
+some step of the 8 s sequence in {100 * np.mean(mc.paper_alarm):.1f} % of the runs, the
+corrected one in {100 * np.mean(mc.chi2_alarm):.1f} % (each step is a test, so a sequence
 alarm is more frequent than the per-step level).
 
 ## Figs. 3 and 4: errors of the plane
@@ -320,12 +383,7 @@ bound for every radius (≥ 3.3 m, `radius_bound.png`): a single run's reading.
 ## Closed form vs generic solves (first run, N = 1000)
 
 {markdown_table(solver_rows, list(solver_rows[0]))}
-The sequential closed form takes {1e3 * np.median(seq_time):.2f} ms for all 801 steps
+The sequential closed form takes {1e3 * np.median(mc.seq_time):.2f} ms for all 801 steps
 (median of {runs} runs); the warm-started generic re-solves every 100 steps agree with it
 to {gen_err:.1e} rad.
 """
-    track_md, track_summary = run_track_demo(out, seed=seed)
-    summary["track"] = track_summary
-    write_json(out / "summary.json", summary)
-    (out / "report.md").write_text(report + track_md)
-    return summary

@@ -58,8 +58,9 @@ The skeleton of every problem package (``docs/architecture.md``, "Adding a probl
 * :mod:`~optmodels.plane.solution`: :class:`PlaneSolution` and its failure form.
 * :mod:`~optmodels.plane.verify`: the re-check of every estimate against (1.2)-(1.3) and
   the gate.
-* :mod:`~optmodels.plane.generic`: the CasADi formulations (full, reduced), their cache and
-  the multistart :func:`solve`.
+* :mod:`~optmodels.plane.generic`: the NLPs in the back-end's cache and the multistart
+  :func:`solve`; their CasADi formulations (full (1.2)-(1.3) with its O(N) derivatives,
+  reduced (1.12)-(1.13)) in :mod:`~optmodels.plane.formulations`.
 * :mod:`~optmodels.plane.closedform`: :func:`closed_form` (1.5)-(1.8),
   :func:`change_of_basis`, :func:`scatter_matrix`, :func:`svd_fit`.
 
@@ -72,8 +73,9 @@ The problem's own modules:
   stream: sliding windows (:mod:`~optmodels.plane.windows`, running sums with removal), the
   plane-change test (:mod:`~optmodels.plane.detector`: a Chow-type likelihood-ratio test
   with its false-alarm rate per hour bounded, and the detectable tilt), general D_i
-  through :func:`fit_general` (its steps in :mod:`~optmodels.plane.track_steps`). Named
-  ``tracking`` so that it does not shadow the function.
+  through :func:`fit_general` (its argument checks in :mod:`~optmodels.plane.track_setup`,
+  its steps in :mod:`~optmodels.plane.track_steps`). Named ``tracking`` so that it does
+  not shadow the function.
 * :mod:`~optmodels.plane.general`: :func:`fit_general`, the ML plane for general SPD D_i
   (Newton on the sphere for the profile of (1.12)), warm-startable;
   :mod:`~optmodels.plane.lines`: :func:`line_test`, the resolved test;

@@ -381,6 +381,26 @@ def fit_general(
         Naming the argument: shapes, non-finite values, covariances not SPD, identical or
         collinear-to-round-off points, ``tol``/``max_iter``/``level`` out of range.
     """
+    pts, cv, tol, max_iter, lv, start = _validate(
+        points, cov, normal0=normal0, tol=tol, max_iter=max_iter, level=level
+    )
+    sc = _scaled(pts, cv, start)
+    starts = [start / np.linalg.norm(start)] if start is not None else _cold_starts(sc)
+    phi, n, converged, curv, iters = _best_start(sc, starts, tol, max_iter)
+    return _package(sc, lv, n, phi, converged, curv, iters, max_iter)
+
+
+def _validate(
+    points: ArrayLike,
+    cov: ArrayLike,
+    *,
+    normal0: ArrayLike | None,
+    tol: float,
+    max_iter: int,
+    level: float,
+) -> tuple[FloatArray, FloatArray, float, int, float, FloatArray | None]:
+    """The arguments of :func:`fit_general` checked: points (N, 3), covariances (N, 3, 3)
+    SPD (a (3, 3) broadcast), ``tol``, ``max_iter``, ``level`` and the warm start."""
     pts = as_finite_array(f"{_WHERE} points", points, shape=(None, 3), max_abs=MAX_MAGNITUDE)
     npts = pts.shape[0]
     if npts < 3:
@@ -399,9 +419,31 @@ def fit_general(
         start = as_finite_array(f"{_WHERE} normal0", normal0, shape=(3,), max_abs=MAX_MAGNITUDE)
         if not float(np.linalg.norm(start)) > 0:
             raise ProblemError(f"{_WHERE} normal0: must be non-zero")
+    return pts, cv, tol, max_iter, lv, start
 
-    # centre and scale (translation and scaling map planes to planes; (1.2) unchanged
-    # when the covariances are scaled with the points)
+
+@dataclass(frozen=True)
+class _ScaledFit:
+    """The data of :func:`fit_general` centred and scaled to unit RMS spread (translation
+    and scaling map planes to planes; (1.2) is unchanged when the covariances are scaled
+    with the points): ``y`` (N, 3), ``c`` (N, 3, 3) symmetrised, their traces ``tr``."""
+
+    y: FloatArray
+    c: FloatArray
+    tr: FloatArray
+    centre: FloatArray
+    scale: float
+
+    @property
+    def n_points(self) -> int:
+        return int(self.y.shape[0])
+
+
+def _scaled(pts: FloatArray, cv: FloatArray, start: FloatArray | None) -> _ScaledFit:
+    """Centre and scale the data; refuse identical points, points collinear to round-off
+    (on a cold start only: a warm start skips that SVD) and covariances
+    that float64 cannot weight."""
+    npts = pts.shape[0]
     centre = pts.mean(axis=0)
     y = pts - centre
     scale = float(np.sqrt(np.mean(np.sum(y * y, axis=1))))
@@ -423,33 +465,56 @@ def fit_general(
             f"{_WHERE} cov: variances outside 1e±100 of the spread² of the "
             "points (float64 cannot hold the weights); check units"
         )
+    return _ScaledFit(y=y, c=c, tr=tr, centre=centre, scale=scale)
 
-    if start is not None:
-        starts = [start / np.linalg.norm(start)]
-    else:
-        _, axes = np.linalg.eigh(y.T @ y)
-        dm = np.mean(c, axis=0)
-        m, h = np.linalg.eigh(dm)
-        tw = h / np.sqrt(m)
-        _, gv = np.linalg.eigh(tw.T @ (y.T @ y) @ tw)
-        n_cf = tw @ gv[:, 0]
-        starts = [n_cf / np.linalg.norm(n_cf), axes[:, 0], axes[:, 1], axes[:, 2]]
 
+def _cold_starts(sc: _ScaledFit) -> list[FloatArray]:
+    """The cold starts: the closed form (1.14)-(1.15) with the mean covariance, then the
+    three principal axes of the scatter."""
+    y, c = sc.y, sc.c
+    _, axes = np.linalg.eigh(y.T @ y)
+    dm = np.mean(c, axis=0)
+    m, h = np.linalg.eigh(dm)
+    tw = h / np.sqrt(m)
+    _, gv = np.linalg.eigh(tw.T @ (y.T @ y) @ tw)
+    n_cf = tw @ gv[:, 0]
+    return [n_cf / np.linalg.norm(n_cf), axes[:, 0], axes[:, 1], axes[:, 2]]
+
+
+def _best_start(
+    sc: _ScaledFit, starts: list[FloatArray], tol: float, max_iter: int
+) -> tuple[float, FloatArray, bool, float, int]:
+    """Newton from every start; the lowest converged (1.12) is kept (a converged run
+    before any that did not): ``(Φ, n, converged, curvature, iterations of all runs)``."""
     best: tuple[float, FloatArray, bool, float] | None = None
     iters = 0
     for s in starts:
-        n, it, conv, curv = _newton(y, c, s, tol, max_iter)
+        n, it, conv, curv = _newton(sc.y, sc.c, s, tol, max_iter)
         iters += it
-        val = _profile(y, c, n)
+        val = _profile(sc.y, sc.c, n)
         key = (not conv, val)
         if best is None or key < (not best[2], best[0]):
             best = (val, n, conv, curv)
     assert best is not None
-    phi, n, converged, curv = best
+    return (*best, iters)
 
+
+def _package(
+    sc: _ScaledFit,
+    lv: float,
+    n: FloatArray,
+    phi: float,
+    converged: bool,
+    curv: float,
+    iters: int,
+    max_iter: int,
+) -> GeneralFit:
+    """The re-check of the kept normal (:func:`_check`), its status, the line test behind
+    ``resolved`` (:mod:`optmodels.plane.lines`), the plane in the data's frame."""
+    y, c, npts = sc.y, sc.c, sc.n_points
     num_err, curv_chk, a_scaled = _check(y, c, n)
     curv = curv_chk if np.isfinite(curv_chk) else curv
-    normal, offset = _canonical_sign(n, scale * a_scaled + float(n @ centre))
+    normal, offset = _canonical_sign(n, sc.scale * a_scaled + float(n @ sc.centre))
 
     status = verified_status(Status.OPTIMAL, num_err)
     message = ""
@@ -469,7 +534,7 @@ def fit_general(
 
     line_dof = 2 * npts - 4
     line_thr = _chi2_ppf(lv, line_dof)
-    lower, lower_dir = _line_lower_bound(y, tr)
+    lower, lower_dir = _line_lower_bound(y, sc.tr)
     if lower > line_thr:  # resolved beyond doubt: no need for the exact line fit
         line_stat, line_dir, above = lower, lower_dir, True
     else:

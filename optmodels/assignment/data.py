@@ -1,6 +1,6 @@
 r"""The problem of paper 004 in NumPy: the data, the model (5), (8) of a hypothesis
-H = (π, γ) of (13)-(14), its score (13), the result type, and every NumPy check of an
-answer against them (the MILP point's re-check :func:`_recheck` included).
+H = (π, γ) of (13)-(14) and its score (13), the objective every answer is re-checked
+against.
 
 Model (the paper leaves the group likelihood and the prior open; this is the default):
 
@@ -68,7 +68,7 @@ _CHUNK = 2048
 class AssignmentData:
     """Predictions ``means`` (Q, d), ``covs`` (Q, d, d); ``measurements`` (N, d) with noise
     ``meas_cov``: one (d, d) for all or one per measurement (N, d, d), R_i (e.g. from
-    :func:`~optmodels.assignment.sensor.polar_measurement_covs`); surveillance ``volume``
+    :func:`~optmodels.assignment.polar.polar_measurement_covs`); surveillance ``volume``
     Δx (m^d); detection probability ``pd`` ∈ (0, 1); the merge prior: a per-merge factor
     ``rho`` ∈ (0, 1] (the paper's constant), or instead a ``sensor``
     (:class:`~optmodels.assignment.sensor.Resolution`: the prior of a group from its
@@ -228,21 +228,9 @@ class AssignmentData:
 
 
 # ----------------------------------------------------------------------------- likelihoods
-def _logpdf(x: FloatArray, mean: FloatArray, cov: FloatArray) -> FloatArray:
-    """ln N(x_i; mean, cov) for all rows of x (computed in logs; never log 0)."""
-    chol = np.linalg.cholesky(cov)
-    z = np.linalg.solve(chol, (x - mean).T)
-    d = x.shape[1]
-    return (
-        -0.5 * np.sum(z**2, axis=0)
-        - np.sum(np.log(np.diag(chol)))
-        - 0.5 * d * math.log(2 * math.pi)
-    )
-
-
 def block_log_prior(data: AssignmentData, group: tuple[int, ...], detected: bool) -> float:
     """A block's share of ln P(H): the user's ``block_log_prior``, or with a sensor
-    ln w(S) (:func:`~optmodels.assignment.sensor.log_group_weight`: ln P_conn(S) −
+    ln w(S) (:func:`~optmodels.assignment.merge_prior.log_group_weight`: ln P_conn(S) −
     Σ_{i<j∈S} ln(1 − u_ij); ln(u_ij/(1 − u_ij)) for a pair, 0 for a singleton), else the
     constant (|S| − 1) ln ρ; plus ln P_D if detected, else ln(1 − P_D)."""
     as_instance("assignment.block_log_prior data", data, AssignmentData)

@@ -450,7 +450,7 @@ TABLES: dict[str, TableSpec] = {
     "optmodels.trajectories.solution.TrajectorySolution": TableSpec(
         "object", (Column("start"), Column("velocity"))
     ),
-    "optmodels.assignment.data.AssignmentSolution": TableSpec(
+    "optmodels.assignment.solution.AssignmentSolution": TableSpec(
         "measurement", (Column("assignment", "group"),)
     ),
     "optmodels.fusion.two_site_ml.JointMLSolution": TableSpec(

@@ -13,7 +13,7 @@ import pytest
 
 from optmodels import ProblemError
 from optmodels import assignment as asg
-from optmodels.assignment import data as asg_data
+from optmodels.assignment import groups as asg_groups
 from optmodels.assignment import milp as asg_milp
 from optmodels.core import REJECT_TOL, VERIFY_TOL, SolveError, Status
 from solvers_cmp.assignment import instance
@@ -329,7 +329,7 @@ def test_size_guards_refuse_before_allocating(monkeypatch: pytest.MonkeyPatch) -
     with pytest.raises(ProblemError, match="candidate groups") as err:
         asg.solve(dense)  # at the default limit
     assert "max_group_size" in str(err.value) and str(asg.MAX_CANDIDATE_GROUPS) in str(err.value)
-    monkeypatch.setattr(asg_data, "MAX_CANDIDATE_GROUPS", 2000)  # same path, quicker to trace
+    monkeypatch.setattr(asg_groups, "MAX_CANDIDATE_GROUPS", 2000)  # same path, quicker to trace
     for data in (dense, dense_scene(200, 3.0, gate=None)):
         tracemalloc.start()
         with pytest.raises(ProblemError, match="candidate groups"):

@@ -14,6 +14,8 @@ import pytest
 
 from optmodels import assignment as asg
 from optmodels.assignment import data as asg_data
+from optmodels.assignment import merge_prior as asg_merge_prior
+from optmodels.assignment import quadrature as asg_quadrature
 from optmodels.assignment import sensor as asg_sensor
 from optmodels.assignment.sensor import PAIR_NEGLECT, Resolution
 from optmodels.core import ProblemError, Status
@@ -102,7 +104,7 @@ def test_candidate_groups_follow_the_sensor() -> None:
             if len(seen) == k:
                 want.add(g)
             elif k >= 2:  # excluded: some neglected pair in every spanning tree
-                assert asg_sensor._log_max_tree(dense, g) <= math.log(PAIR_NEGLECT) + 1e-9
+                assert asg_merge_prior._log_max_tree(dense, g) <= math.log(PAIR_NEGLECT) + 1e-9
     assert got == want and any(len(g) >= 3 for g in got) and len(got) < 2**9 - 1
     big = scan(1000, 0)
     data = asg.AssignmentData(
@@ -218,7 +220,7 @@ def test_memory_guards_refuse_before_allocating(monkeypatch: pytest.MonkeyPatch)
     res = Resolution(range=150.0, azimuth=math.radians(1.0), site=np.zeros(2))
     means, covs = _polar_scene(rng, 40)
     full = res.pair_probabilities(means, covs)
-    monkeypatch.setattr(asg_sensor, "QUADRATURE_BYTES", 4096)
+    monkeypatch.setattr(asg_quadrature, "QUADRATURE_BYTES", 4096)
     np.testing.assert_allclose(res.pair_probabilities(means, covs), full, rtol=1e-13)
     monkeypatch.setattr(asg_sensor, "MAX_PAIR_TABLE_BYTES", 40 * 40 * 8 - 1)
     with pytest.raises(ProblemError, match="gated_pairs"):
@@ -226,7 +228,7 @@ def test_memory_guards_refuse_before_allocating(monkeypatch: pytest.MonkeyPatch)
     d = asg.AssignmentData(
         means, covs, means[:5], np.eye(2) * 100.0, 1e9, 0.9, sensor=res, max_group_size=2
     )
-    monkeypatch.setattr(asg_data, "MAX_PAIR_TABLE_BYTES", 40 * 40 * 8 - 1)
+    monkeypatch.setattr(asg_sensor, "MAX_PAIR_TABLE_BYTES", 40 * 40 * 8 - 1)
     with pytest.raises(ProblemError, match="pair_table"):
         d.pair_unresolved()
     monkeypatch.setattr(asg_data, "MAX_TABLE_ENTRIES", 5 * 40 - 1)

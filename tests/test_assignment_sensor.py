@@ -14,13 +14,13 @@ from scipy.stats import multivariate_normal
 
 from optmodels import assignment as asg
 from optmodels.assignment.data import AssignmentData
-from optmodels.assignment.sensor import (
-    Resolution,
+from optmodels.assignment.merge_prior import connected_probability
+from optmodels.assignment.polar import (
     cartesian_to_polar,
-    connected_probability,
     polar_measurement_covs,
     polar_to_cartesian,
 )
+from optmodels.assignment.sensor import Resolution
 from optmodels.core import ProblemError
 
 SITE = np.array([0.0, 0.0])
@@ -99,7 +99,7 @@ def test_pair_probability_tails_and_limits() -> None:
     assert outside == far == pytest.approx(1e-100, rel=1e-12)
     # box with independent coordinates: Δ ~ N(μ, diag(s²)) (an ellipse with E = I m², in
     # the coordinates' frame, is a disc; use the box directly)
-    from optmodels.assignment.sensor import _box_probability, _interval_prob
+    from optmodels.assignment.quadrature import _box_probability, _interval_prob
 
     mu, s = np.array([[30.0, -0.004]]), np.array([60.0, 0.006])
     got = _box_probability(mu, np.diag(s**2)[None], np.array([100.0, 0.01]))[0]
@@ -495,7 +495,7 @@ def test_column_bounds_from_column_generation_are_valid(seed: int) -> None:
     removing the columns with U_c < L never removes a hypothesis scoring ≥ L; the same
     for the full LP's dual point."""
     from optmodels.assignment import kbest, milp
-    from optmodels.assignment.data import candidate_groups
+    from optmodels.assignment.groups import candidate_groups
 
     d = _radar_case(seed + 5)
     groups = candidate_groups(d)

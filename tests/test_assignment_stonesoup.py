@@ -23,7 +23,8 @@ from stonesoup.types.prediction import GaussianStatePrediction
 from stonesoup.types.state import GaussianState
 from stonesoup.types.track import Track
 
-from optmodels.assignment.sensor import Resolution, polar_measurement_covs
+from optmodels.assignment.polar import polar_measurement_covs
+from optmodels.assignment.sensor import Resolution
 from optmodels.assignment.stonesoup import (
     MergedDetection,
     MergedMeasurementAssociator,

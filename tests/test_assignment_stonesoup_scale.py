@@ -17,7 +17,8 @@ from stonesoup.types.state import GaussianState
 from stonesoup.types.track import Track
 
 from optmodels import assignment as asg
-from optmodels.assignment.sensor import Resolution, polar_measurement_covs
+from optmodels.assignment.polar import polar_measurement_covs
+from optmodels.assignment.sensor import Resolution
 from optmodels.assignment.stonesoup import MergedDetection, MergedMeasurementAssociator
 from optmodels.core import ProblemError
 from solvers_cmp import assignment_tracking as at

@@ -396,7 +396,7 @@ def test_assignment_gap_and_time_limit_reach_highs(monkeypatch: pytest.MonkeyPat
     assert sol.log_score == pytest.approx(best.log_score, rel=1e-9, abs=1e-9)
     assert sorted(map(tuple, sol.partition)) == sorted(map(tuple, best.partition))
     # the old private names still translate the same way
-    from optmodels.assignment import _as_solver, _solver_options
+    from optmodels.assignment.solvers import _as_solver, _solver_options
 
     assert _solver_options("w", "SCIP", 0.1, None, False) == {"scip_params": {"limits/gap": 0.1}}
     assert _as_solver("w", "highs") == "HIGHS"

@@ -13,7 +13,8 @@ import numpy as np
 import pytest
 
 from optmodels import assignment as asg
-from optmodels.assignment.sensor import Resolution, polar_measurement_covs
+from optmodels.assignment.polar import polar_measurement_covs
+from optmodels.assignment.sensor import Resolution
 from tests.test_cli import assert_error, run_many
 
 

@@ -186,9 +186,6 @@ PENDING_SKELETON = {
     ("biasfield", "solution"): "FieldSolution is in problem.py (issue 23 item 2)",
     ("biasfield", "verify._finish"): "the gate is verify._verify (issue 23 item 2)",
     ("biasfield", "generic.solve"): "solve is in selection.py (issue 23 item 2)",
-    ("assignment", "solution"): "AssignmentSolution is in data.py",
-    ("assignment", "verify._finish"): "the gate is data._finish_point",
-    ("assignment", "generic.solve"): "solve is in milp.py",
 }
 
 

@@ -430,7 +430,7 @@ def test_assignment_solve_corrupted_point(
     monkeypatch: pytest.MonkeyPatch, verdicts: list[Verdict], rel: float, expect: Status
 ) -> None:
     """The MILP's objective off by ``rel``: downgraded, then refused, by the gate of
-    :func:`optmodels.assignment.data._finish_point` (the same point through it gives the
+    :func:`optmodels.assignment.verify._finish` (the same point through it gives the
     same solution); ``milp.solve`` still decides inline until it calls that function (see
     the gate slice's report)."""
     data = assignment_case(np.random.default_rng(9))
@@ -444,15 +444,15 @@ def test_assignment_solve_corrupted_point(
 
     monkeypatch.setattr(asg.milp, "solve_problem", corrupted)
     captured: dict[str, Any] = {}
-    real_recheck = asg.data._recheck
+    real_recheck = asg.verify._recheck
 
     def spy_recheck(*args: Any) -> Any:
         captured["args"] = args
         return real_recheck(*args)
 
-    # the re-check's inputs, whether milp.solve calls _recheck itself or _finish_point does
+    # the re-check's inputs, whether milp.solve calls _recheck itself or verify._finish does
     monkeypatch.setattr(asg.milp, "_recheck", spy_recheck, raising=False)
-    monkeypatch.setattr(asg.data, "_recheck", spy_recheck)
+    monkeypatch.setattr(asg.verify, "_recheck", spy_recheck)
     sol = asg.solve(data, model="cvxpy")
     assert sol.status is expect, sol.message
     assert sol.residuals["objective"] == pytest.approx(rel, rel=1e-6)
@@ -465,7 +465,7 @@ def test_assignment_solve_corrupted_point(
         "solve_time": 0.0,
         "iterations": None,
     }
-    via_gate = asg.data._finish_point(
+    via_gate = asg.verify._finish(
         *captured["args"], common=common, gap_reached=None, gap=0.0, info={}
     )
     decided(verdicts, via_gate, expect)

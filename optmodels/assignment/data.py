@@ -1,6 +1,6 @@
 r"""The problem of paper 004 in NumPy: the data, the model (5), (8) of a hypothesis
-H = (π, γ) of (13)-(14), its score (13), the result type, and every NumPy check of an
-answer against them (the MILP point's re-check :func:`_recheck` included).
+H = (π, γ) of (13)-(14) and its score (13), the objective every answer is re-checked
+against.
 
 Model (the paper leaves the group likelihood and the prior open; this is the default):
 
@@ -13,10 +13,14 @@ Model (the paper leaves the group likelihood and the prior open; this is the def
 * ln P(H) = (Q − |π|) ln ρ + Σ_{S∈π}[d_S ln P_D + (1 − d_S) ln(1 − P_D)];
 * score(H) = ln P(H) + Σ_i ln φ_{i,γ(i)}; the MAP hypothesis maximises it.
 
-Holds: :class:`AssignmentData`, :func:`candidate_groups` (the size guard
-:data:`MAX_CANDIDATE_GROUPS`), :func:`block_log_prior`, :func:`log_likelihoods`,
-:func:`score`, the validators :func:`_as_partition` / :func:`_as_assignment`,
-:class:`AssignmentSolution`, :func:`_canonical` and :func:`_recheck`.
+Holds: :class:`AssignmentData` (every argument checked), the likelihoods (5)
+:func:`log_likelihoods` (the dense table, size guard :data:`MAX_TABLE_ENTRIES`) and
+:func:`entry_log_likelihoods` (given entries only), the predicted returns
+:func:`group_moments` / :func:`group_arrays`, the prior :func:`block_log_prior`, the
+objective :func:`score` (13), and the validators :func:`_as_block`, :func:`_as_partition`,
+:func:`_as_assignment`. The candidate groups are in :mod:`~optmodels.assignment.groups`,
+the result type in :mod:`~optmodels.assignment.solution`, the re-check of an answer in
+:mod:`~optmodels.assignment.verify`.
 """
 
 from __future__ import annotations
@@ -28,22 +32,18 @@ from typing import Any
 
 import numpy as np
 import scipy.sparse as sps
-from scipy.special import comb
 
+from optmodels.assignment.merge_prior import log_group_weight
 from optmodels.assignment.sensor import (
-    MAX_PAIR_TABLE_BYTES,
     PAIR_NEGLECT,
     U_FLOOR,
+    PairTable,
     Resolution,
-    log_group_weight,
+    _dense_edges,
 )
 from optmodels.core import (
-    VERIFY_TOL,
     FloatArray,
     ProblemError,
-    Solution,
-    Status,
-    Verdict,
     as_count,
     as_finite_array,
     as_float_array,
@@ -51,76 +51,16 @@ from optmodels.core import (
     as_positive,
     as_probability,
     check_spd_stack,
-    failure,
-    finish,
 )
 
 Partition = list[tuple[int, ...]]
 
-
-#: Size guards (documented in the README). Candidate groups (z_S columns) enumerated at
-#: most; beyond it the gate/max_group_size must be tightened. The count is checked while
-#: the cliques grow, before anything of that size is allocated.
-MAX_CANDIDATE_GROUPS = 100_000
-
-
-# ----------------------------------------------------------------------------- pairs
-class PairTable:
-    """The sensor's pair probabilities u_ij stored for the gated pairs only
-    (:meth:`~optmodels.assignment.sensor.Resolution.gated_pairs`); every other pair is
-    neglected (u_ij ≤ PAIR_NEGLECT, read as U_FLOOR). Indexed like the dense (Q, Q) table
-    (``u[i, j]``, ``u[np.ix_(a, b)]``), which is what the group weights read."""
-
-    def __init__(self, q: int, ii: np.ndarray, jj: np.ndarray, u: FloatArray) -> None:
-        self.q, self.ii, self.jj, self.u = q, ii, jj, u
-        self._map = {(int(a), int(b)): float(v) for a, b, v in zip(ii, jj, u, strict=True)}
-
-    @property
-    def shape(self) -> tuple[int, int]:
-        return (self.q, self.q)
-
-    def _one(self, a: int, b: int) -> float:
-        if a == b:
-            return 1.0
-        return self._map.get((a, b) if a < b else (b, a), U_FLOOR)
-
-    def __getitem__(self, key: Any) -> Any:
-        rows, cols = key
-        if np.ndim(rows) == 0 and np.ndim(cols) == 0:
-            return self._one(int(rows), int(cols))
-        r, c = np.broadcast_arrays(np.asarray(rows, dtype=int), np.asarray(cols, dtype=int))
-        return np.array(
-            [self._one(a, b) for a, b in zip(r.ravel().tolist(), c.ravel().tolist(), strict=True)]
-        ).reshape(r.shape)
-
-    def edges(self, neglect: float = PAIR_NEGLECT) -> tuple[np.ndarray, np.ndarray]:
-        """The pairs (i < j) with u_ij above ``neglect``: the edges of the gating graph."""
-        on = self.u > neglect
-        return self.ii[on], self.jj[on]
-
-    def log_not_merged_total(self) -> float:
-        """Σ_{i<j} ln(1 − u_ij) over every pair (the neglected ones at U_FLOOR)."""
-        rest = self.q * (self.q - 1) // 2 - len(self.u)
-        return float(np.sum(np.log1p(-self.u)) + rest * math.log1p(-U_FLOOR))
-
-    def dense(self, where: str) -> FloatArray:
-        """The (Q, Q) table (diagonal 1), refused above MAX_PAIR_TABLE_BYTES."""
-        if self.q * self.q * 8 > MAX_PAIR_TABLE_BYTES:
-            raise ProblemError(
-                f"{where}: the dense (Q, Q) table for Q = {self.q} needs "
-                f"{self.q * self.q * 8 / 2**30:.3g} GiB; read the gated pairs "
-                f"from AssignmentData.pair_table instead"
-            )
-        out = np.full((self.q, self.q), U_FLOOR)
-        np.fill_diagonal(out, 1.0)
-        out[self.ii, self.jj] = out[self.jj, self.ii] = self.u
-        return out
-
-
-def _dense_edges(u: FloatArray, neglect: float = PAIR_NEGLECT) -> tuple[np.ndarray, np.ndarray]:
-    ii, jj = np.triu_indices(u.shape[0], 1)
-    on = u[ii, jj] > neglect
-    return ii[on], jj[on]
+#: Entries of a dense ln φ table refused by :func:`log_likelihoods` (8 bytes each: 2 GiB),
+#: and the work memory (bytes) of one batch of Cholesky factors.
+MAX_TABLE_ENTRIES = 2**28
+_WORK_BYTES = 64 * 2**20
+#: Groups per batch of the default likelihood (bounds the (groups, N, d, d) work arrays).
+_CHUNK = 2048
 
 
 # ----------------------------------------------------------------------------- data
@@ -128,7 +68,7 @@ def _dense_edges(u: FloatArray, neglect: float = PAIR_NEGLECT) -> tuple[np.ndarr
 class AssignmentData:
     """Predictions ``means`` (Q, d), ``covs`` (Q, d, d); ``measurements`` (N, d) with noise
     ``meas_cov``: one (d, d) for all or one per measurement (N, d, d), R_i (e.g. from
-    :func:`~optmodels.assignment.sensor.polar_measurement_covs`); surveillance ``volume``
+    :func:`~optmodels.assignment.polar.polar_measurement_covs`); surveillance ``volume``
     Δx (m^d); detection probability ``pd`` ∈ (0, 1); the merge prior: a per-merge factor
     ``rho`` ∈ (0, 1] (the paper's constant), or instead a ``sensor``
     (:class:`~optmodels.assignment.sensor.Resolution`: the prior of a group from its
@@ -288,125 +228,9 @@ class AssignmentData:
 
 
 # ----------------------------------------------------------------------------- likelihoods
-def _logpdf(x: FloatArray, mean: FloatArray, cov: FloatArray) -> FloatArray:
-    """ln N(x_i; mean, cov) for all rows of x (computed in logs; never log 0)."""
-    chol = np.linalg.cholesky(cov)
-    z = np.linalg.solve(chol, (x - mean).T)
-    d = x.shape[1]
-    return (
-        -0.5 * np.sum(z**2, axis=0)
-        - np.sum(np.log(np.diag(chol)))
-        - 0.5 * d * math.log(2 * math.pi)
-    )
-
-
-def candidate_groups(
-    data: AssignmentData, *, limit: int | None = None, model_gate: bool = True
-) -> list[tuple[int, ...]]:
-    """Singletons and the groups allowed by ``max_group_size`` and ``group_gate`` (cliques
-    of the gate graph: members pairwise within the gate under K_i + K_j), in
-    lexicographic order by size.
-
-    With a ``sensor`` and no finite ``group_gate`` the gate follows from the resolution
-    model: the groups are the connected subsets of the gating graph (edges: the pairs with
-    u_ij > PAIR_NEGLECT, :meth:`AssignmentData.pair_edges`). A group outside it needs an
-    unresolved neglected pair in every spanning tree, so the prior mass of all variants
-    that use one is at most Σ_neglected u_ij ≤ PAIR_NEGLECT · Q(Q − 1)/2.
-    ``model_gate=False`` ignores that gate (every subset, as without a sensor).
-
-    Raises
-    ------
-    ProblemError
-        If there are more than ``limit`` (default :data:`MAX_CANDIDATE_GROUPS`): refused
-        while the cliques grow (or, without a gate, from the count Σ_s C(Q, s)), before
-        the list or any model of that size is built.
-    """
-    as_instance("assignment.candidate_groups data", data, AssignmentData)
-    limit = (
-        MAX_CANDIDATE_GROUPS
-        if limit is None
-        else as_count("assignment.candidate_groups limit", limit, minimum=1)
-    )
-    q = data.q
-    size = q if data.max_group_size is None else min(q, int(data.max_group_size))
-
-    def refuse(count: str) -> ProblemError:
-        return ProblemError(
-            f"assignment: {count} candidate groups (Q = {q}, max_group_size = "
-            f"{data.max_group_size}, group_gate = {data.group_gate}), above the limit "
-            f"{limit}; tighten group_gate or lower max_group_size (merges of more than a "
-            f"few objects are rarely plausible)"
-        )
-
-    gated = data.group_gate is not None and np.isfinite(data.group_gate)
-    if data._pair_u is not None and not gated and model_gate:
-        return _connected_groups(data, size, limit, refuse)
-    if not gated:
-        total = sum(int(comb(q, k, exact=True)) for k in range(1, size + 1))
-        if total > limit:
-            raise refuse(f"{total:.3g}")
-    ok = np.ones((q, q), dtype=bool)
-    if gated and size >= 2:
-        gate2 = float(data.group_gate) ** 2
-        for i in range(q - 1):  # Mahalanobis distance to the later objects, one batch
-            dm = data.means[i + 1 :] - data.means[i]
-            s = data.covs[i + 1 :] + data.covs[i]
-            d2 = np.einsum("kd,kd->k", dm, np.linalg.solve(s, dm[..., None])[..., 0])
-            ok[i, i + 1 :] = ok[i + 1 :, i] = d2 <= gate2
-    out: list[tuple[int, ...]] = [(j,) for j in range(q)]
-    # grow cliques of the gate graph in lexicographic order; each carries the mask of the
-    # objects adjacent to all its members
-    frontier: list[tuple[tuple[int, ...], np.ndarray]] = [((j,), ok[j]) for j in range(q)]
-    for _ in range(2, size + 1):
-        nxt: list[tuple[tuple[int, ...], np.ndarray]] = []
-        for g, common in frontier:
-            for j in np.flatnonzero(common[g[-1] + 1 :]) + g[-1] + 1:
-                nxt.append(((*g, int(j)), common & ok[j]))
-            if len(out) + len(nxt) > limit:
-                raise refuse(f"more than {limit}")
-        out.extend(g for g, _ in nxt)
-        frontier = nxt
-        if not frontier:
-            break
-    return out
-
-
-def _connected_groups(
-    data: AssignmentData, size: int, limit: int, refuse: Callable[[str], ProblemError]
-) -> list[tuple[int, ...]]:
-    """Singletons and the connected subsets (2 ≤ |S| ≤ ``size``) of the gating graph,
-    sorted within each size; refused above ``limit`` while they grow."""
-    ii, jj = data.pair_edges()
-    out: list[tuple[int, ...]] = [(j,) for j in range(data.q)]
-    if size < 2 or len(ii) == 0:
-        return out
-    nbrs: dict[int, set[int]] = {}
-    for a, b in zip(ii.tolist(), jj.tolist(), strict=True):
-        nbrs.setdefault(a, set()).add(b)
-        nbrs.setdefault(b, set()).add(a)
-    cur = sorted({(a, b) for a, b in zip(ii.tolist(), jj.tolist(), strict=True)})
-    for s_ in range(2, size + 1):
-        if len(out) + len(cur) > limit:
-            raise refuse(f"more than {limit}")
-        out.extend(cur)
-        if s_ == size:
-            break
-        nxt: set[tuple[int, ...]] = set()
-        for g in cur:
-            members = set(g)
-            for v in set().union(*(nbrs[x] for x in g)) - members:
-                nxt.add(tuple(sorted((*g, v))))
-            if len(out) + len(nxt) > limit:
-                raise refuse(f"more than {limit}")
-        if not nxt:
-            break
-        cur = sorted(nxt)
-    return out
-
-
 def block_log_prior(data: AssignmentData, group: tuple[int, ...], detected: bool) -> float:
     """A block's share of ln P(H): the user's ``block_log_prior``, or with a sensor
-    ln w(S) (:func:`~optmodels.assignment.sensor.log_group_weight`: ln P_conn(S) −
+    ln w(S) (:func:`~optmodels.assignment.merge_prior.log_group_weight`: ln P_conn(S) −
     Σ_{i<j∈S} ln(1 − u_ij); ln(u_ij/(1 − u_ij)) for a pair, 0 for a singleton), else the
     constant (|S| − 1) ln ρ; plus ln P_D if detected, else ln(1 − P_D)."""
     as_instance("assignment.block_log_prior data", data, AssignmentData)
@@ -428,6 +252,7 @@ def block_log_prior(data: AssignmentData, group: tuple[int, ...], detected: bool
         if lw is None:
             lw = data._log_w[g] = log_group_weight(data._pair_u, g, data._conn)
         return lw + det
+    assert data.rho is not None, "AssignmentData checks: rho is required without a sensor"
     return (len(group) - 1) * math.log(data.rho) + det
 
 
@@ -535,7 +360,7 @@ def group_arrays(
     )
     for s_ in sorted(set(sizes.tolist())):
         at = np.flatnonzero(sizes == s_)
-        mem = np.array([groups[c] for c in at], dtype=int).reshape(len(at), s_)
+        mem = np.array([groups[c] for c in at.tolist()], dtype=int).reshape(len(at), s_)
         if s_ == 1:
             mean[at], cov[at] = data.means[mem[:, 0]], data.covs[mem[:, 0]]
             continue
@@ -546,16 +371,6 @@ def group_arrays(
         mean[at] = np.einsum("gs,gsd->gd", w, data.means[mem])
         cov[at] = np.einsum("gs,gsab->gab", w**2, data.covs[mem])
     return mean, cov
-
-
-#: Entries of a dense ln φ table refused by :func:`log_likelihoods` (8 bytes each: 2 GiB),
-#: and the work memory (bytes) of one batch of Cholesky factors.
-MAX_TABLE_ENTRIES = 2**28
-_WORK_BYTES = 64 * 2**20
-
-
-#: Groups per batch of the default likelihood (bounds the (groups, N, d, d) work arrays).
-_CHUNK = 2048
 
 
 def _group_matrix(data: AssignmentData, groups: Sequence[tuple[int, ...]]) -> sps.csr_matrix:
@@ -595,7 +410,7 @@ def _default_loglik(data: AssignmentData, groups: Sequence[tuple[int, ...]]) -> 
 def score(
     data: AssignmentData,
     partition: Partition,
-    assignment: Sequence[int],
+    assignment: Sequence[int] | np.ndarray,
     loglik: dict[tuple[int, ...], FloatArray] | None = None,
 ) -> float:
     """score(H) of a hypothesis: ``assignment[i]`` indexes ``partition`` or is −1."""
@@ -673,156 +488,3 @@ def _as_assignment(name: str, assignment: Any, n: int, blocks: int) -> list[int]
     if len(used) != len(set(used)):
         raise ProblemError(f"{name}: a block received more than one measurement")
     return a
-
-
-# ----------------------------------------------------------------------------- solutions
-@dataclass
-class AssignmentSolution(Solution):
-    """``partition`` (sorted list of sorted tuples), ``assignment`` (N,) index into
-    ``partition`` or −1 (background), ``log_score``, ``mip_gap`` reached."""
-
-    partition: Partition = field(default_factory=list)
-    assignment: np.ndarray = field(default_factory=lambda: np.empty(0, dtype=int))
-    log_score: float = float("nan")
-    mip_gap: float | None = None
-
-
-def _canonical(
-    partition: Sequence[Sequence[int]], assignment: Sequence[int]
-) -> tuple[Partition, np.ndarray]:
-    blocks = [tuple(sorted(b)) for b in partition]
-    order = sorted(range(len(blocks)), key=lambda k: blocks[k])
-    new_index = {old: new for new, old in enumerate(order)}
-    return [blocks[k] for k in order], np.array(
-        [new_index[k] if k >= 0 else -1 for k in assignment], dtype=int
-    )
-
-
-# ----------------------------------------------------------------------------- re-check
-def _recheck(
-    data: AssignmentData,
-    groups: list[tuple[int, ...]],
-    keep: np.ndarray,
-    x: FloatArray,
-    a_eq: sps.csr_matrix,
-    a_ub: sps.csr_matrix,
-    b_ub: FloatArray,
-    solver_objective: float,
-    exclude: Sequence[AssignmentSolution],
-    fixed: Partition | None,
-) -> tuple[Partition, np.ndarray, float, dict[str, float], str]:
-    """Re-check the solver's point against the original problem, in NumPy.
-
-    Returns the rounded hypothesis, its recomputed score (13) and the residuals: the
-    integrality of x, the constraint rows at x (exact cover, one source per measurement,
-    ≤ 1 measurement per block, the no-good cuts), and the relative difference between
-    the solver's objective and the recomputed score. A rounded point that is not a valid
-    hypothesis (or repeats an excluded one) gives an infinite residual and a message.
-    """
-    n_g, n_k = len(groups), len(keep)
-    xr = np.round(x)
-    res = {"integrality": float(np.max(np.abs(x - xr), initial=0.0))}
-    eq = a_eq @ x - 1.0
-    res["exact_cover"] = float(np.max(np.abs(eq[: data.q]), initial=0.0))
-    res["one_source"] = float(np.max(np.abs(eq[data.q :]), initial=0.0))
-    ub = a_ub @ x - b_ub
-    res["block_capacity"] = float(np.max(np.maximum(ub[:n_g], 0.0), initial=0.0))
-    res["no_good_cuts"] = float(np.max(np.maximum(ub[n_g:], 0.0), initial=0.0))
-    z_on = np.flatnonzero(xr[:n_g] > 0.5)
-    part = [groups[c] for c in z_on]
-    where = {g: k for k, g in enumerate(part)}
-    assign = np.full(data.n, -1)
-    why = ""
-    for v, (i, c) in zip(xr[n_g : n_g + n_k], keep, strict=True):
-        if v > 0.5:
-            if groups[c] not in where or assign[i] >= 0:
-                why = "γ assigns a measurement twice or to a block that is off"
-            else:
-                assign[i] = where[groups[c]]
-    s = math.nan
-    if not why:
-        try:
-            part, assign = _canonical(part, assign)
-            s = score(data, part, assign)
-        except ProblemError as exc:
-            why = f"the rounded point is not a hypothesis ({exc})"
-    if not why and any(h.partition == part and list(h.assignment) == list(assign) for h in exclude):
-        why = "the solver returned an excluded hypothesis"
-    if not why and fixed is not None and part != sorted(fixed):
-        why = "the solver changed the fixed partition"
-    if why or not np.isfinite(s):
-        res["objective"] = math.inf
-        return part, assign, s, res, why or "the recomputed score is not finite"
-    res["objective"] = (
-        abs(solver_objective - s) / max(1.0, abs(s)) if np.isfinite(solver_objective) else math.inf
-    )
-    return part, assign, s, res, ""
-
-
-# ----------------------------------------------------------------------------- the gate
-def _finish_point(
-    data: AssignmentData,
-    groups: list[tuple[int, ...]],
-    keep: np.ndarray,
-    x: FloatArray,
-    a_eq: sps.csr_matrix,
-    a_ub: sps.csr_matrix,
-    b_ub: FloatArray,
-    solver_objective: float,
-    exclude: Sequence[AssignmentSolution],
-    fixed: Partition | None,
-    *,
-    common: dict[str, Any],
-    gap_reached: float | None,
-    gap: float,
-    info: dict[str, Any],
-) -> AssignmentSolution:
-    """End of the MILP solve for the solver's point ``x`` (``common``: the back-end's
-    fields, status OK): :func:`_recheck`, then the one gate
-    (:func:`optmodels.core.finish`) on its residuals; refused: the failure form (no
-    hypothesis; the rounded one in ``info["rejected_partition"]``/``["rejected_assignment"]``).
-    Accepted OPTIMAL with a reached MIP gap above VERIFY_TOL (relative to max(1, |score|))
-    is OPTIMAL_INACCURATE: not proven optimal."""
-    part, assign, s, resid, why = _recheck(
-        data, groups, keep, x, a_eq, a_ub, b_ub, solver_objective, exclude, fixed
-    )
-    fields = {k: v for k, v in common.items() if k not in ("status", "message")}
-
-    def note(v: Verdict) -> str:
-        if why:
-            return f"re-check failed: {why}"
-        return "" if v.status.ok else f"re-check failed: residuals {resid}"
-
-    def reject(sol: AssignmentSolution) -> AssignmentSolution:
-        rest = {k: v for k, v in fields.items() if k != "method"}
-        return failure(
-            AssignmentSolution,
-            sol.method,
-            sol.message,
-            status=sol.status,
-            mip_gap=gap_reached,
-            residuals=resid,
-            info=dict(info, rejected_partition=part, rejected_assignment=assign),
-            **rest,
-        )
-
-    sol = AssignmentSolution(
-        status=common["status"],
-        objective=s,
-        partition=part,
-        assignment=assign,
-        log_score=s,
-        message=common["message"],
-        mip_gap=gap_reached if gap_reached is not None else gap,
-        residuals=resid,
-        info=info,
-        **fields,
-    )
-    sol = finish(sol, note=note, reject=reject)
-    if sol.ok and gap_reached is not None and np.isfinite(gap_reached):
-        # HiGHS' gap is relative to |incumbent|; judge it relative to max(1, |score|)
-        scaled = gap_reached * abs(s) / max(1.0, abs(s))
-        if scaled > VERIFY_TOL and sol.status is Status.OPTIMAL:
-            sol.status = Status.OPTIMAL_INACCURATE
-            sol.message += f"; stopped at MIP gap {gap_reached:.3g} (not proven optimal)"
-    return sol

@@ -6,16 +6,9 @@ Same problem, same columns as the CVXPY model of :mod:`~optmodels.assignment.mil
 original-form reference, ``solve(..., model="cvxpy")``; tested equal), built from sparse
 arrays only:
 
-1. **Likelihood gate (exact).** A column γ_iS is only needed if its gain
-   ln φ_iS + ln P_D − ln(1 − P_D) exceeds the background's −ln Δx (pruning rule 1 of
-   :mod:`~optmodels.assignment.milp`). With ln φ_iS = −½ m² − ½ ln det 2π(K_S + R_i),
-   det(K_S + R_i) ≥ det R_i and m² ≥ ‖x_i − μ_S‖² / (λ_max(K_S) + max_i λ_max(R_i)), so
-   every needed column has ‖x_i − μ_S‖² < (λ_max(K_S) + R_max) · 2 (ln(P_D/(1 − P_D)) +
-   ln Δx − ½ min_i ln det 2πR_i): those pairs come from a k-d tree on the measurements
-   (:class:`scipy.spatial.cKDTree`), and ln φ is evaluated for them only.
-2. **Dominance pruning** (rules 2, 3 of :func:`~optmodels.assignment.milp._prune`) on
-   those entries; an entry outside the gate enters a comparison as −∞, a lower bound of
-   its gain, so every removal stays justified.
+1. **Likelihood gate (exact)** and 2. **dominance pruning** on the gated entries:
+   :mod:`~optmodels.assignment.gating` (the likelihoods ln φ_iS are evaluated for the
+   gated pairs only).
 3. **Components.** The graph on objects and measurements joins the members of each kept
    group and each measurement to the members of each group it has a column on. Every
    constraint row (exact cover of an object, one source per measurement, ≤ 1 measurement
@@ -29,7 +22,14 @@ arrays only:
    (14), exact); the others all in one HiGHS model (``highspy``, built from the same
    sparse triplets), so HiGHS' fixed cost is paid at most once per scan.
 4. **Re-check** of the assembled point against the whole model and the recomputed score
-   (13) (:func:`~optmodels.assignment.data._recheck`, as for the CVXPY path).
+   (13) (:func:`~optmodels.assignment.verify._recheck`, as for the CVXPY path) and the
+   gate :func:`~optmodels.assignment.verify._finish`.
+
+:func:`solve_decomposed` reads build (:func:`_build`: gate, pruning, sparse model,
+components) → run (:func:`_closed_forms` for the uncontended and small contended
+components, :func:`_run_contended` for the rest in one HiGHS model) → finish
+(:func:`~optmodels.assignment.verify._finish`); its arguments are checked by
+:func:`optmodels.assignment.solve`.
 
 Measured (``python -m solvers_cmp.assignment_scale``, 2-core VM at load ≈ 10, medians):
 per scan 0.09 s at Q = 1000 and 0.60 s at Q = 3000 (under an 8 GiB address-space limit)
@@ -41,23 +41,19 @@ from __future__ import annotations
 import functools
 import itertools
 import math
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 import scipy.sparse as sps
 from scipy.optimize import linear_sum_assignment
 from scipy.sparse.csgraph import connected_components
-from scipy.spatial import cKDTree
 
-from optmodels.assignment.data import (
-    AssignmentData,
-    AssignmentSolution,
-    _finish_point,
-    block_log_prior,
-    entry_log_likelihoods,
-    group_arrays,
-)
+from optmodels.assignment.data import AssignmentData, block_log_prior
+from optmodels.assignment.gating import gated_entries, prune_entries
 from optmodels.assignment.sensor import PAIR_NEGLECT
+from optmodels.assignment.solution import AssignmentSolution
+from optmodels.assignment.verify import _finish
 from optmodels.backends.profiles import milp_options
 from optmodels.core import FloatArray, ProblemError, Status, timed
 
@@ -77,101 +73,6 @@ def highspy_module() -> Any:
 
     silence_highs_banner()
     return highspy
-
-
-# ----------------------------------------------------------------------------- gated gains
-def gated_entries(
-    data: AssignmentData, groups: list[tuple[int, ...]], bonus: float
-) -> tuple[np.ndarray, np.ndarray, FloatArray]:
-    """The (measurement, group) pairs that can carry a needed column γ_iS (module
-    docstring, item 1) and their gains ln φ_iS + ``bonus``: (rows, cols, gain)."""
-    n = data.n
-    empty = np.zeros(0, dtype=int)
-    if n == 0:
-        return empty, empty.copy(), np.zeros(0)
-    noise = data.meas_cov if data.per_measurement_cov else data.meas_cov[None]
-    _, logdet = np.linalg.slogdet(2 * math.pi * noise)
-    m2max = 2.0 * (bonus + math.log(data.volume) - 0.5 * float(logdet.min()))
-    if m2max <= 0:
-        return empty, empty.copy(), np.zeros(0)
-    r_max = float(np.linalg.eigvalsh(noise)[:, -1].max())
-    mean, cov = group_arrays(data, groups)
-    radius = np.sqrt(m2max * (np.linalg.eigvalsh(cov)[:, -1] + r_max)) * (1 + 1e-9)
-    if n * len(groups) <= 4096:  # all pairs directly: cheaper than a tree (measured)
-        dist = np.linalg.norm(data.measurements[None, :, :] - mean[:, None, :], axis=2)
-        cols, rows = np.nonzero(dist <= radius[:, None])
-    else:
-        lists = cKDTree(data.measurements).query_ball_point(mean, radius, return_sorted=False)
-        lens = np.fromiter(map(len, lists), dtype=int, count=len(groups))
-        cols = np.repeat(np.arange(len(groups)), lens)
-        rows = np.fromiter(itertools.chain.from_iterable(lists), dtype=int, count=int(lens.sum()))
-    return rows, cols, entry_log_likelihoods(data, groups, rows, cols) + bonus
-
-
-def _lookup(keys: np.ndarray, vals: FloatArray, want: np.ndarray) -> FloatArray:
-    """vals at the sorted ``keys`` equal to ``want``, −∞ where absent."""
-    pos = np.searchsorted(keys, want)
-    pos = np.minimum(pos, max(len(keys) - 1, 0))
-    hit = keys[pos] == want if len(keys) else np.zeros(len(want), dtype=bool)
-    return np.where(hit, vals[pos] if len(keys) else 0.0, -np.inf)
-
-
-def prune_entries(
-    data: AssignmentData,
-    groups: list[tuple[int, ...]],
-    p0: FloatArray,
-    rows: np.ndarray,
-    cols: np.ndarray,
-    gain: FloatArray,
-    bg: float,
-) -> tuple[np.ndarray, np.ndarray]:
-    """Pruning rules 1-3 (module docstring) on the gated entries: the kept groups (mask)
-    and the kept entries (mask). Singletons are always kept (the cover needs them)."""
-    n_g = len(groups)
-    sizes = np.fromiter(map(len, groups), dtype=int, count=n_g)
-    usable = gain > bg
-    keys = rows.astype(np.int64) * n_g + cols
-    order = np.argsort(keys, kind="stable")
-    skeys, sgain = keys[order], gain[order]
-    index = {g: c for c, g in enumerate(groups)}
-    keep_g = sizes == 1
-    for size in sorted(set(sizes[sizes > 1].tolist())):
-        cs = np.flatnonzero(sizes == size)
-        members = np.array([groups[c] for c in cs], dtype=int)  # (G_s, s); singleton j is j
-        split = p0[members].sum(axis=1)
-        rest = np.array(
-            [
-                [index.get(tuple(np.delete(m, pos).tolist()), -1) for pos in range(size)]
-                for m in members
-            ],
-            dtype=int,
-        )
-        local = np.full(n_g, -1)
-        local[cs] = np.arange(len(cs))
-        ent = np.flatnonzero(usable & (local[cols] >= 0))
-        if len(ent):
-            li = local[cols[ent]]
-            i = rows[ent].astype(np.int64)
-            lhs = p0[cols[ent]] + gain[ent]
-            best = np.full(len(ent), -np.inf)
-            for pos in range(size):
-                best = np.maximum(best, _lookup(skeys, sgain, i * n_g + members[li, pos]))
-            rhs = split[li] + best
-            for pos in range(size):
-                rr = rest[li, pos]
-                ok = rr >= 0
-                peel = np.full(len(ent), -np.inf)
-                peel[ok] = (
-                    p0[rr[ok]]
-                    + p0[members[li[ok], pos]]
-                    + _lookup(skeys, sgain, i[ok] * n_g + rr[ok])
-                )
-                rhs = np.maximum(rhs, peel)
-            usable[ent[lhs <= rhs]] = False
-        has = np.zeros(n_g, dtype=bool)
-        has[cols[usable]] = True
-        keep_g[cs] = has[cs] | (p0[cs] > split)
-    return keep_g, usable & keep_g[cols]
 
 
 # ----------------------------------------------------------------------------- the model
@@ -315,6 +216,74 @@ def _highs_solve(
     return Status.ERROR, None, math.nan, gap_reached, text, ts.elapsed
 
 
+@dataclass
+class _Model:
+    """The decomposed model of one scan (:func:`_build`): the kept ``groups`` (singletons
+    first), their undetected prior terms ``p0``, the kept entries ``keep`` (K, 2) =
+    (measurement, group) sorted, with gains ``kgain``; the sparse MILP ``c``, ``a_eq``,
+    ``a_ub``, ``b_ub`` (:func:`sparse_model`); the components of the graph on objects
+    0..Q−1 and measurements Q..Q+N−1 (``label`` per node, ``n_comp``, ``n_obj`` objects
+    per component, ``contended``: with a merged group), each group's ``first`` member and
+    each column's component ``col_comp``."""
+
+    groups: list[tuple[int, ...]]
+    p0: FloatArray
+    keep: np.ndarray
+    kgain: FloatArray
+    c: FloatArray
+    a_eq: Rows
+    a_ub: Rows
+    b_ub: FloatArray
+    first: np.ndarray
+    label: np.ndarray
+    n_comp: int
+    n_obj: np.ndarray
+    contended: np.ndarray
+    col_comp: np.ndarray
+
+
+def _build(data: AssignmentData, groups: list[tuple[int, ...]], bg: float) -> _Model:
+    """Items 1-3 of the module docstring: the gated gains, the pruning, the sparse model
+    on the kept columns and its connected components."""
+    q, n = data.q, data.n
+    p0 = np.array([block_log_prior(data, g, False) for g in groups])
+    bonus = math.log(data.pd) - math.log1p(-data.pd)
+    rows, cols, gain = gated_entries(data, groups, bonus)
+    keep_g, keep_e = prune_entries(data, groups, p0, rows, cols, gain, bg)
+    new = np.cumsum(keep_g) - 1
+    groups = [g for g, k in zip(groups, keep_g, strict=True) if k]
+    p0 = p0[keep_g]
+    keep = np.column_stack([rows[keep_e], new[cols[keep_e]]]).astype(int).reshape(-1, 2)
+    kgain = gain[keep_e]
+    order = np.lexsort((keep[:, 1], keep[:, 0]))
+    keep, kgain = keep[order], kgain[order]
+    c, a_eq, a_ub, b_ub = sparse_model(data, groups, p0, keep, kgain)
+    # components on objects 0..Q-1 and measurements Q..Q+N-1
+    first = np.fromiter((g[0] for g in groups), dtype=int, count=len(groups))
+    merged = [g for g in groups if len(g) > 1]
+    ea = np.array([a for g in merged for a in g[:-1]] + (q + keep[:, 0]).tolist(), dtype=int)
+    eb = np.array([b for g in merged for b in g[1:]] + first[keep[:, 1]].tolist(), dtype=int)
+    n_comp, label = _components(q + n, ea, eb)
+    contended = np.zeros(n_comp, dtype=bool)
+    contended[label[[g[0] for g in merged]]] = True
+    return _Model(
+        groups=groups,
+        p0=p0,
+        keep=keep,
+        kgain=kgain,
+        c=c,
+        a_eq=a_eq,
+        a_ub=a_ub,
+        b_ub=b_ub,
+        first=first,
+        label=label,
+        n_comp=int(n_comp),
+        n_obj=np.bincount(label[:q], minlength=n_comp),
+        contended=contended,
+        col_comp=np.concatenate([label[first], label[q + keep[:, 0]], label[q:]]),
+    )
+
+
 def solve_decomposed(
     data: AssignmentData,
     groups: list[tuple[int, ...]],
@@ -324,121 +293,42 @@ def solve_decomposed(
     verbose: bool,
     where: str,
 ) -> AssignmentSolution:
-    """The MAP hypothesis over the candidate ``groups`` (module docstring), re-checked."""
-    q, n = data.q, data.n
+    """The MAP hypothesis over the candidate ``groups`` (module docstring), re-checked:
+    build → the closed forms → one HiGHS model for the contended rest → the gate."""
+    q = data.q
     bg = -math.log(data.volume)
     with timed() as tb:
-        p0 = np.array([block_log_prior(data, g, False) for g in groups])
-        bonus = math.log(data.pd) - math.log1p(-data.pd)
-        rows, cols, gain = gated_entries(data, groups, bonus)
-        keep_g, keep_e = prune_entries(data, groups, p0, rows, cols, gain, bg)
-        new = np.cumsum(keep_g) - 1
-        groups = [g for g, k in zip(groups, keep_g, strict=True) if k]
-        p0 = p0[keep_g]
-        keep = np.column_stack([rows[keep_e], new[cols[keep_e]]]).astype(int).reshape(-1, 2)
-        kgain = gain[keep_e]
-        order = np.lexsort((keep[:, 1], keep[:, 0]))
-        keep, kgain = keep[order], kgain[order]
-        n_g, n_k = len(groups), len(keep)
-        c, a_eq, a_ub, b_ub = sparse_model(data, groups, p0, keep, kgain)
-        # components on objects 0..Q-1 and measurements Q..Q+N-1
-        first = np.fromiter((g[0] for g in groups), dtype=int, count=n_g)
-        merged = [g for g in groups if len(g) > 1]
-        ea = np.array([a for g in merged for a in g[:-1]] + (q + keep[:, 0]).tolist(), dtype=int)
-        eb = np.array([b for g in merged for b in g[1:]] + first[keep[:, 1]].tolist(), dtype=int)
-        n_comp, label = _components(q + n, ea, eb)
-        col_comp = np.concatenate([label[first], label[q + keep[:, 0]], label[q:]])
-        n_obj = np.bincount(label[:q], minlength=n_comp)
-        contended = np.zeros(n_comp, dtype=bool)
-        contended[label[[g[0] for g in merged]]] = True
-    x = np.zeros(len(c))
+        m = _build(data, groups, bg)
+    n_g, n_k = len(m.groups), len(m.keep)
+    x = np.zeros(len(m.c))
     x[:q] = 1.0  # groups are sorted by size: the singletons come first, all on by default
     x[n_g + n_k :] = 1.0  # every measurement on the background until given to a block
     info: dict[str, Any] = {
         "candidate_groups": n_g,
         "assignment_variables": n_k,
-        "components": int(n_comp),
-        "contended_components": int(contended.sum()),
-        "largest_component": int(np.bincount(label).max(initial=0)),
+        "components": m.n_comp,
+        "contended_components": int(m.contended.sum()),
+        "largest_component": int(np.bincount(m.label).max(initial=0)),
         "neglected_pair_bound": _neglected_bound(data),
     }
     with timed() as tc:
-        # singleton-only components: one object -> its best column; several -> LSA
-        single_col = keep[:, 1] < q
-        comp_e = label[q + keep[:, 0]]
-        easy = ~contended[comp_e] & single_col
-        one = easy & (n_obj[comp_e] == 1)
-        if one.any():
-            e = np.flatnonzero(one)
-            e = e[np.lexsort((kgain[e], keep[e, 1]))]  # by object, then gain ascending
-            last = np.append(np.diff(keep[e, 1]) != 0, True)  # each object's best
-            _take(x, n_g, n_k, keep, e[last])
-        several = np.flatnonzero(easy & (n_obj[comp_e] > 1))
-        if len(several):
-            by = np.argsort(comp_e[several], kind="stable")
-            several = several[by]
-            bounds = np.flatnonzero(np.diff(comp_e[several])) + 1
-            for part in np.split(several, bounds):
-                _take(x, n_g, n_k, keep, _lsa(keep[part], kgain[part] - bg, part))
-        # small contended components: every unresolved variant, each by its linear
-        # assignment (the paper's per-variant problem (14), exact); larger ones: HiGHS
-        enumerated = 0
-        if contended.any():
-            g_comp = label[first]
-            for comp in np.flatnonzero(contended):
-                if n_obj[comp] > ENUMERATE_OBJECTS:
-                    continue
-                gi = np.flatnonzero(g_comp == comp)
-                ei = np.flatnonzero(comp_e == comp)
-                got = _enumerate(groups, gi, p0, keep, kgain - bg, ei)
-                if got is None:
-                    continue
-                on, chosen = got
-                x[gi] = 0.0
-                x[on] = 1.0
-                _take(x, n_g, n_k, keep, chosen)
-                contended[comp] = False
-                enumerated += 1
-    info["enumerated_components"] = enumerated
+        info["enumerated_components"] = _closed_forms(data, m, x, bg)
     gap_reached: float | None = 0.0
     status, msg, solve_t = Status.OPTIMAL, "decomposed", tc.elapsed
-    solver_obj = float(c @ x)
-    if contended.any():
-        sel_c = np.flatnonzero(contended[col_comp])
+    solver_obj = float(m.c @ x)
+    if m.contended.any():
+        sel_c = np.flatnonzero(m.contended[m.col_comp])
         if len(sel_c) > MAX_MILP_COLUMNS:
             raise ProblemError(
                 f"{where}: {len(sel_c)} binary columns in the contended "
                 f"components, above the limit {MAX_MILP_COLUMNS:.0e}; lower "
                 f"max_group_size"
             )
-        row_on = np.concatenate(
-            [contended[label[:q]], contended[label[q:]], contended[label[first]]]
-        )
-        new_row = np.cumsum(row_on) - 1
-        new_col = np.full(len(c), -1)
-        new_col[sel_c] = np.arange(len(sel_c))
-        r_all = np.concatenate([a_eq.r, a_ub.r + q + n])
-        c_all = np.concatenate([a_eq.c, a_ub.c])
-        v_all = np.concatenate([a_eq.v, a_ub.v])
-        on = row_on[r_all] & (new_col[c_all] >= 0)
-        n_eq = int(row_on[: q + n].sum())
-        n_rows = int(row_on.sum())
-        lo = np.concatenate([np.ones(n_eq), np.full(n_rows - n_eq, -np.inf)])
-        hi = np.concatenate([np.ones(n_eq), b_ub[row_on[q + n :]]])
-        status, xs, obj, gap_reached, text, t_milp = _highs_solve(
-            c[sel_c],
-            new_row[r_all[on]],
-            new_col[c_all[on]],
-            v_all[on],
-            (n_rows, len(sel_c)),
-            lo,
-            hi,
-            gap,
-            limit,
-            verbose,
+        status, xs, obj, gap_reached, text, t_milp = _run_contended(
+            data, m, sel_c, gap, limit, verbose
         )
         solve_t += t_milp
-        msg = f"decomposed; HiGHS on {int(contended.sum())} contended components: {text}"
+        msg = f"decomposed; HiGHS on {int(m.contended.sum())} contended components: {text}"
         info["milp_columns"] = len(sel_c)
         if xs is None:
             if gap_reached is not None:
@@ -453,10 +343,10 @@ def solve_decomposed(
                 mip_gap=gap_reached,
                 info=info,
             )
-        rest = np.ones(len(c), dtype=bool)
+        rest = np.ones(len(m.c), dtype=bool)
         rest[sel_c] = False
         x[sel_c] = xs
-        solver_obj = obj + float(c[rest] @ x[rest])
+        solver_obj = obj + float(m.c[rest] @ x[rest])
     common = {
         "status": status,
         "method": "highs:decomposed",
@@ -465,14 +355,14 @@ def solve_decomposed(
         "iterations": None,
         "message": msg,
     }
-    return _finish_point(
+    return _finish(
         data,
-        groups,
-        keep,
+        m.groups,
+        m.keep,
         x,
-        a_eq,
-        a_ub,
-        b_ub,
+        m.a_eq,
+        m.a_ub,
+        m.b_ub,
         solver_obj,
         (),
         None,
@@ -480,6 +370,88 @@ def solve_decomposed(
         gap_reached=gap_reached,
         gap=gap,
         info=info,
+    )
+
+
+def _closed_forms(data: AssignmentData, m: _Model, x: FloatArray, bg: float) -> int:
+    """Set in ``x`` the MAP of every component that needs no MILP: singleton-only ones (one
+    object: its best column; several: a linear assignment) and contended ones of at most
+    :data:`ENUMERATE_OBJECTS` objects (every unresolved variant, each by its linear
+    assignment: the paper's per-variant problem (14), exact), which are then marked
+    uncontended in ``m.contended``. Returns the number of components enumerated."""
+    q = data.q
+    n_g, n_k = len(m.groups), len(m.keep)
+    keep, kgain = m.keep, m.kgain
+    single_col = keep[:, 1] < q
+    comp_e = m.label[q + keep[:, 0]]
+    easy = ~m.contended[comp_e] & single_col
+    one = easy & (m.n_obj[comp_e] == 1)
+    if one.any():
+        e = np.flatnonzero(one)
+        e = e[np.lexsort((kgain[e], keep[e, 1]))]  # by object, then gain ascending
+        last = np.append(np.diff(keep[e, 1]) != 0, True)  # each object's best
+        _take(x, n_g, n_k, keep, e[last])
+    several = np.flatnonzero(easy & (m.n_obj[comp_e] > 1))
+    if len(several):
+        by = np.argsort(comp_e[several], kind="stable")
+        several = several[by]
+        bounds = np.flatnonzero(np.diff(comp_e[several])) + 1
+        for part in np.split(several, bounds):
+            _take(x, n_g, n_k, keep, _lsa(keep[part], kgain[part] - bg, part))
+    enumerated = 0
+    g_comp = m.label[m.first]
+    for comp in np.flatnonzero(m.contended):
+        if m.n_obj[comp] > ENUMERATE_OBJECTS:
+            continue
+        gi = np.flatnonzero(g_comp == comp)
+        ei = np.flatnonzero(comp_e == comp)
+        got = _enumerate(m.groups, gi, m.p0, keep, kgain - bg, ei)
+        if got is None:
+            continue
+        on, chosen = got
+        x[gi] = 0.0
+        x[on] = 1.0
+        _take(x, n_g, n_k, keep, chosen)
+        m.contended[comp] = False
+        enumerated += 1
+    return enumerated
+
+
+def _run_contended(
+    data: AssignmentData,
+    m: _Model,
+    sel_c: np.ndarray,
+    gap: float,
+    limit: float | None,
+    verbose: bool,
+) -> tuple[Status, FloatArray | None, float, float | None, str, float]:
+    """The contended components' columns ``sel_c`` and their rows as one HiGHS model
+    (:func:`_highs_solve`): status, their x, objective, MIP gap reached, message, s."""
+    q, n = data.q, data.n
+    label, contended = m.label, m.contended
+    row_on = np.concatenate([contended[label[:q]], contended[label[q:]], contended[label[m.first]]])
+    new_row = np.cumsum(row_on) - 1
+    new_col = np.full(len(m.c), -1)
+    new_col[sel_c] = np.arange(len(sel_c))
+    r_all = np.concatenate([m.a_eq.r, m.a_ub.r + q + n])
+    c_all = np.concatenate([m.a_eq.c, m.a_ub.c])
+    v_all = np.concatenate([m.a_eq.v, m.a_ub.v])
+    on = row_on[r_all] & (new_col[c_all] >= 0)
+    n_eq = int(row_on[: q + n].sum())
+    n_rows = int(row_on.sum())
+    lo = np.concatenate([np.ones(n_eq), np.full(n_rows - n_eq, -np.inf)])
+    hi = np.concatenate([np.ones(n_eq), m.b_ub[row_on[q + n :]]])
+    return _highs_solve(
+        m.c[sel_c],
+        new_row[r_all[on]],
+        new_col[c_all[on]],
+        v_all[on],
+        (n_rows, len(sel_c)),
+        lo,
+        hi,
+        gap,
+        limit,
+        verbose,
     )
 
 

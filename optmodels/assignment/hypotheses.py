@@ -17,15 +17,9 @@ from typing import Any
 
 import numpy as np
 
-from optmodels.assignment.data import (
-    AssignmentData,
-    AssignmentSolution,
-    Partition,
-    _canonical,
-    candidate_groups,
-    log_likelihoods,
-    score,
-)
+from optmodels.assignment.data import AssignmentData, Partition, log_likelihoods, score
+from optmodels.assignment.groups import candidate_groups
+from optmodels.assignment.solution import AssignmentSolution, _canonical
 from optmodels.core import ProblemError, Status, as_count, as_instance, timed
 
 #: :func:`brute_force` refuses above this many hypotheses (:func:`count_hypotheses`); it

@@ -25,23 +25,17 @@ import numpy as np
 import scipy.sparse as sps
 from scipy.optimize import linprog
 
-from optmodels.assignment.data import (
-    AssignmentData,
-    AssignmentSolution,
-    Partition,
-    _canonical,
-    block_log_prior,
-    candidate_groups,
-    score,
-)
+from optmodels.assignment.data import AssignmentData, Partition, block_log_prior, score
+from optmodels.assignment.generic import solve
+from optmodels.assignment.groups import candidate_groups
 from optmodels.assignment.hypotheses import COUNT_LIMIT, count_hypotheses
 from optmodels.assignment.milp import (
     MAX_MODEL_COLUMNS,
     _build_model,
     _gains,
     _solve_model,
-    solve,
 )
+from optmodels.assignment.solution import AssignmentSolution, _canonical
 from optmodels.assignment.solvers import _as_solver
 from optmodels.core import FloatArray, ProblemError, Status, as_count, as_instance
 
@@ -160,7 +154,7 @@ def _lower_bound(
             total += float(sum(table[p[int(b)]][i] for i, b in zip(rows[on], aa[on], strict=True)))
         return total + bg * float(np.count_nonzero(~on))
 
-    def add(part: Partition, a: Sequence[int]) -> None:
+    def add(part: Partition, a: Sequence[int] | np.ndarray) -> None:
         p, aa = _canonical(part, a)
         key = (tuple(p), tuple(int(x) for x in aa))
         if key not in seen:
@@ -185,8 +179,8 @@ def _lower_bound(
     if len(ranked) < k:
         return -math.inf
     # L = the k-th score, recomputed by score() (k distinct hypotheses score ≥ it)
-    p, aa = ranked[k - 1][1]
-    exact = score(data, list(p), list(aa), table)
+    kth_part, kth_assign = ranked[k - 1][1]
+    exact = score(data, list(kth_part), list(kth_assign), table)
     return min(exact, ranked[k - 1][0])
 
 
@@ -240,6 +234,8 @@ def _column_bounds(
     every column with r > 0 added, at most ``rounds`` times. Any dual point gives valid
     bounds, so stopping early only weakens them; the restricted LPs are much smaller
     than the full one (issue 18: Q = 12, N = 14, every group: 61 439 columns)."""
+    y: FloatArray | None = None
+    u: FloatArray | None = None
     if start is None:
         duals = _lp_duals(c, a_eq, a_ub, b_ub)
         if duals is None:
@@ -256,7 +252,6 @@ def _column_bounds(
         zc = np.flatnonzero(np.asarray(csc.min(axis=0).todense()).ravel() < 0)
         z_of_row[owner[zc]] = zc
         active = start.copy()
-        y = u = None
         for _ in range(rounds):
             rows = np.unique(owner[active & (owner >= 0)])
             active[z_of_row[rows]] = True
@@ -272,8 +267,8 @@ def _column_bounds(
             if not len(new):
                 break  # the restricted LP's optimum is the full LP's
             active[new] = True
-        if y is None or u is None:
-            return None
+    if y is None or u is None:
+        return None
     r = c - a_eq.T @ y - (a_ub.T @ u if a_ub.shape[0] else 0.0)
     d = float(y.sum() + u @ b_ub + np.maximum(r, 0.0).sum())
     return d + np.minimum(r, 0.0)

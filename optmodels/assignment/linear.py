@@ -10,14 +10,8 @@ import math
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from optmodels.assignment.data import (
-    AssignmentData,
-    AssignmentSolution,
-    _canonical,
-    block_log_prior,
-    log_likelihoods,
-    score,
-)
+from optmodels.assignment.data import AssignmentData, block_log_prior, log_likelihoods, score
+from optmodels.assignment.solution import AssignmentSolution, _canonical
 from optmodels.core import Status, as_instance, failure, finish, timed
 
 

@@ -1,5 +1,7 @@
-r"""The joint MAP hypothesis of (13)-(14) as one sparse MILP (CVXPY; HiGHS by default):
-exact pruning, the model, the solve and its re-check (:func:`~optmodels.assignment.data._recheck`).
+r"""The joint MAP hypothesis of (13)-(14) as one sparse MILP in CVXPY (HiGHS by default), the
+original form behind :func:`optmodels.assignment.solve` (``model="cvxpy"``) and
+:func:`~optmodels.assignment.k_best`: exact pruning, the model, and its solve ended by the
+re-check and gate :func:`optmodels.assignment.verify._finish`.
 
 MILP (binary z_S per candidate group, γ_iS, γ_i0):
 
@@ -17,9 +19,10 @@ ln φ_iS + ln P_D − ln(1 − P_D) does not exceed the background's −ln Δx c
 by γ_i0 without lowering the score, so it is never needed for a MAP hypothesis and is
 not created.
 
-Holds: :func:`solve`, the dominance pruning :func:`_prune`, the sparse model
-:func:`_build_model` and the size guards :data:`MAX_LIKELIHOOD_ENTRIES`,
-:data:`MAX_MODEL_COLUMNS`; each MILP solver's gap and time-limit names are the back-end's
+Holds: the dominance pruning :func:`_prune`, the model's columns :func:`_gains` and
+:func:`_columns`, the sparse model :func:`_build_model`, its solve :func:`_solve_model`,
+and the size guards :data:`MAX_LIKELIHOOD_ENTRIES`, :data:`MAX_MODEL_COLUMNS`; each MILP
+solver's gap and time-limit names are the back-end's
 (:func:`optmodels.backends.profiles.milp_options`).
 """
 
@@ -35,28 +38,15 @@ import scipy.sparse as sps
 
 from optmodels.assignment.data import (
     AssignmentData,
-    AssignmentSolution,
     Partition,
-    _as_partition,
-    _finish_point,
     block_log_prior,
-    candidate_groups,
     log_likelihoods,
 )
-from optmodels.assignment.decomposed import highspy_module, solve_decomposed
-from optmodels.backends.cvxpy_backend import as_milp_solver, solve_problem
+from optmodels.assignment.solution import AssignmentSolution
+from optmodels.assignment.verify import _finish
+from optmodels.backends.cvxpy_backend import solve_problem
 from optmodels.backends.profiles import milp_options
-from optmodels.core import (
-    FloatArray,
-    ProblemError,
-    Status,
-    as_choice,
-    as_flag,
-    as_instance,
-    as_number,
-    as_positive,
-    timed,
-)
+from optmodels.core import FloatArray, ProblemError, Status, timed
 
 #: Entries of the ln φ_iS table (N × candidate groups, 8 bytes each: 160 MB at the limit).
 MAX_LIKELIHOOD_ENTRIES = 20_000_000
@@ -178,133 +168,36 @@ def _build_model(
     return c, a_eq, a_ub, b
 
 
-def solve(
+def _columns(
+    w: str,
     data: AssignmentData,
-    *,
-    solver: str = "HIGHS",
-    mip_gap: float = 0.0,
-    time_limit: float | None = None,
-    fixed_partition: Partition | None = None,
-    prune: bool = True,
-    exclude: Sequence[AssignmentSolution] = (),
-    model: str = "auto",
-    **options: Any,
-) -> AssignmentSolution:
-    """The joint MAP hypothesis of (13)-(14) as one MILP (HiGHS by default): decomposed
-    into the connected components of the model's graph (direct HiGHS,
-    :mod:`~optmodels.assignment.decomposed`) or as one CVXPY model (the original form).
-
-    Parameters
-    ----------
-    data : AssignmentData
-    solver : str
-        A CVXPY MILP solver (:data:`MILP_SOLVERS`; HIGHS, SCIPY, SCIP, ...). A continuous
-        solver (CLARABEL, OSQP, ...) is refused with :class:`ProblemError`.
-    mip_gap : float
-        Relative MIP gap in [0, 1) to stop at; 0 (default) proves optimality. A solution
-        with a reached gap above :data:`~optmodels.core.VERIFY_TOL` (relative to
-        max(1, |score|)) is OPTIMAL_INACCURATE, never OPTIMAL.
-    time_limit : float, optional
-        Seconds, positive and finite (None: no limit). A solve stopped by it is
-        ITERATION_LIMIT (with the gap reached in the message), never returned as a
-        solution.
-    fixed_partition : list of tuples, optional
-        Solve one unresolved variant (the per-variant problem of (14)).
-    prune : bool
-        Exact dominance pruning (module docstring). ``False`` keeps every variable (needed
-        when hypotheses other than the MAP matter, as in :func:`k_best`).
-    exclude : sequence of AssignmentSolution
-        Hypotheses to exclude, one sparse no-good cut each.
-    model : {"auto", "decomposed", "cvxpy"}
-        ``"decomposed"``: gated likelihoods, exact pruning, the exact split into
-        connected components (closed forms for the uncontended ones, one direct HiGHS
-        MILP for all contended ones; the same MAP). ``"cvxpy"``: the whole model in
-        CVXPY (the original-form reference). ``"auto"`` (default) takes the decomposed
-        path when it is exact and applies: solver HIGHS, no ``fixed_partition``,
-        ``exclude`` or solver options other than ``verbose``, ``prune=True``, the default
-        likelihood and prior.
-    **options
-        Passed to the solver (its own names; ``verbose=True`` shows its log).
-
-    Returns
-    -------
-    AssignmentSolution
-        The hypothesis, re-checked in NumPy (:func:`_recheck`): integrality, every
-        constraint row, a valid partition and assignment, and the recomputed score (13)
-        against the solver's objective; ``residuals`` holds them and the status is
-        downgraded or refused by :func:`~optmodels.core.verified_status`.
-
-    Raises
-    ------
-    ProblemError
-        Bad arguments, or a model above the size guards :data:`MAX_CANDIDATE_GROUPS`,
-        :data:`MAX_LIKELIHOOD_ENTRIES`, :data:`MAX_MODEL_COLUMNS` (checked before the
-        model is allocated).
-    """
-    w = "assignment.solve"
-    as_instance(f"{w} data", data, AssignmentData)
-    key = as_milp_solver(w, solver)
-    gap = as_number(f"{w} mip_gap", mip_gap, low=0.0, high=1.0, high_open=True)
-    limit = None if time_limit is None else as_positive(f"{w} time_limit", time_limit)
-    as_flag(f"{w} prune", prune)
-    if isinstance(exclude, AssignmentSolution) or not all(
-        isinstance(h, AssignmentSolution) for h in exclude
-    ):
-        raise ProblemError(f"{w} exclude: expected a sequence of AssignmentSolution")
-    kind = as_choice(f"{w} model", model, ("auto", "decomposed", "cvxpy"))
-    direct_ok = (
-        key == "HIGHS"
-        and fixed_partition is None
-        and not exclude
-        and prune is True
-        and not set(options) - {"verbose"}
-        and data.log_likelihood is None
-        and data.block_log_prior is None
-        and highspy_module() is not None
-    )
-    if kind == "decomposed" and not direct_ok:
-        raise ProblemError(
-            f"{w} model: 'decomposed' needs solver HIGHS, no "
-            f"fixed_partition, exclude or solver options, prune=True and the "
-            f"default likelihood and prior; use model='cvxpy'"
-        )
-    if kind != "cvxpy" and direct_ok:
-        return solve_decomposed(
-            data,
-            candidate_groups(data),
-            gap=gap,
-            limit=limit,
-            verbose=bool(options.get("verbose", False)),
-            where=w,
-        )
-    fixed = None
-    if fixed_partition is not None:
-        fixed = _as_partition(f"{w} fixed_partition", fixed_partition, data.q)
-        groups = sorted(set(fixed))
-    else:
-        groups = candidate_groups(data)
+    groups: list[tuple[int, ...]],
+    fixed: Partition | None,
+    prune: bool,
+) -> tuple[list[tuple[int, ...]], FloatArray, np.ndarray]:
+    """The model's columns: the groups kept, the gains (N, G) and the measurement-group
+    pairs ``keep`` (K, 2) after the exact pruning (module docstring; rules 2-3 only for
+    the whole model with the default prior), refused above :data:`MAX_MODEL_COLUMNS`
+    before the model is built."""
     n = data.n
-    with timed() as tb:
-        _, gain = _gains(w, data, groups)
-        bg = -math.log(data.volume)
-        if prune:
-            usable = gain > bg  # exact pruning 1 (module docstring)
-            if fixed is None and data.block_log_prior is None:
-                groups, gain, usable = _prune(data, groups, gain, usable)
-        else:
-            usable = np.isfinite(gain)  # a user's −inf likelihood: impossible, no variable
-        keep = np.argwhere(usable).reshape(-1, 2)
-        columns = len(groups) + len(keep) + n
-        if columns > MAX_MODEL_COLUMNS:
-            raise ProblemError(
-                f"{w}: {columns} binary columns ({len(groups)} groups, {len(keep)} "
-                f"measurement-group pairs), above the limit {MAX_MODEL_COLUMNS:.0e}"
-                + ("; prune=False keeps every pair" if not prune else "")
-                + "; tighten group_gate or lower max_group_size"
-            )
-    return _solve_model(
-        w, data, groups, gain, keep, exclude, fixed, key, gap, limit, options, tb.elapsed
-    )
+    _, gain = _gains(w, data, groups)
+    bg = -math.log(data.volume)
+    if prune:
+        usable = gain > bg  # exact pruning 1 (module docstring)
+        if fixed is None and data.block_log_prior is None:
+            groups, gain, usable = _prune(data, groups, gain, usable)
+    else:
+        usable = np.isfinite(gain)  # a user's −inf likelihood: impossible, no variable
+    keep = np.argwhere(usable).reshape(-1, 2)
+    columns = len(groups) + len(keep) + n
+    if columns > MAX_MODEL_COLUMNS:
+        raise ProblemError(
+            f"{w}: {columns} binary columns ({len(groups)} groups, {len(keep)} "
+            f"measurement-group pairs), above the limit {MAX_MODEL_COLUMNS:.0e}"
+            + ("; prune=False keeps every pair" if not prune else "")
+            + "; tighten group_gate or lower max_group_size"
+        )
+    return groups, gain, keep
 
 
 def _gains(
@@ -343,7 +236,7 @@ def _solve_model(
 ) -> AssignmentSolution:
     """The MILP on the columns ``groups``/``keep`` (with the no-good cuts of ``exclude``),
     solved by ``key`` and ended by the NumPy re-check and the status gate
-    (:func:`~optmodels.assignment.data._finish_point`); ``build_time`` is the caller's
+    (:func:`~optmodels.assignment.verify._finish`); ``build_time`` is the caller's
     share of the model building."""
     q, n = data.q, data.n
     with timed() as tb:
@@ -370,7 +263,7 @@ def _solve_model(
             objective=float("nan"), message=msg, mip_gap=gap_reached, info=info, **common
         )
     xv = np.asarray(x.value, dtype=float).reshape(-1)
-    return _finish_point(
+    return _finish(
         data,
         groups,
         keep,

@@ -47,10 +47,10 @@ from scipy.special import gammainc
 from optmodels.assignment.data import (
     AssignmentData,
     block_log_prior,
-    candidate_groups,
     group_moments,
     log_likelihoods,
 )
+from optmodels.assignment.groups import candidate_groups
 from optmodels.core import (
     FloatArray,
     ProblemError,
@@ -282,13 +282,13 @@ def soft_marginals(
     usable = allowed & ~drop & keep_g[None, :]
     # clusters: members of a kept group, objects sharing a usable measurement
     uf = _Union(q)
-    for c in np.flatnonzero(keep_g):
+    for c in np.flatnonzero(keep_g).tolist():
         for j in groups[c][1:]:
             uf.join(groups[c][0], j)
     for i in range(n):
-        objs = {j for c in np.flatnonzero(usable[i]) for j in groups[c]}
-        if len(objs) > 1:
-            it = iter(objs)
+        near = {j for c in np.flatnonzero(usable[i]).tolist() for j in groups[c]}
+        if len(near) > 1:
+            it = iter(near)
             first = next(it)
             for j in it:
                 uf.join(first, j)
@@ -296,7 +296,7 @@ def soft_marginals(
     cluster_of = [roots.setdefault(uf.find(j), len(roots)) for j in range(q)]
     clusters = [tuple(j for j in range(q) if cluster_of[j] == c) for c in range(len(roots))]
     g_of: list[list[int]] = [[] for _ in clusters]
-    for c in np.flatnonzero(keep_g):
+    for c in np.flatnonzero(keep_g).tolist():
         g_of[cluster_of[groups[c][0]]].append(int(c))
     beta: list[dict[tuple[Block, int], float]] = [{} for _ in range(q)]
     meas_of, methods, counts, neglected = [], [], [], []

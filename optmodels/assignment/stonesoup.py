@@ -71,9 +71,10 @@ from typing import Any
 
 import numpy as np
 
-from optmodels.assignment.data import AssignmentData, AssignmentSolution
-from optmodels.assignment.milp import solve as _map_solve
+from optmodels.assignment.data import AssignmentData
+from optmodels.assignment.generic import solve as _map_solve
 from optmodels.assignment.sensor import Resolution
+from optmodels.assignment.solution import AssignmentSolution
 from optmodels.core import (
     FloatArray,
     ProblemError,
@@ -114,7 +115,9 @@ def _number(value: Any, name: str) -> float:
     return float(value)
 
 
-class MergedDetection(Detection):
+# Stone Soup has no type information (its classes are Any to mypy): subclassing them is
+# the associator's job, so the two subclass lines below are exempt from that one check.
+class MergedDetection(Detection):  # type: ignore[misc]
     """The pseudo-detection by which one member of an unresolved group is updated:
     ``state_vector`` z'_i, ``measurement_model`` the detection's model with the inflated
     noise R'_i (module docstring). Compares and hashes as ``merged_from`` (so a tracker's
@@ -219,10 +222,11 @@ def cell_covariance(resolution: Resolution, point: FloatArray) -> FloatArray:
     dp = p - site
     r, az = float(np.linalg.norm(dp[:2])), float(np.arctan2(dp[1], dp[0]))
     g = np.array([[math.cos(az), -r * math.sin(az)], [math.sin(az), r * math.cos(az)]])
-    c = g @ np.diag([resolution.range**2 / 3.0, resolution.azimuth**2 / 3.0]) @ g.T
+    cell_r, cell_az = resolution._cell()
+    c = g @ np.diag([cell_r**2 / 3.0, cell_az**2 / 3.0]) @ g.T
     if d == 2:
         return c
-    out = np.eye(d) * resolution.range**2 / 3.0  # other axes: the range extent
+    out = np.eye(d) * cell_r**2 / 3.0  # other axes: the range extent
     out[:2, :2] = c
     return out
 
@@ -254,7 +258,7 @@ def _inflated(model: Any, noise: FloatArray) -> Any:
     return m
 
 
-class MergedMeasurementAssociator(DataAssociator):
+class MergedMeasurementAssociator(DataAssociator):  # type: ignore[misc]
     """MAP joint assignment with unresolved groups (paper 004) as a Stone Soup associator.
 
     Returns ``{track: SingleHypothesis}``; the tracks of one unresolved group each get a

@@ -9,7 +9,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 from scipy import linalg
 
-from optmodels.core import MAX_MAGNITUDE, FloatArray, ProblemError, as_finite_array
+from optmodels.core import MAX_MAGNITUDE, FloatArray, ProblemError, as_finite_array, as_float_array
 from optmodels.fusion.inputs import _pair, _where
 from optmodels.fusion.verify import _refuse_inaccurate, _weight_error
 
@@ -101,13 +101,39 @@ def fused_covariance(
 
     With the paper's W and S12 = 0 this is (C1 + C2)⁻¹; with the paper's W applied to
     correlated estimates it is the covariance one actually gets (larger than
-    (C1 + C2)⁻¹, and possibly larger than S1 itself). Inputs are not validated (an
-    internal building block; the public fusion functions validate)."""
-    wm, a, b = (np.asarray(v, dtype=float) for v in (w, s1, s2))
+    (C1 + C2)⁻¹, and possibly larger than S1 itself). Only the form of the inputs is
+    checked (numeric arrays of (m, m) matrices whose stacks broadcast): NaN entries (a
+    failed W) propagate, and S1, S2 are not required to be positive definite.
+
+    Raises
+    ------
+    ProblemError
+        Naming the argument: not a numeric array (ragged, text, ``None`` entries,
+        complex values, a mapping), or not (..., m, m) like W; naming all of them when
+        their stacks do not broadcast.
+    """
+    fn = "fused_covariance"
+    given = {"W": w, "S1": s1, "S2": s2} | ({} if s12 is None else {"s12": s12})
+    mats = {k: as_float_array(_where(fn, k), v) for k, v in given.items()}
+    m = mats["W"].shape[-1] if mats["W"].ndim else 0
+    for k, mat in mats.items():
+        if mat.ndim < 2 or mat.shape[-2:] != (m, m):
+            raise ProblemError(
+                f"{_where(fn, k)}: expected square matrices (m, m) or a stack of them, "
+                f"m = {m} from W, got shape {mat.shape}"
+            )
+    try:
+        np.broadcast_shapes(*(mat.shape for mat in mats.values()))
+    except ValueError:
+        raise ProblemError(
+            f"{_where(fn, ', '.join(mats))}: stacks of shapes "
+            f"{', '.join(str(mat.shape) for mat in mats.values())} do not broadcast"
+        ) from None
+    wm, a, b = mats["W"], mats["S1"], mats["S2"]
     v = np.eye(wm.shape[-1]) - wm
     tr = np.swapaxes
     cov = v @ a @ tr(v, -1, -2) + wm @ b @ tr(wm, -1, -2)
     if s12 is not None:
-        c = np.asarray(s12, dtype=float)
+        c = mats["s12"]
         cov = cov + v @ c @ tr(wm, -1, -2) + wm @ tr(c, -1, -2) @ tr(v, -1, -2)
     return 0.5 * (cov + tr(cov, -1, -2))

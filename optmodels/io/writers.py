@@ -17,7 +17,14 @@ from typing import Any
 
 import numpy as np
 
-from optmodels.core import FloatArray, ProblemError, as_finite_array, json_text, to_jsonable
+from optmodels.core import (
+    FloatArray,
+    ProblemError,
+    as_finite_array,
+    as_instance,
+    json_text,
+    to_jsonable,
+)
 from optmodels.io.paths import _write_text, output_file
 
 
@@ -62,15 +69,12 @@ def write_csv(path: str | os.PathLike[str], rows: Sequence[Mapping[str, Any]]) -
     Raises
     ------
     ProblemError
-        Naming the path if it is a directory or cannot be written; if a row is not a
-        mapping.
+        Naming the path if it is a directory or cannot be written; naming ``rows`` if it
+        is not a sequence of mappings (text, a single mapping, a row of another type).
     """
+    rows = _mapping_rows("io.write_csv rows", rows)
     cols: list[str] = []
-    for i, r in enumerate(rows):
-        if not isinstance(r, Mapping):
-            raise ProblemError(
-                f"io.write_csv rows: row {i} is a {type(r).__name__}, expected a mapping"
-            )
+    for r in rows:
         cols += [k for k in r if k not in cols]
     p = output_file(path, name="io.write_csv path")
     buf = _stdio.StringIO(newline="")
@@ -79,6 +83,21 @@ def write_csv(path: str | os.PathLike[str], rows: Sequence[Mapping[str, Any]]) -
     for r in rows:
         w.writerow({k: csv_cell(r.get(k)) for k in cols})
     _write_text(p, buf.getvalue(), newline="")
+
+
+def _mapping_rows(name: str, rows: Any) -> list[Mapping[str, Any]]:
+    """``rows`` as a list of mappings (one a row), or one :class:`ProblemError` naming
+    ``name``: text (read letter by letter), a single mapping (read key by key), a
+    non-iterable or a row that is not a mapping is refused."""
+    if isinstance(rows, str | bytes | Mapping) or not isinstance(rows, Iterable):
+        raise ProblemError(
+            f"{name}: expected a sequence of mappings (one a row), got {type(rows).__name__}"
+        )
+    out = list(rows)
+    for i, r in enumerate(out):
+        if not isinstance(r, Mapping):
+            raise ProblemError(f"{name}: row {i} is a {type(r).__name__}, expected a mapping")
+    return out
 
 
 def csv_cell(v: Any) -> Any:
@@ -116,7 +135,23 @@ def markdown_table(
     columns: Sequence[str],
     formats: Mapping[str, str] | None = None,
 ) -> str:
-    """A GitHub-flavoured Markdown table of ``rows`` restricted to ``columns``."""
+    """A GitHub-flavoured Markdown table of ``rows`` restricted to ``columns``.
+
+    Raises
+    ------
+    ProblemError
+        Naming ``rows`` if it is not a sequence of mappings; naming ``columns`` if it is
+        not a list of names (text or a mapping would be read letter by letter, key by key).
+    """
+    rows = _mapping_rows("io.markdown_table rows", rows)
+    if isinstance(columns, str | bytes | Mapping) or not isinstance(columns, Iterable):
+        raise ProblemError(
+            f"io.markdown_table columns: expected a sequence of column names, "
+            f"got {type(columns).__name__}"
+        )
+    columns = list(columns)
+    for i, c in enumerate(columns):
+        as_instance(f"io.markdown_table columns[{i}]", c, str)
     fmts = formats or {}
     lines = ["| " + " | ".join(columns) + " |", "|" + "---|" * len(columns)]
     for r in rows:

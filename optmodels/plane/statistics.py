@@ -19,6 +19,7 @@ from optmodels.core import (
     MAX_MAGNITUDE,
     FloatArray,
     ProblemError,
+    as_float_array,
     as_instance,
     as_number,
     as_probability,
@@ -268,12 +269,7 @@ def cramer_rao_bound(data: PlaneData, normal: ArrayLike, offset: float) -> Crame
 
 
 def _direction_stack(name: str, value: ArrayLike) -> FloatArray:
-    if np.iscomplexobj(value):
-        raise ProblemError(f"{name}: complex values are not accepted (give real numbers)")
-    try:
-        a = np.asarray(value, dtype=float)
-    except (TypeError, ValueError) as exc:
-        raise ProblemError(f"{name}: not a numeric array ({exc})") from exc
+    a = as_float_array(name, value)  # ragged, text, None entries, complex: refused
     if a.ndim == 0 or a.shape[-1] != 3:
         raise ProblemError(f"{name}: expected shape (..., 3), got {a.shape}")
     if np.any(np.isinf(a)) or np.any(np.abs(a[np.isfinite(a)]) > MAX_MAGNITUDE):
@@ -305,19 +301,19 @@ def plane_errors(
     """(angle error in rad, offset error in m) with (n, a) sign-aligned to the truth.
     Stacks (..., 3) and (...,) work; NaN rows give NaN (see :func:`angle_error`)."""
     n = _direction_stack("plane.plane_errors normal", normal)
-    if np.iscomplexobj(offset):
-        raise ProblemError("plane.plane_errors offset: complex values are not accepted")
-    try:
-        a = np.asarray(offset, dtype=float)
-    except (TypeError, ValueError) as exc:
-        raise ProblemError(f"plane.plane_errors offset: not numeric ({exc})") from exc
+    a = as_float_array("plane.plane_errors offset", offset)
     if a.shape != n.shape[:-1] or np.any(np.isinf(a)):
         raise ProblemError(
             f"plane.plane_errors offset: expected finite values (NaN allowed) "
             f"of shape {n.shape[:-1]}, got shape {a.shape}"
         )
+    if np.any(np.isnan(a) & ~np.any(np.isnan(n), axis=-1)):
+        raise ProblemError(
+            "plane.plane_errors offset: NaN where the normal is a number (NaN only on "
+            "the NaN rows of an unresolved step)"
+        )
     true_offset = as_number("plane.plane_errors true_offset", true_offset)
-    _direction_stack("plane.plane_errors true_normal", true_normal)
-    sign = np.sign(np.sum(n * np.asarray(true_normal, dtype=float), axis=-1))
+    m = _direction_stack("plane.plane_errors true_normal", true_normal)
+    sign = np.sign(np.sum(n * m, axis=-1))
     sign = np.where(sign == 0, 1.0, sign)
-    return angle_error(n, true_normal), sign * a - true_offset
+    return angle_error(n, m), sign * a - true_offset

@@ -9,7 +9,7 @@ import numpy as np
 import scipy.sparse as sp
 from numpy.typing import ArrayLike
 
-from optmodels.core import FloatArray, ProblemError, as_finite_array
+from optmodels.core import FloatArray, ProblemError, as_finite_array, as_instance
 from optmodels.trajectories.data import Family, FamilyName, TrajectoryData, resolve_family
 from optmodels.trajectories.moments import _stats
 
@@ -24,6 +24,7 @@ def _per_object(data: TrajectoryData, a: ArrayLike, name: str) -> FloatArray:
 
 def predict(data: TrajectoryData, start: ArrayLike, velocity: ArrayLike) -> FloatArray:
     """Model values ŷ = start_j + velocity_j (t − epoch) at the data's times, (Σ N_j, d)."""
+    as_instance("trajectories.predict data", data, TrajectoryData)
     s = _per_object(data, start, "trajectories.predict start")
     v = _per_object(data, velocity, "trajectories.predict velocity")
     return s[data.obj] + v[data.obj] * data.t[:, None]
@@ -32,6 +33,7 @@ def predict(data: TrajectoryData, start: ArrayLike, velocity: ArrayLike) -> Floa
 def objective(data: TrajectoryData, start: ArrayLike, velocity: ArrayLike) -> float:
     """W (4), (10) of the Q lines, weighted: Σ w (y − y0_j − V_j (t − epoch))², evaluated
     in centred times (y − p_j − V_j (t − T_j), p_j = y0_j + V_j (T_j − epoch))."""
+    as_instance("trajectories.objective data", data, TrajectoryData)
     s = _per_object(data, start, "trajectories.objective start")
     v = _per_object(data, velocity, "trajectories.objective velocity")
     st = _stats(data)
@@ -45,6 +47,7 @@ def constraint_residuals(
 ) -> dict[str, float]:
     """Largest violation of the family's equalities (y0_j = y0_k, V_j = V_k in a group),
     relative to the size of the parameters."""
+    as_instance("trajectories.constraint_residuals data", data, TrajectoryData)
     fam = resolve_family(family, data.n_objects)
     s = _per_object(data, start, "trajectories.constraint_residuals start")
     v = _per_object(data, velocity, "trajectories.constraint_residuals velocity")
@@ -63,6 +66,7 @@ def design_matrix(data: TrajectoryData, family: FamilyName | Family) -> sp.csr_m
     """The design matrix A (2) of the family, rows object by object: (5) for diverging,
     (11) for parallel (returned as A, the paper prints Aᵀ). Sparse, Σ N_j × R, velocity
     columns t − epoch (s)."""
+    as_instance("trajectories.design_matrix data", data, TrajectoryData)
     fam = resolve_family(family, data.n_objects)
     n = data.n_measurements
     rows = np.concatenate([np.arange(n), np.arange(n)])

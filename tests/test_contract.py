@@ -186,10 +186,6 @@ PENDING_SKELETON = {
     "move it to verify.py with tests/test_gate.py's tr.solution._finish_solve",
     ("fusion", "generic.solve"): "fuse (closed form and CVXPY) is in estimate.py; split into "
     "closedform.py / generic.py with tests/test_gate.py's patches of fu.estimate",
-    ("biasfield", "data"): "FieldData is in cells.py (issue 23 item 2)",
-    ("biasfield", "solution"): "FieldSolution is in problem.py (issue 23 item 2)",
-    ("biasfield", "verify._finish"): "the gate is verify._verify (issue 23 item 2)",
-    ("biasfield", "generic.solve"): "solve is in selection.py (issue 23 item 2)",
     ("assignment", "solution"): "AssignmentSolution is in data.py",
     ("assignment", "verify._finish"): "the gate is data._finish_point",
     ("assignment", "generic.solve"): "solve is in milp.py",

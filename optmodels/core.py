@@ -439,7 +439,7 @@ TABLES: dict[str, TableSpec] = {
     "optmodels.plane.solution.PlaneSolution": TableSpec(
         "point", (Column("projected", "", ("x_m", "y_m", "z_m")),)
     ),
-    "optmodels.biasfield.problem.FieldSolution": TableSpec(
+    "optmodels.biasfield.solution.FieldSolution": TableSpec(
         "cell",
         (
             Column("centers", "", ("x_m", "y_m")),

@@ -24,7 +24,7 @@ from tqdm import tqdm
 
 from optmodels import biasfield as bf
 from optmodels.backends.cvxpy_backend import available_solvers
-from optmodels.biasfield import selection as sel
+from optmodels.biasfield import verify as sel
 from optmodels.io import markdown_table
 from solvers_cmp import cases, report
 from solvers_cmp.cases import HIGH_OPTIONS, Outcome, Run, cvxpy_qp_solvers

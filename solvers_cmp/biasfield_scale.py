@@ -41,9 +41,9 @@ from scipy.spatial import cKDTree
 
 from optmodels.biasfield.cells import build_field_data
 from optmodels.biasfield.cleaning import clean_plots
-from optmodels.biasfield.data import PlotTable, RadarSet
 from optmodels.biasfield.fields import BiasField
 from optmodels.biasfield.geometry import to_polar, wrap_angle
+from optmodels.biasfield.tables import PlotTable, RadarSet
 from optmodels.biasfield.tracks import fit_tracks
 
 #: The full benchmark and its quick variant (``--small``).

@@ -362,7 +362,8 @@ def _recording(tmp_path, rng: np.random.Generator, *, t0: float = 50_000.0) -> t
 
 def test_read_recording_heights_plane_positions_and_report(tmp_path) -> None:
     from optmodels.biasfield import geometry3d as g3
-    from optmodels.biasfield.recording import fl_to_height, read_recording
+    from optmodels.biasfield.heights import fl_to_height
+    from optmodels.biasfield.recording import read_recording
 
     rng = np.random.default_rng(42)
     rec, sites, f, truth = _recording(tmp_path, rng)
@@ -441,7 +442,7 @@ def test_read_recording_gap_falls_back_to_flight_level(tmp_path) -> None:
 
 
 def test_fl_to_height_isa() -> None:
-    from optmodels.biasfield.recording import R_ISA, fl_to_height
+    from optmodels.biasfield.heights import R_ISA, fl_to_height
 
     # geopotential 11 000 m (the tropopause) ↔ geometric 11 019.1 m (ICAO Doc 7488 table)
     assert abs(float(fl_to_height(11_000.0)) - 11_019.1) < 0.1
@@ -453,8 +454,8 @@ def test_fl_to_height_isa() -> None:
 
 
 def test_read_recording_bad_arguments(tmp_path) -> None:
-    from optmodels.biasfield.data import RadarSet
     from optmodels.biasfield.recording import read_recording, read_sites
+    from optmodels.biasfield.tables import RadarSet
 
     p = tmp_path / "a.ast"
     p.write_bytes(ax.encode_cat048([1.0], 7, 11, [1e4], [0.1], address=1))
@@ -486,8 +487,8 @@ def test_simulated_3d_network_encoded_and_read_back(tmp_path) -> None:
     heights): its plots as CAT048 and its aircraft as CAT021 at every path instant; the
     recording gives every plot's time, slant range, azimuth to the format's resolution and
     its height from ADS-B (interpolated) to LSB/2 plus the time quantisation."""
-    from optmodels.biasfield.data import RadarSet
     from optmodels.biasfield.recording import read_recording
+    from optmodels.biasfield.tables import RadarSet
     from optmodels.scenarios.radar_network import radar_network
 
     sc = radar_network(7, n_aircraft=4, duration=90.0, geometry="3d")

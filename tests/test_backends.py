@@ -249,7 +249,8 @@ def _sent(call: dict) -> dict:
 def test_profile_tables_are_the_old_ones_and_the_problems_share_them() -> None:
     from optmodels import trajectories
     from optmodels.backends import profiles
-    from optmodels.biasfield import lipschitz, selection
+    from optmodels.biasfield import generic as lipschitz
+    from optmodels.biasfield import generic as selection
     from solvers_cmp import cases
 
     # the CVXPY solvers keep their measured options; the table adds the CasADi plugins run

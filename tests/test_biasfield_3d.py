@@ -16,9 +16,9 @@ from pymap3d import vincenty
 from optmodels.biasfield import geometry3d as g3
 from optmodels.biasfield.cells import build_field_data
 from optmodels.biasfield.closedform import closed_form
-from optmodels.biasfield.data import PlotTable, RadarSet
-from optmodels.biasfield.fielddata import FieldData, uncertainty_sets
+from optmodels.biasfield.data import FieldData, uncertainty_sets
 from optmodels.biasfield.paths import AircraftPaths
+from optmodels.biasfield.tables import PlotTable, RadarSet
 from optmodels.core import ProblemError, Status
 from optmodels.scenarios.radar_network import radar_network
 

@@ -21,9 +21,10 @@ from optmodels.biasfield.cleaning import (
     clean_plots,
     clean_reports,
 )
-from optmodels.biasfield.data import AircraftPaths, PlotTable
 from optmodels.biasfield.geometry import to_polar
 from optmodels.biasfield.ingest import read_tracks
+from optmodels.biasfield.paths import AircraftPaths
+from optmodels.biasfield.tables import PlotTable
 from optmodels.biasfield.tracks import fit_tracks, polyline_normal
 from optmodels.core import ProblemError
 from optmodels.scenarios.radar_network import fly_paths3d, radar_network, simulate_plots

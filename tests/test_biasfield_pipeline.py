@@ -456,12 +456,12 @@ def test_read_tracks_to_enu_and_simulate(tmp_path) -> None:
         "optmodels.biasfield.cells",
         "optmodels.biasfield.baseline",
         "optmodels.scenarios",
-        "optmodels.biasfield.fielddata",
+        "optmodels.biasfield.data",
         "optmodels.biasfield.averaging",
         "optmodels.biasfield.polyline",
         "optmodels.biasfield.paths",
         "optmodels.biasfield.closedform",
-        "optmodels.biasfield.selection",
+        "optmodels.biasfield.generic",
     ],
 )
 def test_modules_import_first(module: str) -> None:

@@ -27,9 +27,10 @@ STAGES: dict[str, int] = {
     "geometry3d": 0,
     "fields": 0,
     "paths": 0,
-    "data": 0,
+    "tables": 0,
     "cleaning": 0,
     "ingest": 0,
+    "heights": 0,
     "recording": 0,
     "frames": 0,
     # 1 tracks: the polyline fits (3) and the parametric baseline (2)-(4)
@@ -37,17 +38,17 @@ STAGES: dict[str, int] = {
     "tracks": 1,
     "baseline": 1,
     # 2 field data: cells, averages (6)-(7), FieldData and its sets (10), the chain's owner
-    "fielddata": 2,
+    "data": 2,
     "averaging": 2,
     "cells": 2,
     "pipeline": 2,
-    # 3 selection: the original problem (8)-(10), closed form (11), QP, Lipschitz, re-checks
+    # 3 selection, in the one skeleton: the original problem (8)-(10), the solution, the
+    # re-checks and the gate, closed form (11), the generic QP and Lipschitz SOCP
     "problem": 3,
+    "solution": 3,
     "verify": 3,
-    "identifiability": 3,
     "closedform": 3,
-    "lipschitz": 3,
-    "selection": 3,
+    "generic": 3,
     # 4 use: the map, correcting plots, registration, ADS-B as the referee
     "fieldmap": 4,
     "correction": 4,
@@ -63,7 +64,7 @@ STAGE_NAMES = ("inputs", "tracks", "field data", "selection", "use")
 UPSTREAM_ALLOWED = {
     # FieldSolution.map/at/covered return the use layer's FieldMap (public API); the
     # import is lazy and the map is cached on the solution
-    ("problem", "usage"),
+    ("solution", "usage"),
 }
 
 #: Private names imported across modules (module, imported module, name): files owned by

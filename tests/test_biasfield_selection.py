@@ -14,7 +14,7 @@ from scipy.sparse import linalg as splinalg
 from optmodels import ProblemError
 from optmodels import biasfield as bf
 from optmodels.backends.cvxpy_backend import available_solvers
-from optmodels.biasfield import selection as sel
+from optmodels.biasfield import closedform, generic, problem, verify
 from optmodels.core import VERIFY_TOL, SolveError, Status
 from optmodels.scenarios.radar_network import radar_network
 
@@ -31,22 +31,22 @@ def data() -> bf.FieldData:
 
 
 def test_edge_factor_reproduces_r(data: bf.FieldData) -> None:
-    g = sel.edge_factor(data)
-    r = sel.r_matrix(data)
+    g = problem.edge_factor(data)
+    r = problem.r_matrix(data)
     assert abs(g.T @ g - r).max() < 1e-12 * abs(r).max()
     # J(φ) = φᵀRφ and the paper's sum over ordered pairs is twice that
     rng = np.random.default_rng(0)
     phi = rng.normal(size=r.shape[0])
     total = 0.0
-    p = sel.p_full(data)
+    p = problem.p_full(data)
     m2 = 2 * data.m
     for i in range(data.k):
         for j in range(data.k):
             if data.adjacency[i, j] != 0:
                 d = phi[m2 * i : m2 * (i + 1)] - phi[m2 * j : m2 * (j + 1)]
                 total += d @ p @ d / np.sum((data.centers[i] - data.centers[j]) ** 2)
-    assert sel.objective(data, phi) == pytest.approx(phi @ (r @ phi), rel=1e-12)
-    assert total == pytest.approx(2 * sel.objective(data, phi), rel=1e-12)
+    assert problem.objective(data, phi) == pytest.approx(phi @ (r @ phi), rel=1e-12)
+    assert total == pytest.approx(2 * problem.objective(data, phi), rel=1e-12)
 
 
 @pytest.mark.parametrize("formulation", ["constrained", "reduced"])
@@ -58,9 +58,9 @@ def test_unconstrained_qp_equals_closed_form(
     to max |φ|) with the package's high-accuracy defaults (OSQP: 50 polish refinements).
     SCS cannot take the reduced problem without a box (no constraint rows): reported as
     ERROR, never as a field."""
-    cf = sel.closed_form(data)
+    cf = closedform.closed_form(data)
     assert cf.residuals["stationarity"] < 1e-10
-    g = sel.solve(data, solver=solver, formulation=formulation)  # type: ignore[arg-type]
+    g = generic.solve(data, solver=solver, formulation=formulation)  # type: ignore[arg-type]
     if solver == "SCS" and formulation == "reduced":
         assert g.status is Status.ERROR and np.all(np.isnan(g.phi))
         return
@@ -73,7 +73,7 @@ def test_printed_11_sign(data: bf.FieldData) -> None:
     """(11) as printed, η = +(Φ1ᵀRΦ1)⁻¹Φ1ᵀRΦ0, is the maximiser's mirror: its J is
     larger than at η = 0, while the corrected sign gives the minimum."""
     phi0, phi1 = bf.uncertainty_sets(data)
-    r = sel.r_matrix(data).toarray()
+    r = problem.r_matrix(data).toarray()
     a = phi1.T @ r @ phi1
     b = phi1.T @ r @ phi0
     printed = phi0 + phi1 @ np.linalg.solve(a, b)
@@ -81,7 +81,7 @@ def test_printed_11_sign(data: bf.FieldData) -> None:
     j0 = phi0 @ r @ phi0
     assert printed @ r @ printed > j0 > right @ r @ right
     np.testing.assert_allclose(
-        right, sel.closed_form(data).phi, rtol=1e-9, atol=1e-9 * np.abs(right).max()
+        right, closedform.closed_form(data).phi, rtol=1e-9, atol=1e-9 * np.abs(right).max()
     )
 
 
@@ -89,11 +89,11 @@ def test_binding_box(data: bf.FieldData) -> None:
     """K at 90 % of the unconstrained field's largest |f|: the box binds, J rises, solvers
     agree to 1e-6 and KKT holds to 1e-7 (stationarity, complementarity, multiplier
     signs), all recomputed in NumPy."""
-    cf = sel.closed_form(data)
+    cf = closedform.closed_form(data)
     box = (0.9 * np.abs(cf.field[..., 0]).max(), 0.9 * np.abs(cf.field[..., 1]).max())
-    assert sel.box_feasibility(data, box).size == 0
+    assert verify.box_feasibility(data, box).size == 0
     sols = [
-        sel.solve(data, box=box, solver=s, formulation=f)  # type: ignore[arg-type]
+        generic.solve(data, box=box, solver=s, formulation=f)  # type: ignore[arg-type]
         for s in QP_SOLVERS
         for f in ("constrained", "reduced")
     ]
@@ -112,17 +112,17 @@ def test_binding_box(data: bf.FieldData) -> None:
         assert np.all(s.duals.reshape(-1)[act] * s.active.reshape(-1)[act] >= 0)
     # a box that the optimum already satisfies changes nothing (inactive: QP = closed form)
     loose = (2 * np.abs(cf.field[..., 0]).max(), 2 * np.abs(cf.field[..., 1]).max())
-    g = sel.solve(data, box=loose)
+    g = generic.solve(data, box=loose)
     assert np.all(g.active == 0)
     assert np.max(np.abs(g.phi - cf.phi)) < 1e-7 * np.max(np.abs(cf.phi))
 
 
 def test_infeasible_box_is_reported(data: bf.FieldData) -> None:
-    cf = sel.closed_form(data)
+    cf = closedform.closed_form(data)
     box = (0.05 * np.abs(cf.field[..., 0]).max(), 0.05 * np.abs(cf.field[..., 1]).max())
-    bad = sel.box_feasibility(data, box)
+    bad = verify.box_feasibility(data, box)
     assert bad.size > 0
-    g = sel.solve(data, box=box)
+    g = generic.solve(data, box=box)
     assert g.status is Status.INFEASIBLE and "cells" in g.message
     assert np.all(np.isnan(g.phi))
 
@@ -130,12 +130,12 @@ def test_infeasible_box_is_reported(data: bf.FieldData) -> None:
 def test_lipschitz_is_minimal(data: bf.FieldData) -> None:
     """The SOCP's L: capping it 0.1 % lower makes the problem infeasible; 0.1 % higher is
     feasible; and no field of the quadratic criterion has a smaller L."""
-    lip = sel.solve_lipschitz(data)
+    lip = generic.solve_lipschitz(data)
     assert lip.status is Status.OPTIMAL and lip.lipschitz is not None
-    assert sel.solve_lipschitz(data, cap=lip.lipschitz * (1 - 1e-3)).status is Status.INFEASIBLE
-    assert sel.solve_lipschitz(data, cap=lip.lipschitz * (1 + 1e-3)).status.ok
-    cf = sel.closed_form(data)
-    lt = np.linalg.cholesky(sel.p_full(data)).T
+    assert generic.solve_lipschitz(data, cap=lip.lipschitz * (1 - 1e-3)).status is Status.INFEASIBLE
+    assert generic.solve_lipschitz(data, cap=lip.lipschitz * (1 + 1e-3)).status.ok
+    cf = closedform.closed_form(data)
+    lt = np.linalg.cholesky(problem.p_full(data)).T
     i, j = np.nonzero(np.triu(data.adjacency.toarray()))
     m2 = 2 * data.m
     jumps = [
@@ -154,9 +154,9 @@ def test_bad_input(data: bf.FieldData) -> None:
     adj[:, 0] = 0
     lonely = bf.FieldData(data.radars, data.centers, data.xi, adj, data.P)
     with pytest.raises(ProblemError, match="no neighbour"):
-        sel.closed_form(lonely)
+        closedform.closed_form(lonely)
     with pytest.raises(ProblemError, match="box"):
-        sel.solve(data, box=(-1.0, 1e-3))
+        generic.solve(data, box=(-1.0, 1e-3))
     asym = data.adjacency.toarray()
     asym[0, 1], asym[1, 0] = 1, 0
     with pytest.raises(ProblemError, match="symmetric"):
@@ -173,7 +173,7 @@ def test_box_feasibility_matches_per_cell_lps() -> None:
     from scipy.optimize import linprog
 
     fd, _ = bf.synthetic_field_data(1, cells=150)
-    cf = sel.closed_form(fd)
+    cf = closedform.closed_form(fd)
     phi0, phi1 = bf.uncertainty_sets(fd)
     m2 = 2 * fd.m
     for f in (0.5, 0.9, 1.0):
@@ -194,15 +194,15 @@ def test_box_feasibility_matches_per_cell_lps() -> None:
             )
             if r.status == 2:
                 slow.append(k)
-        np.testing.assert_array_equal(sel.box_feasibility(fd, box), slow)
+        np.testing.assert_array_equal(verify.box_feasibility(fd, box), slow)
 
 
 def test_identifiability_report() -> None:
     """Sparse condition number and per-cell spread against dense linear algebra."""
     fd, _ = bf.synthetic_field_data(2, cells=200)
-    idf = sel.identifiability(fd, batch=64)
+    idf = verify.identifiability(fd, batch=64)
     _, phi1 = bf.uncertainty_sets(fd)
-    h = (phi1.T @ sel.r_matrix(fd) @ phi1).toarray()
+    h = (phi1.T @ problem.r_matrix(fd) @ phi1).toarray()
     assert idf.condition == pytest.approx(np.linalg.cond(h), rel=1e-6)
     hi = np.linalg.inv(h)
     spread = np.sqrt([np.trace(hi[2 * k : 2 * k + 2, 2 * k : 2 * k + 2]) for k in range(fd.k)])
@@ -220,11 +220,11 @@ def test_disconnected_graph_is_solved_per_component() -> None:
     adj[np.ix_(left, ~left)] = 0
     adj[np.ix_(~left, left)] = 0
     split = bf.FieldData(fd.radars, fd.centers, fd.xi, adj, fd.P)
-    both = sel.closed_form(split)
+    both = closedform.closed_form(split)
     assert both.info["components"] >= 2
     for part in (left, ~left):
         sub = bf.FieldData(fd.radars, fd.centers[part], fd.xi[part], adj[np.ix_(part, part)], fd.P)
-        alone = sel.closed_form(sub)
+        alone = closedform.closed_form(sub)
         np.testing.assert_allclose(
             both.field[part], alone.field, rtol=1e-8, atol=1e-10 * np.abs(alone.field).max()
         )
@@ -234,7 +234,7 @@ def test_disconnected_graph_is_solved_per_component() -> None:
 def _lipschitz_of(data: bf.FieldData, phi: np.ndarray) -> float:
     """max over neighbour pairs of ‖Lᵀ(f_i − f_j)‖ / ‖x̌_i − x̌_j‖, P = LLᵀ, by loops over
     the dense adjacency (independent of the module's sparse edge matrices)."""
-    lt = np.linalg.cholesky(sel.p_full(data)).T
+    lt = np.linalg.cholesky(problem.p_full(data)).T
     i, j = np.nonzero(np.triu(data.adjacency.toarray()))
     m2 = 2 * data.m
     return max(
@@ -255,12 +255,12 @@ def test_lipschitz_scs_few_iterations_is_not_trusted(data: bf.FieldData, iters: 
     it (the gap bound is ≤ REJECT_TOL = 1e-3 of L at η = 0, and L(η = 0) < 3 L* here).
     At 1-3 iterations SCS is far from converged: the result must not be OK; with its
     defaults here (``iters=None``: eps 1e-9, 200 000 iterations) it must be OK."""
-    ref = sel.solve_lipschitz(data)
+    ref = generic.solve_lipschitz(data)
     assert ref.status is Status.OPTIMAL and ref.max_residual < 1e-6
     phi0, phi1 = bf.uncertainty_sets(data)
     assert _lipschitz_of(data, phi0) < 3 * ref.lipschitz  # the premise of the 1e-3 bound
     opts = {} if iters is None else {"max_iters": iters}
-    sol = sel.solve_lipschitz(data, solver="SCS", **opts)
+    sol = generic.solve_lipschitz(data, solver="SCS", **opts)
     if iters is None:
         assert sol.ok, sol.message
     elif iters <= 3:
@@ -285,13 +285,13 @@ def test_lipschitz_reduced_equals_constrained() -> None:
     differences ~1e-8; 100× margin). The minimiser of a max is not unique (cells away
     from the binding edges are free), so only L is compared, each recomputed by loops."""
     fd, _ = bf.synthetic_field_data(3, cells=80)
-    free = sel.solve_lipschitz(fd)
+    free = generic.solve_lipschitz(fd)
     big = np.abs(free.field).max(axis=(0, 1))
     box = (0.9 * float(big[0]), 0.9 * float(big[1]))
-    assert sel.box_feasibility(fd, box).size == 0
+    assert verify.box_feasibility(fd, box).size == 0
     for b in (None, box):
-        red = sel.solve_lipschitz(fd, box=b, formulation="reduced")
-        con = sel.solve_lipschitz(fd, box=b, formulation="constrained")
+        red = generic.solve_lipschitz(fd, box=b, formulation="reduced")
+        con = generic.solve_lipschitz(fd, box=b, formulation="constrained")
         assert red.status is Status.OPTIMAL and con.ok, (red.message, con.message)
         l_red, l_con = _lipschitz_of(fd, red.phi), _lipschitz_of(fd, con.phi)
         assert l_red == pytest.approx(l_con, rel=1e-6)
@@ -305,7 +305,7 @@ def test_lipschitz_certificate_residuals(data: bf.FieldData) -> None:
     """The re-check is a real certificate: at Clarabel's optimum every residual is below
     VERIFY_TOL; shifting the returned field along η (still on the sets) raises its L and
     the re-check reports the gap -- the difference of the L values in units of L(η = 0)."""
-    sol = sel.solve_lipschitz(data)
+    sol = generic.solve_lipschitz(data)
     assert sol.status is Status.OPTIMAL
     assert max(sol.residuals.values()) < VERIFY_TOL
     phi0, phi1 = bf.uncertainty_sets(data)
@@ -315,7 +315,7 @@ def test_lipschitz_certificate_residuals(data: bf.FieldData) -> None:
     worse.phi = phi0 + phi1 @ worse.eta.reshape(-1)
     worse.lipschitz = _lipschitz_of(data, worse.phi)
     duals = sol.info["duals"]
-    res = sel.lipschitz_residuals(data, worse, duals)
+    res = verify.lipschitz_residuals(data, worse, duals)
     l_zero = _lipschitz_of(data, phi0)
     expect = (worse.lipschitz - sol.lipschitz) / l_zero
     assert expect > 1e-3
@@ -335,9 +335,9 @@ def test_box_must_be_a_pair_of_positive_numbers(data: bf.FieldData) -> None:
         (np.inf, 1e-3),
     ):
         for call in (
-            lambda b: sel.solve(data, box=b),
-            lambda b: sel.solve_lipschitz(data, box=b),
-            lambda b: sel.box_feasibility(data, b),
+            lambda b: generic.solve(data, box=b),
+            lambda b: generic.solve_lipschitz(data, box=b),
+            lambda b: verify.box_feasibility(data, b),
         ):
             with pytest.raises(ProblemError, match="box"):
                 call(bad)
@@ -345,15 +345,15 @@ def test_box_must_be_a_pair_of_positive_numbers(data: bf.FieldData) -> None:
 
 def test_scalar_arguments_are_checked(data: bf.FieldData) -> None:
     cases = [
-        (lambda: sel.solve_lipschitz(data, cap=-1.0), "cap"),
-        (lambda: sel.solve_lipschitz(data, cap="x"), "cap"),
-        (lambda: sel.solve_lipschitz(data, formulation="dense"), "formulation"),
-        (lambda: sel.solve(data, formulation=3), "formulation"),
-        (lambda: sel.solve(data, solver=3), "solver"),
-        (lambda: sel.solve(data, bogus_option=1), "bogus_option"),
-        (lambda: sel.solve_lipschitz(data, bogus_option=1), "bogus_option"),
-        (lambda: sel.identifiability(data, batch=2.5), "batch"),
-        (lambda: sel.closed_form("data"), "FieldData"),
+        (lambda: generic.solve_lipschitz(data, cap=-1.0), "cap"),
+        (lambda: generic.solve_lipschitz(data, cap="x"), "cap"),
+        (lambda: generic.solve_lipschitz(data, formulation="dense"), "formulation"),
+        (lambda: generic.solve(data, formulation=3), "formulation"),
+        (lambda: generic.solve(data, solver=3), "solver"),
+        (lambda: generic.solve(data, bogus_option=1), "bogus_option"),
+        (lambda: generic.solve_lipschitz(data, bogus_option=1), "bogus_option"),
+        (lambda: verify.identifiability(data, batch=2.5), "batch"),
+        (lambda: closedform.closed_form("data"), "FieldData"),
         (lambda: bf.uncertainty_sets(data, space="spherical"), "space"),
         (lambda: bf.synthetic_field_data(0, cells=2.5), "cells"),
         (lambda: bf.synthetic_field_data(0, cells=20, noise=-1.0), "noise"),
@@ -411,16 +411,18 @@ def test_closed_form_conditioning_check(weight: float, expect: Status) -> None:
         fd.radars, fd.centers, fd.xi, fd.adjacency, np.diag([1 / 50.0**2, weight / 1e-3**2])
     )
     phi0, phi1 = bf.uncertainty_sets(d)
-    h = (phi1.T @ sel.r_matrix(d) @ phi1).toarray()
+    h = (phi1.T @ problem.r_matrix(d) @ phi1).toarray()
     kappa = np.linalg.cond(h, 1)
-    cf = sel.closed_form(d)
+    cf = closedform.closed_form(d)
     assert kappa / 3 <= cf.info["condition"] <= kappa * (1 + 1e-8)
     assert cf.status is expect, cf.message
     if expect is Status.ERROR:
         assert np.all(np.isnan(cf.phi)) and "conditioning" in cf.message
-        eta_dense = -np.linalg.solve(h, phi1.T @ (sel.r_matrix(d) @ phi0))
+        eta_dense = -np.linalg.solve(h, phi1.T @ (problem.r_matrix(d) @ phi0))
         assert cf.residuals["stationarity"] < 1e-12
-        eta_sparse = -splinalg.splu(sparse.csc_matrix(h)).solve(phi1.T @ (sel.r_matrix(d) @ phi0))
+        eta_sparse = -splinalg.splu(sparse.csc_matrix(h)).solve(
+            phi1.T @ (problem.r_matrix(d) @ phi0)
+        )
         assert np.max(np.abs(eta_dense - eta_sparse)) > 1e-9 * np.max(np.abs(eta_dense))
     else:
         assert cf.residuals["conditioning"] == pytest.approx(kappa * np.finfo(float).eps, rel=0.7)

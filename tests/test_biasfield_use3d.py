@@ -11,8 +11,8 @@ import pytest
 from scipy.spatial import Delaunay
 
 from optmodels import biasfield as bf
-from optmodels.biasfield.data import RadarSet
 from optmodels.biasfield.referee import absolute_error, adsb_field, compare_fields
+from optmodels.biasfield.tables import RadarSet
 from optmodels.biasfield.usage import FieldMap, correct_plots, field_map, registration_error
 from optmodels.core import ProblemError, Status
 from optmodels.scenarios.radar_network import radar_network

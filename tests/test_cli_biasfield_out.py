@@ -363,7 +363,8 @@ def test_an_isolated_height_spike_is_cleaned(tmp_path: Path) -> None:
     beside it get the ADS-B height of the clean neighbours (10 km to the 6.25 ft LSB),
     not the +3.9 km of the interpolation through the spike; without the cleaning, the
     flight-level check still rejects the spiked ADS-B heights for the flight level."""
-    from optmodels.biasfield.recording import HEIGHT_SOURCES, fl_to_height, read_recording
+    from optmodels.biasfield.heights import fl_to_height
+    from optmodels.biasfield.recording import HEIGHT_SOURCES, read_recording
 
     rec, sites, f = _spike_recording(tmp_path, slice(50, 51))
     near = f["near"]
@@ -386,7 +387,8 @@ def test_a_long_height_spike_gives_the_flight_level_height(tmp_path: Path) -> No
     the cleaning keeps some; the plots among them disagree with their own flight level
     by ~7.8 km (> 300 m + 8 % of 10 km) and get the flight-level height (within the FL
     LSB of the truth), counted per source; the other plots keep the ADS-B height."""
-    from optmodels.biasfield.recording import HEIGHT_SOURCES, fl_to_height, read_recording
+    from optmodels.biasfield.heights import fl_to_height
+    from optmodels.biasfield.recording import HEIGHT_SOURCES, read_recording
 
     rec, sites, f = _spike_recording(tmp_path, slice(40, 48))
     near = f["near"]

@@ -181,12 +181,7 @@ def test_cli_verb_demo_and_adapter(name: str) -> None:
 #: Where a package is not yet in the skeleton of docs/architecture.md ("Adding a problem"),
 #: with what is left to do; the test fails when an entry is no longer a deviation, so that
 #: the list only shrinks.
-PENDING_SKELETON = {
-    ("biasfield", "data"): "FieldData is in cells.py (issue 23 item 2)",
-    ("biasfield", "solution"): "FieldSolution is in problem.py (issue 23 item 2)",
-    ("biasfield", "verify._finish"): "the gate is verify._verify (issue 23 item 2)",
-    ("biasfield", "generic.solve"): "solve is in selection.py (issue 23 item 2)",
-}
+PENDING_SKELETON: dict[tuple[str, str], str] = {}
 
 
 def _skeleton_deviations(name: str) -> set[str]:

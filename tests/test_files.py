@@ -23,7 +23,7 @@ import pytest
 
 from optmodels import biasfield as bf
 from optmodels import io
-from optmodels.biasfield.data import AircraftPaths
+from optmodels.biasfield.paths import AircraftPaths
 from optmodels.core import ProblemError
 
 ORIGIN = (55.0, 83.0, 150.0)  # lat, lon (deg), alt (m)

@@ -7,9 +7,9 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from optmodels.biasfield.data import PlotTable, RadarSet
 from optmodels.biasfield.frames import default_epoch, from_frame, to_frame
 from optmodels.biasfield.recording import AdsbReports
+from optmodels.biasfield.tables import PlotTable, RadarSet
 from optmodels.core import ProblemError
 
 TOL_T = 1e-6  # s: datetimes are ns; seconds of day ~1e5 carry ~1e-11 s of float error

@@ -5,20 +5,22 @@ Paper: ``shared/papers/001_d6b2428a10e192f8.txt``. Errata: ``docs/errata.md``.
 
 The modules in the order the data travels (tests/test_biasfield_rooms.py holds the order):
 
-* inputs: ``data`` (:class:`RadarSet`, :class:`PlotTable`), ``paths``
+* inputs: ``tables`` (:class:`RadarSet`, :class:`PlotTable`), ``paths``
   (:class:`AircraftPaths`), ``geometry`` (polar maps), ``geometry3d`` (the exact 3-D
   geometry: slant range, each radar's own north, the common plane), ``fields`` (bias field
-  models), ``ingest`` (files), ``recording`` (ASTERIX CAT048 / CAT021 in), ``frames``
-  (pandas in and out), ``cleaning`` (gaps, glitches, ground traffic);
+  models), ``ingest`` (files), ``heights`` (flight level → height, ADS-B height spikes),
+  ``recording`` (ASTERIX CAT048 / CAT021 in), ``frames`` (pandas in and out),
+  ``cleaning`` (gaps, glitches, ground traffic);
 * tracks: ``polyline`` (the polyline's basis, knots and band solves), ``tracks`` (the track
   fits (3)), ``baseline`` (the parametric baseline (2)-(4));
 * field data: ``cells`` (:func:`build_field_data`: cells, averaging (6)-(7)), ``averaging``
-  (its helpers), ``fielddata`` (:class:`FieldData`, neighbours, the uncertainty sets (10)),
+  (its helpers), ``data`` (:class:`FieldData`, neighbours, the uncertainty sets (10)),
   ``pipeline`` (plots → FieldData in one call);
-* selection (section 4; entry point ``selection``): ``problem`` (the original problem
-  (8)-(10), :class:`FieldSolution`), ``closedform`` (closed form (11)), ``selection`` (the
-  QP (9)-(10)), ``lipschitz`` (the Lipschitz class), ``verify`` (the NumPy re-checks),
-  ``identifiability``;
+* selection (section 4), in the one skeleton of the problem packages: ``problem`` (the
+  original problem (8)-(10): objective (9), R, the box, the shared argument checks),
+  ``solution`` (:class:`FieldSolution` and its failure form), ``verify`` (the NumPy
+  re-checks, identifiability and the gate), ``closedform`` (closed form (11)), ``generic``
+  (the QP (9)-(10) [+ (8)] and the Lipschitz SOCP);
 * use (issue 17): ``usage`` (:class:`FieldMap`, :func:`correct_plots`,
   :func:`registration_error`, :func:`score`), ``referee`` (ADS-B as the referee).
 """
@@ -33,8 +35,7 @@ from optmodels.biasfield.cleaning import (
     clean_reports,
 )
 from optmodels.biasfield.closedform import closed_form
-from optmodels.biasfield.data import PlotTable, RadarSet
-from optmodels.biasfield.fielddata import (
+from optmodels.biasfield.data import (
     FieldData,
     laplacian,
     neighbours,
@@ -43,6 +44,7 @@ from optmodels.biasfield.fielddata import (
 )
 from optmodels.biasfield.fields import BiasField
 from optmodels.biasfield.frames import from_frame, to_frame
+from optmodels.biasfield.generic import solve, solve_lipschitz
 from optmodels.biasfield.geometry import (
     bias_from_shift,
     from_polar,
@@ -51,8 +53,8 @@ from optmodels.biasfield.geometry import (
     to_polar,
     wrap_angle,
 )
+from optmodels.biasfield.heights import adsb_height_spikes, fl_to_height
 from optmodels.biasfield.ingest import read_plots, read_radars, read_tracks
-from optmodels.biasfield.lipschitz import solve_lipschitz
 from optmodels.biasfield.paths import AircraftPaths
 from optmodels.biasfield.pipeline import (
     FieldBuild,
@@ -61,13 +63,10 @@ from optmodels.biasfield.pipeline import (
     save_field_data,
 )
 from optmodels.biasfield.polyline import hat_basis
-from optmodels.biasfield.problem import FieldSolution
 from optmodels.biasfield.recording import (
     AdsbReports,
     Recording,
     RecordingReport,
-    adsb_height_spikes,
-    fl_to_height,
     read_recording,
     read_sites,
 )
@@ -79,8 +78,9 @@ from optmodels.biasfield.referee import (
     adsb_reference,
     compare_fields,
 )
-from optmodels.biasfield.selection import solve
+from optmodels.biasfield.solution import FieldSolution
 from optmodels.biasfield.summary import radar_baseline
+from optmodels.biasfield.tables import PlotTable, RadarSet
 from optmodels.biasfield.tracks import ResidualCheck, TrackFit, fit_tracks, residual_check
 from optmodels.biasfield.usage import (
     Corrected,

@@ -10,7 +10,7 @@ PROBLEM = {
     "closed_form": "(11)",
     "api": {
         "data": "FieldData",
-        "residuals": ("selection.objective", "selection.kkt_residuals"),
+        "residuals": ("problem.objective", "verify.kkt_residuals"),
         "solve": "solve",
         "closed_form": "closed_form",
         "estimate": "field",

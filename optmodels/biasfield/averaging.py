@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 from scipy.spatial import cKDTree
 
-from optmodels.biasfield.data import PlotTable, RadarSet
+from optmodels.biasfield.tables import PlotTable, RadarSet
 from optmodels.biasfield.tracks import TrackFit
 from optmodels.core import FloatArray, ProblemError
 
@@ -163,6 +163,7 @@ def sample_cells(
     """Each sample's nearest cell and the samples that count (within ``cell_radius`` of
     it and farther than ``exclude_radius`` from every radar)."""
     dist, cell = tree.query(pos)
+    assert radars.sites is not None  # set by RadarSet.__post_init__
     near = np.min(np.linalg.norm(pos[:, None] - radars.sites[None], axis=2), axis=1)
     return cell, np.flatnonzero((dist <= cell_radius) & (near > exclude_radius))
 

@@ -32,9 +32,9 @@ import numpy as np
 from scipy import linalg, stats
 
 from optmodels.biasfield import geometry3d as g3
-from optmodels.biasfield.data import PlotTable, RadarSet, check_tables
 from optmodels.biasfield.geometry import to_polar
 from optmodels.biasfield.polyline import polyline_knots, polyline_normal, split_at_gaps, whiten
+from optmodels.biasfield.tables import PlotTable, RadarSet, check_tables
 from optmodels.core import FloatArray, ProblemError, as_positive
 
 __all__ = ["BaselineResult", "azimuth_bias_baseline"]
@@ -88,19 +88,20 @@ def azimuth_bias_baseline(
     vinv_all = np.empty((len(plots), 2, 2))
     dcol = np.empty((len(plots), 2))
     h_all = plots.height if radars.is_3d else None
+    sites = radars.sites
+    assert sites is not None  # set by RadarSet.__post_init__
     for i in range(m):
         sel = plots.radar == i
         h_i = None if h_all is None else h_all[sel]
         vinv_all[sel] = np.linalg.inv(radars.cartesian_cov(i, z_all[sel], height=h_i))
-        if radars.is_3d:  # ∂z/∂α at fixed slant range and height (exact)
-            dcol[sel] = g3.plane_jacobian(
-                z_all[sel],
-                h_i,
-                radars.geodetic[i],  # type: ignore
-                radars.origin,
-            )[:, :, 1]
+        if radars.geodetic is not None and radars.origin is not None and h_i is not None:
+            # 3-D (the plots' heights were checked by cartesian above): ∂z/∂α at fixed
+            # slant range and height (exact)
+            dcol[sel] = g3.plane_jacobian(z_all[sel], h_i, radars.geodetic[i], radars.origin)[
+                :, :, 1
+            ]
         else:
-            pol = to_polar(z_all[sel], radars.sites[i])
+            pol = to_polar(z_all[sel], sites[i])
             dcol[sel] = pol[:, :1] * np.column_stack([np.cos(pol[:, 1]), -np.sin(pol[:, 1])])
     ids = np.unique(plots.object[plots.object >= 0]) if objects is None else np.asarray(objects)
     s_mat = np.zeros((m, m))

@@ -1,5 +1,5 @@
 r"""The field-data stage (paper 001, section 3): track fits → cells → averages (6)-(7) →
-:class:`~optmodels.biasfield.fielddata.FieldData`.
+:class:`~optmodels.biasfield.data.FieldData`.
 
 * Cell centres x̌_(k): a grid, or k-means of the fitted positions (where traffic is),
   :func:`place_centers`. A sample belongs to the cell of its nearest centre if it lies
@@ -8,7 +8,7 @@ r"""The field-data stage (paper 001, section 3): track fits → cells → averag
   **all** m radars in cell k, the fitted ξ̂_i^a(t) are averaged over the instants the
   object spent in the cell, then over the objects, with their exact covariance.
 * Neighbours, the Laplacian Q of (9) and the uncertainty sets (10) belong to the data:
-  :mod:`~optmodels.biasfield.fielddata` (importable from here as well).
+  :mod:`~optmodels.biasfield.data`.
 
 :func:`build_field_data` reads validate (:func:`_settings`) → build (the fits, the sampled
 objects, the centres) → run (the per-cell sums) → finish (:func:`_field_data`).
@@ -36,17 +36,8 @@ from optmodels.biasfield.averaging import (
     object_samples,
     progress_bar,
 )
-from optmodels.biasfield.data import PlotTable, RadarSet, check_tables
-
-# the data's names stay importable from here (usage.py and pipeline.py import them so)
-from optmodels.biasfield.fielddata import (
-    MAX_SYNTHETIC_CELLS,
-    FieldData,
-    laplacian,
-    neighbours,
-    synthetic_field_data,
-    uncertainty_sets,
-)
+from optmodels.biasfield.data import FieldData, neighbours
+from optmodels.biasfield.tables import PlotTable, RadarSet, check_tables
 from optmodels.biasfield.tracks import TrackFit, fit_tracks
 from optmodels.core import (
     MAX_MAGNITUDE,
@@ -58,18 +49,7 @@ from optmodels.core import (
     as_positive,
 )
 
-__all__ = [
-    "MAX_SYNTHETIC_CELLS",
-    "MAX_UNION_RADARS",
-    "Diagnostics",
-    "FieldData",
-    "build_field_data",
-    "laplacian",
-    "neighbours",
-    "place_centers",
-    "synthetic_field_data",
-    "uncertainty_sets",
-]
+__all__ = ["MAX_UNION_RADARS", "Diagnostics", "build_field_data", "place_centers"]
 
 
 def place_centers(
@@ -95,7 +75,7 @@ def place_centers(
     if pts.shape[1] != 2:
         raise ProblemError(f"{fn} points: expected (N, 2) positions (m), got {pts.shape}")
     count = as_count(f"{fn} count", count, minimum=2)
-    method = as_choice(f"{fn} method", method, ("kmeans", "grid"))  # type: ignore[assignment]
+    as_choice(f"{fn} method", method, ("kmeans", "grid"))
     if pts.shape[0] < count:
         raise ProblemError(
             f"{fn} count: need 2 ≤ count ≤ number of points ({pts.shape[0]}), got {count}"
@@ -281,7 +261,7 @@ class _Settings:
     cell_radius: float | None
     knot_spacing: float
     sample_step: float
-    neighbour_method: str
+    neighbour_method: Literal["delaunay", "radius"]
     neighbour_radius: float | None
     P: ArrayLike | None
     exclude_radius: float
@@ -317,20 +297,12 @@ def _settings(
         cell_radius = as_positive(f"{fn} cell_radius (m)", cell_radius)
     knot_spacing = as_positive(f"{fn} knot_spacing (s)", knot_spacing)
     sample_step = as_positive(f"{fn} sample_step (s)", sample_step)
-    neighbour_method = as_choice(
-        f"{fn} neighbour_method",  # type: ignore[assignment]
-        neighbour_method,
-        ("delaunay", "radius"),
-    )
+    neighbour_method = as_choice(f"{fn} neighbour_method", neighbour_method, ("delaunay", "radius"))
     if neighbour_method == "radius":
         neighbour_radius = as_positive(f"{fn} neighbour_radius (m)", neighbour_radius)
     exclude_radius = as_positive(f"{fn} exclude_radius (m)", exclude_radius, allow_zero=True)
     seed = as_count(f"{fn} seed", seed)
-    coverage = as_choice(
-        f"{fn} coverage",
-        coverage,  # type: ignore[assignment]
-        ("all", "union"),
-    )
+    coverage = as_choice(f"{fn} coverage", coverage, ("all", "union"))
     subset_share = as_positive(f"{fn} subset_share", subset_share)
     if subset_share > 1:
         raise ProblemError(f"{fn} subset_share: expected a share in (0, 1], got {subset_share}")
@@ -382,15 +354,15 @@ def _sampled_objects(
 def _centres(fn: str, s: _Settings, all_pos: list[FloatArray]) -> FloatArray:
     """The cell centres: k-means of the sampled positions, or the centres given."""
     cells = s.cells
-    if np.ndim(cells) == 0:
+    if isinstance(cells, int):  # a count (checked by as_count): k-means
         pts = np.vstack(all_pos)
-        if pts.shape[0] < int(cells):  # type: ignore[arg-type]
+        if pts.shape[0] < cells:
             raise ProblemError(
-                f"{fn} cells: {int(cells)} cells asked for but only "  # type: ignore
+                f"{fn} cells: {cells} cells asked for but only "
                 f"{pts.shape[0]} sampling instants are shared by "
                 f"{'two radars or more' if s.union else 'all radars'}"
             )
-        return place_centers(pts, int(cells), seed=s.seed)  # type: ignore[arg-type]
+        return place_centers(pts, cells, seed=s.seed)
     centers = as_finite_array(f"{fn} cells", cells, ndim=2, max_abs=MAX_MAGNITUDE)
     if centers.shape[1] != 2 or centers.shape[0] < 2:
         raise ProblemError(
@@ -446,11 +418,7 @@ def _field_data(
     diag.samples_per_cell = sums.samples[keep]
     diag.plots_per_cell = sums.plots[keep]
     diag.objects_per_cell = n_obj
-    adj = neighbours(
-        centers,
-        method=s.neighbour_method,  # type: ignore[arg-type]
-        radius=s.neighbour_radius,
-    )
+    adj = neighbours(centers, method=s.neighbour_method, radius=s.neighbour_radius)
     if s.P is None:
         p = sparse.block_diag(
             [
@@ -460,7 +428,8 @@ def _field_data(
         ).toarray()
     else:
         p = as_finite_array(f"{fn} P", s.P, ndim=2, max_abs=MAX_MAGNITUDE)
-    if not radars.is_3d:
+    assert radars.sites is not None  # set by RadarSet.__post_init__
+    if radars.geodetic is None or radars.origin is None:  # 2-D
         return FieldData(radars.sites, centers, xi, adj, p, xi_cov, seen=seen)
     heights = sums.height[keep] / n_obj
     if seen is None:

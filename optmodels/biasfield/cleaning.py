@@ -55,7 +55,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from optmodels.biasfield.data import PlotTable, RadarSet
+from optmodels.biasfield.tables import PlotTable, RadarSet
 from optmodels.core import (
     MAX_MAGNITUDE,
     FloatArray,

@@ -3,9 +3,10 @@ r"""The closed form (11) of the smoothest bias field (paper 001, section 4).
 Closed form (11), with the sign fixed: η* = −(Φ¹ᵀRΦ¹)⁻¹Φ¹ᵀRΦ⁰ (the printed (11) has no
 minus sign; with (10)'s "+Φ¹η" the minimiser needs it), φ* = Φ⁰ + Φ¹η*. Solved by a sparse
 LU factorisation (scipy ``splu``) of the 2K × 2K matrix, re-checked in NumPy against the
-original problem (9)-(10) like a generic solve (:mod:`~optmodels.biasfield.verify`).
-The generic solves are :func:`optmodels.biasfield.selection.solve` (the QP (9)-(10) [+ (8)])
-and :func:`optmodels.biasfield.lipschitz.solve_lipschitz`.
+original problem (9)-(10) like a generic solve
+(:func:`optmodels.biasfield.verify.recheck_closed_form`, ending in the gate).
+The generic solves are :func:`optmodels.biasfield.generic.solve` (the QP (9)-(10) [+ (8)])
+and :func:`optmodels.biasfield.generic.solve_lipschitz`.
 """
 
 from __future__ import annotations
@@ -13,19 +14,10 @@ from __future__ import annotations
 import numpy as np
 from scipy.sparse import linalg as splinalg
 
-from optmodels.biasfield.fielddata import FieldData, uncertainty_sets
-from optmodels.biasfield.problem import (
-    FieldSolution,
-    check_graph,
-    failed_solution,
-    pack_solution,
-    r_matrix,
-)
-from optmodels.biasfield.verify import (
-    condition_number,
-    conditioning_residual,
-    verify_solution,
-)
+from optmodels.biasfield.data import FieldData, uncertainty_sets
+from optmodels.biasfield.problem import check_graph, r_matrix
+from optmodels.biasfield.solution import FieldSolution
+from optmodels.biasfield.verify import failed_solution, pack_solution, recheck_closed_form
 from optmodels.core import ProblemError, Status, timed
 
 __all__ = ["closed_form"]
@@ -75,11 +67,4 @@ def closed_form(data: FieldData) -> FieldSolution:
         return failed_solution(data, (phi0, phi1), common, None)
     sol = pack_solution(data, (phi0, phi1), phi, eta, common, None, None)
     sol.info["components"] = n_comp
-    grad = phi1.T @ (r @ phi)
-    sol.residuals["stationarity"] = float(np.max(np.abs(grad))) / max(
-        float(np.max(np.abs(b))), 1e-300
-    )
-    kappa = condition_number(a, lu)
-    sol.info["condition"] = kappa
-    sol.residuals["conditioning"] = conditioning_residual(kappa)
-    return verify_solution(sol)
+    return recheck_closed_form(sol, (phi0, phi1), r, a, lu)

@@ -10,9 +10,9 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from optmodels.biasfield.data import PlotTable, RadarSet
 from optmodels.biasfield.fieldmap import FieldMap
 from optmodels.biasfield.geometry import wrap_angle
+from optmodels.biasfield.tables import PlotTable, RadarSet
 from optmodels.core import (
     FloatArray,
     as_count,

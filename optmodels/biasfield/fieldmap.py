@@ -5,7 +5,8 @@ solution. Split out of ``usage.py``; the names are re-exported there unchanged."
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+import dataclasses
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -14,8 +15,8 @@ from numpy.typing import ArrayLike
 from scipy.spatial import Delaunay, QhullError, cKDTree
 
 from optmodels.biasfield import geometry3d as g3
-from optmodels.biasfield.data import RadarSet
-from optmodels.biasfield.fielddata import FieldData
+from optmodels.biasfield.data import FieldData
+from optmodels.biasfield.tables import RadarSet
 from optmodels.core import (
     MAX_MAGNITUDE,
     FloatArray,
@@ -118,9 +119,9 @@ class FieldMap:
     origin: FloatArray | None = None
     chain: str = ""
     seen: np.ndarray | None = None
-    _tri: Any = field(default=None, repr=False, compare=False)
-    _tree: Any = field(default=None, repr=False, compare=False)
-    _own: Any = field(default=None, repr=False, compare=False)
+    _tri: Any = dataclasses.field(default=None, repr=False, compare=False)
+    _tree: Any = dataclasses.field(default=None, repr=False, compare=False)
+    _own: Any = dataclasses.field(default=None, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         c = as_finite_array(
@@ -203,7 +204,7 @@ class FieldMap:
         if self.geodetic is not None and chain == "2d":
             raise ProblemError(f"{fn} chain: a field with geodetic sites is of the 3-D chain")
         object.__setattr__(self, "chain", "3d" if self.geodetic is not None else chain)
-        if self.geodetic is not None:
+        if self.geodetic is not None and self.origin is not None:
             geo = as_finite_array(f"{fn} geodetic", self.geodetic, shape=(m, 3))
             for j in range(m):
                 g3.site_geodetic(f"{fn} geodetic[{j}]", geo[j])
@@ -376,6 +377,7 @@ class FieldMap:
         save_npz(
             path,
             name="biasfield.FieldMap.save path",
+            compressed=True,
             centers=self.centers,
             field=self.field,
             max_distance=np.array(self.max_distance),

@@ -1,5 +1,5 @@
 """pandas DataFrames in and out of the bias-field tables (issue 16): radar plots
-(:class:`~optmodels.biasfield.data.PlotTable`) and ADS-B reports
+(:class:`~optmodels.biasfield.tables.PlotTable`) and ADS-B reports
 (:class:`~optmodels.biasfield.recording.AdsbReports`), with the column names ADS-B tools
 use.
 
@@ -210,8 +210,8 @@ def to_frame(
         too few ``addresses``, times that ``datetime64[ns]`` cannot hold from ``epoch``,
         an unknown ``convention``.
     """
-    from optmodels.biasfield.data import PlotTable, RadarSet
     from optmodels.biasfield.recording import AdsbReports, Recording
+    from optmodels.biasfield.tables import PlotTable, RadarSet
 
     pd = _pd()
     conv = as_choice("frames.to_frame convention", convention, CONVENTIONS)
@@ -311,8 +311,8 @@ def from_frame(
         of range; an ADS-B frame whose altitude unit is not known (no ``convention``
         given or carried), or whose columns contradict the one given.
     """
-    from optmodels.biasfield.data import PlotTable, RadarSet
     from optmodels.biasfield.recording import AdsbReports
+    from optmodels.biasfield.tables import PlotTable, RadarSet
 
     fn = "frames.from_frame"
     pd = _pd()

@@ -252,7 +252,7 @@ def polar_jacobian3d(x: ArrayLike, h: ArrayLike, site: ArrayLike, origin: ArrayL
 def plane_jacobian(x: ArrayLike, h: ArrayLike, site: ArrayLike, origin: ArrayLike) -> FloatArray:
     """∂(East, North)/∂(slant range, azimuth) at fixed height, (..., 2, 2): the inverse of
     :func:`polar_jacobian3d` (how a polar bias moves the plotted position on the plane)."""
-    return np.linalg.inv(polar_jacobian3d(x, h, site, origin))
+    return np.asarray(np.linalg.inv(polar_jacobian3d(x, h, site, origin)), dtype=float)
 
 
 def shift_from_bias3d(

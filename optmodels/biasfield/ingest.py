@@ -40,7 +40,8 @@ from optmodels.biasfield.cleaning import (
     CleaningReport,
     clean_reports,
 )
-from optmodels.biasfield.data import AircraftPaths, PlotTable, RadarSet
+from optmodels.biasfield.paths import AircraftPaths
+from optmodels.biasfield.tables import PlotTable, RadarSet
 from optmodels.core import (
     FloatArray,
     ProblemError,

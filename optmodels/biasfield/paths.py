@@ -1,10 +1,10 @@
 """True (or reference) aircraft paths (paper 001, (1)): the positions x^a(t) the plots of
-:mod:`~optmodels.biasfield.data` are made from (synthetic scenes) or checked against
-(ADS-B, :mod:`~optmodels.biasfield.referee`). Importable from
-:mod:`optmodels.biasfield.data` as well (the input tables' module)."""
+:mod:`~optmodels.biasfield.tables` are made from (synthetic scenes) or checked against
+(ADS-B, :mod:`~optmodels.biasfield.referee`); the third input table."""
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -110,10 +110,10 @@ class AircraftPaths:
     @classmethod
     def from_tracks(
         cls,
-        times: list[ArrayLike],
-        lat: list[ArrayLike],
-        lon: list[ArrayLike],
-        height: list[ArrayLike],
+        times: Sequence[ArrayLike],
+        lat: Sequence[ArrayLike],
+        lon: Sequence[ArrayLike],
+        height: Sequence[ArrayLike],
         origin: ArrayLike,
         labels: tuple[Any, ...] | None = None,
     ) -> AircraftPaths:
@@ -140,9 +140,9 @@ class AircraftPaths:
     @classmethod
     def from_plane(
         cls,
-        times: list[ArrayLike],
-        en: list[ArrayLike],
-        height: list[ArrayLike],
+        times: Sequence[ArrayLike],
+        en: Sequence[ArrayLike],
+        height: Sequence[ArrayLike],
         origin: ArrayLike,
         labels: tuple[Any, ...] | None = None,
     ) -> AircraftPaths:

@@ -1,4 +1,4 @@
-r"""The one owner of the plots → :class:`~optmodels.biasfield.cells.FieldData` chain
+r"""The one owner of the plots → :class:`~optmodels.biasfield.data.FieldData` chain
 (paper 001: the track fits (3), the cells and the averaging (6)-(7), the sets (10)).
 
 :func:`field_data_from_plots` runs, in order: the 3-D placement check (plots a 3-D radar
@@ -26,8 +26,8 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from optmodels.biasfield.cells import Diagnostics, build_field_data
-from optmodels.biasfield.data import PlotTable, RadarSet
-from optmodels.biasfield.fielddata import FieldData
+from optmodels.biasfield.data import FieldData
+from optmodels.biasfield.tables import PlotTable, RadarSet
 from optmodels.core import ProblemError, as_instance
 
 __all__ = ["FieldBuild", "field_data_from_plots", "field_data_names", "save_field_data"]
@@ -163,7 +163,7 @@ def save_field_data(
     name: str = "biasfield.save_field_data path",
 ) -> Any:
     """Write ``data`` to the ``.npz`` :meth:`FieldData.load
-    <optmodels.biasfield.cells.FieldData.load>` reads (the keys of ``FieldData.save``),
+    <optmodels.biasfield.data.FieldData.load>` reads (the keys of ``FieldData.save``),
     with the radars' ``names`` if given, exactly at ``path`` and atomically
     (:func:`optmodels.io.save_npz`: a kill part-way leaves the previous file readable).
     Returns the path written."""

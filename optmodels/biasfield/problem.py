@@ -1,29 +1,26 @@
 r"""The original problem of section 4 (paper 001, (8)-(10)) and what every method shares.
 
-The solution type :class:`FieldSolution`; the objective (9) J(φ) = φᵀ(Q ⊗ P)φ written as
-‖Gφ‖² with the sparse edge-difference factor G (:func:`edge_factor`, :func:`objective`)
-and R = Q ⊗ P itself (:func:`r_matrix`); the box (8) as bounds on φ (:func:`box_bounds`);
-the checks of the arguments common to the solves (:func:`check_graph`,
-:func:`check_arguments`); the per-component scaling the solvers see
+The objective (9) J(φ) = φᵀ(Q ⊗ P)φ written as ‖Gφ‖² with the sparse edge-difference
+factor G (:func:`edge_factor`, :func:`objective`) and R = Q ⊗ P itself (:func:`r_matrix`);
+the sets (10) as computed once per solve (:data:`Sets`, from
+:func:`optmodels.biasfield.data.uncertainty_sets`); the box (8) as bounds on φ
+(:func:`box_bounds`); the checks of the arguments common to the solves
+(:func:`check_graph`, :func:`check_arguments`); the per-component scaling the solvers see
 (:func:`variable_scales`, and the scaled Lipschitz SOCP's matrices :func:`lipschitz_data`,
-shared by its solve and its certificate check); the solver call (:func:`run_solver`), the
-result packer (:func:`pack_solution`: φ on the sets (10), the box's active set; the gate
-is :func:`optmodels.biasfield.verify.verify_solution`) and the result of a method without a
-field (:func:`failed_solution`).
+shared by its solve and its certificate check) and the solver call (:func:`run_solver`).
 
 Those helpers are the selection stage's shared pieces: public inside the package (used by
-:mod:`~optmodels.biasfield.closedform`, :mod:`~optmodels.biasfield.selection`,
-:mod:`~optmodels.biasfield.lipschitz`, :mod:`~optmodels.biasfield.verify`,
-:mod:`~optmodels.biasfield.identifiability` and :mod:`~optmodels.biasfield.referee`), not
-re-exported by ``optmodels.biasfield``.
+:mod:`~optmodels.biasfield.closedform`, :mod:`~optmodels.biasfield.generic`,
+:mod:`~optmodels.biasfield.verify` and :mod:`~optmodels.biasfield.referee`), not
+re-exported by ``optmodels.biasfield``. The solution is
+:class:`~optmodels.biasfield.solution.FieldSolution`, packed and re-checked by
+:mod:`~optmodels.biasfield.verify`.
 """
 
 from __future__ import annotations
 
-import dataclasses
 from collections.abc import Sequence
-from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import cvxpy as cp
 import numpy as np
@@ -32,125 +29,29 @@ from scipy import sparse
 from scipy.sparse import csgraph
 
 from optmodels.backends.cvxpy_backend import solve_problem
-from optmodels.biasfield.fielddata import FieldData, laplacian, uncertainty_sets
+from optmodels.biasfield.data import FieldData, laplacian, uncertainty_sets
 from optmodels.core import (
     FloatArray,
     ProblemError,
-    Solution,
     as_choice,
     as_finite_array,
     as_instance,
     as_positive,
 )
 
-if TYPE_CHECKING:  # usage imports this module; at run time FieldMap is imported lazily
-    from optmodels.biasfield.usage import FieldMap
-
-__all__ = ["FieldSolution", "Sets", "edge_factor", "objective"]
+__all__ = ["Sets", "edge_factor", "objective"]
 
 
 #: (Φ⁰, Φ¹) of (10), computed once per solve and handed to the helpers below.
 Sets = tuple[FloatArray, sparse.csr_matrix]
 
 
-@dataclass
-class FieldSolution(Solution):
-    """A field on the cells: ``field`` (K, m, 2) = [range, azimuth] bias per cell and radar,
-    ``phi`` (2mK,), ``eta`` (K, 2); ``active`` (K, m, 2) box constraints at their bound
-    (+1 upper, −1 lower, 0 free); ``duals`` (K, m, 2) their multipliers (≥ 0, signed like
-    ``active``); ``lipschitz`` L for :func:`~optmodels.biasfield.lipschitz.solve_lipschitz`.
-
-    ``centers`` (K, 2) the cell centres x̌_k (m, common plane) the field belongs to, and
-    ``frame`` the data's frame (``sites`` (m, 2); ``geodetic`` (m, 3) and ``origin`` (3,)
-    for the exact 3-D chain; None where absent); ``seen`` (K, m) the radars of each cell
-    (per-cell subsets; ``field`` is 0 where a radar does not see a cell, and the map serves
-    each radar over its own cells only): with them :meth:`at` evaluates the field
-    anywhere in the covered area and :meth:`map` gives the
-    :class:`~optmodels.biasfield.usage.FieldMap` to correct plots with or to save."""
-
-    field: FloatArray = dataclasses.field(default_factory=lambda: np.empty(0))
-    phi: FloatArray = dataclasses.field(default_factory=lambda: np.empty(0))
-    eta: FloatArray = dataclasses.field(default_factory=lambda: np.empty(0))
-    active: np.ndarray = dataclasses.field(default_factory=lambda: np.empty(0))
-    duals: FloatArray = dataclasses.field(default_factory=lambda: np.empty(0))
-    lipschitz: float | None = None
-    centers: FloatArray = dataclasses.field(default_factory=lambda: np.empty((0, 2)))
-    frame: dict[str, Any] = dataclasses.field(default_factory=dict, repr=False)
-    seen: np.ndarray | None = None
-
-    def map(self, *, names: Sequence[str] = (), max_distance: float | None = None) -> FieldMap:
-        """The field as a :class:`~optmodels.biasfield.usage.FieldMap` (the P1 interpolant
-        on the Delaunay triangulation of ``centers``, with the data's frame and the radars'
-        ``names`` if given; ``max_distance`` (m) bounds the covered area, default 1.5 × the
-        largest nearest-neighbour distance of the centres). Refused (ProblemError) for a
-        solution with no field (status not OK) or without its cells."""
-        from optmodels.biasfield.usage import FieldMap
-
-        if not self.status.ok:
-            raise ProblemError(
-                f"biasfield.FieldSolution.map: status {self.status.value} has no field to use"
-            )
-        c = np.asarray(self.centers, dtype=float)
-        if c.ndim != 2 or c.shape[0] != np.shape(self.field)[0]:
-            raise ProblemError(
-                "biasfield.FieldSolution.map: the solution carries no cell "
-                f"centres for its field (centers {c.shape}, field "
-                f"{np.shape(self.field)}); use biasfield.field_map(solution, "
-                "data)"
-            )
-        key = (tuple(str(n) for n in names), max_distance)
-        cache = self.__dict__.get("_maps")
-        if cache is None or cache[0] != key or cache[2] is not self.field:
-            dmax = float("nan") if max_distance is None else max_distance
-            fm = FieldMap(
-                c,
-                self.field,
-                dmax,
-                key[0],
-                self.frame.get("sites"),
-                self.frame.get("geodetic"),
-                self.frame.get("origin"),
-                self.frame.get("chain", ""),
-                seen=self.seen,
-            )
-            cache = (key, fm, self.field)
-            self.__dict__["_maps"] = cache
-        fm_cached: FieldMap = cache[1]
-        return fm_cached
-
-    def __getstate__(self) -> dict[str, Any]:  # the cached interpolant is not pickled
-        state = dict(self.__dict__)
-        state.pop("_maps", None)
-        return state
-
-    def at(self, points: ArrayLike) -> FloatArray:
-        """The estimated field at ``points`` (n, 2) (m, East/North on the common plane):
-        (n, m, 2) = [range bias (m), azimuth bias (rad)] per radar. Exactly the cell
-        values at the centres; between them the P1 interpolant of :meth:`map`
-        (docs/formulations.md: consistent with the smoothness functional (9)); NaN outside
-        the covered area (:meth:`covered`)."""
-        return self.map().at(points)
-
-    def covered(self, points: ArrayLike) -> np.ndarray:
-        """(n,) True where :meth:`at` is defined (inside the triangulation of the centres
-        and near one)."""
-        return self.map().covered(points)
-
-    @property
-    def max_residual(self) -> float:
-        """Largest KKT/feasibility residual; ``residuals["dual_sign"]`` (the share of
-        box multipliers with a sign off, a diagnostic) is not a residual and is left out."""
-        vals = [float(v) for k, v in self.residuals.items() if k != "dual_sign"]
-        if any(np.isnan(v) for v in vals):
-            return float("nan")
-        return max(vals, default=0.0)
-
-
 # ----------------------------------------------------------------------------- pieces
 def p_full(data: FieldData) -> FloatArray:
     """P of ‖·‖_F as the (2m, 2m) matrix (a (2, 2) P repeated for every radar)."""
-    m = data.m
-    return np.kron(np.eye(m), data.P) if data.P.shape == (2, 2) else data.P
+    if data.P.shape != (2, 2):
+        return data.P
+    return np.asarray(np.kron(np.eye(data.m), data.P), dtype=float)
 
 
 def _edges(data: FieldData) -> tuple[np.ndarray, np.ndarray, FloatArray]:
@@ -236,11 +137,7 @@ def objective(data: FieldData, phi: ArrayLike) -> float:
     """J(φ) = φᵀ(Q ⊗ P)φ (9) (half the paper's sum over ordered pairs, see errata);
     ``phi`` (2mK,) cell by cell, radar by radar, [range m, azimuth rad]."""
     g = edge_factor(data)
-    return _objective(g, as_finite_array("biasfield.objective phi", phi, shape=(g.shape[1],)))
-
-
-def _objective(g: sparse.csr_matrix, phi: FloatArray) -> float:
-    v = g @ phi
+    v = g @ as_finite_array("biasfield.objective phi", phi, shape=(g.shape[1],))
     return float(v @ v)
 
 
@@ -292,8 +189,8 @@ def variable_scales(data: FieldData, phi0: FloatArray) -> FloatArray:
 def check_arguments(
     fn: str, data: FieldData, formulation: Any, solver: Any, box: Any
 ) -> tuple[int, Any, str, Any, Any]:
-    """The checked arguments common to :func:`~optmodels.biasfield.selection.solve` and
-    :func:`~optmodels.biasfield.lipschitz.solve_lipschitz`: the number of graph components,
+    """The checked arguments common to :func:`~optmodels.biasfield.generic.solve` and
+    :func:`~optmodels.biasfield.generic.solve_lipschitz`: the number of graph components,
     the formulation, the solver's name, the box bound and the uncertainty sets (10)."""
     n_comp, _ = check_graph(data)
     formulation = as_choice(f"{fn} formulation", formulation, ("constrained", "reduced"))
@@ -308,70 +205,6 @@ def run_solver(where: str, prob: cp.Problem, solver: str, opts: dict[str, Any]) 
         return solve_problem(prob, solver, **opts)
     except ProblemError as exc:
         raise ProblemError(f"{where} options: {exc}") from None
-
-
-def failed_solution(
-    data: FieldData, sets: Sets, common: dict[str, Any], bound: FloatArray | None
-) -> FieldSolution:
-    """The result of a method that produced no field (a failed solve, an overflow, a
-    proven-infeasible box): φ and η NaN, packed and re-checked by :func:`pack_solution`."""
-    phi0, phi1 = sets
-    return pack_solution(
-        data, sets, np.full(phi0.size, np.nan), np.full(phi1.shape[1], np.nan), common, bound, None
-    )
-
-
-def pack_solution(
-    data: FieldData,
-    sets: Sets,
-    phi: FloatArray,
-    eta: FloatArray,
-    common: dict[str, Any],
-    bound: FloatArray | None,
-    duals: FloatArray | None,
-    lipschitz: float | None = None,
-) -> FieldSolution:
-    """A method's φ, η (and box multipliers ``duals``) packed as a :class:`FieldSolution`
-    with the residuals of the sets (10) and of the box (8) and the box's active set; the
-    status in ``common`` is not judged here (the gate is
-    :func:`~optmodels.biasfield.verify.verify_solution`)."""
-    k, m = data.k, data.m
-    phi0, phi1 = sets
-    res: dict[str, float] = {}
-    scale = max(float(np.max(np.abs(phi0))), 1e-300)
-    res["set"] = float(np.max(np.abs(phi - phi0 - phi1 @ eta))) / scale
-    active = np.zeros(phi.size, dtype=np.int8)
-    if bound is not None:
-        res["box"] = float(np.max(np.maximum(np.abs(phi) - bound, 0.0) / bound))
-        tol = 1e-6 * bound
-        active[phi >= bound - tol] = 1
-        active[phi <= -bound + tol] = -1
-    dual = np.zeros(phi.size) if duals is None else duals
-    return FieldSolution(
-        objective=_objective(edge_factor(data), phi),
-        residuals=res,
-        field=phi.reshape(k, m, 2),
-        phi=phi,
-        eta=eta.reshape(k, 2),
-        active=active.reshape(k, m, 2),
-        duals=dual.reshape(k, m, 2),
-        lipschitz=lipschitz,
-        centers=data.centers.copy(),
-        frame=_frame(data),
-        seen=None if data.seen is None else data.seen.copy(),
-        **common,
-    )
-
-
-def _frame(data: FieldData) -> dict[str, Any]:
-    """The frame a field on ``data``'s cells belongs to (see :class:`FieldSolution`)."""
-    three = data.geodetic is not None and data.origin is not None
-    return {
-        "sites": data.radars.copy(),
-        "chain": "3d" if three else "2d",
-        "geodetic": None if not three else np.array(data.geodetic, dtype=float),
-        "origin": None if not three else np.array(data.origin, dtype=float),
-    }
 
 
 def lipschitz_data(data: FieldData, sets: Sets) -> dict[str, Any]:

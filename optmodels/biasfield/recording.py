@@ -40,11 +40,12 @@ import os
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from optmodels.biasfield.data import PlotTable, RadarSet
+from optmodels.biasfield.heights import adsb_height_spikes, fl_to_height, interp_by_object
+from optmodels.biasfield.tables import PlotTable, RadarSet
 from optmodels.core import (
     FloatArray,
     ProblemError,
@@ -54,34 +55,22 @@ from optmodels.core import (
     as_positive,
 )
 
+if TYPE_CHECKING:  # the ASTERIX codec is imported when a recording is read
+    from optmodels.io.asterix import AsterixData, Cat021Reports, Cat048Reports
+
 __all__ = [
+    "HEIGHT_SOURCES",
     "AdsbReports",
     "Recording",
     "RecordingReport",
-    "adsb_height_spikes",
-    "fl_to_height",
     "read_recording",
     "read_sites",
 ]
 
-#: Earth radius of the ISA geopotential ↔ geometric conversion (m, ICAO Doc 7488).
-R_ISA = 6_356_766.0
 #: Height sources of :attr:`Recording.height_source`.
 HEIGHT_SOURCES = ("none", "adsb", "flight level", "flight level, ADS-B rejected")
-
-
-def fl_to_height(pressure_altitude: Any, geoid_undulation: float = 0.0) -> FloatArray:
-    """Standard-atmosphere height (m above the ellipsoid) of a pressure altitude (m).
-
-    H_p (= FL · 30.48 m) is the ISA geopotential altitude; h = R·H_p/(R − H_p) with
-    R = 6 356 766 m is the geometric altitude above mean sea level; + N (the geoid
-    undulation, m) above the WGS-84 ellipsoid. Exact only in the standard atmosphere.
-    """
-    hp = np.asarray(pressure_altitude, dtype=float)
-    n = as_number(
-        "biasfield.fl_to_height geoid_undulation", geoid_undulation, low=-120.0, high=120.0
-    )
-    return R_ISA * hp / (R_ISA - hp) + n
+#: The entry point the argument errors name.
+_FN = "biasfield.read_recording"
 
 
 @dataclass(frozen=True)
@@ -284,43 +273,103 @@ def read_recording(
     """
     from optmodels.io.asterix import read_asterix
 
-    fn = "biasfield.read_recording"
-    if isinstance(radars, str | os.PathLike):
-        radars = read_sites(radars, origin=origin)
-    radars = as_instance(f"{fn} radars", radars, RadarSet)
-    if origin is not None and not isinstance(origin, str) and radars.origin is not None:
+    radars, opts = _validate(
+        radars,
+        origin=origin,
+        max_gap=max_gap,
+        geoid_undulation=geoid_undulation,
+        drop_out_of_range=drop_out_of_range,
+        height_margin=height_margin,
+        height_margin_rel=height_margin_rel,
+        clean_heights=clean_heights,
+    )
+    data = read_asterix(
+        [Path(p) if isinstance(p, str) else p for p in _paths(paths)], date=date, editions=editions
+    )
+    sel = _select_plots(data.cat048, radars, opts.drop_out_of_range)
+    adsb, addresses, adsb_dropped = _adsb_reports(data.cat021, data.cat048.address[sel.keep])
+    heights = _plot_heights(data.cat048, sel.keep, addresses, adsb, opts)
+    return _package(data, radars, sel, adsb, addresses, adsb_dropped, heights)
+
+
+@dataclass(frozen=True)
+class _Options:
+    """The checked options of :func:`read_recording`."""
+
+    max_gap: float
+    geoid_undulation: float
+    drop_out_of_range: bool
+    height_margin: float
+    height_margin_rel: float
+    clean_heights: bool
+
+
+def _validate(
+    radars: RadarSet | str | os.PathLike[str],
+    *,
+    origin: tuple[float, float, float] | str | None,
+    max_gap: float,
+    geoid_undulation: float,
+    drop_out_of_range: bool,
+    height_margin: float,
+    height_margin_rel: float,
+    clean_heights: bool,
+) -> tuple[RadarSet, _Options]:
+    """The radar set (read from a sites file, or given: a 3-D set with SAC/SIC ids whose
+    origin is ``origin`` if that is given) and the checked options, or ProblemError."""
+    given = read_sites(radars, origin=origin) if isinstance(radars, str | os.PathLike) else radars
+    checked = as_instance(f"{_FN} radars", given, RadarSet)
+    if origin is not None and not isinstance(origin, str) and checked.origin is not None:
         try:
-            same = np.allclose(np.asarray(origin, dtype=float), radars.origin, rtol=0, atol=1e-9)
+            same = np.allclose(np.asarray(origin, dtype=float), checked.origin, rtol=0, atol=1e-9)
         except (TypeError, ValueError):
             same = False
         if not same:
             raise ProblemError(
-                f"{fn} origin: {origin!r:.60} differs from the RadarSet's "
-                f"origin {tuple(map(float, radars.origin))}; give the origin "
+                f"{_FN} origin: {origin!r:.60} differs from the RadarSet's "
+                f"origin {tuple(map(float, checked.origin))}; give the origin "
                 "to read_sites (a RadarSet carries its own)"
             )
-    if not radars.is_3d or not radars.ids:
+    if not checked.is_3d or not checked.ids:
         raise ProblemError(
-            f"{fn} radars: need a 3-D RadarSet (geodetic sites) with SAC/SIC "
+            f"{_FN} radars: need a 3-D RadarSet (geodetic sites) with SAC/SIC "
             "ids, e.g. from read_sites"
         )
-    max_gap = as_positive(f"{fn} max_gap", max_gap)
-    height_margin = as_positive(f"{fn} height_margin (m)", height_margin)
-    height_margin_rel = as_number(f"{fn} height_margin_rel", height_margin_rel, low=0.0, high=1.0)
-    clean_heights = as_flag(f"{fn} clean_heights", clean_heights)
-    drop_out_of_range = as_flag(f"{fn} drop_out_of_range", drop_out_of_range)
-    fl_to_height(0.0, geoid_undulation)  # checks it
-    data = read_asterix(
-        [Path(p) if isinstance(p, str) else p for p in _paths(paths)], date=date, editions=editions
+    opts = _Options(
+        max_gap=as_positive(f"{_FN} max_gap", max_gap),
+        geoid_undulation=geoid_undulation,
+        drop_out_of_range=as_flag(f"{_FN} drop_out_of_range", drop_out_of_range),
+        height_margin=as_positive(f"{_FN} height_margin (m)", height_margin),
+        height_margin_rel=as_number(
+            f"{_FN} height_margin_rel", height_margin_rel, low=0.0, high=1.0
+        ),
+        clean_heights=as_flag(f"{_FN} clean_heights", clean_heights),
     )
-    c, a = data.cat048, data.cat021
+    fl_to_height(0.0, geoid_undulation)  # checks it
+    return checked, opts
+
+
+@dataclass(frozen=True)
+class _PlotSelection:
+    """The CAT048 plots kept: per plot its ``radar`` (index, −1 for an unknown SAC/SIC) and
+    ``keep``; the drops by reason and the unknown (SAC, SIC) pairs."""
+
+    radar: np.ndarray
+    keep: np.ndarray
+    dropped: dict[str, int]
+    unknown: tuple[tuple[int, int], ...]
+
+
+def _select_plots(c: Cat048Reports, radars: RadarSet, drop_out_of_range: bool) -> _PlotSelection:
+    """The plots of a radar of ``radars`` (by SAC/SIC) with an aircraft address, within
+    their radar's ``max_range`` (beyond it: dropped, or ProblemError with
+    ``drop_out_of_range=False``)."""
     dropped: dict[str, int] = {}
 
     def drop(reason: str, mask: np.ndarray) -> None:
         if mask.any():
             dropped[reason] = dropped.get(reason, 0) + int(mask.sum())
 
-    # --- plots: radar by SAC/SIC
     lut = np.full(256 * 256, -1, np.int64)
     for i, (sac, sic) in enumerate(radars.ids):
         lut[256 * sac + sic] = i
@@ -336,18 +385,24 @@ def read_recording(
     over = keep & (c.range > radars.max_range[np.maximum(radar, 0)])
     if over.any() and not drop_out_of_range:
         raise ProblemError(
-            f"{fn}: {int(over.sum())} plots beyond their radar's max_range "
+            f"{_FN}: {int(over.sum())} plots beyond their radar's max_range "
             "(drop_out_of_range=False)"
         )
     drop("beyond max_range", over)
     keep &= ~over
+    return _PlotSelection(radar, keep, dropped, unknown)
 
-    # --- ADS-B reports
+
+def _adsb_reports(
+    a: Cat021Reports, plot_addresses: np.ndarray
+) -> tuple[AdsbReports, np.ndarray, dict[str, int]]:
+    """The ADS-B reports with an address, sorted by (object, time); the objects' addresses
+    (those of the kept plots and of the reports, sorted) and the reports dropped."""
     a_keep = a.address >= 0
     adsb_dropped: dict[str, int] = {}
     if (~a_keep).any():
         adsb_dropped["no target address (I021/080)"] = int((~a_keep).sum())
-    addresses = np.unique(np.concatenate([c.address[keep], a.address[a_keep]]))
+    addresses = np.unique(np.concatenate([plot_addresses, a.address[a_keep]]))
     a_obj = np.searchsorted(addresses, a.address[a_keep])
     a_t = a.time[a_keep]
     order = np.lexsort((a_t, a_obj))
@@ -360,50 +415,87 @@ def read_recording(
         a.height[a_keep][order],
         a.pressure_altitude[a_keep][order],
     )
+    return adsb, addresses, adsb_dropped
 
-    # --- plot heights: CAT021 spikes out, then interpolated, then checked against FL
+
+@dataclass(frozen=True)
+class _Heights:
+    """Per kept plot (in file order) its ``object``, ``height`` (m above the ellipsoid)
+    and ``source`` (index into :data:`HEIGHT_SOURCES`); the CAT021 ``spikes`` discarded."""
+
+    object: np.ndarray
+    height: FloatArray
+    source: np.ndarray
+    spikes: int
+
+
+def _plot_heights(
+    c: Cat048Reports,
+    keep: np.ndarray,
+    addresses: np.ndarray,
+    adsb: AdsbReports,
+    opts: _Options,
+) -> _Heights:
+    """The heights of the kept plots (module docstring): the CAT021 spikes out, the ADS-B
+    height interpolated, then checked against the plot's flight level."""
     spikes = (
         adsb_height_spikes(adsb.object, adsb.time, adsb.height)
-        if clean_heights
+        if opts.clean_heights
         else np.zeros(len(adsb), dtype=bool)
     )
     h_clean = np.where(spikes, np.nan, adsb.height)
-    p_t = c.time[keep]
     p_obj = np.searchsorted(addresses, c.address[keep])
-    h_adsb = _interp_by_object(adsb.object, adsb.time, h_clean, p_obj, p_t, max_gap)
+    h_adsb = interp_by_object(adsb.object, adsb.time, h_clean, p_obj, c.time[keep], opts.max_gap)
     hp = c.pressure_altitude[keep]
-    h_fl = fl_to_height(hp, geoid_undulation)
+    h_fl = fl_to_height(hp, opts.geoid_undulation)
     off = (
         np.isfinite(h_adsb)
         & np.isfinite(h_fl)
-        & (np.abs(h_adsb - h_fl) > height_margin + height_margin_rel * np.abs(hp))
+        & (np.abs(h_adsb - h_fl) > opts.height_margin + opts.height_margin_rel * np.abs(hp))
     )
     source = np.where(off, 3, np.where(np.isfinite(h_adsb), 1, np.where(np.isfinite(h_fl), 2, 0)))
     height = np.where(source == 1, h_adsb, np.where(source >= 2, h_fl, np.nan))
+    return _Heights(p_obj, height, source, int(spikes.sum()))
+
+
+def _package(
+    data: AsterixData,
+    radars: RadarSet,
+    sel: _PlotSelection,
+    adsb: AdsbReports,
+    addresses: np.ndarray,
+    adsb_dropped: dict[str, int],
+    h: _Heights,
+) -> Recording:
+    """The kept plots sorted by time as a 3-D :class:`PlotTable`, with the report of the
+    counts and, per plot, where its CAT048 record is."""
+    c = data.cat048
+    keep = sel.keep
+    p_t = c.time[keep]
     order_p = np.argsort(p_t, kind="stable")
     plots = PlotTable(
         p_t[order_p],
-        radar[keep][order_p],
+        sel.radar[keep][order_p],
         c.range[keep][order_p],
         c.azimuth[keep][order_p],
-        p_obj[order_p],
-        height[order_p],
+        h.object[order_p],
+        h.height[order_p],
     )
-    heights = {HEIGHT_SOURCES[k]: int(np.sum(source == k)) for k in (1, 2, 0)}
-    if (source == 3).any():
-        heights[HEIGHT_SOURCES[3]] = int(np.sum(source == 3))
+    heights = {HEIGHT_SOURCES[k]: int(np.sum(h.source == k)) for k in (1, 2, 0)}
+    if (h.source == 3).any():
+        heights[HEIGHT_SOURCES[3]] = int(np.sum(h.source == 3))
     report = RecordingReport(
         len(c),
         len(plots),
-        dropped,
+        sel.dropped,
         heights,
-        len(a),
+        len(data.cat021),
         len(adsb),
         adsb_dropped,
         dict(data.records),
         dict(data.dropped),
-        unknown,
-        int(spikes.sum()),
+        sel.unknown,
+        h.spikes,
     )
     rows = np.flatnonzero(keep)[order_p]
     return Recording(
@@ -411,7 +503,7 @@ def read_recording(
         adsb,
         radars,
         addresses,
-        source[order_p],
+        h.source[order_p],
         c.mode3a[keep][order_p],
         data.epoch,
         report,
@@ -419,87 +511,3 @@ def read_recording(
         np.asarray(c.offset)[rows],
         np.asarray(c.file)[rows],
     )
-
-
-def adsb_height_spikes(
-    obj: np.ndarray,
-    t: FloatArray,
-    height: FloatArray,
-    *,
-    neighbours: int = 2,
-    tolerance: float = 150.0,
-    vertical_rate: float = 100.0,
-) -> np.ndarray:
-    """(n,) True for the ADS-B geometric heights that are spikes.
-
-    Reports sorted by (object, time). A Hampel filter: each finite height h_k is compared
-    with the median of the finite heights of the same object among itself and its
-    ``neighbours`` reports on each side (at least 3 values, else the report is kept): a
-    spike when |h_k − median| > ``tolerance`` + ``vertical_rate`` · τ_k (m; τ_k the
-    largest time distance, s, to a neighbour used). The median of a steady climb or
-    descent is the report's own height, and one or two consecutive outliers never carry
-    the median of five, so an isolated altitude spike (the +7.8 km of a corrupted
-    I021/140) is caught whatever its size while 100 m/s (≈ 20 000 ft/min, beyond any
-    airliner) of true vertical motion is not. A longer run of bad heights carries the
-    median and is left to the flight-level check of :func:`read_recording`. Vectorised
-    over all objects at once (``scipy.signal.medfilt`` works on one series: a Python call
-    per aircraft, and it pads the ends and gaps with zeros).
-    """
-    h = np.asarray(height, dtype=float)
-    n = h.size
-    out = np.zeros(n, dtype=bool)
-    if n < 3:
-        return out
-    vals, dist = [np.where(np.isfinite(h), h, np.nan)], [np.zeros(n)]
-    for d in [*range(-neighbours, 0), *range(1, neighbours + 1)]:
-        j = np.arange(n) + d
-        ok = (j >= 0) & (j < n)
-        jc = np.clip(j, 0, n - 1)
-        ok &= (obj[jc] == obj) & np.isfinite(h[jc])
-        vals.append(np.where(ok, h[jc], np.nan))
-        dist.append(np.where(ok, np.abs(t[jc] - t), 0.0))
-    v = np.stack(vals, axis=1)
-    enough = np.sum(np.isfinite(v), axis=1) >= 3
-    judged = enough & np.isfinite(h)
-    if not judged.any():
-        return out
-    med = np.nanmedian(v[judged], axis=1)
-    tau = np.max(np.stack(dist, axis=1)[judged], axis=1)
-    out[judged] = np.abs(h[judged] - med) > tolerance + vertical_rate * tau
-    return out
-
-
-def _interp_by_object(
-    obj: np.ndarray,
-    t: FloatArray,
-    v: FloatArray,
-    q_obj: np.ndarray,
-    q_t: FloatArray,
-    max_gap: float,
-) -> FloatArray:
-    """Per query (object, time) the linear interpolation of ``v`` between the two
-    bracketing reports of the same object with finite ``v``, if they are at most
-    ``max_gap`` apart (a query at a report's own time takes its value); NaN otherwise.
-    ``obj``/``t`` sorted by (object, time)."""
-    out = np.full(q_t.shape, np.nan)
-    ok = np.isfinite(v)
-    obj, t, v = obj[ok], t[ok], v[ok]
-    if t.size == 0 or q_t.size == 0:
-        return out
-    span = float(max(t.max(), q_t.max()) - min(t.min(), q_t.min())) + 2 * max_gap + 1.0
-    base = min(float(t.min()), float(q_t.min())) - max_gap
-    key = obj * span + (t - base)
-    qkey = q_obj * span + (q_t - base)
-    j = np.searchsorted(key, qkey, side="right")  # first report after the query
-    lo, hi = j - 1, j
-    valid = (lo >= 0) & (hi < t.size)
-    lo_c, hi_c = np.clip(lo, 0, t.size - 1), np.clip(hi, 0, t.size - 1)
-    valid &= (obj[lo_c] == q_obj) & (obj[hi_c] == q_obj)
-    valid &= (t[hi_c] - t[lo_c]) <= max_gap
-    dt = np.where(valid, t[hi_c] - t[lo_c], 1.0)
-    w = np.where(valid, (q_t - t[lo_c]) / np.where(dt > 0, dt, 1.0), 0.0)
-    out = np.where(valid, v[lo_c] + w * (v[hi_c] - v[lo_c]), np.nan)
-    # a query exactly at a report's time (also the last report of an object)
-    exact = (lo >= 0) & (obj[lo_c] == q_obj) & (t[lo_c] == q_t)
-    out = np.where(exact, v[lo_c], out)
-    return out

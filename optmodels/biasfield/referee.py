@@ -42,8 +42,7 @@ from scipy.spatial import cKDTree
 
 from optmodels.biasfield import geometry3d as g3
 from optmodels.biasfield.correction import correct_plots
-from optmodels.biasfield.data import PlotTable, RadarSet
-from optmodels.biasfield.fielddata import FieldData
+from optmodels.biasfield.data import FieldData
 from optmodels.biasfield.fieldmap import FieldMap, Triangles, field_map
 from optmodels.biasfield.geometry import wrap_angle
 from optmodels.biasfield.problem import check_graph, r_matrix
@@ -53,6 +52,7 @@ from optmodels.biasfield.registration import (
     registration_error,
     systematic_square,
 )
+from optmodels.biasfield.tables import PlotTable, RadarSet
 from optmodels.core import (
     MAX_MAGNITUDE,
     FloatArray,

@@ -11,8 +11,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from optmodels.biasfield.data import PlotTable, RadarSet
 from optmodels.biasfield.fieldmap import FieldMap
+from optmodels.biasfield.tables import PlotTable, RadarSet
 from optmodels.core import (
     MAX_MAGNITUDE,
     FloatArray,
@@ -174,10 +174,11 @@ def registration_error(
     z = plane_positions(fn, plots, radars, positions)
     inside = np.ones(len(plots), dtype=bool) if within is None else within.covered(z)
     keep = plots.object >= 0
-    tracks: dict[tuple[int, int], np.ndarray] = {}
+    rows_of: dict[tuple[int, int], list[int]] = {}
     for idx in np.flatnonzero(keep):
-        tracks.setdefault((int(plots.object[idx]), int(plots.radar[idx])), []).append(idx)
-    for key, rows in tracks.items():
+        rows_of.setdefault((int(plots.object[idx]), int(plots.radar[idx])), []).append(int(idx))
+    tracks: dict[tuple[int, int], np.ndarray] = {}
+    for key, rows in rows_of.items():
         r = np.asarray(rows)
         tracks[key] = r[np.argsort(plots.time[r], kind="stable")]
     half = {}
@@ -222,10 +223,10 @@ def registration_error(
         sys_sum = var_sum = 0.0
         n_used = 0
         n_areas = 0
-        obj = np.concatenate(owner[pair])
+        objects = np.concatenate(owner[pair])
         for c in np.unique(label):
             sel = label == c
-            dc, oc = d[sel], obj[sel]
+            dc, oc = d[sel], objects[sel]
             if dc.shape[0] < min_samples:
                 continue
             est = systematic_square(dc, oc)
@@ -235,12 +236,12 @@ def registration_error(
             var_sum += dc.shape[0] * est[1]
             n_used += dc.shape[0]
             n_areas += 1
-        key = (names[pair[0]], names[pair[1]])
-        raw[key] = float(np.sqrt(np.mean(np.sum(d * d, axis=1))))
-        pairs[key] = float(np.sqrt(max(sys_sum, 0.0) / n_used)) if n_used else float("nan")
-        count[key] = int(d.shape[0])
-        areas[key] = n_areas
-        floor[key] = float(np.sqrt(var_sum / n_used)) if n_used else float("nan")
+        named = (names[pair[0]], names[pair[1]])
+        raw[named] = float(np.sqrt(np.mean(np.sum(d * d, axis=1))))
+        pairs[named] = float(np.sqrt(max(sys_sum, 0.0) / n_used)) if n_used else float("nan")
+        count[named] = int(d.shape[0])
+        areas[named] = n_areas
+        floor[named] = float(np.sqrt(var_sum / n_used)) if n_used else float("nan")
         tot_var += var_sum
         tot_sys += sys_sum
         tot_n += n_used

@@ -35,7 +35,6 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from optmodels.biasfield.data import PlotTable, RadarSet, check_tables
 from optmodels.biasfield.polyline import (
     inv2,
     locate,
@@ -46,6 +45,7 @@ from optmodels.biasfield.polyline import (
     split_at_gaps,
     whiten,
 )
+from optmodels.biasfield.tables import PlotTable, RadarSet, check_tables
 from optmodels.core import (
     MAX_MAGNITUDE,
     FloatArray,

@@ -16,7 +16,7 @@ a known field.
   NaN, and :meth:`FieldMap.covered` says where. A map carries the frame it was estimated
   in (radar names, sites; geodetic sites and origin for the exact 3-D chain), saved with
   it, and refuses a radar set that differs (:meth:`FieldMap.check_radars`).
-  :meth:`~optmodels.biasfield.problem.FieldSolution.at` is this map of a solution.
+  :meth:`~optmodels.biasfield.solution.FieldSolution.at` is this map of a solution.
 * :func:`correct_plots`: f_i subtracted from radar i's (range, azimuth) at each plot's
   position (fixed point: the bias is a function of the *true* position x, evaluated at the
   corrected position; two passes change it by O(‖∇f‖·‖s‖), below 1e-6 of the bias for
@@ -41,7 +41,7 @@ from numpy.typing import ArrayLike
 
 from optmodels.biasfield.correction import REASONS, correct_plots, seen_by_others
 from optmodels.biasfield.correction import Corrected as Corrected
-from optmodels.biasfield.fielddata import FieldData, uncertainty_sets
+from optmodels.biasfield.data import FieldData, uncertainty_sets
 from optmodels.biasfield.fieldmap import FieldMap, field_map
 from optmodels.biasfield.geometry import wrap_angle
 from optmodels.biasfield.registration import RegistrationError, registration_error

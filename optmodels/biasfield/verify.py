@@ -1,38 +1,119 @@
-r"""NumPy re-checks of the section-4 answers (paper 001, (8)-(11)), and the status they set.
+r"""NumPy re-checks of the section-4 answers (paper 001, (8)-(11)), and the gate.
 
 Every result -- the closed form (11), the QP (9)-(10) [+ box (8)], the Lipschitz SOCP -- is
-re-checked here against the original problem, not against the solver's report:
+packed and re-checked here against the original problem, not against the solver's report:
 
+* :func:`pack_solution` / :func:`failed_solution`: a method's φ, η as a
+  :class:`~optmodels.biasfield.solution.FieldSolution` with the residuals of the sets (10)
+  and of the box (8) (or, without a field, φ and η NaN);
 * :func:`condition_number` / :func:`conditioning_residual`: κ₁(Φ¹ᵀRΦ¹) and the error floor
-  κ₁·ε of η;
+  κ₁·ε of η; :func:`identifiability`: what the data identify (that condition and the
+  per-cell spread from the diagonal blocks of (Φ¹ᵀRΦ¹)⁻¹);
 * :func:`kkt_residuals`: stationarity, dual signs and complementarity of the QP;
 * :func:`box_feasibility`: the cells whose uncertainty set misses the box (8), exactly;
 * :func:`lipschitz_residuals`: the SOCP's field against the solver's L and its dual
   certificate (weak duality);
-* :func:`verify_solution` (the gate; the failure form ``_no_field``): the largest residual
-  → :func:`optmodels.core.verified_status` (:data:`~optmodels.core.VERIFY_TOL`
-  OPTIMAL_INACCURATE, :data:`~optmodels.core.REJECT_TOL` ERROR without a field).
+* :func:`recheck_closed_form`, :func:`recheck_qp`, :func:`recheck_lipschitz`: each
+  method's re-check, ending in the gate :func:`_finish` (the largest residual →
+  :func:`optmodels.core.finish`: :data:`~optmodels.core.VERIFY_TOL` OPTIMAL_INACCURATE,
+  :data:`~optmodels.core.REJECT_TOL` ERROR in the failure form
+  :func:`optmodels.biasfield.solution._failure`, without a field).
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 from scipy import sparse
 from scipy.sparse import linalg as splinalg
 
-from optmodels.biasfield.fielddata import FieldData, uncertainty_sets
+from optmodels.biasfield import solution
+from optmodels.biasfield.data import FieldData, uncertainty_sets
 from optmodels.biasfield.problem import (
-    FieldSolution,
     Sets,
     box_bounds,
+    check_graph,
+    edge_factor,
     lipschitz_data,
     r_matrix,
 )
-from optmodels.core import FloatArray, ProblemError, finish
+from optmodels.biasfield.solution import FieldSolution
+from optmodels.core import FloatArray, ProblemError, as_count, finish
 
-__all__ = ["box_feasibility", "kkt_residuals", "lipschitz_residuals"]
+__all__ = [
+    "Identifiability",
+    "box_feasibility",
+    "identifiability",
+    "kkt_residuals",
+    "lipschitz_residuals",
+]
+
+
+# ----------------------------------------------------------------------------- packing
+def failed_solution(
+    data: FieldData, sets: Sets, common: dict[str, Any], bound: FloatArray | None
+) -> FieldSolution:
+    """The result of a method that produced no field (a failed solve, an overflow, a
+    proven-infeasible box): φ and η NaN, packed and re-checked by :func:`pack_solution`."""
+    phi0, phi1 = sets
+    return pack_solution(
+        data, sets, np.full(phi0.size, np.nan), np.full(phi1.shape[1], np.nan), common, bound, None
+    )
+
+
+def pack_solution(
+    data: FieldData,
+    sets: Sets,
+    phi: FloatArray,
+    eta: FloatArray,
+    common: dict[str, Any],
+    bound: FloatArray | None,
+    duals: FloatArray | None,
+    lipschitz: float | None = None,
+) -> FieldSolution:
+    """A method's φ, η (and box multipliers ``duals``) packed as a :class:`FieldSolution`
+    with the residuals of the sets (10) and of the box (8) and the box's active set; the
+    status in ``common`` is not judged here (the gate is :func:`_finish`)."""
+    k, m = data.k, data.m
+    phi0, phi1 = sets
+    res: dict[str, float] = {}
+    scale = max(float(np.max(np.abs(phi0))), 1e-300)
+    res["set"] = float(np.max(np.abs(phi - phi0 - phi1 @ eta))) / scale
+    active = np.zeros(phi.size, dtype=np.int8)
+    if bound is not None:
+        res["box"] = float(np.max(np.maximum(np.abs(phi) - bound, 0.0) / bound))
+        tol = 1e-6 * bound
+        active[phi >= bound - tol] = 1
+        active[phi <= -bound + tol] = -1
+    dual = np.zeros(phi.size) if duals is None else duals
+    jumps = edge_factor(data) @ phi  # J(φ) = ‖Gφ‖² (9), NaN for a method without a field
+    return FieldSolution(
+        objective=float(jumps @ jumps),
+        residuals=res,
+        field=phi.reshape(k, m, 2),
+        phi=phi,
+        eta=eta.reshape(k, 2),
+        active=active.reshape(k, m, 2),
+        duals=dual.reshape(k, m, 2),
+        lipschitz=lipschitz,
+        centers=data.centers.copy(),
+        frame=_frame(data),
+        seen=None if data.seen is None else data.seen.copy(),
+        **common,
+    )
+
+
+def _frame(data: FieldData) -> dict[str, Any]:
+    """The frame a field on ``data``'s cells belongs to (see :class:`FieldSolution`)."""
+    three = data.geodetic is not None and data.origin is not None
+    return {
+        "sites": data.radars.copy(),
+        "chain": "3d" if three else "2d",
+        "geodetic": None if not three else np.array(data.geodetic, dtype=float),
+        "origin": None if not three else np.array(data.origin, dtype=float),
+    }
 
 
 # ----------------------------------------------------------------------------- conditioning
@@ -66,25 +147,56 @@ def conditioning_residual(kappa: float) -> float:
     return float(kappa * np.finfo(float).eps)
 
 
-# ----------------------------------------------------------------------------- status
-def _no_field(sol: FieldSolution) -> None:
-    """The bias field's failure form: no field, φ, η (NaN), no Lipschitz constant."""
-    sol.field = np.full_like(sol.field, np.nan)
-    sol.phi = np.full_like(sol.phi, np.nan)
-    sol.eta = np.full_like(sol.eta, np.nan)
-    sol.lipschitz = None if sol.lipschitz is None else float("nan")
+@dataclass(frozen=True)
+class Identifiability:
+    """How well the smoothness criterion pins the field down.
+
+    ``condition``: condition number of H = Φ¹ᵀRΦ¹ (2K × 2K); ``spread`` (K,):
+    √tr of the 2 × 2 diagonal blocks of H⁻¹ per cell (metres per unit √J: how far η_k,
+    the per-cell common shift, can move for a given rise of J); ``worst``: cells by
+    decreasing spread. What no method can recover: the common Cartesian shift in each cell
+    (η_k itself) is fixed only by the smoothness prior, never by the data.
+    """
+
+    condition: float
+    spread: FloatArray
+    worst: np.ndarray
 
 
-def verify_solution(sol: FieldSolution) -> FieldSolution:
-    """A claimed optimum whose NumPy-recomputed residual (KKT: stationarity, box violation,
-    complementarity; or the Lipschitz SOCP's certificate; conditioning) exceeds VERIFY_TOL
-    is reported OPTIMAL_INACCURATE, above REJECT_TOL
-    ERROR (without a field): the one gate :func:`optmodels.core.finish`
-    (:func:`optmodels.core.verified_status`; ``dual_sign`` is a diagnostic, not a
-    residual)."""
-    if not sol.ok:  # a failed solve was packed without a field already
-        return sol
-    return finish(sol, ignore=("dual_sign",), reject=_no_field)
+def identifiability(data: FieldData, *, batch: int = 512) -> Identifiability:
+    """Condition of Φ¹ᵀRΦ¹ (sparse eigenvalues) and the per-cell spread from the diagonal
+    blocks of its inverse (one sparse factorisation, solved in batches of columns)."""
+    batch = as_count("biasfield.identifiability batch", batch, minimum=1)
+    check_graph(data)
+    _, phi1 = uncertainty_sets(data)
+    h = (phi1.T @ r_matrix(data) @ phi1).tocsc()
+    try:
+        lu = splinalg.splu(h)
+    except RuntimeError as exc:
+        raise ProblemError(
+            f"biasfield.identifiability data: Φ1ᵀRΦ1 is singular ({exc}); "
+            "the field is not identifiable on these cells"
+        ) from None
+    n = h.shape[0]
+    diag = np.empty((n // 2, 2, 2))
+    for start in range(0, n, batch):
+        cols = np.arange(start, min(start + batch, n))
+        rhs = np.zeros((n, cols.size))
+        rhs[cols, np.arange(cols.size)] = 1.0
+        x = lu.solve(rhs)
+        for c_i, c in enumerate(cols):
+            diag[c // 2, :, c % 2] = x[2 * (c // 2) : 2 * (c // 2) + 2, c_i]
+    spread = np.sqrt(np.maximum(np.trace(diag, axis1=1, axis2=2), 0.0))
+    lam_max = float(splinalg.eigsh(h, k=1, which="LA", return_eigenvectors=False)[0])
+    inv_max = float(
+        splinalg.eigsh(
+            splinalg.LinearOperator(h.shape, matvec=lu.solve, dtype=float),
+            k=1,
+            which="LA",
+            return_eigenvectors=False,
+        )[0]
+    )
+    return Identifiability(lam_max * inv_max, spread, np.argsort(-spread))
 
 
 # ----------------------------------------------------------------------------- QP
@@ -123,7 +235,7 @@ def kkt_residuals(
 
 
 def box_feasibility(
-    data: FieldData, box: tuple[float, float], *, sets: Sets | None = None
+    data: FieldData, box: tuple[float, float] | None, *, sets: Sets | None = None
 ) -> np.ndarray:
     """Cells whose uncertainty set misses the box (8). The box and the sets are per cell,
     so each cell is a 2-variable feasibility problem: the polygon ∩_j {η : |Φ⁰_j + a_jᵀη| ≤
@@ -183,7 +295,7 @@ def lipschitz_residuals(
 ) -> dict[str, float]:
     r"""Re-check of a Lipschitz SOCP solution against the problem, in NumPy.
 
-    In the scaled variables of :func:`~optmodels.biasfield.lipschitz.solve_lipschitz`
+    In the scaled variables of :func:`~optmodels.biasfield.generic.solve_lipschitz`
     (φ = sc·u, u = u0 + Bη̃, cone e: (ℓ d_e/ref, w_e = D̃_e u)), the Lagrangian with the
     solver's multipliers (λ_e, μ_e) of the cones, α, β ≥ 0 of the box u ≤ b, −u ≤ b and
     γ ≥ 0 of ℓ ≤ cap gives the dual
@@ -260,3 +372,71 @@ def lipschitz_residuals(
         g -= gamma * float(cap) * ref / lip0
     out["gap"] = abs(ell - g)
     return out
+
+
+# ----------------------------------------------------------------------------- the gate
+def recheck_closed_form(
+    sol: FieldSolution,
+    sets: Sets,
+    r: sparse.csr_matrix,
+    h: sparse.spmatrix,
+    lu: Any,
+) -> FieldSolution:
+    """The closed form's re-check: ``residuals["stationarity"]`` (Φ¹ᵀRφ relative to
+    Φ¹ᵀRΦ⁰, the gradient at η = 0) and ``["conditioning"]`` = κ₁(H)·ε of H = Φ¹ᵀRΦ¹ (with
+    the factorisation ``lu`` of H the closed form used; ``info["condition"]`` gives κ₁),
+    then the gate."""
+    phi0, phi1 = sets
+    grad = phi1.T @ (r @ sol.phi)
+    sol.residuals["stationarity"] = float(np.max(np.abs(grad))) / max(
+        float(np.max(np.abs(phi1.T @ (r @ phi0)))), 1e-300
+    )
+    kappa = condition_number(h, lu)
+    sol.info["condition"] = kappa
+    sol.residuals["conditioning"] = conditioning_residual(kappa)
+    return _finish(sol)
+
+
+def recheck_qp(
+    data: FieldData, sol: FieldSolution, box: tuple[float, float] | None, sets: Sets
+) -> FieldSolution:
+    """The QP's re-check: :func:`kkt_residuals` and the conditioning term κ₁(Φ¹ᵀRΦ¹)·ε (an
+    upper bound for the reduced Hessian of any active set; one sparse factorisation), then
+    the gate."""
+    sol.residuals.update(kkt_residuals(data, sol, box, sets=sets))
+    phi1 = sets[1]
+    kappa = condition_number(phi1.T @ r_matrix(data) @ phi1)
+    sol.info["condition"] = kappa
+    sol.residuals["conditioning"] = conditioning_residual(kappa)
+    return _finish(sol)
+
+
+def recheck_lipschitz(
+    data: FieldData,
+    sol: FieldSolution,
+    duals: dict[str, Any],
+    *,
+    box: tuple[float, float] | None,
+    cap: float | None,
+    sets: Sets,
+    prob_data: dict[str, Any],
+) -> FieldSolution:
+    """The Lipschitz SOCP's re-check: :func:`lipschitz_residuals` (the field's L and the
+    solver's dual certificate), then the gate."""
+    sol.residuals.update(
+        lipschitz_residuals(data, sol, duals, box=box, cap=cap, sets=sets, prob_data=prob_data)
+    )
+    return _finish(sol)
+
+
+def _finish(sol: FieldSolution) -> FieldSolution:
+    """The gate: a claimed optimum whose NumPy-recomputed residual (KKT: stationarity, box
+    violation, complementarity; or the Lipschitz SOCP's certificate; conditioning) exceeds
+    VERIFY_TOL is reported OPTIMAL_INACCURATE, above REJECT_TOL ERROR in the failure form
+    :func:`~optmodels.biasfield.solution._failure` (without a field): the one gate
+    :func:`optmodels.core.finish` (:func:`optmodels.core.verified_status`; ``dual_sign``
+    is a diagnostic, not a residual). A failed solve was packed without a field already
+    (:func:`failed_solution`) and is returned as it is."""
+    if not sol.ok:
+        return sol
+    return finish(sol, ignore=("dual_sign",), reject=solution._failure)

@@ -18,7 +18,7 @@ import numpy as np
 
 from optmodels import biasfield as bf
 from optmodels import plots
-from optmodels.biasfield import selection as sel
+from optmodels.biasfield import verify as sel
 from optmodels.biasfield.referee import adsb_field, compare_fields
 from optmodels.biasfield.usage import score
 from optmodels.io import atomic_write, markdown_table, write_json

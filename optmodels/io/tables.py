@@ -98,7 +98,7 @@ def read_csv_rows(path: str | os.PathLike[str], *, what: str = "CSV file") -> Cs
 def csv_numbers(
     path: str | os.PathLike[str],
     column: str,
-    cells: Sequence[Any],
+    cells: Sequence[Any] | np.ndarray,
     lines: Sequence[int] | None = None,
     *,
     finite: bool = True,
@@ -165,7 +165,7 @@ _ISO = re.compile(
 def csv_times(
     path: str | os.PathLike[str],
     column: str,
-    cells: Sequence[Any],
+    cells: Sequence[Any] | np.ndarray,
     lines: Sequence[int] | None = None,
     *,
     epoch: Any = None,
@@ -232,7 +232,7 @@ def _columns(p: Path, table: CsvRows, names: Sequence[str]) -> dict[str, FloatAr
     return {c: csv_numbers(p, c, [r[col[c]] for r in table.rows], table.lines) for c in names}
 
 
-class PlaneCsv(dict):
+class PlaneCsv(dict[str, FloatArray]):
     """Columns of a plane CSV: ``points`` (N, 3) and optional ``t``, ``alpha2``, ``cov``
     ((N, 3, 3) from ``cxx, cxy, cxz, cyy, cyz, czz``)."""
 

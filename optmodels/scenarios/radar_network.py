@@ -26,9 +26,10 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from optmodels.biasfield import geometry3d as g3
-from optmodels.biasfield.data import AircraftPaths, PlotTable, RadarSet
 from optmodels.biasfield.fields import BiasField
 from optmodels.biasfield.geometry import shift_from_bias, to_polar, wrap_angle
+from optmodels.biasfield.paths import AircraftPaths
+from optmodels.biasfield.tables import PlotTable, RadarSet
 from optmodels.core import FloatArray, ProblemError, as_finite_array, as_positive
 
 __all__ = [

@@ -38,7 +38,7 @@ from typing import Any
 
 import numpy as np
 
-from optmodels.biasfield.recording import R_ISA
+from optmodels.biasfield.heights import R_ISA
 from optmodels.core import (
     FloatArray,
     as_choice,

@@ -100,13 +100,15 @@ def _variation_sizer(var: Any, nsp: Any) -> Sizer:
     if issubclass(var, base.Compound):
         subs = [None if s is None else _rule_sizer(s) for s in var.cv_items_list]
 
-        memo: dict[bytes, tuple[int, list[Sizer]]] = {}
+        # per sub-FSPEC: the size of its fixed subitems, and the sizers of all its subitems
+        # in order when one of them is variable (None: all fixed)
+        memo: dict[bytes, tuple[int, list[Sizer] | None]] = {}
 
         def compound(
             buf: bytes,
             q: int,
             _subs: list[Sizer | None] = subs,
-            _memo: dict[bytes, tuple[int, list[Sizer]]] = memo,
+            _memo: dict[bytes, tuple[int, list[Sizer] | None]] = memo,
         ) -> int:
             p = q
             while buf[p] & 1:
@@ -114,31 +116,26 @@ def _variation_sizer(var: Any, nsp: Any) -> Sizer:
             p += 1
             fs = buf[q:p]
             hit = _memo.get(fs)
-            if hit is None:  # sub-FSPEC seen first: its fixed part and variable subitems
+            if hit is None:  # sub-FSPEC seen first: its subitems' sizers
                 present = [
                     7 * k + bit for k, b in enumerate(fs) for bit in range(7) if b & (0x80 >> bit)
                 ]
-                fixed, var = 0, []
+                sizers: list[Sizer] = []
                 for frn in present:
-                    if frn >= len(_subs) or _subs[frn] is None:
+                    sz = _subs[frn] if frn < len(_subs) else None
+                    if sz is None:
                         raise _Bad(f"compound subfield {frn + 1} not in the specification")
-                    sz = _subs[frn]
-                    if isinstance(sz, int):
-                        fixed += sz
-                    else:
-                        var.append(sz)  # type: ignore[arg-type]
-                hit = _memo[bytes(fs)] = (fixed, var)
+                    sizers.append(sz)
+                fixed = sum(s for s in sizers if isinstance(s, int))
+                variable = any(not isinstance(s, int) for s in sizers)
+                hit = _memo[bytes(fs)] = (fixed, sizers if variable else None)
             # all subitems fixed: the size is known from the sub-FSPEC alone; else walk
             # them (a variable subitem is sized at its own offset)
-            fixed, var = hit
-            if not var:
+            fixed, walk = hit
+            if walk is None:
                 return p - q + fixed
-            present = [
-                7 * k + bit for k, b in enumerate(fs) for bit in range(7) if b & (0x80 >> bit)
-            ]
-            for frn in present:
-                sz = _subs[frn]
-                p += sz if isinstance(sz, int) else sz(buf, p)  # type: ignore[operator,misc]
+            for sz in walk:
+                p += sz if isinstance(sz, int) else sz(buf, p)
             return p - q
 
         return compound
@@ -274,15 +271,15 @@ class _Layout:
         sizes: list[Sizer] = []
         need: list[int] = []
         for frn in frns:
-            if frn >= len(self.uap) or self.uap[frn][0] is None:
+            name, s = self.uap[frn] if frn < len(self.uap) else (None, None)
+            if name is None or s is None:
                 raise _Bad(
                     f"FSPEC announces FRN {frn + 1}, which CAT"
                     f"{self.spec.cv_category:03d} edition {self.spec.cv_edition} "
                     "does not define"
                 )
-            name, s = self.uap[frn]
-            sizes.append(s)  # type: ignore[arg-type]
-            need.append(self.slot.get(name, -1))  # type: ignore[arg-type]
+            sizes.append(s)
+            need.append(self.slot.get(name, -1))
         out = (sizes, need)
         self.cache[fspec] = out
         return out

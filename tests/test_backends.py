@@ -6,7 +6,12 @@ import numpy as np
 import pytest
 
 from optmodels.backends.casadi_backend import IPOPT_STATUS, build_nlpsol, run_nlpsol
-from optmodels.backends.cvxpy_backend import CVXPY_STATUS, require_solver, solve_problem
+from optmodels.backends.cvxpy_backend import (
+    CVXPY_STATUS,
+    available_solvers,
+    require_solver,
+    solve_problem,
+)
 from optmodels.core import ProblemError, SolverNotAvailable, Status
 
 QP_SOLVERS = ["CLARABEL", "OSQP", "SCS"]
@@ -71,7 +76,17 @@ def test_iteration_limit_maps_to_status() -> None:
 
 
 def test_missing_solver_names_install_hint() -> None:
+    # a solver CVXPY knows but this machine lacks: the package to install
+    missing = next(
+        s for s in ("GUROBI", "MOSEK", "CPLEX", "XPRESS") if s not in available_solvers()
+    )
     with pytest.raises(SolverNotAvailable, match="pip install"):
+        require_solver(missing)
+    # a typo is not a package name to install: the closest installed solver instead
+    with pytest.raises(ProblemError, match="did you mean CLARABEL") as exc:
+        require_solver("CLARABL")
+    assert "pip install" not in str(exc.value)
+    with pytest.raises(ProblemError, match="unknown solver 'NO_SUCH_SOLVER'"):
         require_solver("NO_SUCH_SOLVER")
 
 

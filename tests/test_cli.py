@@ -294,6 +294,31 @@ def test_trajectories_fit_errors(tmp_path: Path) -> None:
     assert_error(r_unknown, 2, "unknown object")
 
 
+def test_trajectories_fit_without_sigma2_estimates_it(tmp_path: Path) -> None:
+    """No σ² given: σ² is estimated as RSS/dof and the covariance scaled by it (never
+    computed silently with σ² = 1); equal to the closed form run with σ² = s² known."""
+    sc = scenarios.launcher_release(11, family="diverging")
+    path = tmp_path / "objects.csv"
+    _write_traj_csv(path, sc, labels=["A", "B", "C", "D"])
+    res = run_json("trajectories", "fit", path, "--family", "diverging")
+    unit = trajectories.closed_form(
+        trajectories.TrajectoryData(sc.times, sc.values, 1.0), "diverging"
+    )
+    s2 = unit.objective / unit.dof
+    ref = trajectories.closed_form(
+        trajectories.TrajectoryData(sc.times, sc.values, s2), "diverging"
+    )
+    assert res["sigma2_source"] == "estimated" and res["fit_p_value"] is None
+    assert res["sigma2_estimate"] == pytest.approx(s2, rel=1e-9)
+    np.testing.assert_allclose(res["theta_std"], ref.std, rtol=1e-9)
+    np.testing.assert_allclose(res["covariance"], ref.covariance, rtol=1e-9)
+    # the simulator's own σ²: the estimate is within its sampling spread (RSS/σ² ~ χ²(dof))
+    assert abs(s2 / sc.sigma2 - 1) < 5 * np.sqrt(2 / unit.dof)
+    assert res["family_test"]["sigma2"] == "estimated"
+    out = run_cli("trajectories", "fit", path, "--family", "diverging").out
+    assert "estimated from the residuals" in out
+
+
 def test_trajectories_fit_text_output(tmp_path: Path) -> None:
     sc = scenarios.launcher_release(4, family="parallel")
     path = tmp_path / "p.csv"

@@ -11,6 +11,7 @@ import subprocess
 import threading
 import time
 from collections.abc import Iterator
+from pathlib import Path
 
 import pytest
 
@@ -132,3 +133,33 @@ def test_cli_montecarlo_on_a_peer_that_is_not_dask(
     assert proc.returncode == 2, proc.stderr
     assert "Dask" in proc.stderr and "Traceback" not in proc.stderr
     assert time.monotonic() - t0 < 30.0  # 10 s deadline plus start-up
+
+
+def test_dask_address_without_distributed_is_bad_input(
+    monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+) -> None:
+    """A Dask address where ``distributed`` is not installed (a bare ``pip install .``) is
+    one ProblemError with the install hint in the API, and exit 2 in the CLI (was exit 3,
+    "internal error: ModuleNotFoundError")."""
+    import sys
+
+    monkeypatch.setitem(sys.modules, "distributed", None)  # find_spec -> None
+    with pytest.raises(ProblemError, match=r"optmodels\[distributed\]"):
+        as_scheduler("montecarlo.run scheduler", "tcp://127.0.0.1:8786")
+    with pytest.raises(argparse.ArgumentTypeError, match="not installed"):
+        scheduler_argument("tcp://127.0.0.1:8786")
+    code = (
+        "import sys; sys.modules['distributed'] = None\n"
+        "from optmodels.cli import main\n"
+        "sys.exit(main(['montecarlo', 'plane-angle', '--trials', '2', '--scheduler', "
+        "'tcp://127.0.0.1:8786', '--checkpoint', sys.argv[1], '--json']))"
+    )
+    r = subprocess.run(
+        [sys.executable, "-c", code, str(tmp_path / "c.jsonl")],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert r.returncode == 2, r.stderr
+    assert "pip install 'optmodels[distributed]'" in r.stdout + r.stderr
+    assert "Traceback" not in r.stderr

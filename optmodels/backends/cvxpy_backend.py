@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import contextlib
 import ctypes
+import difflib
 import functools
 import re
 import time
@@ -112,10 +113,21 @@ def require_solver(name: str) -> str:
             )
         return key
     if key not in available_solvers():
-        hint = PIP_NAMES.get(key, key.lower())
-        raise SolverNotAvailable(
-            f"CVXPY solver {key!r} is not installed here (installed: "
-            f"{', '.join(available_solvers())}); try `pip install {hint}`"
+        installed = ", ".join(available_solvers())
+        if key in PIP_NAMES or key in cp.settings.SOLVERS:
+            hint = PIP_NAMES.get(key, key.lower())
+            raise SolverNotAvailable(
+                f"CVXPY solver {key!r} is not installed here (installed: "
+                f"{installed}); try `pip install {hint}`"
+            )
+        # not a solver CVXPY knows: a typo, never a package name to install
+        close = difflib.get_close_matches(
+            key, [*available_solvers(), *(f"CASADI_{p.upper()}" for p in casadi_qp_plugins())], n=1
+        )
+        raise ProblemError(
+            f"solver: unknown solver {name!r}"
+            + (f"; did you mean {close[0]}?" if close else "")
+            + f" (installed: {installed})"
         )
     return key
 

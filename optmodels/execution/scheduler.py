@@ -16,6 +16,7 @@ garbage) is one clear ``ProblemError`` within ``timeout`` instead of a hang or a
 from __future__ import annotations
 
 import argparse
+import importlib.util
 import socket
 import struct
 import time
@@ -46,6 +47,11 @@ def _address_problem(text: str) -> str | None:
     scheme, sep, rest = text.partition("://")
     if not sep or not scheme or not rest or any(c.isspace() for c in text):
         return f"expected {_EXPECTED}, got {text!r}"[:200]
+    if importlib.util.find_spec("distributed") is None:
+        return (
+            f"{text!r} is a Dask address, but Dask distributed is not installed: "
+            "pip install 'optmodels[distributed]' (or use serial / processes)"
+        )
     return None
 
 

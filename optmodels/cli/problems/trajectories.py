@@ -36,8 +36,13 @@ def _trajectories_fit(args: argparse.Namespace) -> Outcome:
             if args.sigma2 is not None:
                 raise ProblemError("--sigma2: the file has a sigma2 column already")
             sigma2: Any = cols["sigma2"]
+            source = "file"
+        elif args.sigma2 is not None:
+            sigma2, source = args.sigma2, "--sigma2"
         else:
-            sigma2 = 1.0 if args.sigma2 is None else args.sigma2
+            # no variance given: weights 1 and σ² estimated from the residuals below
+            # (never a covariance silently computed with σ² = 1)
+            sigma2, source = 1.0, "estimated"
         data = trajectories.TrajectoryData(cols["times"], cols["values"], sigma2, epoch=args.epoch)
     q = data.n_objects
     if args.family == "custom":
@@ -70,6 +75,16 @@ def _trajectories_fit(args: argparse.Namespace) -> Outcome:
     if fam is None:  # every trajectories solution carries its family
         raise RuntimeError("trajectories: the solution carries no family")
     std = sol.std
+    covariance = sol.covariance
+    s2: float | None = None
+    if source == "estimated" and sol.ok:
+        if sol.dof <= 0:
+            raise ProblemError(
+                "--sigma2: no degrees of freedom left to estimate the error variance "
+                "from the residuals; give --sigma2 (unit of y squared) or a sigma2 column"
+            )
+        s2 = float(sol.objective) / sol.dof  # unbiased σ² estimate RSS / (N - p)
+        std, covariance = std * np.sqrt(s2), covariance * s2
     out: dict[str, Any] = {
         "file": str(args.file),
         "objects": labels,
@@ -83,13 +98,15 @@ def _trajectories_fit(args: argparse.Namespace) -> Outcome:
         "method": sol.method,
         "theta": sol.theta,
         "theta_std": std,
-        "covariance": sol.covariance,
+        "covariance": covariance,
+        "sigma2_source": source,
+        "sigma2_estimate": s2,
         "start": {lab: sol.start[k] for k, lab in enumerate(labels)},
         "velocity": {lab: sol.velocity[k] for k, lab in enumerate(labels)},
         "objective": sol.objective,
         "dof": sol.dof,
         "fit_p_value": float(stats.chi2.sf(sol.objective, sol.dof))
-        if sol.dof > 0 and sol.ok
+        if sol.dof > 0 and sol.ok and source != "estimated"
         else None,
         "residuals": sol.residuals,
         "build_time": sol.build_time,
@@ -99,7 +116,10 @@ def _trajectories_fit(args: argparse.Namespace) -> Outcome:
     }
     if sol.ok and fam.n_constraints > 0:
         out["family_test"] = trajectories.family_test(
-            data, fam, level=args.level, sigma2="estimated" if args.sigma2_unknown else "known"
+            data,
+            fam,
+            level=args.level,
+            sigma2="estimated" if args.sigma2_unknown or source == "estimated" else "known",
         ).to_dict()
     return out, sol.ok
 
@@ -112,17 +132,26 @@ def _print_trajectories_fit(res: dict[str, Any]) -> None:
     if res["status"] not in _OK_STATUSES:
         print(f"  {res['message']}")
         return
+    print(f"  (start in the unit of y at t = {res['epoch']} s; velocity in unit of y per s)")
     for lab in res["objects"]:
         print(
             f"  {lab}: start = {np.round(res['start'][lab], 6)}, "
             f"velocity = {np.round(res['velocity'][lab], 6)}"
         )
-    print(f"  θ std = {np.round(res['theta_std'], 6).tolist()}")
-    pv = res["fit_p_value"]
     print(
-        f"  χ² = {res['objective']:.6g} on {res['dof']} dof"
-        + (f" (p = {pv:.3g})" if pv is not None else "")
+        f"  θ std = {np.round(res['theta_std'], 6).tolist()} (θ = shared starts, then velocities)"
     )
+    pv = res["fit_p_value"]
+    if res["sigma2_source"] == "estimated":
+        print(
+            f"  σ² not given: estimated from the residuals, s² = {res['sigma2_estimate']:.6g} "
+            f"(unit of y)² on {res['dof']} dof; θ std scaled by s (give --sigma2 if known)"
+        )
+    else:
+        print(
+            f"  χ² = {res['objective']:.6g} on {res['dof']} dof"
+            + (f" (p = {pv:.3g})" if pv is not None else "")
+        )
     t = res.get("family_test")
     if t:
         verdict = "REJECTED" if t["reject"] else "not rejected"
@@ -183,7 +212,8 @@ def register(sub: Any) -> None:
     tfit.add_argument(
         "--sigma2",
         type=positive,
-        help="error variance, (unit of y)² (when absent: 1, or the file's sigma2 column)",
+        help="error variance, (unit of y)²; when neither this nor a sigma2 column is given, σ² "
+        "is estimated from the residuals (RSS/dof) and the F test is used",
     )
     tfit.add_argument(
         "--sigma2-unknown",

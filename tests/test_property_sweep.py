@@ -575,31 +575,7 @@ def _net_map(c: Ctx) -> bf.FieldMap:
 
 #: (entry, argument, bad kind) -> why it fails today, for defects in files this sweep's
 #: owner does not own (strict xfail: the mark must go when the defect is fixed).
-KNOWN: dict[tuple[str, str, str], str] = {  # found by this sweep; see notes/robust.md
-    ("biasfield.FieldData", "adjacency", "mapping"): "raw ValueError",
-    ("biasfield.FieldData", "adjacency", "text"): "raw ValueError",
-    ("biasfield.PlotTable", "object", "ragged"): "raw ValueError",
-    ("biasfield.PlotTable", "radar", "ragged"): "raw ValueError",
-    ("biasfield.fl_to_height", "pressure_altitude", "complex-array"): "accepted silently",
-    ("biasfield.fl_to_height", "pressure_altitude", "mapping"): "raw TypeError",
-    ("biasfield.fl_to_height", "pressure_altitude", "none-entry"): "accepted silently",
-    ("biasfield.fl_to_height", "pressure_altitude", "ragged"): "raw ValueError",
-    ("biasfield.fl_to_height", "pressure_altitude", "text-array"): "raw ValueError",
-    ("biasfield.laplacian", "adjacency", "mapping"): "raw ValueError",
-    ("biasfield.laplacian", "adjacency", "text"): "raw ValueError",
-    ("biasfield.seen_by_others", "plots", "mapping"): "raw AttributeError",
-    ("biasfield.seen_by_others", "plots", "number"): "raw TypeError",
-    ("biasfield.seen_by_others", "plots", "text"): "raw AttributeError",
-    ("biasfield.solve", "box", "ragged"): "raw ValueError",
-    ("biasfield.uncertainty_sets", "data", "mapping"): "raw AttributeError",
-    ("biasfield.uncertainty_sets", "data", "number"): "raw AttributeError",
-    ("biasfield.uncertainty_sets", "data", "text"): "raw AttributeError",
-    ("biasfield.wrap_angle", "a", "complex-array"): "accepted silently",
-    ("biasfield.wrap_angle", "a", "mapping"): "raw TypeError",
-    ("biasfield.wrap_angle", "a", "none-entry"): "accepted silently",
-    ("biasfield.wrap_angle", "a", "ragged"): "raw ValueError",
-    ("biasfield.wrap_angle", "a", "text-array"): "raw ValueError",
-}
+KNOWN: dict[tuple[str, str, str], str] = {}  # found by this sweep; see notes/robust.md
 
 
 # ------------------------------------------------------------------ bad values

@@ -51,6 +51,7 @@ REASONS = ("covered", "one radar only", "outside every cell")
 def seen_by_others(plots: PlotTable, window: float = 60.0) -> np.ndarray:
     """(n,) True where another radar has a plot of the same object (``plots.object`` ≥ 0)
     within ``window`` seconds: the plot is seen by two radars or more."""
+    plots = as_instance("biasfield.seen_by_others plots", plots, PlotTable)
     window = as_positive("biasfield.seen_by_others window (s)", window)
     out = np.zeros(len(plots), dtype=bool)
     known = np.flatnonzero(plots.object >= 0)

@@ -44,6 +44,8 @@ from optmodels.core import (
     as_choice,
     as_count,
     as_finite_array,
+    as_float_array,
+    as_instance,
     as_positive,
     check_spd,
     check_spd_stack,
@@ -113,7 +115,7 @@ class FieldData:
                 "at least one cell centre"
             )
         self.xi = as_finite_array("xi", self.xi, shape=(k, m, 2), max_abs=MAX_MAGNITUDE)
-        self.adjacency = as_adjacency(self.adjacency, k)
+        self.adjacency = as_adjacency(self.adjacency, k, "biasfield.FieldData adjacency")
         if self.centers.shape[1] != 2:
             raise ProblemError(f"centers: expected (K, 2), got {self.centers.shape}")
         upper = sparse.triu(self.adjacency, k=1).tocoo()
@@ -283,11 +285,13 @@ class FieldData:
             raise ProblemError(f"{path}: {exc}") from None
 
 
-def as_adjacency(adj: Any, k: int) -> sparse.csr_matrix:
-    """Dense/sparse (K, K) 0/1 matrix or (E, 2) edge list → symmetric CSR int8."""
+def as_adjacency(adj: Any, k: int, name: str = "adjacency") -> sparse.csr_matrix:
+    """Dense/sparse (K, K) 0/1 matrix or (E, 2) edge list → symmetric CSR int8; a bad one
+    is one :class:`ProblemError` naming ``name``."""
     if sparse.issparse(adj):
         a = sparse.csr_matrix(adj)
     else:
+        as_float_array(name, adj)  # text, mappings, ragged rows, None entries, complex: refused
         arr = np.asarray(adj)
         if (
             arr.ndim == 2
@@ -296,18 +300,18 @@ def as_adjacency(adj: Any, k: int) -> sparse.csr_matrix:
             and np.issubdtype(arr.dtype, np.integer)
         ):
             if arr.size and (arr.min() < 0 or arr.max() >= k):
-                raise ProblemError(f"adjacency: edge list refers to cells outside 0..{k - 1}")
+                raise ProblemError(f"{name}: edge list refers to cells outside 0..{k - 1}")
             a = sparse.csr_matrix((np.ones(arr.shape[0]), (arr[:, 0], arr[:, 1])), shape=(k, k))
             a = a + a.T
         else:
             a = sparse.csr_matrix(arr)
     if a.shape != (k, k):
-        raise ProblemError(f"adjacency: expected ({k}, {k}) or an (E, 2) edge list, got {a.shape}")
+        raise ProblemError(f"{name}: expected ({k}, {k}) or an (E, 2) edge list, got {a.shape}")
     a = (a != 0).astype(np.int8).tocsr()
     if (a != a.T).nnz:
-        raise ProblemError("adjacency: not symmetric (c(x, y) must equal c(y, x))")
+        raise ProblemError(f"{name}: not symmetric (c(x, y) must equal c(y, x))")
     if a.diagonal().any():
-        raise ProblemError("adjacency: a cell cannot neighbour itself (c(x, x) = 0)")
+        raise ProblemError(f"{name}: a cell cannot neighbour itself (c(x, x) = 0)")
     a.eliminate_zeros()
     return a
 
@@ -352,7 +356,7 @@ def neighbours(
 def laplacian(centers: ArrayLike, adjacency: ArrayLike) -> sparse.csr_matrix:
     """Q of (9): Q_ij = −a_ij, Q_ii = Σ_j a_ij, a_ij = c_ij/‖x_i − x_j‖² (sparse)."""
     c = as_finite_array("biasfield.laplacian centers", centers, ndim=2, max_abs=MAX_MAGNITUDE)
-    adj = sparse.coo_matrix(as_adjacency(adjacency, c.shape[0]))
+    adj = sparse.coo_matrix(as_adjacency(adjacency, c.shape[0], "biasfield.laplacian adjacency"))
     d2 = np.sum((c[adj.row] - c[adj.col]) ** 2, axis=1)
     if np.any(d2 == 0):
         raise ProblemError("biasfield.laplacian centers: two neighbouring centres coincide")
@@ -373,6 +377,7 @@ def uncertainty_sets(
     k, and the rows of the radars outside S_k are zero in Φ⁰ and Φ¹ (their φ entries are
     0 and enter neither (9) nor (8)); with every radar in every S_k this is the paper's
     (10) exactly."""
+    as_instance("biasfield.uncertainty_sets data", data, FieldData)
     as_choice("biasfield.uncertainty_sets space", space, ("polar", "cartesian"))
     m, k = data.m, data.k
     if data.seen is None:

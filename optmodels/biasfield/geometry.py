@@ -15,7 +15,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike
 
-from optmodels.core import FloatArray, ProblemError, as_finite_array
+from optmodels.core import FloatArray, ProblemError, as_finite_array, as_float_array
 
 __all__ = [
     "bias_from_shift",
@@ -28,8 +28,13 @@ __all__ = [
 
 
 def wrap_angle(a: ArrayLike) -> FloatArray:
-    """Wrap angles (rad) to (−π, π]."""
-    arr = np.asarray(a, dtype=float)
+    """Wrap angles (rad) to (−π, π]. NaN stays NaN; text, ragged rows, ``None`` entries,
+    complex values and mappings are one :class:`ProblemError` naming ``a``."""
+    # fast path for the package's own float64 arrays (millions of plot azimuths)
+    if type(a) is np.ndarray and a.dtype == np.float64:
+        arr: FloatArray = a
+    else:
+        arr = as_float_array("biasfield.wrap_angle a", a)
     out = np.mod(arr + np.pi, 2 * np.pi) - np.pi
     return np.where(out == -np.pi, np.pi, out)
 

@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from optmodels.core import FloatArray, as_number
+from optmodels.core import FloatArray, as_float_array, as_number
 
 __all__ = ["R_ISA", "adsb_height_spikes", "fl_to_height", "interp_by_object"]
 
@@ -29,8 +29,13 @@ def fl_to_height(pressure_altitude: Any, geoid_undulation: float = 0.0) -> Float
     H_p (= FL · 30.48 m) is the ISA geopotential altitude; h = R·H_p/(R − H_p) with
     R = 6 356 766 m is the geometric altitude above mean sea level; + N (the geoid
     undulation, m) above the WGS-84 ellipsoid. Exact only in the standard atmosphere.
+    NaN (no flight level) stays NaN; text, ragged rows, ``None`` entries, complex values
+    and mappings are one :class:`ProblemError` naming ``pressure_altitude``.
     """
-    hp = np.asarray(pressure_altitude, dtype=float)
+    # fast path for the package's own float64 arrays (the flight levels of every plot)
+    hp = pressure_altitude
+    if type(hp) is not np.ndarray or hp.dtype != np.float64:
+        hp = as_float_array("biasfield.fl_to_height pressure_altitude", pressure_altitude)
     n = as_number(
         "biasfield.fl_to_height geoid_undulation", geoid_undulation, low=-120.0, high=120.0
     )

@@ -35,6 +35,7 @@ from optmodels.core import (
     ProblemError,
     as_choice,
     as_finite_array,
+    as_float_array,
     as_instance,
     as_positive,
 )
@@ -160,7 +161,7 @@ def box_bounds(
     as_instance(f"{where} data", data, FieldData)
     if box is None:
         return None
-    if isinstance(box, str | bytes) or np.ndim(box) != 1 or np.size(box) != 2:
+    if isinstance(box, str | bytes) or as_float_array(f"{where} box", box).shape != (2,):
         raise ProblemError(
             f"{where} box: expected a pair (K1 range bound in m, K2 azimuth "
             f"bound in rad), got {box!r:.80}"

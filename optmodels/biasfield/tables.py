@@ -21,7 +21,14 @@ from numpy.typing import ArrayLike
 
 from optmodels.biasfield import geometry3d as g3
 from optmodels.biasfield.geometry import from_polar, polar_jacobian
-from optmodels.core import MAX_MAGNITUDE, FloatArray, ProblemError, as_count, as_finite_array
+from optmodels.core import (
+    MAX_MAGNITUDE,
+    FloatArray,
+    ProblemError,
+    as_count,
+    as_finite_array,
+    as_float_array,
+)
 
 __all__ = ["PlotTable", "RadarSet", "check_tables"]
 
@@ -273,6 +280,9 @@ class PlotTable:
         )
         if np.any(r < 0):
             raise ProblemError(f"biasfield.PlotTable range: {int(np.sum(r < 0))} negative ranges")
+        for name, value in (("radar", self.radar), ("object", self.object)):
+            if not isinstance(value, np.ndarray):  # ragged, text, None entries...: refused
+                as_float_array(f"biasfield.PlotTable {name}", value)
         rad = np.asarray(self.radar)
         obj = np.asarray(self.object)
         for name, arr in (("radar", rad), ("object", obj)):
@@ -282,12 +292,7 @@ class PlotTable:
                     f"{arr.dtype} {arr.shape}"
                 )
         if self.height is not None:
-            try:
-                h = np.asarray(self.height, dtype=float)
-            except (TypeError, ValueError) as exc:
-                raise ProblemError(
-                    f"biasfield.PlotTable height: not a numeric array ({exc})"
-                ) from None
+            h = as_float_array("biasfield.PlotTable height", self.height)  # NaN: unknown
             if h.shape != (n,):
                 raise ProblemError(
                     f"biasfield.PlotTable height: expected {n} heights (m), got shape {h.shape}"

@@ -21,20 +21,8 @@ traffic_encounter`: fast crossings with 1-3 merged scans, slow formations, long 
 (:func:`summarise_traffic`, the done-when :func:`done_when_traffic`); the per-scan cost of
 the soft associator against Stone Soup's JPDA on the same scans is :func:`benchmark`.
 
-Metrics per run (positions only, m):
-
-* mean GOSPA: Stone Soup's ``GOSPAMetric`` (p = 2, α = 2, cutoff ``c``) per scan,
-  averaged over the scans;
-* assignment of tracks to truths per scan: the optimal assignment of the GOSPA cost
-  (distance, cutoff c; a pair at ≥ c is unassigned). A track's label is the truth it is
-  assigned to (or none);
-* track swap: a track whose label at the last scan (the objects of a crossing are then
-  kilometres apart) is another object than the one it started on; counted per track
-  (a swapped pair counts 2). Flips of the assignment while the objects are closer than
-  the estimation errors are not swaps. In a parallel encounter below the resolution the
-  objects never separate, and a "swap" there is a coin toss on unobservable identities;
-* track break: a track whose label goes from an object to none (lost: farther than c
-  from every object it could take), counted once per loss.
+The metrics of a run (mean GOSPA, track swaps and breaks) and their summaries over a
+study's runs are :mod:`solvers_cmp.tracking_metrics`'s.
 
 Usage::
 
@@ -47,14 +35,12 @@ Usage::
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import json
 import time
-from datetime import datetime, timedelta
+from datetime import timedelta
 from typing import Any
 
 import numpy as np
-from scipy.optimize import linear_sum_assignment
 
 from optmodels.scenarios.encounters import (
     TRAFFIC_KINDS,
@@ -63,6 +49,16 @@ from optmodels.scenarios.encounters import (
     encounter,
     traffic_encounter,
 )
+from solvers_cmp.tracking_metrics import (
+    T0,
+    RunResult,
+    TrafficResult,
+    gospa_per_scan,
+    mean_gospa,
+    summarise,
+    summarise_traffic,
+    swaps_and_breaks,
+)
 
 METHODS = ("MAP+merges", "resolved", "GNN", "JPDA")
 #: Every method, the soft associator of issue 29 included.
@@ -70,7 +66,6 @@ ALL_METHODS = (*METHODS, "JPDA5", "soft")
 #: The soft mixture methods (the tracker reduces a MultipleHypothesis per track).
 MIXTURE = ("JPDA", "JPDA5", "soft")
 RATIOS = (0.25, 0.5, 0.75, 1.5, 2.0, 3.0)
-T0 = datetime(2026, 1, 1)
 
 
 def resolution_model(sensor: RadarCell) -> Any:
@@ -256,91 +251,6 @@ def run_tracking(
     return tracks
 
 
-def _truth_paths(enc: Encounter) -> list[Any]:
-    from stonesoup.types.groundtruth import GroundTruthPath, GroundTruthState
-
-    return [
-        GroundTruthPath(
-            [
-                GroundTruthState(
-                    enc.truth[k, t].reshape(-1, 1), timestamp=T0 + timedelta(seconds=float(tt))
-                )
-                for t, tt in enumerate(enc.times)
-            ]
-        )
-        for k in range(enc.q)
-    ]
-
-
-def mean_gospa(enc: Encounter, tracks: list[Any], *, c: float = 500.0, p: float = 2.0) -> float:
-    """Mean over the scans of Stone Soup's GOSPA distance (positions, m)."""
-    return float(np.mean(gospa_per_scan(enc, tracks, c=c, p=p)))
-
-
-def gospa_per_scan(
-    enc: Encounter, tracks: list[Any], *, c: float = 500.0, p: float = 2.0
-) -> list[float]:
-    """Stone Soup's GOSPA distance (positions, m) at each scan."""
-    from stonesoup.measures import Euclidean
-    from stonesoup.metricgenerator.ospametric import GOSPAMetric
-
-    gen = GOSPAMetric(c=c, p=p, measure=Euclidean(mapping=(0, 2)))
-    m = gen.compute_over_time(
-        *gen.extract_states(tracks, True), *gen.extract_states(_truth_paths(enc), True)
-    )
-    values = m.value if isinstance(m.value, list) else [m]
-    return [float(v.value["distance"]) for v in values]
-
-
-def track_labels(enc: Encounter, tracks: list[Any], *, c: float = 500.0) -> list[list[int | None]]:
-    """Per scan, the object each track is assigned to by the optimal assignment of the
-    GOSPA cost (position distance, cutoff ``c``; None: unassigned)."""
-    out = []
-    for t in range(len(enc.times)):
-        est = np.array(
-            [
-                np.asarray(tr.states[t + 1].state_vector, dtype=float).ravel()[[0, 2]]
-                for tr in tracks
-            ]
-        )
-        tru = enc.truth[:, t][:, [0, 2]]
-        cost = np.minimum(np.linalg.norm(est[:, None] - tru[None], axis=2), c)
-        rows, cols = linear_sum_assignment(cost)
-        label: list[int | None] = [None] * len(tracks)
-        for r, k in zip(rows, cols, strict=True):
-            if cost[r, k] < c:
-                label[r] = int(k)
-        out.append(label)
-    return out
-
-
-def swaps_and_breaks(enc: Encounter, tracks: list[Any], *, c: float = 500.0) -> tuple[int, int]:
-    """Track swaps and breaks of a run (module docstring): swaps = tracks whose label at
-    the last scan is another object than the one they started on (track j on object j);
-    breaks = transitions of a track's label from an object to none (first scan included:
-    tracks start on their objects)."""
-    labels = track_labels(enc, tracks, c=c)
-    prev: list[int | None] = list(range(len(tracks)))
-    breaks = 0
-    for lab in labels:
-        breaks += sum(p is not None and x is None for p, x in zip(prev, lab, strict=True))
-        prev = lab
-    swaps = sum(x is not None and x != j for j, x in enumerate(labels[-1]))
-    return swaps, breaks
-
-
-@dataclasses.dataclass
-class RunResult:
-    method: str
-    ratio: float
-    seed: int
-    gospa: float
-    swaps: int
-    breaks: int
-    merged_scans: int
-    seconds: float
-
-
 def study(
     *,
     ratios: tuple[float, ...] = RATIOS,
@@ -394,32 +304,6 @@ def study(
     return out
 
 
-def summarise(results: list[RunResult]) -> list[dict[str, Any]]:
-    """One row per (ratio, method): mean GOSPA ± its standard error, swaps, breaks (sums
-    and per run), merged scans per run, seconds per run."""
-    rows = []
-    for x in sorted({r.ratio for r in results}):
-        for m in dict.fromkeys(r.method for r in results):
-            sel = [r for r in results if r.ratio == x and r.method == m]
-            g = np.array([r.gospa for r in sel])
-            rows.append(
-                {
-                    "ratio": x,
-                    "method": m,
-                    "runs": len(sel),
-                    "gospa": float(g.mean()),
-                    "gospa_se": float(g.std(ddof=1) / np.sqrt(len(g)))
-                    if len(g) > 1
-                    else float("nan"),
-                    "swaps": int(sum(r.swaps for r in sel)),
-                    "breaks": int(sum(r.breaks for r in sel)),
-                    "merged_scans": float(np.mean([r.merged_scans for r in sel])),
-                    "s_per_run": float(np.median([r.seconds for r in sel])),
-                }
-            )
-    return rows
-
-
 def done_when(rows: list[dict[str, Any]]) -> dict[str, Any]:
     """Issue 18's done-when on ``rows``: below the resolution (ratio < 1) MAP+merges has
     the lowest mean GOSPA of the four and no more swaps than any; at ratio ≥ 2 its mean
@@ -446,19 +330,6 @@ def done_when(rows: list[dict[str, Any]]) -> dict[str, Any]:
 
 
 # ----------------------------------------------------------------------------- issue 29
-@dataclasses.dataclass
-class TrafficResult:
-    method: str
-    kind: str
-    seed: int
-    gospa: float
-    gospa_merged: float
-    swaps: int
-    breaks: int
-    merged_scans: int
-    seconds: float
-
-
 def traffic_encounters(
     kinds: tuple[str, ...] = TRAFFIC_KINDS, runs: int = 8, seed: int = 2029
 ) -> list[Encounter]:
@@ -504,34 +375,6 @@ def traffic_study(
                 )
             )
     return out
-
-
-def summarise_traffic(results: list[TrafficResult]) -> list[dict[str, Any]]:
-    """One row per (kind, method) and per ("all", method): mean GOSPA ± standard error,
-    mean GOSPA on the merged scans, swaps and breaks (sums), merged scans per run."""
-    rows = []
-    for kind in [*dict.fromkeys(r.kind for r in results), "all"]:
-        for m in dict.fromkeys(r.method for r in results):
-            sel = [r for r in results if r.method == m and kind in (r.kind, "all")]
-            g = np.array([r.gospa for r in sel])
-            gm = np.array([r.gospa_merged for r in sel if np.isfinite(r.gospa_merged)])
-            rows.append(
-                {
-                    "kind": kind,
-                    "method": m,
-                    "runs": len(sel),
-                    "gospa": float(g.mean()),
-                    "gospa_se": float(g.std(ddof=1) / np.sqrt(len(g)))
-                    if len(g) > 1
-                    else float("nan"),
-                    "gospa_merged": float(gm.mean()) if len(gm) else float("nan"),
-                    "swaps": int(sum(r.swaps for r in sel)),
-                    "breaks": int(sum(r.breaks for r in sel)),
-                    "merged_scans": float(np.mean([r.merged_scans for r in sel])),
-                    "s_per_run": float(np.median([r.seconds for r in sel])),
-                }
-            )
-    return rows
 
 
 def done_when_traffic(rows: list[dict[str, Any]]) -> dict[str, Any]:

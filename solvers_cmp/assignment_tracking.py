@@ -21,8 +21,8 @@ traffic_encounter`: fast crossings with 1-3 merged scans, slow formations, long 
 (:func:`summarise_traffic`, the done-when :func:`done_when_traffic`); the per-scan cost of
 the soft associator against Stone Soup's JPDA on the same scans is :func:`benchmark`.
 
-The metrics of a run (mean GOSPA, track swaps and breaks) and their summaries over a
-study's runs are :mod:`solvers_cmp.tracking_metrics`'s.
+The metrics of a run (GOSPA, track swaps and breaks) are :mod:`solvers_cmp.tracking_metrics`'s;
+the command line below is :mod:`solvers_cmp.assignment_tracking_cli`'s.
 
 Usage::
 
@@ -34,8 +34,7 @@ Usage::
 
 from __future__ import annotations
 
-import argparse
-import json
+import dataclasses
 import time
 from datetime import timedelta
 from typing import Any
@@ -49,16 +48,7 @@ from optmodels.scenarios.encounters import (
     encounter,
     traffic_encounter,
 )
-from solvers_cmp.tracking_metrics import (
-    T0,
-    RunResult,
-    TrafficResult,
-    gospa_per_scan,
-    mean_gospa,
-    summarise,
-    summarise_traffic,
-    swaps_and_breaks,
-)
+from solvers_cmp.tracking_metrics import T0, gospa_per_scan, swaps_and_breaks
 
 METHODS = ("MAP+merges", "resolved", "GNN", "JPDA")
 #: Every method, the soft associator of issue 29 included.
@@ -251,6 +241,23 @@ def run_tracking(
     return tracks
 
 
+def mean_gospa(enc: Encounter, tracks: list[Any], *, c: float = 500.0, p: float = 2.0) -> float:
+    """Mean over the scans of Stone Soup's GOSPA distance (positions, m)."""
+    return float(np.mean(gospa_per_scan(enc, tracks, c=c, p=p)))
+
+
+@dataclasses.dataclass
+class RunResult:
+    method: str
+    ratio: float
+    seed: int
+    gospa: float
+    swaps: int
+    breaks: int
+    merged_scans: int
+    seconds: float
+
+
 def study(
     *,
     ratios: tuple[float, ...] = RATIOS,
@@ -304,6 +311,32 @@ def study(
     return out
 
 
+def summarise(results: list[RunResult]) -> list[dict[str, Any]]:
+    """One row per (ratio, method): mean GOSPA ± its standard error, swaps, breaks (sums
+    and per run), merged scans per run, seconds per run."""
+    rows = []
+    for x in sorted({r.ratio for r in results}):
+        for m in dict.fromkeys(r.method for r in results):
+            sel = [r for r in results if r.ratio == x and r.method == m]
+            g = np.array([r.gospa for r in sel])
+            rows.append(
+                {
+                    "ratio": x,
+                    "method": m,
+                    "runs": len(sel),
+                    "gospa": float(g.mean()),
+                    "gospa_se": float(g.std(ddof=1) / np.sqrt(len(g)))
+                    if len(g) > 1
+                    else float("nan"),
+                    "swaps": int(sum(r.swaps for r in sel)),
+                    "breaks": int(sum(r.breaks for r in sel)),
+                    "merged_scans": float(np.mean([r.merged_scans for r in sel])),
+                    "s_per_run": float(np.median([r.seconds for r in sel])),
+                }
+            )
+    return rows
+
+
 def done_when(rows: list[dict[str, Any]]) -> dict[str, Any]:
     """Issue 18's done-when on ``rows``: below the resolution (ratio < 1) MAP+merges has
     the lowest mean GOSPA of the four and no more swaps than any; at ratio ≥ 2 its mean
@@ -330,6 +363,19 @@ def done_when(rows: list[dict[str, Any]]) -> dict[str, Any]:
 
 
 # ----------------------------------------------------------------------------- issue 29
+@dataclasses.dataclass
+class TrafficResult:
+    method: str
+    kind: str
+    seed: int
+    gospa: float
+    gospa_merged: float
+    swaps: int
+    breaks: int
+    merged_scans: int
+    seconds: float
+
+
 def traffic_encounters(
     kinds: tuple[str, ...] = TRAFFIC_KINDS, runs: int = 8, seed: int = 2029
 ) -> list[Encounter]:
@@ -375,6 +421,34 @@ def traffic_study(
                 )
             )
     return out
+
+
+def summarise_traffic(results: list[TrafficResult]) -> list[dict[str, Any]]:
+    """One row per (kind, method) and per ("all", method): mean GOSPA ± standard error,
+    mean GOSPA on the merged scans, swaps and breaks (sums), merged scans per run."""
+    rows = []
+    for kind in [*dict.fromkeys(r.kind for r in results), "all"]:
+        for m in dict.fromkeys(r.method for r in results):
+            sel = [r for r in results if r.method == m and kind in (r.kind, "all")]
+            g = np.array([r.gospa for r in sel])
+            gm = np.array([r.gospa_merged for r in sel if np.isfinite(r.gospa_merged)])
+            rows.append(
+                {
+                    "kind": kind,
+                    "method": m,
+                    "runs": len(sel),
+                    "gospa": float(g.mean()),
+                    "gospa_se": float(g.std(ddof=1) / np.sqrt(len(g)))
+                    if len(g) > 1
+                    else float("nan"),
+                    "gospa_merged": float(gm.mean()) if len(gm) else float("nan"),
+                    "swaps": int(sum(r.swaps for r in sel)),
+                    "breaks": int(sum(r.breaks for r in sel)),
+                    "merged_scans": float(np.mean([r.merged_scans for r in sel])),
+                    "s_per_run": float(np.median([r.seconds for r in sel])),
+                }
+            )
+    return rows
 
 
 def done_when_traffic(rows: list[dict[str, Any]]) -> dict[str, Any]:
@@ -468,111 +542,7 @@ def benchmark(encs: list[Encounter], *, rounds: int = 3) -> dict[str, Any]:
     }
 
 
-def main(argv: list[str] | None = None) -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--runs", type=int, default=20)
-    ap.add_argument("--q", type=int, default=2)
-    ap.add_argument("--kind", default="crossing", choices=("crossing", "parallel"))
-    ap.add_argument(
-        "--seed",
-        type=int,
-        default=None,
-        help="default 2026 (crossing study), 2029 (--traffic, --bench)",
-    )
-    ap.add_argument("--ratios", type=float, nargs="*", default=list(RATIOS))
-    ap.add_argument("--scans", type=int, default=24)
-    ap.add_argument("--half-angle", type=float, default=5.0, help="crossing half-angle, deg")
-    ap.add_argument(
-        "--no-resolution",
-        action="store_true",
-        help="MAP+merges with the constant ρ even if a sensor model exists",
-    )
-    ap.add_argument(
-        "--no-cell",
-        action="store_true",
-        help="MAP+merges without the one-cell constraint on merged members",
-    )
-    ap.add_argument("--methods", nargs="*", default=list(METHODS), choices=METHODS)
-    ap.add_argument("--json", action="store_true")
-    ap.add_argument(
-        "--traffic",
-        action="store_true",
-        help="issue 29: the traffic encounters (--runs per kind), five methods",
-    )
-    ap.add_argument("--kinds", nargs="*", default=list(TRAFFIC_KINDS), choices=TRAFFIC_KINDS)
-    ap.add_argument(
-        "--bench",
-        type=int,
-        default=0,
-        metavar="RUNS",
-        help="issue 29: per-scan cost soft vs JPDA on RUNS encounters per kind",
-    )
-    a = ap.parse_args(argv)
-    t0 = time.perf_counter()
-    if a.seed is None:
-        a.seed = 2029 if (a.traffic or a.bench) else 2026
-    if a.bench:
-        print(json.dumps(benchmark(traffic_encounters(tuple(a.kinds), a.bench, a.seed)), indent=1))
-        return
-    if a.traffic:
-        trows = summarise_traffic(traffic_study(kinds=tuple(a.kinds), runs=a.runs, seed=a.seed))
-        if a.json:
-            print(
-                json.dumps(
-                    {
-                        "rows": trows,
-                        "done_when": done_when_traffic(trows),
-                        "wall_s": time.perf_counter() - t0,
-                    },
-                    indent=1,
-                )
-            )
-            return
-        print(
-            f"{'kind':>13} {'method':>10} {'GOSPA':>7} {'se':>5} {'merged':>7} "
-            f"{'swaps':>5} {'breaks':>6}"
-        )
-        for r in trows:
-            print(
-                f"{r['kind']:>13} {r['method']:>10} {r['gospa']:7.1f} {r['gospa_se']:5.1f} "
-                f"{r['gospa_merged']:7.1f} {r['swaps']:5d} {r['breaks']:6d}"
-            )
-        print(json.dumps(done_when_traffic(trows)))
-        return
-    res = study(
-        ratios=tuple(a.ratios),
-        runs=a.runs,
-        q=a.q,
-        kind=a.kind,
-        seed=a.seed,
-        use_resolution=not a.no_resolution,
-        scans=a.scans,
-        half_angle_deg=a.half_angle,
-        cell_information=not a.no_cell,
-        methods=tuple(a.methods),
-    )
-    rows = summarise(res)
-    verdict = done_when(rows)
-    if a.json:
-        print(
-            json.dumps(
-                {"rows": rows, "done_when": verdict, "wall_s": time.perf_counter() - t0}, indent=1
-            )
-        )
-        return
-    print(
-        f"{'ratio':>6} {'method':>11} {'GOSPA':>8} {'se':>6} {'swaps':>5} {'breaks':>6} "
-        f"{'merged':>6} {'s/run':>6}"
-    )
-    for r in rows:
-        print(
-            f"{r['ratio']:6.2f} {r['method']:>11} {r['gospa']:8.1f} {r['gospa_se']:6.1f} "
-            f"{r['swaps']:5d} {r['breaks']:6d} {r['merged_scans']:6.1f} "
-            f"{r['s_per_run']:6.2f}"
-        )
-    print(json.dumps(verdict))
-    print(f"wall {time.perf_counter() - t0:.0f} s")
+if __name__ == "__main__":  # the study's command line (module docstring, "Usage")
+    from solvers_cmp.assignment_tracking_cli import main
 
-
-if __name__ == "__main__":
     main()

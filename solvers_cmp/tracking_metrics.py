@@ -1,6 +1,6 @@
-"""The metrics of one tracking run against its encounter's truth, and their summaries
-over a study's runs (:mod:`solvers_cmp.assignment_tracking`: issue 18's crossing and
-parallel encounters, issue 29's traffic encounters).
+"""The metrics of one tracking run of :mod:`solvers_cmp.assignment_tracking` against its
+encounter's truth (issue 18's crossing and parallel encounters, issue 29's traffic
+encounters).
 
 Metrics per run (positions only, m):
 
@@ -17,13 +17,12 @@ Metrics per run (positions only, m):
 * track break: a track whose label goes from an object to none (lost: farther than c
   from every object it could take), counted once per loss.
 
-The tracks are Stone Soup ``Track`` objects whose states carry timestamps :data:`T0` +
+The tracks are Stone Soup ``Track`` objects whose states carry the timestamps :data:`T0` +
 the encounter's times (s).
 """
 
 from __future__ import annotations
 
-import dataclasses
 from datetime import datetime, timedelta
 from typing import Any
 
@@ -36,7 +35,6 @@ from optmodels.scenarios.encounters import Encounter
 T0 = datetime(2026, 1, 1)
 
 
-# ----------------------------------------------------------------------------- one run
 def _truth_paths(enc: Encounter) -> list[Any]:
     """The encounter's truth as Stone Soup ``GroundTruthPath`` objects, one per object."""
     from stonesoup.types.groundtruth import GroundTruthPath, GroundTruthState
@@ -52,11 +50,6 @@ def _truth_paths(enc: Encounter) -> list[Any]:
         )
         for k in range(enc.q)
     ]
-
-
-def mean_gospa(enc: Encounter, tracks: list[Any], *, c: float = 500.0, p: float = 2.0) -> float:
-    """Mean over the scans of Stone Soup's GOSPA distance (positions, m)."""
-    return float(np.mean(gospa_per_scan(enc, tracks, c=c, p=p)))
 
 
 def gospa_per_scan(
@@ -109,83 +102,3 @@ def swaps_and_breaks(enc: Encounter, tracks: list[Any], *, c: float = 500.0) -> 
         prev = lab
     swaps = sum(x is not None and x != j for j, x in enumerate(labels[-1]))
     return swaps, breaks
-
-
-# ----------------------------------------------------------------------------- a study
-@dataclasses.dataclass
-class RunResult:
-    method: str
-    ratio: float
-    seed: int
-    gospa: float
-    swaps: int
-    breaks: int
-    merged_scans: int
-    seconds: float
-
-
-def summarise(results: list[RunResult]) -> list[dict[str, Any]]:
-    """One row per (ratio, method): mean GOSPA ± its standard error, swaps, breaks (sums
-    and per run), merged scans per run, seconds per run."""
-    rows = []
-    for x in sorted({r.ratio for r in results}):
-        for m in dict.fromkeys(r.method for r in results):
-            sel = [r for r in results if r.ratio == x and r.method == m]
-            g = np.array([r.gospa for r in sel])
-            rows.append(
-                {
-                    "ratio": x,
-                    "method": m,
-                    "runs": len(sel),
-                    "gospa": float(g.mean()),
-                    "gospa_se": float(g.std(ddof=1) / np.sqrt(len(g)))
-                    if len(g) > 1
-                    else float("nan"),
-                    "swaps": int(sum(r.swaps for r in sel)),
-                    "breaks": int(sum(r.breaks for r in sel)),
-                    "merged_scans": float(np.mean([r.merged_scans for r in sel])),
-                    "s_per_run": float(np.median([r.seconds for r in sel])),
-                }
-            )
-    return rows
-
-
-@dataclasses.dataclass
-class TrafficResult:
-    method: str
-    kind: str
-    seed: int
-    gospa: float
-    gospa_merged: float
-    swaps: int
-    breaks: int
-    merged_scans: int
-    seconds: float
-
-
-def summarise_traffic(results: list[TrafficResult]) -> list[dict[str, Any]]:
-    """One row per (kind, method) and per ("all", method): mean GOSPA ± standard error,
-    mean GOSPA on the merged scans, swaps and breaks (sums), merged scans per run."""
-    rows = []
-    for kind in [*dict.fromkeys(r.kind for r in results), "all"]:
-        for m in dict.fromkeys(r.method for r in results):
-            sel = [r for r in results if r.method == m and kind in (r.kind, "all")]
-            g = np.array([r.gospa for r in sel])
-            gm = np.array([r.gospa_merged for r in sel if np.isfinite(r.gospa_merged)])
-            rows.append(
-                {
-                    "kind": kind,
-                    "method": m,
-                    "runs": len(sel),
-                    "gospa": float(g.mean()),
-                    "gospa_se": float(g.std(ddof=1) / np.sqrt(len(g)))
-                    if len(g) > 1
-                    else float("nan"),
-                    "gospa_merged": float(gm.mean()) if len(gm) else float("nan"),
-                    "swaps": int(sum(r.swaps for r in sel)),
-                    "breaks": int(sum(r.breaks for r in sel)),
-                    "merged_scans": float(np.mean([r.merged_scans for r in sel])),
-                    "s_per_run": float(np.median([r.seconds for r in sel])),
-                }
-            )
-    return rows

@@ -25,10 +25,16 @@ from typing import Literal
 import numpy as np
 from numpy.typing import ArrayLike
 
+from optmodels.biasfield import (
+    AircraftPaths,
+    BiasField,
+    PlotTable,
+    RadarSet,
+    shift_from_bias,
+    to_polar,
+    wrap_angle,
+)
 from optmodels.biasfield import geometry3d as g3
-from optmodels.biasfield.data import AircraftPaths, PlotTable, RadarSet
-from optmodels.biasfield.fields import BiasField
-from optmodels.biasfield.geometry import shift_from_bias, to_polar, wrap_angle
 from optmodels.core import FloatArray, ProblemError, as_finite_array, as_positive
 
 __all__ = [

@@ -21,20 +21,8 @@ traffic_encounter`: fast crossings with 1-3 merged scans, slow formations, long 
 (:func:`summarise_traffic`, the done-when :func:`done_when_traffic`); the per-scan cost of
 the soft associator against Stone Soup's JPDA on the same scans is :func:`benchmark`.
 
-Metrics per run (positions only, m):
-
-* mean GOSPA: Stone Soup's ``GOSPAMetric`` (p = 2, α = 2, cutoff ``c``) per scan,
-  averaged over the scans;
-* assignment of tracks to truths per scan: the optimal assignment of the GOSPA cost
-  (distance, cutoff c; a pair at ≥ c is unassigned). A track's label is the truth it is
-  assigned to (or none);
-* track swap: a track whose label at the last scan (the objects of a crossing are then
-  kilometres apart) is another object than the one it started on; counted per track
-  (a swapped pair counts 2). Flips of the assignment while the objects are closer than
-  the estimation errors are not swaps. In a parallel encounter below the resolution the
-  objects never separate, and a "swap" there is a coin toss on unobservable identities;
-* track break: a track whose label goes from an object to none (lost: farther than c
-  from every object it could take), counted once per loss.
+The metrics of a run (GOSPA, track swaps and breaks) are :mod:`solvers_cmp.tracking_metrics`'s;
+the command line below is :mod:`solvers_cmp.assignment_tracking_cli`'s.
 
 Usage::
 
@@ -46,15 +34,12 @@ Usage::
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
-import json
 import time
-from datetime import datetime, timedelta
+from datetime import timedelta
 from typing import Any
 
 import numpy as np
-from scipy.optimize import linear_sum_assignment
 
 from optmodels.scenarios.encounters import (
     TRAFFIC_KINDS,
@@ -63,6 +48,7 @@ from optmodels.scenarios.encounters import (
     encounter,
     traffic_encounter,
 )
+from solvers_cmp.tracking_metrics import T0, gospa_per_scan, swaps_and_breaks
 
 METHODS = ("MAP+merges", "resolved", "GNN", "JPDA")
 #: Every method, the soft associator of issue 29 included.
@@ -70,7 +56,6 @@ ALL_METHODS = (*METHODS, "JPDA5", "soft")
 #: The soft mixture methods (the tracker reduces a MultipleHypothesis per track).
 MIXTURE = ("JPDA", "JPDA5", "soft")
 RATIOS = (0.25, 0.5, 0.75, 1.5, 2.0, 3.0)
-T0 = datetime(2026, 1, 1)
 
 
 def resolution_model(sensor: RadarCell) -> Any:
@@ -256,77 +241,9 @@ def run_tracking(
     return tracks
 
 
-def _truth_paths(enc: Encounter) -> list[Any]:
-    from stonesoup.types.groundtruth import GroundTruthPath, GroundTruthState
-
-    return [
-        GroundTruthPath(
-            [
-                GroundTruthState(
-                    enc.truth[k, t].reshape(-1, 1), timestamp=T0 + timedelta(seconds=float(tt))
-                )
-                for t, tt in enumerate(enc.times)
-            ]
-        )
-        for k in range(enc.q)
-    ]
-
-
 def mean_gospa(enc: Encounter, tracks: list[Any], *, c: float = 500.0, p: float = 2.0) -> float:
     """Mean over the scans of Stone Soup's GOSPA distance (positions, m)."""
     return float(np.mean(gospa_per_scan(enc, tracks, c=c, p=p)))
-
-
-def gospa_per_scan(
-    enc: Encounter, tracks: list[Any], *, c: float = 500.0, p: float = 2.0
-) -> list[float]:
-    """Stone Soup's GOSPA distance (positions, m) at each scan."""
-    from stonesoup.measures import Euclidean
-    from stonesoup.metricgenerator.ospametric import GOSPAMetric
-
-    gen = GOSPAMetric(c=c, p=p, measure=Euclidean(mapping=(0, 2)))
-    m = gen.compute_over_time(
-        *gen.extract_states(tracks, True), *gen.extract_states(_truth_paths(enc), True)
-    )
-    values = m.value if isinstance(m.value, list) else [m]
-    return [float(v.value["distance"]) for v in values]
-
-
-def track_labels(enc: Encounter, tracks: list[Any], *, c: float = 500.0) -> list[list[int | None]]:
-    """Per scan, the object each track is assigned to by the optimal assignment of the
-    GOSPA cost (position distance, cutoff ``c``; None: unassigned)."""
-    out = []
-    for t in range(len(enc.times)):
-        est = np.array(
-            [
-                np.asarray(tr.states[t + 1].state_vector, dtype=float).ravel()[[0, 2]]
-                for tr in tracks
-            ]
-        )
-        tru = enc.truth[:, t][:, [0, 2]]
-        cost = np.minimum(np.linalg.norm(est[:, None] - tru[None], axis=2), c)
-        rows, cols = linear_sum_assignment(cost)
-        label: list[int | None] = [None] * len(tracks)
-        for r, k in zip(rows, cols, strict=True):
-            if cost[r, k] < c:
-                label[r] = int(k)
-        out.append(label)
-    return out
-
-
-def swaps_and_breaks(enc: Encounter, tracks: list[Any], *, c: float = 500.0) -> tuple[int, int]:
-    """Track swaps and breaks of a run (module docstring): swaps = tracks whose label at
-    the last scan is another object than the one they started on (track j on object j);
-    breaks = transitions of a track's label from an object to none (first scan included:
-    tracks start on their objects)."""
-    labels = track_labels(enc, tracks, c=c)
-    prev: list[int | None] = list(range(len(tracks)))
-    breaks = 0
-    for lab in labels:
-        breaks += sum(p is not None and x is None for p, x in zip(prev, lab, strict=True))
-        prev = lab
-    swaps = sum(x is not None and x != j for j, x in enumerate(labels[-1]))
-    return swaps, breaks
 
 
 @dataclasses.dataclass
@@ -625,111 +542,7 @@ def benchmark(encs: list[Encounter], *, rounds: int = 3) -> dict[str, Any]:
     }
 
 
-def main(argv: list[str] | None = None) -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--runs", type=int, default=20)
-    ap.add_argument("--q", type=int, default=2)
-    ap.add_argument("--kind", default="crossing", choices=("crossing", "parallel"))
-    ap.add_argument(
-        "--seed",
-        type=int,
-        default=None,
-        help="default 2026 (crossing study), 2029 (--traffic, --bench)",
-    )
-    ap.add_argument("--ratios", type=float, nargs="*", default=list(RATIOS))
-    ap.add_argument("--scans", type=int, default=24)
-    ap.add_argument("--half-angle", type=float, default=5.0, help="crossing half-angle, deg")
-    ap.add_argument(
-        "--no-resolution",
-        action="store_true",
-        help="MAP+merges with the constant ρ even if a sensor model exists",
-    )
-    ap.add_argument(
-        "--no-cell",
-        action="store_true",
-        help="MAP+merges without the one-cell constraint on merged members",
-    )
-    ap.add_argument("--methods", nargs="*", default=list(METHODS), choices=METHODS)
-    ap.add_argument("--json", action="store_true")
-    ap.add_argument(
-        "--traffic",
-        action="store_true",
-        help="issue 29: the traffic encounters (--runs per kind), five methods",
-    )
-    ap.add_argument("--kinds", nargs="*", default=list(TRAFFIC_KINDS), choices=TRAFFIC_KINDS)
-    ap.add_argument(
-        "--bench",
-        type=int,
-        default=0,
-        metavar="RUNS",
-        help="issue 29: per-scan cost soft vs JPDA on RUNS encounters per kind",
-    )
-    a = ap.parse_args(argv)
-    t0 = time.perf_counter()
-    if a.seed is None:
-        a.seed = 2029 if (a.traffic or a.bench) else 2026
-    if a.bench:
-        print(json.dumps(benchmark(traffic_encounters(tuple(a.kinds), a.bench, a.seed)), indent=1))
-        return
-    if a.traffic:
-        trows = summarise_traffic(traffic_study(kinds=tuple(a.kinds), runs=a.runs, seed=a.seed))
-        if a.json:
-            print(
-                json.dumps(
-                    {
-                        "rows": trows,
-                        "done_when": done_when_traffic(trows),
-                        "wall_s": time.perf_counter() - t0,
-                    },
-                    indent=1,
-                )
-            )
-            return
-        print(
-            f"{'kind':>13} {'method':>10} {'GOSPA':>7} {'se':>5} {'merged':>7} "
-            f"{'swaps':>5} {'breaks':>6}"
-        )
-        for r in trows:
-            print(
-                f"{r['kind']:>13} {r['method']:>10} {r['gospa']:7.1f} {r['gospa_se']:5.1f} "
-                f"{r['gospa_merged']:7.1f} {r['swaps']:5d} {r['breaks']:6d}"
-            )
-        print(json.dumps(done_when_traffic(trows)))
-        return
-    res = study(
-        ratios=tuple(a.ratios),
-        runs=a.runs,
-        q=a.q,
-        kind=a.kind,
-        seed=a.seed,
-        use_resolution=not a.no_resolution,
-        scans=a.scans,
-        half_angle_deg=a.half_angle,
-        cell_information=not a.no_cell,
-        methods=tuple(a.methods),
-    )
-    rows = summarise(res)
-    verdict = done_when(rows)
-    if a.json:
-        print(
-            json.dumps(
-                {"rows": rows, "done_when": verdict, "wall_s": time.perf_counter() - t0}, indent=1
-            )
-        )
-        return
-    print(
-        f"{'ratio':>6} {'method':>11} {'GOSPA':>8} {'se':>6} {'swaps':>5} {'breaks':>6} "
-        f"{'merged':>6} {'s/run':>6}"
-    )
-    for r in rows:
-        print(
-            f"{r['ratio']:6.2f} {r['method']:>11} {r['gospa']:8.1f} {r['gospa_se']:6.1f} "
-            f"{r['swaps']:5d} {r['breaks']:6d} {r['merged_scans']:6.1f} "
-            f"{r['s_per_run']:6.2f}"
-        )
-    print(json.dumps(verdict))
-    print(f"wall {time.perf_counter() - t0:.0f} s")
+if __name__ == "__main__":  # the study's command line (module docstring, "Usage")
+    from solvers_cmp.assignment_tracking_cli import main
 
-
-if __name__ == "__main__":
     main()

@@ -218,54 +218,10 @@ def _failure_lines(rows: list[dict[str, Any]]) -> list[str]:
     return lines
 
 
-def write_harness_report(
-    out: Path,
-    rows: list[dict[str, Any]],
-    *,
-    profile: str,
-    time_limit: float,
-    error_tol: float,
-    violation_tol: float,
-    notes: dict[str, str] | None = None,
-    env: dict[str, Any] | None = None,
-    skipped: list[dict[str, Any]] | None = None,
-) -> str:
-    """Write ``report.md``, one scaling plot per problem (``<problem>_scaling.png``) and
-    ``summary.csv`` for a harness sweep; return the Markdown. ``skipped``: runs the quick
-    sweep left out (problem, instance, size, formulation, solver, why)."""
-    from optmodels import plots
-    from solvers_cmp import cases as cs
-    from solvers_cmp.harness import summarise
-    from solvers_cmp.harness.metrics import N_BOOT, TIE_MARGIN
-
-    out.mkdir(parents=True, exist_ok=True)
-    summary = summarise(rows, time_limit, skipped=skipped or ())
-    write_csv(out / "summary.csv", summary)
-    instance_notes = _instance_notes(rows)
-    env = env or environment()
-    problems = [p for p in cs.REGISTRY if any(r["problem"] == p for r in rows)]
-    problems += sorted({r["problem"] for r in rows} - set(problems))
-    md = [
-        "# Solver and formulation comparison\n",
-        f"Profile **{profile}**: success = status OK **and** solution error ≤ "
-        f"{error_tol:.0e} against the reference **and** re-computed violation of the "
-        f"original problem ≤ {violation_tol:.0e}. Time limit {time_limit:g} s per run; a "
-        "failure is charged the time limit. Times are shifted geometric means (shift "
-        "10 ms) over the problem's cases; `rel_*` divides by the best of the problem "
-        "(1.0 = fastest). Build = CVXPY canonicalisation or CasADi construction; solve = "
-        "the solver's own time (median of the run's repetitions; build = the first "
-        "call's, measured for every row, the closed forms' included). Full rows: "
-        "`results.csv` (each with its time limit, options and solver version: a rerun "
-        "recomputes any row whose key differs); this table: `summary.csv`.\n",
-        f"Machine: {env['cpu']}, {env['cores']} cores; Python {env['python']}; "
-        + ", ".join(f"{k} {v}" for k, v in env["packages"].items() if v)
-        + ".\n",
-    ]
-    n_ok = sum(r["success"] for r in rows)
-    md.append(
-        f"{len(rows)} runs, {n_ok} successes, {len(rows) - n_ok} failures, each "
-        "explained under its problem.\n"
-    )
+def _headline_rows(problems: list[str], summary: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """The headline table: per problem and original formulation, the best generic solve
+    (the tied leaders named together), its interval, the next solver's ratio, the
+    efficiency, the best reduction and the floor (closed form, enumeration)."""
     headline = []
     for p in problems:
         mine_s = [s for s in summary if s["problem"] == p]
@@ -304,17 +260,37 @@ def write_harness_report(
                     or "—",
                 }
             )
-    md.append("## Headline\n")
-    md.append(
+    return headline
+
+
+#: The columns of the headline table, in order.
+_HEADLINE_COLS = [
+    "problem",
+    "original problem",
+    "best generic",
+    "success",
+    "total (sgm, s)",
+    "95% interval (s)",
+    "next (× leader, 95%)",
+    "efficiency",
+    "best reduction",
+    "floor (s)",
+]
+
+
+def _headline(problems: list[str], summary: list[dict[str, Any]]) -> list[str]:
+    """The ``Headline`` section: how the solves are ranked and tied, and the table."""
+    from solvers_cmp.harness.metrics import N_BOOT, TIE_MARGIN
+
+    return [
+        "## Headline\n",
         "Generic solves of the **original** problem ranked per problem by success "
         "rate, then the shifted geometric mean of build + solve time over the "
         "problem's cases; the 95 % interval is a percentile bootstrap over the cases "
         f"({N_BOOT} resamples, seeded); solvers whose intervals overlap the leader's "
         "are **tied** (`1=`) and named together — a rerun may swap them, not the "
         "headline. Reductions (reduced formulations, the linear assignment without "
-        "merges) and the floor (closed form, enumeration) have their own rows.\n"
-    )
-    md.append(
+        "merges) and the floor (closed form, enumeration) have their own rows.\n",
         "Ties are decided on the cases every solver of the problem ran, *paired*: "
         "`× leader` is the ratio of a solver's shifted geometric mean to the "
         "leader's with the 95 % interval of the same bootstrap over the cases (the "
@@ -325,70 +301,125 @@ def write_harness_report(
         "problems): Σ Cramér–Rao bound / Σ squared error of the estimate against the "
         "truth over the seeded draws (number of draws in brackets); 1 = efficient "
         "(up to the draws' Monte Carlo spread, shared by every solver of the "
-        "problem), below 1 = what an early stop costs the estimate.\n"
+        "problem), below 1 = what an early stop costs the estimate.\n",
+        markdown_table(
+            _headline_rows(problems, summary),
+            _HEADLINE_COLS,
+            {"success": ".0%", "total (sgm, s)": ".2e"},
+        ),
+    ]
+
+
+def _skipped_section(skipped: list[dict[str, Any]]) -> list[str]:
+    """``Left out of this quick sweep``: the runs the profile marks as too slow, grouped
+    by problem, solver and reason."""
+    groups: dict[tuple[str, str, str], list[str]] = {}
+    for k in skipped:
+        groups.setdefault((k["problem"], k["solver"], k["why"]), []).append(
+            f"{k['instance']}/{k['formulation']}/{k['size']}"
+        )
+    return [
+        "\n## Left out of this quick sweep\n\nRuns the profile marks as too "
+        "slow for their size (`solvers_cmp.harness.profiles.TOO_SLOW`, measured); "
+        "a full `optmodels compare` runs them:\n",
+        "\n".join(
+            f"- {p}: **{sv}** at {', '.join(w)} — {why}" for (p, sv, why), w in groups.items()
+        )
+        + "\n",
+    ]
+
+
+def _problem_section(
+    out: Path,
+    p: str,
+    rows: list[dict[str, Any]],
+    summary: list[dict[str, Any]],
+    instance_notes: dict[str, list[dict[str, Any]]],
+    time_limit: float,
+) -> list[str]:
+    """Problem ``p``'s section: its adapter's description, its summary table, its
+    instances' notes, its scaling plot (written to ``out``) and its failures."""
+    from optmodels import plots
+    from solvers_cmp import cases as cs
+
+    mine = [r for r in rows if r["problem"] == p]
+    try:
+        ad = cs.adapter(p)
+        doc = " ".join((type(ad).__doc__ or "").split())
+        size_label = ad.size_meaning or "size"
+    except Exception:  # a user adapter that no longer imports
+        doc, size_label = "", "size"
+    fig = plots.scaling(
+        out / f"{p}_scaling.png", mine, title=p, size_label=size_label, time_limit=time_limit
     )
+    md = [f"\n## {p}\n\n{doc}\n"]
     md.append(
         markdown_table(
-            headline,
-            [
-                "problem",
-                "original problem",
-                "best generic",
-                "success",
-                "total (sgm, s)",
-                "95% interval (s)",
-                "next (× leader, 95%)",
-                "efficiency",
-                "best reduction",
-                "floor (s)",
-            ],
-            {"success": ".0%", "total (sgm, s)": ".2e"},
+            _display([s for s in summary if s["problem"] == p]), _SUMMARY_COLS, _SUMMARY_FMT
         )
     )
+    notes_p = instance_notes.get(p)
+    if notes_p:
+        md.append(
+            "\nInstances:\n\n"
+            + markdown_table(notes_p, list(notes_p[0]), {"merge gain (ln)": ".2f"})
+        )
+    md.append(f"\n![{p} scaling]({fig.name})\n")
+    fails = _failure_lines(mine)
+    if fails:
+        md.append("\nFailures:\n\n" + "\n".join(fails) + "\n")
+    return md
+
+
+def write_harness_report(
+    out: Path,
+    rows: list[dict[str, Any]],
+    *,
+    profile: str,
+    time_limit: float,
+    error_tol: float,
+    violation_tol: float,
+    notes: dict[str, str] | None = None,
+    env: dict[str, Any] | None = None,
+    skipped: list[dict[str, Any]] | None = None,
+) -> str:
+    """Write ``report.md``, one scaling plot per problem (``<problem>_scaling.png``) and
+    ``summary.csv`` for a harness sweep; return the Markdown. ``skipped``: runs the quick
+    sweep left out (problem, instance, size, formulation, solver, why)."""
+    from solvers_cmp import cases as cs
+    from solvers_cmp.harness import summarise
+
+    out.mkdir(parents=True, exist_ok=True)
+    summary = summarise(rows, time_limit, skipped=skipped or ())
+    write_csv(out / "summary.csv", summary)
+    instance_notes = _instance_notes(rows)
+    env = env or environment()
+    problems = [p for p in cs.REGISTRY if any(r["problem"] == p for r in rows)]
+    problems += sorted({r["problem"] for r in rows} - set(problems))
+    n_ok = sum(r["success"] for r in rows)
+    md = [
+        "# Solver and formulation comparison\n",
+        f"Profile **{profile}**: success = status OK **and** solution error ≤ "
+        f"{error_tol:.0e} against the reference **and** re-computed violation of the "
+        f"original problem ≤ {violation_tol:.0e}. Time limit {time_limit:g} s per run; a "
+        "failure is charged the time limit. Times are shifted geometric means (shift "
+        "10 ms) over the problem's cases; `rel_*` divides by the best of the problem "
+        "(1.0 = fastest). Build = CVXPY canonicalisation or CasADi construction; solve = "
+        "the solver's own time (median of the run's repetitions; build = the first "
+        "call's, measured for every row, the closed forms' included). Full rows: "
+        "`results.csv` (each with its time limit, options and solver version: a rerun "
+        "recomputes any row whose key differs); this table: `summary.csv`.\n",
+        f"Machine: {env['cpu']}, {env['cores']} cores; Python {env['python']}; "
+        + ", ".join(f"{k} {v}" for k, v in env["packages"].items() if v)
+        + ".\n",
+        f"{len(rows)} runs, {n_ok} successes, {len(rows) - n_ok} failures, each "
+        "explained under its problem.\n",
+    ]
+    md += _headline(problems, summary)
     if skipped:
-        md.append(
-            "\n## Left out of this quick sweep\n\nRuns the profile marks as too "
-            "slow for their size (`solvers_cmp.harness.profiles.TOO_SLOW`, measured); "
-            "a full `optmodels compare` runs them:\n"
-        )
-        groups: dict[tuple[str, str, str], list[str]] = {}
-        for k in skipped:
-            groups.setdefault((k["problem"], k["solver"], k["why"]), []).append(
-                f"{k['instance']}/{k['formulation']}/{k['size']}"
-            )
-        md.append(
-            "\n".join(
-                f"- {p}: **{sv}** at {', '.join(w)} — {why}" for (p, sv, why), w in groups.items()
-            )
-            + "\n"
-        )
+        md += _skipped_section(skipped)
     for p in problems:
-        mine = [r for r in rows if r["problem"] == p]
-        try:
-            ad = cs.adapter(p)
-            doc = " ".join((type(ad).__doc__ or "").split())
-            size_label = ad.size_meaning or "size"
-        except Exception:  # a user adapter that no longer imports
-            doc, size_label = "", "size"
-        fig = plots.scaling(
-            out / f"{p}_scaling.png", mine, title=p, size_label=size_label, time_limit=time_limit
-        )
-        md.append(f"\n## {p}\n\n{doc}\n")
-        md.append(
-            markdown_table(
-                _display([s for s in summary if s["problem"] == p]), _SUMMARY_COLS, _SUMMARY_FMT
-            )
-        )
-        notes_p = instance_notes.get(p)
-        if notes_p:
-            md.append(
-                "\nInstances:\n\n"
-                + markdown_table(notes_p, list(notes_p[0]), {"merge gain (ln)": ".2f"})
-            )
-        md.append(f"\n![{p} scaling]({fig.name})\n")
-        fails = _failure_lines(mine)
-        if fails:
-            md.append("\nFailures:\n\n" + "\n".join(fails) + "\n")
+        md += _problem_section(out, p, rows, summary, instance_notes, time_limit)
     if notes:
         md.append(
             "\n## Solvers left out\n\n" + "\n".join(f"- {k}: {v}" for k, v in notes.items()) + "\n"

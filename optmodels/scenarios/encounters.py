@@ -243,7 +243,7 @@ def encounter(
     scans = as_count(f"{_W} scans", scans, minimum=3)
     dt = as_positive(f"{_W} dt (s)", dt)
     sp, sv = (as_positive(f"{_W} init_sigma", v) for v in init_sigma)
-    times = np.arange(scans) * dt
+    times = np.arange(scans, dtype=np.float64) * dt
     tc = times[scans // 2]
     centre = sensor.site + np.array([range_0, 0.0])
     offs = (np.arange(q) - (q - 1) / 2) * separation
@@ -365,7 +365,7 @@ def traffic_encounter(
     dt = as_positive(f"{w} dt (s)", dt)
     sp, sv = (as_positive(f"{w} init_sigma", v) for v in init_sigma)
     max_tries = as_count(f"{w} max_tries", max_tries, minimum=1)
-    times = np.arange(scans) * dt
+    times = np.arange(scans, dtype=np.float64) * dt
     tc = float(times[scans // 2])
     for _ in range(max_tries):
         rng_0, az0 = rng.uniform(20_000.0, 120_000.0), rng.uniform(-math.pi, math.pi)

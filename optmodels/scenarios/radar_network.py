@@ -25,11 +25,16 @@ from typing import Literal
 import numpy as np
 from numpy.typing import ArrayLike
 
+from optmodels.biasfield import (
+    AircraftPaths,
+    BiasField,
+    PlotTable,
+    RadarSet,
+    shift_from_bias,
+    to_polar,
+    wrap_angle,
+)
 from optmodels.biasfield import geometry3d as g3
-from optmodels.biasfield.fields import BiasField
-from optmodels.biasfield.geometry import shift_from_bias, to_polar, wrap_angle
-from optmodels.biasfield.paths import AircraftPaths
-from optmodels.biasfield.tables import PlotTable, RadarSet
 from optmodels.core import FloatArray, ProblemError, as_finite_array, as_positive
 
 __all__ = [
@@ -172,7 +177,9 @@ def fly_paths3d(
     org = g3.site_geodetic("scenarios.fly_paths3d origin", origin)
     times_all = np.arange(0.0, float(duration) + dt, dt)
     nt = times_all.size
-    ts, ens, hs = [], [], []
+    ts: list[ArrayLike] = []
+    ens: list[ArrayLike] = []
+    hs: list[ArrayLike] = []
     for _ in range(n_aircraft):
         start = rng.uniform(0.0, 0.3 * duration)
         stop = min(duration, start + rng.uniform(0.4, 1.0) * duration)
@@ -225,8 +232,8 @@ def _simulate_plots3d(
     phase: FloatArray,
 ) -> tuple[PlotTable, FloatArray, FloatArray]:
     rows: list[tuple[FloatArray, ...]] = []
-    geo_sites = radars.geodetic
-    assert geo_sites is not None
+    geo_sites, origin = radars.geodetic, radars.origin
+    assert geo_sites is not None and origin is not None  # a 3-D radar set has both
     for i in range(radars.m):
         for a in range(len(paths)):
             t, _, geo = paths.track(a)
@@ -243,7 +250,7 @@ def _simulate_plots3d(
             frac = (np.floor(psi[k + 1]) - psi[k]) / (psi[k + 1] - psi[k])
             tk = t[k] + frac * (t[k + 1] - t[k])
             gk = geo[k] + frac[:, None] * (geo[k + 1] - geo[k])
-            xk = g3.common_plane(gk[:, 0], gk[:, 1], radars.origin)
+            xk = g3.common_plane(gk[:, 0], gk[:, 1], origin)
             rk, azk = g3.measure(geo_sites[i], gk[:, 0], gk[:, 1], gk[:, 2])
             f = fields[i](xk)
             noise = rng.normal(size=(tk.size, 2)) * [radars.sigma_range[i], radars.sigma_azimuth[i]]
@@ -310,6 +317,8 @@ def simulate_plots(
                 "fly_paths3d or AircraftPaths.from_reports)"
             )
         return _simulate_plots3d(rng, radars, paths, fields, per, phase)
+    sites = radars.sites
+    assert sites is not None  # RadarSet always holds its plane sites
     rows: list[tuple[FloatArray, ...]] = []
     for i in range(m):
         for a in range(paths.positions.shape[0]):
@@ -317,7 +326,7 @@ def simulate_plots(
             t, p = paths.times[on], paths.positions[a, on]
             if t.size < 2:
                 continue
-            pol = to_polar(p, radars.sites[i])
+            pol = to_polar(p, sites[i])
             psi = (phase[i] + 2 * np.pi * t / per[i] - pol[:, 1]) / (2 * np.pi)
             psi = psi[0] + np.cumsum(
                 np.concatenate([[0.0], wrap_angle(2 * np.pi * np.diff(psi)) / (2 * np.pi)])
@@ -326,7 +335,7 @@ def simulate_plots(
             frac = (np.floor(psi[k + 1]) - psi[k]) / (psi[k + 1] - psi[k])
             tk = t[k] + frac * (t[k + 1] - t[k])
             xk = p[k] + frac[:, None] * (p[k + 1] - p[k])
-            pk = to_polar(xk, radars.sites[i])
+            pk = to_polar(xk, sites[i])
             f = fields[i](xk)
             noise = rng.normal(size=pk.shape) * [radars.sigma_range[i], radars.sigma_azimuth[i]]
             meas = pk + f + noise
@@ -383,21 +392,22 @@ class RadarNetworkScenario:
         """Shifts s_i(x) on the common plane at each plot (n, 2) (3-D: exact, at the
         plot's true height)."""
         out = np.empty_like(self.true_position)
-        for i in range(self.radars.m):
+        r, height = self.radars, self.plots.height
+        for i in range(r.m):
             sel = self.plots.radar == i
-            if self.radars.is_3d:
-                assert self.plots.height is not None
+            if r.is_3d:
+                # a 3-D scenario: geodetic sites, the origin, the plots' true heights
+                assert r.geodetic is not None and r.origin is not None and height is not None
                 out[sel] = g3.shift_from_bias3d(
                     self.true_position[sel],
-                    self.plots.height[sel],
-                    self.radars.geodetic[i],  # type: ignore
-                    self.radars.origin,
+                    height[sel],
+                    r.geodetic[i],
+                    r.origin,
                     self.true_bias[sel],
                 )
             else:
-                out[sel] = shift_from_bias(
-                    self.true_position[sel], self.radars.sites[i], self.true_bias[sel]
-                )
+                assert r.sites is not None  # RadarSet always holds its plane sites
+                out[sel] = shift_from_bias(self.true_position[sel], r.sites[i], self.true_bias[sel])
         return out
 
 
@@ -482,11 +492,7 @@ def radar_network(
     """
     from optmodels.core import as_choice
 
-    geometry = as_choice(
-        "scenarios.radar_network geometry",
-        geometry,  # type: ignore
-        ("2d", "3d"),
-    )
+    is_3d = as_choice("scenarios.radar_network geometry", geometry, ("2d", "3d")) == "3d"
     rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
     s = DEFAULT_SITES if sites is None else as_finite_array("sites", sites, ndim=2)
     m = s.shape[0] if s.ndim == 2 else 0
@@ -495,7 +501,7 @@ def radar_network(
         np.broadcast_to(np.asarray(sigma_azimuth, float), (m,)),
         np.broadcast_to(np.asarray(max_range, float), (m,)),
     )
-    if geometry == "3d":
+    if is_3d:
         org = g3.site_geodetic(
             "scenarios.radar_network origin", DEFAULT_ORIGIN if origin is None else origin
         )
@@ -515,6 +521,8 @@ def radar_network(
         radars = RadarSet(None, *args, geodetic=np.column_stack([lat, lon, hs]), origin=org)
     else:
         radars = RadarSet(s, *args)
+    plane_sites = radars.sites
+    assert plane_sites is not None  # RadarSet always holds its plane sites
     if isinstance(fields, str):
         kinds = ("zero", "constant", "linear", "smooth")
         if fields not in kinds:
@@ -540,7 +548,7 @@ def radar_network(
                     BiasField.linear(
                         [rng.uniform(-100, 100), np.deg2rad(rng.uniform(-0.2, 0.2))],
                         g,
-                        radars.sites[i],
+                        plane_sites[i],
                     )
                 )
             else:
@@ -555,12 +563,13 @@ def radar_network(
                 )
     else:
         flist = list(fields)
-    if geometry == "3d":
+    if is_3d:
+        assert radars.origin is not None  # a geodetic radar set has its origin
         paths = fly_paths3d(
             rng,
             n_aircraft,
             duration,
-            origin=radars.origin,  # type: ignore
+            origin=radars.origin,
             region=region,
             turn_rate=turn_rate,
             levels=levels,

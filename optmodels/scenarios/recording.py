@@ -12,7 +12,7 @@ radar's SAC/SIC (``sac``, ``first_sic`` + i), time of day (``start`` s after UTC
 the simulated time), slant range, azimuth, the aircraft's 24-bit ICAO address and its
 flight level (the ISA pressure altitude of the true height: FL = H_p / 30.48 m / 100,
 H_p = R·h/(R + h), R = 6 356 766 m, the inverse of
-:func:`~optmodels.biasfield.recording.fl_to_height`); per aircraft every ``adsb_interval``
+:func:`~optmodels.biasfield.heights.fl_to_height`); per aircraft every ``adsb_interval``
 s an ADS-B report of its true position and geometric height. The datablocks are written
 in time order (one block per source and minute, sources interleaved), as a recorder
 taps them off the network.
@@ -34,7 +34,7 @@ from __future__ import annotations
 import os
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -46,6 +46,9 @@ from optmodels.core import (
     as_number,
     as_positive,
 )
+
+if TYPE_CHECKING:
+    from optmodels.scenarios.radar_network import RadarNetworkScenario
 
 __all__ = ["SimulatedRecording", "simulate_recording"]
 
@@ -68,7 +71,7 @@ class SimulatedRecording:
 
     recording: Path
     sites: Path
-    scenario: Any
+    scenario: RadarNetworkScenario
     addresses: np.ndarray
     start: float
     counts: dict[str, int]
@@ -92,7 +95,7 @@ class SimulatedRecording:
 
 def _flight_level(height: FloatArray) -> FloatArray:
     """FL (hundreds of feet) of a geometric height h (m): the ISA geopotential altitude
-    H_p = R·h/(R + h), the exact inverse of :func:`~optmodels.biasfield.recording.fl_to_height`
+    H_p = R·h/(R + h), the exact inverse of :func:`~optmodels.biasfield.heights.fl_to_height`
     (geoid undulation 0)."""
     h = np.asarray(height, dtype=float)
     return R_ISA * h / (R_ISA + h) / FT / 100.0
@@ -126,6 +129,102 @@ def _by_minute(t: FloatArray) -> list[np.ndarray]:
     minute = np.floor(t / 60.0).astype(np.int64)
     cuts = np.flatnonzero(np.diff(minute)) + 1
     return np.split(np.arange(t.size), cuts)
+
+
+def _cat048_blocks(
+    sc: RadarNetworkScenario, start: float, sac: int, first_sic: int, addr: np.ndarray
+) -> list[tuple[float, bytes]]:
+    """The plots as CAT048 datablocks, one per radar and minute, each with the time of
+    day (s) of its first record: SAC ``sac``, SIC ``first_sic`` + i, slant range, azimuth,
+    the flight level of the true height and the aircraft's address ``addr``."""
+    from optmodels.io import encode_cat048
+
+    r, p = sc.radars, sc.plots
+    assert p.height is not None  # a 3-D scenario's plots carry the true heights
+    blocks: list[tuple[float, bytes]] = []
+    for i in range(r.m):
+        sel = np.flatnonzero(p.radar == i)
+        t = p.time[sel] + start
+        fl = _flight_level(p.height[sel])
+        for rows in _by_minute(t):
+            k = sel[rows]
+            blocks.append(
+                (
+                    float(t[rows[0]]),
+                    encode_cat048(
+                        t[rows],
+                        sac,
+                        first_sic + i,
+                        p.range[k],
+                        p.azimuth[k],
+                        flight_level=fl[rows],
+                        address=addr[p.object[k]],
+                    ),
+                )
+            )
+    return blocks
+
+
+@dataclass(frozen=True)
+class _Adsb:
+    """The CAT021 side of a recording: ``blocks`` (time of day of the first record, the
+    datablock), per report its ``time`` of day (s) and aircraft ``who``, and the reports
+    given an altitude spike (``spikes``, indices into ``time``)."""
+
+    blocks: list[tuple[float, bytes]]
+    time: FloatArray
+    who: np.ndarray
+    spikes: np.ndarray
+
+
+def _cat021_blocks(
+    sc: RadarNetworkScenario,
+    start: float,
+    sac: int,
+    addr: np.ndarray,
+    *,
+    step: int,
+    spikes: int,
+    seed: int,
+) -> _Adsb:
+    """Every ``step``-th path point of each aircraft as a CAT021 ADS-B report (SAC ``sac``,
+    SIC 200: true position, geometric height, the flight level of the true height), in
+    time order, one datablock per minute; ``spikes`` reports drawn from
+    ``default_rng([seed, 21])`` get a :data:`SPIKE` on their height."""
+    from optmodels.io import encode_cat021
+
+    parts = [sc.paths.track(a) for a in range(len(sc.paths))]
+    t21 = np.concatenate([q[0][::step] for q in parts]) + start
+    geo = np.vstack([q[2][::step] for q in parts if q[2] is not None])
+    who = np.concatenate([np.full(q[0][::step].size, a) for a, q in enumerate(parts)])
+    order = np.argsort(t21, kind="stable")
+    t21, geo, who = t21[order], geo[order], who[order]
+    height = geo[:, 2].copy()
+    rng = np.random.default_rng([int(seed), 21])
+    spike_idx = (
+        np.sort(rng.choice(t21.size, size=min(spikes, t21.size), replace=False))
+        if spikes
+        else np.zeros(0, np.int64)
+    )
+    height[spike_idx] += SPIKE
+    blocks: list[tuple[float, bytes]] = []
+    for rows in _by_minute(t21):
+        blocks.append(
+            (
+                float(t21[rows[0]]),
+                encode_cat021(
+                    t21[rows],
+                    sac,
+                    200,
+                    geo[rows, 0],
+                    geo[rows, 1],
+                    height=height[rows],
+                    flight_level=_flight_level(geo[rows, 2]),
+                    address=addr[who[rows]],
+                ),
+            )
+        )
+    return _Adsb(blocks, t21, who, spike_idx)
 
 
 def simulate_recording(
@@ -192,7 +291,7 @@ def simulate_recording(
     ProblemError
         Naming the argument for a bad value; naming the folder if it cannot be written.
     """
-    from optmodels.io import atomic_write, encode_cat021, encode_cat048, output_dir
+    from optmodels.io import atomic_write, output_dir
     from optmodels.scenarios.radar_network import radar_network, ring_sites
 
     fn = "biasfield.simulate_recording"
@@ -227,58 +326,9 @@ def simulate_recording(
     )
     r, p = sc.radars, sc.plots
     addr = first_address + np.arange(n_air, dtype=np.int64)
-    assert p.height is not None
-    sources: list[tuple[float, bytes]] = []
-    for i in range(r.m):
-        sel = np.flatnonzero(p.radar == i)
-        t = p.time[sel] + start
-        fl = _flight_level(p.height[sel])
-        for rows in _by_minute(t):
-            k = sel[rows]
-            sources.append(
-                (
-                    float(t[rows[0]]),
-                    encode_cat048(
-                        t[rows],
-                        sac,
-                        first_sic + i,
-                        p.range[k],
-                        p.azimuth[k],
-                        flight_level=fl[rows],
-                        address=addr[p.object[k]],
-                    ),
-                )
-            )
-    parts = [sc.paths.track(a) for a in range(len(sc.paths))]
-    t21 = np.concatenate([q[0][::step] for q in parts]) + start
-    geo = np.vstack([q[2][::step] for q in parts if q[2] is not None])
-    who = np.concatenate([np.full(q[0][::step].size, a) for a, q in enumerate(parts)])
-    order = np.argsort(t21, kind="stable")
-    t21, geo, who = t21[order], geo[order], who[order]
-    height = geo[:, 2].copy()
-    rng = np.random.default_rng([int(seed), 21])
-    spike_idx = (
-        np.sort(rng.choice(t21.size, size=min(spikes, t21.size), replace=False))
-        if spikes
-        else np.zeros(0, np.int64)
-    )
-    height[spike_idx] += SPIKE
-    for rows in _by_minute(t21):
-        sources.append(
-            (
-                float(t21[rows[0]]),
-                encode_cat021(
-                    t21[rows],
-                    sac,
-                    200,
-                    geo[rows, 0],
-                    geo[rows, 1],
-                    height=height[rows],
-                    flight_level=_flight_level(geo[rows, 2]),
-                    address=addr[who[rows]],
-                ),
-            )
-        )
+    sources = _cat048_blocks(sc, start, sac, first_sic, addr)
+    adsb = _cat021_blocks(sc, start, sac, addr, step=step, spikes=spikes, seed=seed)
+    sources += adsb.blocks
     sources.sort(key=lambda s: s[0])
     rec = out / "recording.ast"
     with atomic_write(rec, name=f"{fn} folder", binary=True) as fh:  # OSError -> ProblemError
@@ -292,7 +342,7 @@ def simulate_recording(
         sc,
         addr,
         start,
-        {"cat048": len(p), "cat021": int(t21.size), "spikes": int(spike_idx.size)},
-        tuple((int(who[j]), float(t21[j])) for j in spike_idx),
+        {"cat048": len(p), "cat021": int(adsb.time.size), "spikes": int(adsb.spikes.size)},
+        tuple((int(adsb.who[j]), float(adsb.time[j])) for j in adsb.spikes),
         tuple((sac, first_sic + i) for i in range(r.m)),
     )

@@ -36,4 +36,5 @@ def modules() -> list[ModuleType]:
 def with_hook(hook: str) -> dict[str, ModuleType]:
     """The problem modules defining ``hook`` (``run_demo``, ``run_details``) by problem
     name, in the order of :func:`names`."""
-    return {p: m for p in names() if hasattr(m := registry.face_module(__name__, p), hook)}
+    found = {p: registry.face_module(__name__, p) for p in names()}
+    return {p: m for p, m in found.items() if m is not None and hasattr(m, hook)}

@@ -14,12 +14,15 @@ import sys
 import tempfile
 from collections.abc import Iterator
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from optmodels.cli.contract import _leaf
 from optmodels.core import ProblemError
+
+if TYPE_CHECKING:
+    from optmodels.cli.problems.biasfield_read import RecordingInput
 
 #: Columns of ``corrected.csv`` and their units (``--json`` echoes them).
 CORRECTED_COLUMNS = {
@@ -111,13 +114,18 @@ def _fmt(fmt: str, v: np.ndarray) -> np.ndarray:
 
 
 def corrected_columns(
-    inp: dict[str, Any], rng: np.ndarray, az: np.ndarray, covered: np.ndarray, reason: np.ndarray
+    inp: RecordingInput,
+    rng: np.ndarray,
+    az: np.ndarray,
+    covered: np.ndarray,
+    reason: np.ndarray,
 ) -> dict[str, np.ndarray]:
     """The columns of ``corrected.csv`` (:data:`CORRECTED_COLUMNS`), as string arrays, for
-    the plots of ``inp`` (``_read_input``'s result, one row per plot read)."""
+    the plots of ``inp`` (:func:`~optmodels.cli.problems.biasfield_read.read_input`'s
+    result, one row per plot read)."""
     from optmodels.biasfield.recording import HEIGHT_SOURCES
 
-    radars, plots, rec = inp["radars"], inp["plots"], inp.get("recording")
+    radars, plots, rec = inp.radars, inp.plots, inp.recording
     n = len(plots)
     names = np.asarray(radars.names, dtype=object)
     cols: dict[str, np.ndarray] = {"radar": names[plots.radar].astype(str)}
@@ -131,7 +139,7 @@ def corrected_columns(
         hexes = np.array([f"{int(a):06x}" for a in rec.addresses] + [""])
         cols["address"] = hexes[np.where(plots.object >= 0, plots.object, -1)]
     else:
-        labels = np.array([*inp.get("labels", []), ""], dtype=object).astype(str)
+        labels = np.array([*inp.labels, ""], dtype=object).astype(str)
         ok = (plots.object >= 0) & (plots.object < labels.size - 1)
         cols["address"] = labels[np.where(ok, plots.object, -1)]
     t = np.asarray(plots.time, dtype=float)
@@ -140,7 +148,7 @@ def corrected_columns(
         cols["time_of_day"] = np.char.mod("%.7f", np.mod(t, 86400.0))
         if rec.epoch is not None:
             us = np.round(t * 1e6).astype(np.int64).astype("timedelta64[us]")
-            stamp = np.datetime_as_string(np.datetime64(rec.epoch, "us") + us, unit="ms")
+            stamp = np.datetime_as_string(rec.epoch.astype("datetime64[us]") + us, unit="ms")
             cols["utc"] = np.char.add(stamp.astype(str), "Z")
         else:
             cols["utc"] = np.full(n, "", dtype="<U1")

@@ -6,12 +6,14 @@ from __future__ import annotations
 
 import dataclasses
 import warnings
+from unittest import mock
 
 import numpy as np
 import pytest
 from scipy import sparse
 
 from optmodels import biasfield as bf
+from optmodels.biasfield import correction
 from optmodels.biasfield.geometry import polar_jacobian, to_polar, wrap_angle
 from optmodels.biasfield.usage import REASONS, correct_plots, registration_error, seen_by_others
 from optmodels.core import ProblemError
@@ -156,6 +158,15 @@ def _check_network(sc, cells: int):
     out = {}
     for name, part in (("in", train), ("held out", test)):
         c = correct_plots(part, radars, fm)
+        # in blocks (CORRECT_CHUNK plots at a time, a block boundary inside every radar's
+        # and aircraft's plots): the same correction as in one block
+        with mock.patch.object(correction, "CORRECT_CHUNK", 997):
+            cb = correct_plots(part, radars, fm)
+        assert len(part) > 3 * 997
+        # (the 3-D placement through ECEF rounds differently per block: ~1e-12 relative)
+        np.testing.assert_allclose(cb.bias, c.bias, rtol=1e-10, atol=1e-12)
+        assert np.array_equal(cb.covered, c.covered) and np.array_equal(cb.reason, c.reason)
+        np.testing.assert_allclose(cb.plots.range, c.plots.range, rtol=0, atol=1e-9)
         two = seen_by_others(part)
         assert set(np.unique(c.reason)) <= set(REASONS)
         assert np.all((c.reason == "covered") == c.covered)

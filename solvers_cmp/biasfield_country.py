@@ -222,6 +222,12 @@ def run_country(
     res["total_local_s"] = time.perf_counter() - t0
     res["peak_rss_mb"], res["peak_rss_children_mb"] = peak_rss_mb()
     res["rss_trace_peak"] = trace.stop()
+    clock, ends = 0.0, {}
+    for key in ("read_s", "field_data_s", "solve_s", "correct_s", "registration_s"):
+        if key in res:
+            clock += res[key]
+            ends[key.removesuffix("_s")] = clock
+    res["rss_max_per_stage_mb"] = trace.per_stage(ends)  # this process, sampled every 0.1 s
     if dask:
         from distributed import Client, LocalCluster
 

@@ -14,7 +14,10 @@ The contract (README, "Command line"):
   130 interrupted (Ctrl-C).
 - Every error is one line on stderr, ``optmodels: error: <message>``, never a traceback;
   with ``--json`` stdout then holds ``{"error": <message>, "exit_code": <code>}``.
-- One grammar: every ``--help`` shows the defaults; ``--out`` is a FOLDER for the verbs
+- Flags are written in full: no abbreviation is accepted (``--sigma`` is not ``--sigma2``);
+  an unknown flag is a usage error naming the verb's ``--help`` and the flags it may mean.
+- One grammar: every ``--help`` shows the defaults (a switch's help says in words what
+  happens without it); ``--out`` is a FOLDER for the verbs
   that write several files (``demo``, ``compare``, ``biasfield solve``) and a FILE for
   those that write one (named in each verb's help); a verb that writes prints the path
   it wrote; the closed form is ``closed-form``, a value of ``--method`` wherever a verb

@@ -16,7 +16,7 @@ import json
 import os
 import sys
 import traceback
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Any, NoReturn
 
@@ -210,7 +210,15 @@ def _execute(args: argparse.Namespace) -> int:
     _emit(text)
     if not ok:
         status = result.get("status")
-        what = f"status {status}" if status else "some part failed (see the output)"
+        # a multi-part result without a status says why in its "message", if it can
+        why = result.get("message") if not status else None
+        what = (
+            f"status {status}"
+            if status
+            else f"{why}"
+            if why
+            else "some part failed (see the output)"
+        )
         extra = f" ({result['message']})" if status and result.get("message") else ""
         print(f"optmodels: not OK: {what}{extra}", file=sys.stderr, flush=True)
     return EXIT_OK if ok else EXIT_NOT_OK
@@ -252,14 +260,55 @@ class _Help(argparse.RawDescriptionHelpFormatter):
 
 def _shows_default(action: argparse.Action) -> bool:
     """Whether ``--help`` states ``action``'s default (options only; a default that is
-    "off" -- ``None``, ``False``, suppressed -- is not a value worth showing)."""
+    "off" -- ``None``, ``False``, suppressed -- is not a value worth showing, nor is the
+    default of a switch (``store_true``/``store_false``: "(default: True)" under
+    ``--no-clean`` reads as "--no-clean is on"; such a flag's help says in words what
+    happens without it))."""
     return (
         bool(action.option_strings)
         and action.default is not None
         and action.default is not False
         and action.default is not argparse.SUPPRESS
-        and not isinstance(action, argparse._HelpAction | argparse._VersionAction)
+        and not isinstance(
+            action,
+            argparse._HelpAction
+            | argparse._VersionAction
+            | argparse._StoreTrueAction
+            | argparse._StoreFalseAction
+            | argparse._StoreConstAction,
+        )
     )
+
+
+#: The attribute of the parsed namespace naming the innermost parser that ran (the verb's):
+#: an unknown flag is reported against that verb's ``--help``, not the root's.
+_LEAF_ATTR = "_optmodels_leaf_parser"
+
+
+def _did_you_mean(parser: argparse.ArgumentParser, extras: list[str]) -> str:
+    """`` (did you mean --sigma2?)`` for the unknown flags among ``extras`` that start a
+    flag of ``parser`` or are close to one (abbreviations are not accepted: a flag is
+    written in full); ``""`` when none is close. Hidden flags (former spellings) are not
+    suggested."""
+    import difflib
+
+    known = [
+        s
+        for a in parser._actions
+        if a.help is not argparse.SUPPRESS
+        for s in a.option_strings
+        if s.startswith("--")
+    ]
+    hints: list[str] = []
+    for text in extras:
+        flag = text.split("=", 1)[0]
+        if not flag.startswith("--") or flag in known:
+            continue
+        close = [s for s in known if s.startswith(flag)] or difflib.get_close_matches(
+            flag, known, n=2, cutoff=0.75
+        )
+        hints += [c for c in close[:3] if c not in hints]
+    return f" (did you mean {' or '.join(hints)}?)" if hints else ""
 
 
 class _Parser(argparse.ArgumentParser):
@@ -273,7 +322,33 @@ class _Parser(argparse.ArgumentParser):
 
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         kwargs.setdefault("formatter_class", _Help)
+        # no abbreviations, on every parser (the sub-commands' parsers are this class
+        # too): `plane fit --sigma 25` was read as --sigma2 25, a variance in m²
+        kwargs["allow_abbrev"] = False
         super().__init__(*args, **kwargs)
+
+    def parse_known_args(  # type: ignore[override]
+        self, args: Sequence[str] | None = None, namespace: argparse.Namespace | None = None
+    ) -> tuple[argparse.Namespace, list[str]]:
+        """argparse's, recording on the namespace the innermost parser that ran (a verb's
+        parser runs inside its group's, inside the root's: the first to set it wins)."""
+        ns, extras = super().parse_known_args(args, namespace)
+        if not hasattr(ns, _LEAF_ATTR):
+            setattr(ns, _LEAF_ATTR, self)
+        return ns, extras
+
+    def parse_args(  # type: ignore[override]
+        self, args: Sequence[str] | None = None, namespace: argparse.Namespace | None = None
+    ) -> argparse.Namespace:
+        """argparse's, but an unknown flag is the verb's usage error (``see optmodels
+        plane fit --help``), with the flags it may have meant."""
+        ns, extras = self.parse_known_args(args, namespace)
+        leaf = getattr(ns, _LEAF_ATTR, self)
+        if hasattr(ns, _LEAF_ATTR):
+            delattr(ns, _LEAF_ATTR)
+        if extras:
+            leaf.error(f"unrecognized arguments: {' '.join(extras)}{_did_you_mean(leaf, extras)}")
+        return ns
 
     def error(self, message: str) -> NoReturn:
         where = self.prog.removeprefix("optmodels").strip()

@@ -59,6 +59,7 @@ def _montecarlo(args: argparse.Namespace) -> Outcome:
         "summary": res.summary,
         "means": {k: res.mean(k) for k in res.values},
         "standard_errors": {k: res.se(k) for k in res.values} if res.n_ok > 1 else {},
+        "units": _units(study, [*res.summary, *res.values]),
     }
     out["out"] = str(out_path.resolve()) if out_path is not None else None
     out["checkpoint"] = str(checkpoint.resolve()) if checkpoint is not None else None
@@ -66,6 +67,21 @@ def _montecarlo(args: argparse.Namespace) -> Outcome:
         write_json(out_path, {**out, "values": res.values})
     finite = all(bool(np.all(np.isfinite(np.asarray(v, dtype=float)))) for v in res.values.values())
     return out, finite and not res.failures
+
+
+def _units(study: Any, keys: list[str]) -> dict[str, str]:
+    """The unit of each value and summary entry, from the study's ``units`` (a key ending
+    in digits, ``w0``, ``w1``, ..., is looked up as ``w#``); a key the study does not
+    declare has none."""
+    import re
+
+    declared: dict[str, str] = dict(getattr(study, "units", None) or {})
+    out = {}
+    for k in keys:
+        unit = declared.get(k) or declared.get(re.sub(r"\d+$", "#", k))
+        if unit:
+            out[k] = unit
+    return out
 
 
 def _print_montecarlo(res: dict[str, Any]) -> None:
@@ -85,11 +101,17 @@ def _print_montecarlo(res: dict[str, Any]) -> None:
             print(f"    trial {i}: {msg}")
     if res["skipped_lines"]:
         print(f"  {res['skipped_lines']} unreadable checkpoint line(s) skipped")
+    units = res.get("units", {})
+
+    def unit(k: str) -> str:
+        return f" {units[k]}" if k in units else ""
+
     for k, v in res["summary"].items():
-        print(f"  {k:>22s} = {v:.6g}" if isinstance(v, int | float) else f"  {k:>22s} = {v}")
+        shown = f"{v:.6g}" if isinstance(v, int | float) else f"{v}"
+        print(f"  {k:>22s} = {shown}{unit(k)}")
     for k, v in res["means"].items():
         se = res["standard_errors"].get(k)
-        print(f"  mean {k:>17s} = {v:.6g}" + (f" ± {se:.2g}" if se is not None else ""))
+        print(f"  mean {k:>17s} = {v:.6g}" + (f" ± {se:.2g}" if se is not None else "") + unit(k))
 
 
 def register(sub: Any) -> None:

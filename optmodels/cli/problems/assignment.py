@@ -159,13 +159,37 @@ def _assignment_solve(args: argparse.Namespace) -> Outcome:
     return res, sol.ok
 
 
+def _big(n: int) -> str:
+    """A count for the text: as is up to 15 digits, else ``≈ 1.234568e+1301 (log10
+    1301.0915)`` (``assignment count 500 500`` has over 1000 digits; JSON keeps the exact
+    integer)."""
+    import math
+
+    if n < 10**15:
+        return str(n)
+    lg = math.log10(n)
+    return f"≈ {10 ** (lg - math.floor(lg)):.6f}e+{math.floor(lg)} (log10 {lg:.4f})"
+
+
+def _marks(partition: list[list[int]], assignment: list[int]) -> str:
+    """``m0 → 0, m1 → 1+2, m2 → background``: each measurement's block of objects."""
+    blocks = ["+".join(map(str, b)) for b in partition]
+    return (
+        ", ".join(
+            f"m{i} → {'background' if a < 0 else blocks[a]}" for i, a in enumerate(assignment)
+        )
+        or "(no measurement)"
+    )
+
+
 def _print_assignment_solve(res: dict[str, Any]) -> None:
     total = res["hypotheses_total"]
     print(
-        f"{res['method']}: {res['status']} ({res['message']}); log score "
-        f"{res['log_score']:.6f}; "
+        f"{res['method']}: {res['status']}"
+        + (f" ({res['message']})" if res["message"] else "")
+        + f"; log score {res['log_score']:.6f}; "
         + (
-            f"{total} hypotheses in total"
+            f"{_big(total)} hypotheses in total"
             if total is not None
             else "hypotheses not counted (Q or N above " + str(COUNTED) + ")"
         )
@@ -178,9 +202,11 @@ def _print_assignment_solve(res: dict[str, Any]) -> None:
         print(f"  measurement {i}: {'background' if a < 0 else blocks[a]}")
     if "k_best" in res:
         print(
-            f"{len(res['k_best'])} best hypotheses; neglected mass ≤ "
-            f"{res['neglected_mass_bound']:.3g} of the listed"
+            f"{len(res['k_best'])} best hypotheses (log score: each measurement's objects); "
+            f"neglected mass ≤ {res['neglected_mass_bound']:.3g} of the listed:"
         )
+        for r, h in enumerate(res["k_best"], start=1):
+            print(f"  {r}. {h['log_score']:.6f}: {_marks(h['partition'], h['assignment'])}")
 
 
 def _assignment_count(args: argparse.Namespace) -> Outcome:
@@ -198,11 +224,14 @@ def _assignment_count(args: argparse.Namespace) -> Outcome:
 
 def _print_assignment_count(res: dict[str, Any]) -> None:
     print(
-        f"Q = {res['q']} objects, N = {res['n']} measurements: {res['variants']} unresolved "
-        f"variants, {res['total']} hypotheses"
+        f"Q = {res['q']} objects, N = {res['n']} measurements: {_big(res['variants'])} "
+        f"unresolved variants, {_big(res['total'])} hypotheses"
     )
     for b, v in res["per_blocks"].items():
-        print(f"  {b} blocks: {v['variants']} variants × {v['hypotheses_each']} hypotheses")
+        print(
+            f"  {b} blocks: {_big(v['variants'])} variants × {_big(v['hypotheses_each'])} "
+            "hypotheses"
+        )
 
 
 def run_demo(out: Path, args: argparse.Namespace, progress: bool) -> dict[str, Any]:

@@ -21,6 +21,7 @@ import numpy as np
 from optmodels.cli.args import _count, _finite, _positive
 from optmodels.cli.contract import Outcome, _group, _leaf, _reading
 from optmodels.cli.problems.biasfield_out import (
+    LIPSCHITZ_NOTE,
     OBJECTIVE_NOTE,
     field_rows,
     interrupt_note,
@@ -31,7 +32,7 @@ from optmodels.cli.problems.biasfield_out import (
     writable_dir,
     writable_file,
 )
-from optmodels.cli.problems.biasfield_read import read_input
+from optmodels.cli.problems.biasfield_read import azimuth_unit_arg, read_input
 from optmodels.cli.problems.biasfield_use import register_use
 from optmodels.core import ProblemError, as_positive
 from optmodels.execution import scheduler_argument
@@ -204,6 +205,7 @@ def _biasfield_solve(args: argparse.Namespace) -> Outcome:
         "objective": sol.objective,
         "objective_note": OBJECTIVE_NOTE,
         "lipschitz": sol.lipschitz,
+        "lipschitz_note": LIPSCHITZ_NOTE,
         "residuals": sol.residuals,
         "cells": fd.k,
         "out": str(Path(out).resolve()),
@@ -331,12 +333,7 @@ def _build_args(bb: argparse.ArgumentParser, positive: Callable[[str], float]) -
         "with its own radars (default); all: only where every radar does "
         "(paper 001 as printed)",
     )
-    bb.add_argument(
-        "--azimuth-unit",
-        choices=("deg", "rad"),
-        default="deg",
-        help="azimuth unit of CSV/Parquet plots",
-    )
+    azimuth_unit_arg(bb)
     bb.add_argument(
         "--drop-out-of-range",
         action="store_true",
@@ -346,7 +343,8 @@ def _build_args(bb: argparse.ArgumentParser, positive: Callable[[str], float]) -
         "--no-clean",
         dest="clean",
         action="store_false",
-        help="skip the cleaning (glitches, track jumps, ground traffic)",
+        help="skip the cleaning of glitches, track jumps and ground traffic "
+        "(default: cleaning on unless --no-clean)",
     )
     bb.add_argument(
         "--max-rows",

@@ -218,13 +218,28 @@ OBJECTIVE_NOTE = (
 )
 
 
+#: What ``lipschitz`` in ``solve --json`` is, and its unit.
+LIPSCHITZ_NOTE = (
+    "L: the largest ‖Lᵀ_P (f(x̌_i) − f(x̌_j))‖ / ‖x̌_i − x̌_j‖ over neighbouring cells, i.e. "
+    "the field's change in the P-norm of (9) per metre between cell centres; with "
+    "biasfield build's P = diag(1/σ_r², 1/σ_az²) per radar, in noise standard "
+    "deviations per m"
+)
+
+
 def print_solve(res: dict[str, Any]) -> None:
     from optmodels.cli.contract import _OK_STATUSES
 
-    print(f"{res['method']}: {res['status']} ({res['message']})")
+    print(f"{res['method']}: {res['status']}" + (f" ({res['message']})" if res["message"] else ""))
     if res["status"] not in _OK_STATUSES:
         return
-    lip = f", Lipschitz constant {res['lipschitz']:.4g}" if res["lipschitz"] is not None else ""
+    lip = (
+        f", Lipschitz constant {res['lipschitz']:.4g} per m (the field's change between "
+        "neighbouring cells in the P-norm of (9) per metre between their centres; with "
+        "build's P = diag(1/σ_r², 1/σ_az²): noise σ per m)"
+        if res["lipschitz"] is not None
+        else ""
+    )
     print(
         f"{res['cells']} cells{lip}, {res.get('active_bounds', 0)} active bounds; wrote "
         f"{', '.join(res['files'])} to {res['out']}"

@@ -79,6 +79,75 @@ def parse_origin(text: str) -> Origin:
     )
 
 
+#: ``--origin`` farther than this (m) from every site is refused (LAT and LON swapped?).
+ORIGIN_REACH = 1000e3
+
+#: With ``--azimuth-unit`` not given, a CSV/Parquet file of at least this many plots whose
+#: azimuths all lie within ±2π is refused as radians read as degrees.
+AZIMUTH_CHECK_PLOTS = 50
+
+
+def _great_circle(lat0: float, lon0: float, lat: np.ndarray, lon: np.ndarray) -> np.ndarray:
+    """Distances (m) on a sphere of the mean Earth radius from (lat0, lon0) to each (lat,
+    lon), degrees (haversine)."""
+    p0, p1 = np.radians(lat0), np.radians(lat)
+    dlat, dlon = p1 - p0, np.radians(lon - lon0)
+    a = np.sin(dlat / 2) ** 2 + np.cos(p0) * np.cos(p1) * np.sin(dlon / 2) ** 2
+    return 2 * 6_371_008.8 * np.arcsin(np.sqrt(np.clip(a, 0.0, 1.0)))
+
+
+def check_origin(origin: Origin, radars_path: Path) -> None:
+    """``--origin LAT,LON,H`` within :data:`ORIGIN_REACH` of some site of ``radars_path``
+    (checked before the recording is read); a sites CSV of x, y has no geodetic origin
+    and is not checked here. Refused (exit 2) naming ``--origin``, the nearest site and
+    the order of the three numbers: ``83,55,0`` for ``55,83,0`` put the common plane's
+    origin ~3000 km from the sites, and every plot's position with it."""
+    from optmodels.biasfield import read_radars
+
+    with _reading(str(radars_path)):
+        _, org = read_radars(radars_path, origin="mean")
+        if org is None:  # x, y sites: --origin does not apply
+            return
+        sites, _ = read_radars(radars_path, origin="mean", geometry="3d")
+    geo = sites.geodetic
+    assert geo is not None  # a 3-D radar set has its geodetic sites
+    d = _great_circle(origin[0], origin[1], geo[:, 0], geo[:, 1])
+    if float(d.min()) <= ORIGIN_REACH:
+        return
+    k = int(np.argmin(d))
+    swapped = _great_circle(origin[1], origin[0], geo[:, 0], geo[:, 1]).min() <= ORIGIN_REACH
+    raise ProblemError(
+        f"--origin {origin[0]:g},{origin[1]:g},{origin[2]:g}: {d[k] / 1e3:.0f} km from "
+        f"the nearest site ({sites.names[k]} at lat {geo[k, 0]:.4f}°, lon "
+        f"{geo[k, 1]:.4f}°), more than {ORIGIN_REACH / 1e3:.0f} km; the order is "
+        "LAT,LON,H (degrees north, degrees east, m above the WGS-84 ellipsoid)"
+        + (
+            f": latitude and longitude swapped? (--origin {origin[1]:g},{origin[0]:g},"
+            f"{origin[2]:g} is near the sites)"
+            if swapped
+            else ""
+        )
+    )
+
+
+def check_azimuth_unit(plots: PlotTable, path: Path) -> None:
+    """``--azimuth-unit`` not given (degrees, checked): a file of at least
+    :data:`AZIMUTH_CHECK_PLOTS` plots whose azimuths all lie within ±2π (±6.3) is
+    radians read as degrees, refused (exit 2) naming ``--azimuth-unit``; degrees spread
+    over a radar's coverage never all fall within ±6.3°. ``plots.azimuth``: the file's
+    numbers read as degrees, in radians."""
+    n = len(plots)
+    if n < AZIMUTH_CHECK_PLOTS:
+        return
+    deg = np.rad2deg(plots.azimuth)
+    if float(np.max(np.abs(deg))) <= 2 * np.pi * (1 + 1e-12):
+        raise ProblemError(
+            f"--azimuth-unit: all {n} azimuths of {path} lie within ±6.3 "
+            f"({float(deg.min()):.3g} to {float(deg.max()):.3g}): radians? give "
+            "--azimuth-unit rad, or --azimuth-unit deg if they really are degrees"
+        )
+
+
 def _is_asterix(path: Path) -> bool:
     """Content detection (B2's :func:`optmodels.io.asterix.is_asterix`); a file that is
     not there is left to the CSV reader's message."""
@@ -169,14 +238,20 @@ def _table_input(
     labels: list[str] = []
     with _reading(str(args.radars)):
         radars, org_used = read_radars(args.radars, origin=origin if origin is not None else "mean")
-    with _reading(str(files[0])):
-        plots, read_dropped = read_plots(
-            files[0],
-            radars,
-            azimuth_unit=args.azimuth_unit,
-            drop_out_of_range=args.drop_out_of_range,
-            labels=labels,
-        )
+    try:
+        with _reading(str(files[0])):
+            plots, read_dropped = read_plots(
+                files[0],
+                radars,
+                azimuth_unit=args.azimuth_unit or "deg",
+                drop_out_of_range=args.drop_out_of_range,
+                labels=labels,
+            )
+    except ProblemError as exc:  # the API's keyword is the flag here
+        text = str(exc).replace("pass drop_out_of_range=True", "give --drop-out-of-range")
+        raise ProblemError(text) from None
+    if args.azimuth_unit is None:  # not given: degrees, checked
+        check_azimuth_unit(plots, files[0])
     geometry = args.geometry
     if geometry == "auto":
         geometry = "3d" if (org_used is not None and plots.height is not None) else "2d"
@@ -239,6 +314,8 @@ def read_input(
         raise ProblemError(
             f"RECORDING: at most two files (plots, then ADS-B), got {len(args.recording)}"
         )
+    if origin is not None:
+        check_origin(origin, args.radars)  # before the recording is read
     kinds = ["asterix" if _is_asterix(f) else "table" for f in files]
     if "asterix" in kinds:
         inp = _asterix_input(files, kinds, args, origin, require_all)
@@ -291,12 +368,7 @@ def recording_args(p: argparse.ArgumentParser) -> None:
         help="auto: 3-D (slant range, each radar's own north) when the sites are "
         "geodetic and the plots have heights",
     )
-    p.add_argument(
-        "--azimuth-unit",
-        choices=("deg", "rad"),
-        default="deg",
-        help="azimuth unit of CSV/Parquet plots",
-    )
+    azimuth_unit_arg(p)
     p.add_argument(
         "--drop-out-of-range",
         action="store_true",
@@ -309,3 +381,17 @@ def recording_args(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--max-rows", type=_count(0), default=100, help="dropped rows listed per reason in --json"
     )
+
+
+#: ``--azimuth-unit``'s help (``build``, ``correct``, ``registration``).
+AZIMUTH_UNIT_HELP = (
+    "azimuth unit of CSV/Parquet plots (default: deg, checked: a file of "
+    f"{AZIMUTH_CHECK_PLOTS} plots or more whose azimuths all lie within ±6.3 is refused "
+    "as radians; --azimuth-unit deg takes them as degrees)"
+)
+
+
+def azimuth_unit_arg(p: argparse.ArgumentParser) -> None:
+    """``--azimuth-unit deg|rad``; not given (``None``): degrees, checked
+    (:func:`check_azimuth_unit`)."""
+    p.add_argument("--azimuth-unit", choices=("deg", "rad"), help=AZIMUTH_UNIT_HELP)

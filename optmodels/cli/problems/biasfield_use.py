@@ -56,8 +56,34 @@ def _check_asterix_inputs(args: argparse.Namespace) -> None:
             )
 
 
+#: ``correct --out``'s suffixes that say the other format (refused: a binary ASTERIX file
+#: named .csv, or a table named .ast, is a file the next program misreads).
+TEXT_SUFFIXES = (".csv", ".txt", ".json")
+ASTERIX_SUFFIXES = (".ast", ".asterix", ".bin", ".pcap", ".pcapng")
+
+
+def _correct_out(args: argparse.Namespace) -> Path:
+    """``correct --out``: ``corrected.csv`` (``--format csv``) or ``corrected.ast``
+    (``--format asterix``) when not given; a name whose suffix says the other format is
+    refused (exit 2) before any work."""
+    if args.out is None:
+        return Path("corrected.ast" if args.format == "asterix" else "corrected.csv")
+    out = Path(args.out)
+    suffix = out.suffix.lower()
+    wrong = TEXT_SUFFIXES if args.format == "asterix" else ASTERIX_SUFFIXES
+    if suffix in wrong:
+        what = "binary ASTERIX" if args.format == "asterix" else "a CSV table"
+        other = "csv" if args.format == "asterix" else "asterix"
+        fix = ".ast" if args.format == "asterix" else ".csv"
+        raise ProblemError(
+            f"--out {out}: --format {args.format} writes {what}, not a {suffix} file; "
+            f"name it {out.with_suffix(fix).name}, or give --format {other}"
+        )
+    return out
+
+
 def _biasfield_correct(args: argparse.Namespace) -> Outcome:
-    out = writable_file("--out", Path(args.out))  # before any work
+    out = writable_file("--out", _correct_out(args))  # before any work
     if args.format == "asterix":
         _check_asterix_inputs(args)
     stage = ["reading the recording"]
@@ -157,7 +183,9 @@ def _biasfield_registration(args: argparse.Namespace) -> Outcome:
     within = _load_field(args, radars) if args.field else None
     say(args, f"placing {len(plots)} plots and measuring the registration ...")
     z = plots.cartesian(radars)  # placed once for both figures (3-D: exact, ~11 s / 10⁶)
-    reg = registration_error(plots, radars, area=args.area, within=within, positions=z)
+    reg = registration_error(
+        plots, radars, area=args.area, within=within, positions=z, min_samples=MIN_SAMPLES
+    )
     res: dict[str, Any] = {
         "source": inp.source,
         "geometry": inp.geometry,
@@ -172,26 +200,94 @@ def _biasfield_registration(args: argparse.Namespace) -> Outcome:
         ref = adsb_reference(plots, inp.adsb, radars.origin)
         if np.isfinite(ref).all(axis=1).any():
             res["absolute"] = absolute_error(
-                plots, radars, ref, area=args.area, within=within, positions=z
+                plots,
+                radars,
+                ref,
+                area=args.area,
+                within=within,
+                positions=z,
+                min_samples=MIN_SAMPLES,
             ).to_dict()
+    if not np.isfinite(reg.overall):
+        res["message"] = _no_area(args.area, reg.to_dict())
     return res, bool(np.isfinite(reg.overall))
+
+
+def _no_area(area: float, reg: dict[str, Any]) -> str:
+    """Why the registration figures are NaN: no area held enough differences."""
+    n = sum(int(v["samples"]) for v in reg["pairs"].values())
+    return (
+        f"no area of side {area:g} m holds {MIN_SAMPLES} cross-radar differences of two "
+        f"aircraft or more ({n} differences over {len(reg['pairs'])} radar pairs in all), "
+        "so no per-area mean and no figure: give a larger --area (m; default 25000) or "
+        "a longer recording"
+    )
+
+
+def _metres(v: float | None, noise: float | None = None) -> str:
+    """A figure in metres for the text: ``n/a`` when NaN (no area held enough plots);
+    a noise-subtracted figure clipped at 0 says so (``0.0 m (at or below the noise
+    floor of 51 m)``)."""
+    if v is None or not np.isfinite(v):
+        return "n/a"
+    if v == 0.0 and noise is not None and np.isfinite(noise):
+        return f"0.0 m (at or below the noise floor of {noise:.0f} m)"
+    return f"{v:.1f} m"
 
 
 def _print_biasfield_registration(res: dict[str, Any]) -> None:
     reg = res["registration"]
     print(
-        f"cross-radar registration error {reg['overall_m']:.1f} m (per-area means, noise "
-        f"{reg['noise_m']:.1f} m; raw {reg['raw_overall_m']:.1f} m) on {res['plots']} plots"
+        f"cross-radar registration error {_metres(reg['overall_m'], reg['noise_m'])} on "
+        f"{res['plots']} plots: per-area means of {reg['area_m']:g} m squares less their "
+        f"noise (noise {_metres(reg['noise_m'])}; raw {_metres(reg['raw_overall_m'])})"
     )
     for pair, v in reg["pairs"].items():
-        print(f"  {pair}: {v['rms_m']:.1f} m ({v['samples']} samples, {v['areas']} areas)")
+        print(
+            f"  {pair}: {_metres(v['rms_m'], v['noise_m'])}; {v['samples']} samples, "
+            f"{v['areas']} areas; raw {_metres(v['raw_rms_m'])}"
+        )
     if res["absolute"]:
         ab = res["absolute"]
         print(
-            f"absolute error against ADS-B {ab['overall_m']:.1f} m (noise "
-            f"{ab['noise_m']:.1f} m): "
-            + ", ".join(f"{k} {v:.1f} m" for k, v in ab["radars_m"].items())
+            f"absolute error against ADS-B {_metres(ab['overall_m'], ab['noise_m'])} (noise "
+            f"{_metres(ab['noise_m'])}): "
+            + ", ".join(f"{k} {_metres(v)}" for k, v in ab["radars_m"].items())
         )
+    if any(
+        v == 0.0
+        for v in (reg["overall_m"], *(p["rms_m"] for p in reg["pairs"].values()))
+        if v is not None
+    ):
+        print(
+            "  (a figure is the systematic part, |mean|² less the noise variance per area; "
+            "0.0 m: at or below the noise floor, nothing systematic left to measure)"
+        )
+    if res.get("message"):
+        print(f"  n/a: {res['message']}")
+
+
+#: The smallest ``registration --area`` (m): a smaller square holds too few plots of two
+#: aircraft for a per-area mean (``--area 25``, km meant, gave every figure NaN).
+MIN_AREA_SIDE = 1000.0
+
+#: Cross-radar differences (of two aircraft or more) an area needs for its mean
+#: (``registration_error``'s and ``absolute_error``'s ``min_samples``).
+MIN_SAMPLES = 20
+
+
+def _area_side(text: str) -> float:
+    """``--area METRES``: a positive side of at least :data:`MIN_AREA_SIDE` m."""
+    from optmodels.cli.args import _positive
+
+    v = float(_positive()(text))
+    if v < MIN_AREA_SIDE:
+        raise argparse.ArgumentTypeError(
+            f"{text} is the side of each square area in METRES (default 25000, 25 km); "
+            f"a square of {v:g} m holds too few plots of two aircraft for a per-area "
+            f"mean: give {MIN_AREA_SIDE:g} m or more"
+        )
+    return v
 
 
 def register_use(bsub: Any, positive: Callable[[str], float]) -> None:
@@ -212,9 +308,11 @@ def register_use(bsub: Any, positive: Callable[[str], float]) -> None:
     bc.add_argument(
         "--out",
         type=Path,
-        default=Path("corrected.csv"),
         metavar="FILE",
-        help="CSV FILE, one row per plot read: "
+        help="the FILE written (default: corrected.csv, or corrected.ast with --format "
+        "asterix; a .csv/.txt/.json name with --format asterix, or an "
+        ".ast/.asterix/.bin/.pcap name with --format csv, is refused); the CSV has one row "
+        "per plot read: "
         + ", ".join(CORRECTED_COLUMNS)
         + " (the radar's name and SAC/SIC, the ICAO address in hex, times in s "
         "and UTC, range m, azimuth deg in [0, 360), height m and its source, "
@@ -230,14 +328,17 @@ def register_use(bsub: Any, positive: Callable[[str], float]) -> None:
     )
     br.add_argument(
         "--area",
-        type=positive,
+        type=_area_side,
         default=25e3,
-        help="side of the square areas of the per-area means, m",
+        metavar="METRES",
+        help="SIDE of the square areas of the per-area means, in metres (not km, not m²; "
+        f"at least {MIN_AREA_SIDE:g})",
     )
     br.add_argument(
         "--no-clean",
         dest="clean",
         action="store_false",
-        help="do not drop glitches, gaps and ground traffic first",
+        help="do not drop glitches, gaps and ground traffic first "
+        "(default: cleaning on unless --no-clean)",
     )
     br.set_defaults(func=_biasfield_registration, printer=_print_biasfield_registration, adsb=None)

@@ -308,15 +308,16 @@ def _step_status(trk: Any) -> list[str]:
 
 
 def _csv_text(rows: list[dict[str, Any]]) -> str:
-    """The step rows as CSV (floats with 17 significant digits: they read back exactly;
-    NaN as ``nan``; booleans ``True``/``False``)."""
+    """The step rows as CSV (floats as Python's shortest round-trip ``repr``: they read
+    back exactly, and 0.3 is written ``0.3``, not ``0.29999999999999999``; NaN as
+    ``nan``; booleans ``True``/``False``)."""
     buf = _stdio.StringIO(newline="")
     if not rows:
         return ""
     w = csv.DictWriter(buf, fieldnames=list(rows[0]), lineterminator="\n")
     w.writeheader()
     for r in rows:
-        w.writerow({k: (f"{v:.17g}" if isinstance(v, float) else v) for k, v in r.items()})
+        w.writerow({k: (repr(float(v)) if isinstance(v, float) else v) for k, v in r.items()})
     return buf.getvalue()
 
 
@@ -341,11 +342,38 @@ def _cli_row(row: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
+#: ``plane track``'s default ``--false-alarm-rate-per-h``.
+FALSE_ALARMS_PER_H = 1.0
+
+
+def _former_rate(args: argparse.Namespace) -> None:
+    """``--false-alarm-rate R`` (the former name, hidden) is ``--false-alarm-rate-per-h R``
+    (the same number, per hour), with a note on stderr; both at once are refused. Without
+    either, :data:`FALSE_ALARMS_PER_H`."""
+    import sys
+
+    if not hasattr(args, "false_alarm_rate_former"):
+        if args.false_alarm_rate_per_h is None:
+            args.false_alarm_rate_per_h = FALSE_ALARMS_PER_H
+        return
+    if args.false_alarm_rate_per_h is not None:
+        raise ProblemError(
+            "--false-alarm-rate: the former name of --false-alarm-rate-per-h; give one of them"
+        )
+    print(
+        "optmodels: note: --false-alarm-rate is now --false-alarm-rate-per-h "
+        "(false alarms per hour of planar track; the same number)",
+        file=sys.stderr,
+    )
+    args.false_alarm_rate_per_h = args.false_alarm_rate_former
+
+
 def _plane_track(args: argparse.Namespace) -> Outcome:
     from optmodels.io import atomic_write, read_plane_csv
     from optmodels.plane.tracking import track
     from optmodels.plane.windows import window_label
 
+    _former_rate(args)
     out_path = _out_file("--out", args.out) if args.out is not None else None
     with _reading(str(args.file)):
         cols = read_plane_csv(args.file, require_time=True)
@@ -415,7 +443,8 @@ def _print_plane_track(res: dict[str, Any]) -> None:
         print(_csv_text(res["steps"]), end="")
         return
     c = res["status_counts"]
-    ch = ", ".join(f"{t:g}" for t in res["change_times"]) or "none"
+    times = ", ".join(repr(float(t)) for t in res["change_times"])
+    changes = f"plane changes detected at t = {times} s" if times else "no plane change detected"
     print(
         f"{res['file']}: N = {res['n_points']}, {res['n_steps']} steps ({res['method']}, "
         f"window {res['window']}); wrote {res['out']}"
@@ -424,10 +453,7 @@ def _print_plane_track(res: dict[str, Any]) -> None:
         f"  steps: {c['optimal']} optimal, {c['optimal_inaccurate']} inaccurate, "
         f"{c['unresolved']} unresolved (on a line), {c['error']} error"
     )
-    print(
-        f"  plane changes detected at t = {ch} s (bound: "
-        f"{res['false_alarm_rate_per_h']:g} false alarms per hour)"
-    )
+    print(f"  {changes} (bound: {res['false_alarm_rate_per_h']:g} false alarms per hour)")
 
 
 def run_demo(out: Path, args: argparse.Namespace, progress: bool) -> dict[str, Any]:
@@ -528,17 +554,16 @@ def register(sub: Any) -> None:
     tr.add_argument(
         "--false-alarm-rate-per-h",
         type=positive,
-        default=1.0,
         metavar="PER_HOUR",
-        help="detector false alarms per HOUR of planar track",
+        help=f"detector false alarms per HOUR of planar track (default: {FALSE_ALARMS_PER_H:g})",
     )
     tr.add_argument(
         "--false-alarm-rate",
         type=positive,
-        dest="false_alarm_rate_per_h",
+        dest="false_alarm_rate_former",
         default=argparse.SUPPRESS,
         help=argparse.SUPPRESS,
-    )  # the former name
+    )  # the former name: read as --false-alarm-rate-per-h (the same unit), with a note
     tr.add_argument(
         "--power",
         type=_level(),

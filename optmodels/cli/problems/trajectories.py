@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 
@@ -29,6 +29,13 @@ def _trajectories_fit(args: argparse.Namespace) -> Outcome:
     from optmodels import trajectories
     from optmodels.io import read_trajectory_csv
 
+    if args.formulation is not None and args.method == "closed-form":
+        raise ProblemError(
+            f"--formulation {args.formulation}: the form of the generic problem solved by "
+            "--method SOLVER (a CVXPY solver: CLARABEL, OSQP, SCS, ...); the closed form "
+            "(--method closed-form, the default) has none: drop --formulation, or give "
+            "--method CLARABEL"
+        )
     with _reading(str(args.file)):
         cols = read_trajectory_csv(args.file)
         labels = cols["objects"]
@@ -70,7 +77,8 @@ def _trajectories_fit(args: argparse.Namespace) -> Outcome:
     if args.method == "closed-form":
         sol = trajectories.closed_form(data, family)
     else:
-        sol = trajectories.solve(data, family, formulation=args.formulation, solver=args.method)
+        formulation: Literal["constrained", "reduced"] = args.formulation or "constrained"
+        sol = trajectories.solve(data, family, formulation=formulation, solver=args.method)
     fam = sol.family
     if fam is None:  # every trajectories solution carries its family
         raise RuntimeError("trajectories: the solution carries no family")
@@ -231,8 +239,8 @@ def register(sub: Any) -> None:
     tfit.add_argument(
         "--formulation",
         choices=("constrained", "reduced"),
-        default="constrained",
-        help="generic formulation (with --method SOLVER)",
+        help="the generic problem's form, with --method SOLVER only (default: "
+        "constrained; refused with the closed form)",
     )
     tfit.add_argument("--level", type=_level(), default=0.95, help="family test level, in (0, 1)")
     tfit.set_defaults(func=_trajectories_fit, printer=_print_trajectories_fit)

@@ -30,6 +30,12 @@ class AssignmentSeparation:
 
     name: ClassVar[str] = "assignment-separation"
     problem: ClassVar[str] = "assignment"
+    #: The unit of each per-trial value and summary entry (``optmodels montecarlo`` prints it).
+    units: ClassVar[dict[str, str]] = {
+        "correct": "0 or 1 (1: the MAP hypothesis is right)",
+        "rate": "fraction of trials",
+        "se": "fraction of trials (standard error of the rate)",
+    }
 
     separation: float = 1.0
     resolution: float = 1.5

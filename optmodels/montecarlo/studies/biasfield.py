@@ -27,6 +27,11 @@ class BiasfieldRecovery:
 
     name: ClassVar[str] = "biasfield-recovery"
     problem: ClassVar[str] = "biasfield"
+    #: The unit of each per-trial value and summary entry (``optmodels montecarlo`` prints it).
+    units: ClassVar[dict[str, str]] = {
+        "range_rms_m": "m",
+        "azimuth_rms_mrad": "mrad",
+    }
 
     cells: int = 200
     noise: float = 20.0

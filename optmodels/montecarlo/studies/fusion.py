@@ -28,6 +28,14 @@ class FusionWeight:
 
     name: ClassVar[str] = "fusion-weight"
     problem: ClassVar[str] = "fusion"
+    #: The unit of each per-trial value and summary entry (``optmodels montecarlo`` prints
+    #: it); ``w#`` stands for ``w0``, ``w1``, ...
+    units: ClassVar[dict[str, str]] = {
+        "w#": "dimensionless (an entry of vec Ŵ)",
+        "max_rel_diff_diag": "relative (largest |MC − (10)| / (10) on the diagonal)",
+        "var_mc_mean": "dimensionless (mean variance of vec Ŵ's entries, Monte Carlo)",
+        "var_linear_mean": "dimensionless (mean variance of vec Ŵ's entries, (10))",
+    }
 
     n: int = 30
     s1: tuple[tuple[float, ...], ...] = ((1.0, 0.0, 0.0), (0.0, 2.0, 0.0), (0.0, 0.0, 3.0))

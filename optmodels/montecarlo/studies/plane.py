@@ -30,6 +30,16 @@ class PlaneAngle:
 
     name: ClassVar[str] = "plane-angle"
     problem: ClassVar[str] = "plane"
+    #: The unit of each per-trial value and summary entry (``optmodels montecarlo`` prints it).
+    units: ClassVar[dict[str, str]] = {
+        "ml": "rad (angle between the ML and the true normal)",
+        "svd": "rad (angle between the SVD and the true normal)",
+        "crb2": "rad² (Cramér–Rao bound of the angle, squared)",
+        "rmse_ml": "rad",
+        "rmse_svd": "rad",
+        "crb": "rad (RMS Cramér–Rao bound of the angle)",
+        "ml_over_crb": "ratio (1: the bound is reached)",
+    }
 
     n: int = 50
     setting: str = "radar"

@@ -29,6 +29,13 @@ class TrajectoriesEta:
 
     name: ClassVar[str] = "trajectories-eta"
     problem: ClassVar[str] = "trajectories"
+    #: The unit of each per-trial value and summary entry (``optmodels montecarlo`` prints it).
+    units: ClassVar[dict[str, str]] = {
+        "dep": "(unit of y per s)², σ = 1 (squared velocity error, dependent fit)",
+        "ind": "(unit of y per s)², σ = 1 (squared velocity error, independent line)",
+        "eta_mc": "ratio (mean dep / mean ind)",
+        "eta_formula": "ratio (η of paper 002)",
+    }
 
     q: int = 2
     n: int = 10

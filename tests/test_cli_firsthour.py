@@ -423,3 +423,27 @@ def test_assignment_lists_the_k_best_and_counts_readably(tmp_path: Path) -> None
     assert not re.search(r"\d{100}", count.out)
     lg = math.log10(total)
     assert f"(log10 {lg:.4f})" in count.out.splitlines()[0]
+
+
+def test_plane_fit_formulation_with_the_closed_form_is_refused(tmp_path: Path) -> None:
+    """``--formulation reduced`` names the generic NLP's form: with ``--method closed-form``
+    it would be silently ignored, so it is refused (exit 2, naming the flag)."""
+    path = tmp_path / "p.csv"
+    path.write_text("x,y,z\n0,0,0\n1,0,0\n0,1,0\n1,1,0.01\n2,1,0\n")
+    (r,) = run_many(
+        [
+            [
+                "plane",
+                "fit",
+                path,
+                "--sigma2",
+                "1",
+                "--method",
+                "closed-form",
+                "--formulation",
+                "reduced",
+            ]
+        ],
+        expect=None,
+    )
+    assert_error(r, 2, "--formulation reduced")

@@ -78,6 +78,11 @@ def _plane_fit(args: argparse.Namespace) -> Outcome:
     from optmodels.io import read_plane_csv
 
     method = _method(args)
+    if method == "closed-form" and args.formulation == "reduced":
+        raise ProblemError(
+            "--formulation reduced: the form of the generic NLP (--method ipopt); the closed "
+            "form (--method closed-form) has none: drop --formulation, or give --method ipopt"
+        )
     formulation: Literal["full", "reduced"] = (
         "full" if args.formulation == "closed-form" else args.formulation
     )

@@ -319,3 +319,30 @@ def test_no_private_name_crosses_a_package() -> None:
     assert {f: h for f, h in new.items() if h} == {}
     stale = {f: h - found.get(f, set()) for f, h in PENDING_PRIVATE.items()}
     assert {f: h for f, h in stale.items() if h} == {}, "remove these from PENDING_PRIVATE"
+
+
+# --------------------------------------------------------------------------- sizes
+#: docs/architecture.md ("Adding a problem"): no module over 600 lines, no function over 150
+#: (issue 23 item 6), counted on the formatted source (``ruff format`` in ``make test``).
+MAX_MODULE_LINES, MAX_FUNCTION_LINES = 600, 150
+
+
+def test_no_module_over_600_lines_and_no_function_over_150() -> None:
+    import ast
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    long_modules, long_functions = [], []
+    for package in ("optmodels", "solvers_cmp"):
+        for path in sorted((root / package).rglob("*.py")):
+            text = path.read_text(encoding="utf-8")
+            rel = path.relative_to(root).as_posix()
+            if text.count("\n") > MAX_MODULE_LINES:
+                long_modules.append((rel, text.count("\n")))
+            for node in ast.walk(ast.parse(text)):
+                if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef):
+                    size = (node.end_lineno or node.lineno) - node.lineno + 1
+                    if size > MAX_FUNCTION_LINES:
+                        long_functions.append((rel, node.name, size))
+    assert long_modules == [], f"modules over {MAX_MODULE_LINES} lines: {long_modules}"
+    assert long_functions == [], f"functions over {MAX_FUNCTION_LINES} lines: {long_functions}"

@@ -14,6 +14,7 @@ size: ``--country --dask --workers 2``).
 
 from __future__ import annotations
 
+import json
 import sys
 import time
 from typing import Any
@@ -228,6 +229,8 @@ def run_country(
             clock += res[key]
             ends[key.removesuffix("_s")] = clock
     res["rss_max_per_stage_mb"] = trace.per_stage(ends)  # this process, sampled every 0.1 s
+    # the local figures before the Dask pass (a long run stopped there keeps them)
+    print(f"local: {json.dumps(res)}", file=sys.stderr, flush=True)
     if dask:
         from distributed import Client, LocalCluster
 

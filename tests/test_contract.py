@@ -321,6 +321,57 @@ def test_no_private_name_crosses_a_package() -> None:
     assert {f: h for f, h in stale.items() if h} == {}, "remove these from PENDING_PRIVATE"
 
 
+def test_no_package_init_reexports_a_private_name() -> None:
+    """No ``__init__.py`` of optmodels or solvers_cmp imports a private name (``from m import
+    _x``, dunders aside) to hand it on (issue 23): its users import it from its module. An
+    ``__init__`` may import one that its own functions call (``cli.main`` runs ``_execute``),
+    outside its ``__all__``."""
+    import ast
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    found: dict[str, list[str]] = {}
+    for package in ("optmodels", "solvers_cmp"):
+        for path in sorted((root / package).rglob("__init__.py")):
+            tree = ast.parse(path.read_text(encoding="utf-8"))
+            exported: set[str] = set()
+            for node in tree.body:
+                if (
+                    isinstance(node, ast.Assign | ast.AnnAssign)
+                    and any(
+                        isinstance(t, ast.Name) and t.id == "__all__"
+                        for t in (node.targets if isinstance(node, ast.Assign) else [node.target])
+                    )
+                    and isinstance(node.value, ast.List | ast.Tuple)
+                ):
+                    exported |= {
+                        e.value
+                        for e in node.value.elts
+                        if isinstance(e, ast.Constant) and isinstance(e.value, str)
+                    }
+            used = {
+                n.id
+                for f in ast.walk(tree)
+                if isinstance(f, ast.FunctionDef | ast.AsyncFunctionDef)
+                for n in ast.walk(f)
+                if isinstance(n, ast.Name)
+            }
+            for node in ast.walk(tree):
+                if not isinstance(node, ast.ImportFrom):
+                    continue
+                for a in node.names:
+                    bound = a.asname or a.name
+                    if (
+                        a.name.startswith("_")
+                        and not a.name.startswith("__")
+                        and (bound not in used or bound in exported)
+                    ):
+                        module = "." * node.level + (node.module or "")
+                        rel = path.relative_to(root).as_posix()
+                        found.setdefault(rel, []).append(f"{module}.{a.name}")
+    assert found == {}, "import these from their modules, not through the package"
+
+
 # --------------------------------------------------------------------------- sizes
 #: docs/architecture.md ("Adding a problem"): no module over 600 lines, no function over 150
 #: (issue 23 item 6), counted on the formatted source (``ruff format`` in ``make test``).

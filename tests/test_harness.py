@@ -26,6 +26,8 @@ from optmodels.core import ProblemError
 from optmodels.execution import LineLog
 from solvers_cmp import cases as cs
 from solvers_cmp import harness, report
+from solvers_cmp.harness.profiles import _judge
+from solvers_cmp.harness.results import _parse_line
 from tests.harness_adapters import children, interrupt, wait_gone
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -270,7 +272,7 @@ def test_cut_short_and_garbage_rows_are_rerun(
             old[tuple(r[k] for k in key)]["solution_error"], abs=1e-12
         )
     assert harness.read_results(path) == [
-        harness._parse_line(line.encode()) for line in path.read_text().splitlines()[1:]
+        _parse_line(line.encode()) for line in path.read_text().splitlines()[1:]
     ]
 
 
@@ -525,7 +527,7 @@ def test_ctrl_c_of_a_dask_sweep_keeps_rows_and_resumes(
     from optmodels.execution import Interrupted
 
     address = dask_cluster.scheduler_address  # type: ignore[attr-defined]
-    judge = harness._judge
+    judge = _judge
 
     def ctrl_c_at_sleep(row: dict[str, object], prof: harness.Profile) -> None:
         if row["solver"] == "sleep":  # Ctrl-C while the 4th result comes back

@@ -36,13 +36,7 @@ from optmodels.io.asterix import (
     read_asterix,
     rewrite_cat048_positions,
 )
-from optmodels.io.binary import _ZIP_MAGIC as _ZIP_MAGIC
-from optmodels.io.binary import _file_head as _file_head
 from optmodels.io.binary import read_json, read_npy, read_npz
-from optmodels.io.paths import _MAGIC as _MAGIC
-from optmodels.io.paths import _make_dir as _make_dir
-from optmodels.io.paths import _read_bytes as _read_bytes
-from optmodels.io.paths import _write_text as _write_text
 from optmodels.io.paths import (
     as_path,
     atomic_write,
@@ -52,7 +46,6 @@ from optmodels.io.paths import (
     read_text,
     save_npz,
 )
-from optmodels.io.tables import _COV_COLUMNS as _COV_COLUMNS
 from optmodels.io.tables import (
     CsvRows,
     PlaneCsv,
@@ -62,7 +55,6 @@ from optmodels.io.tables import (
     read_plane_csv,
     read_trajectory_csv,
 )
-from optmodels.io.tables import _columns as _columns
 from optmodels.io.writers import (
     csv_cell,
     json_default,

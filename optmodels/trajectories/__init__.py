@@ -81,13 +81,12 @@ problem in NumPy: :func:`predict`, :func:`objective`, :func:`constraint_residual
 ``verify`` (the re-check, the downgrade rules and the gate), ``solution``
 (:class:`TrajectorySolution`), ``generic`` (:func:`solve`), ``closedform``
 (:func:`closed_form`), ``covariances`` (Ψ (14)-(20), η, η0), ``model_choice``
-(:func:`family_test`). Every name is re-exported here; import from
+(:func:`family_test`). Every public name is re-exported here; import from
 ``optmodels.trajectories``.
 """
 
 # Also importable, outside ``__all__`` as before: the documented constants, the family-name
-# type, resolve_family, and _Stats and _Fit (pickled with a TrajectoryData's cache: a pickle
-# written by the single-module version names them here). ``X as X`` marks a re-export.
+# type and resolve_family. ``X as X`` marks a re-export.
 from optmodels.trajectories.closedform import closed_form
 from optmodels.trajectories.covariances import (
     covariance,
@@ -100,14 +99,12 @@ from optmodels.trajectories.covariances import (
 from optmodels.trajectories.data import FAMILIES, Family, TrajectoryData
 from optmodels.trajectories.data import FamilyName as FamilyName
 from optmodels.trajectories.data import resolve_family as resolve_family
-from optmodels.trajectories.fits import _Fit as _Fit
 from optmodels.trajectories.generic import SOLVER_DEFAULTS as SOLVER_DEFAULTS
 from optmodels.trajectories.generic import solve
 from optmodels.trajectories.model_choice import FamilyTest, family_test
 from optmodels.trajectories.moments import EPS as EPS
 from optmodels.trajectories.moments import TIME_RESOLUTION_MAX as TIME_RESOLUTION_MAX
 from optmodels.trajectories.moments import TIME_RESOLUTION_WARN as TIME_RESOLUTION_WARN
-from optmodels.trajectories.moments import _Stats as _Stats
 from optmodels.trajectories.original import (
     constraint_residuals,
     design_matrix,

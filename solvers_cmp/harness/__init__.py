@@ -20,7 +20,8 @@ The runs go through the execution engine,
 :func:`optmodels.execution.execute`: here, in order, through the one local worker
 (``scheduler=None``/``"processes"``; ``"serial"``: in this process), or on a Dask cluster (``scheduler="tcp://host:8786"``,
 ``optmodels compare --scheduler``): each run is then one Dask task, run in a child process
-of its Dask worker with the same time limit (:func:`_remote_run`), and a Dask worker that
+of its Dask worker with the same time limit
+(:func:`~solvers_cmp.harness.remote._remote_run`), and a Dask worker that
 dies records the run as ``crashed``. Only this process writes ``results.csv`` (rows in
 the order they finish), so the rows, the resume, the lock and the repairs are those of
 the local engine.
@@ -32,7 +33,7 @@ is measured against it: ``solution_error`` (adapter-defined, relative), ``object
 ``success`` = status OK and error ≤ the profile's tolerance and violation ≤ tolerance
 (qpbenchmark's definition), with ``reason`` saying why not.
 
-Modules (every name of the former ``solvers_cmp/harness.py`` is importable from here):
+Modules (their public names are importable from here; a private one only from its module):
 :mod:`~solvers_cmp.harness.profiles` (:class:`Profile`, :data:`PROFILES`, ``_judge``),
 :mod:`~solvers_cmp.harness.planning` (:class:`Case`, :func:`plan`, the argument checks),
 :mod:`~solvers_cmp.harness.worker` (the isolated local :class:`Worker`, ``_InProcess``),
@@ -48,31 +49,11 @@ from optmodels.execution import Interrupted as Interrupted
 from optmodels.execution import LineLog as LineLog
 from solvers_cmp.harness.metrics import shifted_geometric_mean, summarise
 from solvers_cmp.harness.planning import Case, Sizes, plan
-from solvers_cmp.harness.planning import _counts as _counts
-from solvers_cmp.harness.planning import _names as _names
 from solvers_cmp.harness.profiles import PROFILES, Profile
-from solvers_cmp.harness.profiles import _judge as _judge
-from solvers_cmp.harness.remote import _REMOTE as _REMOTE
-from solvers_cmp.harness.remote import _remote_run as _remote_run
 from solvers_cmp.harness.results import COLUMNS, KEY, read_results
-from solvers_cmp.harness.results import _csv_line as _csv_line
-from solvers_cmp.harness.results import _header_line as _header_line
-from solvers_cmp.harness.results import _key as _key
-from solvers_cmp.harness.results import _load_results as _load_results
-from solvers_cmp.harness.results import _parse as _parse
-from solvers_cmp.harness.results import _parse_line as _parse_line
-from solvers_cmp.harness.sweep import _sweep as _sweep
 from solvers_cmp.harness.sweep import run_sweep
-from solvers_cmp.harness.versions import _OTHER_PACKAGES as _OTHER_PACKAGES
 from solvers_cmp.harness.versions import solver_version
-from solvers_cmp.harness.worker import _STARTUP_TIMEOUT as _STARTUP_TIMEOUT
 from solvers_cmp.harness.worker import Worker
-from solvers_cmp.harness.worker import _children_allowed as _children_allowed
-from solvers_cmp.harness.worker import _execute as _execute
-from solvers_cmp.harness.worker import _InProcess as _InProcess
-from solvers_cmp.harness.worker import _prepare as _prepare
-from solvers_cmp.harness.worker import _State as _State
-from solvers_cmp.harness.worker import _worker_loop as _worker_loop
 
 __all__ = [
     "COLUMNS",

@@ -29,7 +29,6 @@ from typing import Any
 import numpy as np
 
 from optmodels.core import ProblemError
-from optmodels.montecarlo.studies._common import _set as _set
 
 # the five study classes, importable from here as before the split (so pickles written
 # before it load too); a new problem's study needs no line here: STUDIES finds it

@@ -168,6 +168,10 @@ def _check_network(sc, cells: int):
         assert np.array_equal(cb.covered, c.covered) and np.array_equal(cb.reason, c.reason)
         np.testing.assert_allclose(cb.plots.range, c.plots.range, rtol=0, atol=1e-9)
         two = seen_by_others(part)
+        # "one radar only" exactly where the plot is uncovered, of a known object, and no
+        # other radar saw that object within the window (computed here on all plots)
+        single = ~c.covered & ~two & (part.object >= 0)
+        assert np.array_equal(c.reason == "one radar only", single)
         assert set(np.unique(c.reason)) <= set(REASONS)
         assert np.all((c.reason == "covered") == c.covered)
         assert not np.any(two & (c.reason == "one radar only"))

@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 
 from optmodels.biasfield import BiasField, PlotTable, RadarSet
-from solvers_cmp.biasfield_scale import RssTrace, peak_rss_mb, traffic
+from solvers_cmp.biasfield_scale import RssTrace, peak_rss_mb, run_in_child, traffic
 
 #: The country-scale network of issue 24: 40 radars over ~1000 × 1000 km, ranges 200-250 km
 #: (no area is seen by more than a few), 10 000 aircraft over 24 h, read hour by hour.
@@ -96,23 +96,11 @@ def _bar(items: Any, progress: bool, desc: str) -> Any:
 def read_hours(seed: int, m: int, aircraft: int, hours: float, progress: bool) -> PlotTable:
     """Simulate in a spawned child (its memory stays out of the peak), then read the
     recording hour by hour and join the hours into one plot table."""
-    import multiprocessing as mp
     import os
     import tempfile
 
     with tempfile.TemporaryDirectory() as tmp:
-        proc = mp.get_context("spawn").Process(
-            target=_generate_hours, args=(tmp, seed, m, aircraft, hours)
-        )
-        proc.start()
-        try:
-            proc.join()
-        except BaseException:
-            proc.kill()
-            proc.join()
-            raise
-        if proc.exitcode != 0:
-            raise RuntimeError(f"the traffic generator failed (exit {proc.exitcode})")
+        run_in_child(_generate_hours, (tmp, seed, m, aircraft, hours))
         parts: list[list[np.ndarray]] = [[] for _ in range(5)]
         for name in _bar(sorted(os.listdir(tmp)), progress, "reading hours"):
             with np.load(os.path.join(tmp, name)) as z:

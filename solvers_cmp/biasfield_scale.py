@@ -206,26 +206,31 @@ def _generate(path: str, seed: int, m: int, aircraft: int, hours: float) -> None
     np.savez(path, time=p.time, radar=p.radar, range=p.range, azimuth=p.azimuth, object=p.object)
 
 
+def run_in_child(target: Any, args: tuple[Any, ...]) -> None:
+    """``target(*args)`` in a spawned child process (its memory stays out of this process's
+    peak), killed with this process on an interrupt; a non-zero exit is a RuntimeError."""
+    import multiprocessing as mp
+
+    proc = mp.get_context("spawn").Process(target=target, args=args)
+    proc.start()
+    try:
+        proc.join()
+    except BaseException:
+        proc.kill()
+        proc.join()
+        raise
+    if proc.exitcode != 0:
+        raise RuntimeError(f"the traffic generator failed (exit {proc.exitcode})")
+
+
 def simulate_in_child(seed: int, m: int, aircraft: int, hours: float) -> PlotTable:
     """:func:`traffic` in a spawned child process; the plots come back through a file."""
-    import multiprocessing as mp
     import os
     import tempfile
 
     with tempfile.TemporaryDirectory() as tmp:
         path = os.path.join(tmp, "plots.npz")
-        proc = mp.get_context("spawn").Process(
-            target=_generate, args=(path, seed, m, aircraft, hours)
-        )
-        proc.start()
-        try:
-            proc.join()
-        except BaseException:
-            proc.kill()
-            proc.join()
-            raise
-        if proc.exitcode != 0:
-            raise RuntimeError(f"the traffic generator failed (exit {proc.exitcode})")
+        run_in_child(_generate, (path, seed, m, aircraft, hours))
         with np.load(path) as z:
             return PlotTable(z["time"], z["radar"], z["range"], z["azimuth"], z["object"])
 

@@ -100,6 +100,7 @@ def correct_plots(
     n = len(plots)
     bias = np.zeros((n, 2))
     covered = np.ones(n, dtype=bool)
+    rng, az = np.empty(n), np.empty(n)  # the corrected columns, filled block by block
     # in blocks of CORRECT_CHUNK plots: the interpolation's temporaries (simplices,
     # distances, barycentric weights, the positions) scale with the block, not the
     # recording (3.2·10⁷ plots: peak RSS 10.5 GB in one block; see solvers_cmp.biasfield_country)
@@ -117,11 +118,8 @@ def correct_plots(
                 azimuth=wrap_angle(block.azimuth - b[:, 1]),
             )
         bias[sl], covered[sl] = b, ok
-    out = replace(
-        plots,
-        range=np.abs(plots.range - bias[:, 0]),
-        azimuth=wrap_angle(plots.azimuth - bias[:, 1]),
-    )
+        rng[sl], az[sl] = part.range, part.azimuth
+    out = replace(plots, range=rng, azimuth=az)
     # an object array of the three REASONS strings (8 bytes a plot, not 72 for '<U18')
     code = np.zeros(n, dtype=np.int8)
     if not covered.all():

@@ -231,11 +231,11 @@ class FieldData:
     def k(self) -> int:
         return int(self.centers.shape[0])
 
-    def save(self, path: str | Path) -> None:
-        """Write an ``.npz`` (radars, centers, xi, edges (E, 2), P[, xi_cov]) onto exactly
-        ``path``, atomically (:func:`optmodels.io.save_npz`)."""
+    def npz_arrays(self) -> dict[str, Any]:
+        """The arrays of the ``.npz`` :meth:`load` reads: radars, centers, xi, edges (E, 2),
+        P, and those of xi_cov, jacobians, heights, geodetic, origin, seen that are set."""
         upper = sparse.triu(self.adjacency, k=1).tocoo()
-        arrays = {
+        arrays: dict[str, Any] = {
             "radars": self.radars,
             "centers": self.centers,
             "xi": self.xi,
@@ -245,10 +245,15 @@ class FieldData:
         for name in ("xi_cov", "jacobians", "heights", "geodetic", "origin", "seen"):
             if getattr(self, name) is not None:
                 arrays[name] = getattr(self, name)
+        return arrays
+
+    def save(self, path: str | Path) -> None:
+        """Write an ``.npz`` (:meth:`npz_arrays`) onto exactly ``path``, atomically
+        (:func:`optmodels.io.save_npz`)."""
         from optmodels.io import save_npz
 
         # exactly ``path`` (no ``.npz`` appended), all or nothing (a kill keeps the old file)
-        save_npz(path, name="biasfield.FieldData.save path", compressed=True, **arrays)
+        save_npz(path, name="biasfield.FieldData.save path", compressed=True, **self.npz_arrays())
 
     @classmethod
     def load(cls, path: str | Path) -> FieldData:

@@ -167,22 +167,10 @@ def save_field_data(
     with the radars' ``names`` if given, exactly at ``path`` and atomically
     (:func:`optmodels.io.save_npz`: a kill part-way leaves the previous file readable).
     Returns the path written."""
-    from scipy import sparse
-
     from optmodels.io import save_npz
 
     data = as_instance("biasfield.save_field_data data", data, FieldData)
-    upper = sparse.triu(data.adjacency, k=1).tocoo()
-    arrays: dict[str, Any] = {
-        "radars": data.radars,
-        "centers": data.centers,
-        "xi": data.xi,
-        "edges": np.column_stack([upper.row, upper.col]).astype(np.int64),
-        "P": data.P,
-    }
-    for key in ("xi_cov", "jacobians", "heights", "geodetic", "origin", "seen"):
-        if getattr(data, key) is not None:
-            arrays[key] = getattr(data, key)
+    arrays = data.npz_arrays()
     names = tuple(str(v) for v in names)
     if names:
         if len(names) != data.m:

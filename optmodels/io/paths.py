@@ -22,7 +22,7 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import IO, Any
 
-from optmodels.core import ProblemError
+from optmodels.core import ProblemError, as_flag
 
 # signatures of files that are often given where a text CSV is expected
 _MAGIC = (
@@ -47,6 +47,8 @@ def as_path(name: str, value: Any) -> Path:
             f"{name}: expected a file path, got {type(value).__name__} {value!r:.60}"
         )
     text = os.fspath(value)
+    if not isinstance(text, str):  # an os.PathLike whose __fspath__ gives bytes
+        raise ProblemError(f"{name}: expected a text file path, got {type(text).__name__}")
     if not text or "\x00" in text:
         raise ProblemError(f"{name}: not a usable file path: {text!r:.60}")
     return Path(text)
@@ -201,8 +203,16 @@ def atomic_write(
     Raises
     ------
     ProblemError
-        Naming the path if it cannot be prepared or written (permission, disk full).
+        Naming the path if it cannot be prepared or written (permission, disk full);
+        naming ``binary`` if it is not True/False, ``newline`` if it is not one of
+        :func:`open`'s (None, ``""``, ``"\\n"``, ``"\\r"``, ``"\\r\\n"``).
     """
+    binary = as_flag("io.atomic_write binary", binary)
+    if not (newline is None or (isinstance(newline, str) and newline in _NEWLINES)):
+        raise ProblemError(
+            f"io.atomic_write newline: expected None or one of {', '.join(map(repr, _NEWLINES))}"
+            f", got {type(newline).__name__} {newline!r:.40}"
+        )
     p = output_file(path, name=name)
     try:
         fd, tmp_name = tempfile.mkstemp(prefix=f".{p.name}.", suffix=".tmp", dir=p.parent)
@@ -232,6 +242,10 @@ def atomic_write(
                 tmp.unlink()
 
 
+#: the ``newline`` values :func:`open` takes besides None
+_NEWLINES = ("", "\n", "\r", "\r\n")
+
+
 def _umask() -> int:
     mask = os.umask(0)
     os.umask(mask)
@@ -254,12 +268,34 @@ def save_npz(
 
     Unlike NumPy's own function, no ``.npz`` is appended to the name, and a kill part-way
     leaves the previous archive readable (:func:`atomic_write`). Returns the path written.
+
+    Raises
+    ------
+    ProblemError
+        Naming the path if it cannot be written (see :func:`atomic_write`); naming
+        ``compressed`` if it is not True/False; naming an array that NumPy would store as
+        a pickle (objects, ``None`` entries, a mapping) or cannot make an array of (ragged
+        nested lists): :func:`~optmodels.io.read_npz` does not load pickles.
     """
     import numpy as np
 
+    compressed = as_flag("io.save_npz compressed", compressed)
+    data = {}
+    for key, value in arrays.items():
+        try:
+            a = np.asanyarray(value)
+        except (TypeError, ValueError):  # ragged nested lists
+            a = None
+        if a is None or a.dtype.hasobject:
+            raise ProblemError(
+                f"io.save_npz {key}: expected an array of numbers or text, got "
+                f"{type(value).__name__} {value!r:.40} (it would be stored as a pickle, "
+                "which read_npz does not load)"
+            )
+        data[key] = a
     p = output_file(path, name=name)
     with atomic_write(p, name=name, binary=True) as fh:
-        (np.savez_compressed if compressed else np.savez)(fh, **arrays)
+        (np.savez_compressed if compressed else np.savez)(fh, **data)
     return p
 
 

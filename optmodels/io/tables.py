@@ -15,13 +15,13 @@ import datetime as _dt
 import io as _stdio
 import os
 import re
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any, NamedTuple
 
 import numpy as np
 
-from optmodels.core import FloatArray, ProblemError
+from optmodels.core import FloatArray, ProblemError, as_flag
 from optmodels.io.paths import as_path, read_text
 
 _COV_COLUMNS = ("cxx", "cxy", "cxz", "cyy", "cyz", "czz")
@@ -105,40 +105,90 @@ def csv_numbers(
 ) -> FloatArray:
     """A column of CSV cells (text) or of a Parquet table (numbers) as floats.
 
-    ``lines`` gives the file line of each cell for the messages (else the row number).
+    ``path`` and ``column`` name the file and the column in the messages; ``lines`` gives
+    the file line of each cell for the messages (else the row number). The columns named
+    in :data:`TIME_COLUMNS` may hold ISO 8601 date-times (read by :func:`csv_times`).
 
     Raises
     ------
     ProblemError
         Naming the file, the column and the line of the first cell that is not a number
-        (or, with ``finite``, is NaN/inf).
+        (or, with ``finite``, is NaN/inf); naming the argument for a ``column`` that is
+        not text, ``cells`` that are not one cell per row (text, a mapping, ragged or
+        nested lists), ``lines`` that are not one whole number per cell, or a ``finite``
+        that is not True/False.
     """
-    arr = np.asarray(cells)
+    arr, lines = _cells("io.csv_numbers", column, cells, lines)
+    return _numbers(path, column, arr, lines, finite=as_flag("io.csv_numbers finite", finite))
+
+
+def _cells(fn: str, column: Any, cells: Any, lines: Any) -> tuple[np.ndarray, Sequence[int] | None]:
+    """The arguments of :func:`csv_numbers` / :func:`csv_times` checked: ``cells`` as a
+    1-D array, ``lines`` one whole number per cell (or None)."""
+    if not isinstance(column, str):
+        raise ProblemError(
+            f"{fn} column: expected the column's name (text), got "
+            f"{type(column).__name__} {column!r:.40}"
+        )
+    for name, v in (("cells", cells), ("lines", lines)):
+        if isinstance(v, str | bytes | Mapping):
+            raise ProblemError(
+                f"{fn} {name}: expected one value per row (a list or 1-D array), got "
+                f"{type(v).__name__} {v!r:.40}"
+            )
+    try:
+        arr = np.asarray(cells)
+    except (TypeError, ValueError):  # ragged nested lists
+        raise ProblemError(
+            f"{fn} cells: expected one cell per row (a list or 1-D array), got "
+            f"nested lists of different lengths {cells!r:.40}"
+        ) from None
+    if arr.ndim != 1:
+        raise ProblemError(
+            f"{fn} cells: expected one cell per row (a list or 1-D array), got shape {arr.shape}"
+        )
+    if lines is not None:
+        try:
+            ln = np.asarray(lines)
+        except (TypeError, ValueError):
+            ln = np.zeros((0, 0))
+        if ln.ndim != 1 or (ln.size and ln.dtype.kind not in "iu") or ln.size != arr.size:
+            raise ProblemError(
+                f"{fn} lines: expected {arr.size} file line numbers (whole numbers, one per "
+                f"cell), got {ln.dtype} shape {ln.shape}"
+            )
+    return arr, lines
+
+
+def _numbers(
+    path: Any, column: str, arr: np.ndarray, lines: Sequence[int] | None, *, finite: bool
+) -> FloatArray:
+    """:func:`csv_numbers` of checked arguments."""
 
     def where(i: int) -> str:
         return f"line {lines[i]}" if lines is not None else f"row {i + 1}"
 
-    if (
-        column in TIME_COLUMNS
-        and arr.ndim == 1
-        and (
-            arr.dtype.kind == "M"
-            or (arr.size and isinstance(arr.flat[0], str) and _ISO.match(arr.flat[0].strip()))
-        )
+    if column in TIME_COLUMNS and (
+        arr.dtype.kind == "M"
+        or (arr.size and isinstance(arr.flat[0], str) and _ISO.match(arr.flat[0].strip()))
     ):
-        return csv_times(path, column, cells, lines)[0]
+        return _times(path, column, arr, lines, None)[0]
     if arr.dtype.kind == "M":
         raise ProblemError(f"{path}: column {column!r} holds date-times, expected numbers")
-    try:
-        values = arr.astype(float)
-    except (TypeError, ValueError, OverflowError):
-        values = None
-    if values is None or values.ndim != 1:
-        for i, c in enumerate(arr.reshape(-1) if arr.ndim else [arr.item()]):
+    values = None
+    if arr.dtype.kind != "c":  # complex: refused cell by cell below, not cast
+        try:
+            values = arr.astype(float)
+        except (TypeError, ValueError, OverflowError):
+            values = None
+    if values is None:
+        for i, c in enumerate(arr):
+            cell = c.item() if isinstance(c, np.generic) else c
             try:
-                float(c)
+                if isinstance(cell, complex):
+                    raise TypeError
+                float(cell)
             except (TypeError, ValueError, OverflowError):
-                cell = c.item() if isinstance(c, np.generic) else c
                 raise ProblemError(
                     f"{path}: {where(i)}, column {column!r}: {cell!r:.40} is not a number"
                 ) from None
@@ -174,7 +224,8 @@ def csv_times(
     date-times (``2026-03-01T12:00:05.25``, a space for the ``T``, ``Z`` or ``±HH:MM``
     offsets; naive times are UTC, as :func:`optmodels.biasfield.frames.from_frame` takes
     them), or numpy ``datetime64`` cells (a Parquet timestamp column): seconds since
-    ``epoch`` (default: UTC midnight of the earliest time), returned with the epoch
+    ``epoch`` (an ISO 8601 text, a ``datetime.date``/``datetime`` or a ``datetime64``;
+    default: UTC midnight of the earliest time), returned with the epoch
     (``datetime64[ns]``). :func:`csv_numbers` reads the columns named in
     :data:`TIME_COLUMNS` through this (dropping the epoch).
 
@@ -182,9 +233,58 @@ def csv_times(
     ------
     ProblemError
         Naming the file, the column and the line of the first cell that is neither a
-        number nor an ISO date-time, or a column that mixes the two.
+        number nor an ISO date-time, or a column that mixes the two; naming the argument
+        for an ``epoch`` that is not a date-time (a number, NaT, other text) and for the
+        bad ``column``, ``cells`` and ``lines`` of :func:`csv_numbers`.
     """
-    arr = np.asarray(cells)
+    arr, lines = _cells("io.csv_times", column, cells, lines)
+    e = None if epoch is None else _epoch("io.csv_times epoch", epoch)
+    return _times(path, column, arr, lines, e)
+
+
+def _iso_ns(text: str) -> np.datetime64:
+    """An ISO 8601 date-time (checked against :data:`_ISO`) as UTC ``datetime64[ns]``."""
+    d = _dt.datetime.fromisoformat(text.replace(" ", "T", 1))
+    if d.tzinfo is not None:
+        d = d.astimezone(_dt.UTC).replace(tzinfo=None)
+    return np.datetime64(d, "ns")
+
+
+def _epoch(name: str, epoch: Any) -> np.datetime64:
+    """``epoch`` as ``datetime64[ns]`` (UTC): ISO 8601 text, a date/datetime (an aware one
+    converted to UTC) or a datetime64; numbers, NaT and other text refused."""
+    why = "a number" if isinstance(epoch, bool | int | float | complex | np.number) else None
+    e: np.datetime64 = np.datetime64("NaT", "ns")
+    if why is None:
+        try:
+            if isinstance(epoch, str):
+                if not _ISO.match(epoch.strip()):
+                    raise ValueError("not ISO 8601")
+                e = _iso_ns(epoch.strip())
+            else:
+                if isinstance(epoch, _dt.datetime) and epoch.tzinfo is not None:
+                    epoch = epoch.astimezone(_dt.UTC).replace(tzinfo=None)
+                e = np.datetime64(epoch, "ns")
+        except (TypeError, ValueError, OverflowError) as exc:
+            why = str(exc)
+    if why is None and np.isnat(e):
+        why = "NaT"
+    if why is not None:
+        raise ProblemError(
+            f"{name}: expected a date-time (ISO 8601 text such as '2026-03-01', a "
+            f"datetime.date/datetime or a numpy datetime64), got {epoch!r:.40} ({why:.60})"
+        )
+    return e
+
+
+def _times(
+    path: Any,
+    column: str,
+    arr: np.ndarray,
+    lines: Sequence[int] | None,
+    epoch: np.datetime64 | None,
+) -> tuple[FloatArray, np.datetime64 | None]:
+    """:func:`csv_times` of checked arguments."""
 
     def where(i: int) -> str:
         return f"line {lines[i]}" if lines is not None else f"row {i + 1}"
@@ -197,9 +297,9 @@ def csv_times(
     else:
         first = str(arr.flat[0]).strip() if arr.size else ""
         if not _ISO.match(first):
-            return csv_numbers(path, column, cells, lines), None
+            return _numbers(path, column, arr, lines, finite=True), None
         out = np.empty(arr.size, "datetime64[ns]")
-        for i, c in enumerate(arr.reshape(-1)):
+        for i, c in enumerate(arr):
             text = str(c).strip()
             if not _ISO.match(text):
                 raise ProblemError(
@@ -208,22 +308,15 @@ def csv_times(
                     "give all times as date-times or all as seconds)"
                 )
             try:
-                d = _dt.datetime.fromisoformat(text.replace(" ", "T", 1))
+                out[i] = _iso_ns(text)
             except ValueError as exc:
                 raise ProblemError(
                     f"{path}: {where(i)}, column {column!r}: {text!r:.40}: {exc}"
                 ) from None
-            if d.tzinfo is not None:
-                d = d.astimezone(_dt.UTC).replace(tzinfo=None)
-            out[i] = np.datetime64(d, "ns")
         ns = out
-    if epoch is None:
-        e = ns.min().astype("datetime64[D]").astype("datetime64[ns]")
-    else:
-        try:
-            e = np.datetime64(epoch, "ns")
-        except (TypeError, ValueError) as exc:
-            raise ProblemError(f"{path}: epoch {epoch!r:.40} is not a date-time") from exc
+    if epoch is None and not ns.size:  # no times: no earliest day to count from
+        return np.zeros(0), None
+    e = ns.min().astype("datetime64[D]").astype("datetime64[ns]") if epoch is None else epoch
     return (ns - e).astype("timedelta64[ns]").astype(np.int64) / 1e9, e
 
 

@@ -115,10 +115,17 @@ def write_json(path: str | os.PathLike[str], obj: Any) -> None:
     Raises
     ------
     ProblemError
-        Naming the path if it is a directory or cannot be written.
+        Naming the path if it is a directory or cannot be written; naming ``obj`` if it
+        holds a value JSON has no form for (an object of another type, a reference cycle);
+        nothing is written then.
     """
     p = output_file(path, name="io.write_json path")
-    _write_text(p, json_text(obj) + "\n")
+    try:
+        text = json_text(obj)
+    except (TypeError, ValueError, RecursionError) as exc:
+        why = "a reference cycle" if isinstance(exc, RecursionError) else str(exc)
+        raise ProblemError(f"io.write_json obj: not JSON serialisable ({why:.80})") from None
+    _write_text(p, text + "\n")
 
 
 def json_default(o: Any) -> Any:

@@ -23,7 +23,16 @@ from typing import Any
 import numpy as np
 
 from optmodels.core import ProblemError, as_count, as_flag
-from optmodels.io.asterix.layout import DAY, EDITIONS, FT, NM, _Field, _field, _spec
+from optmodels.io.asterix.layout import (
+    DAY,
+    EDITIONS,
+    FT,
+    NM,
+    _Field,
+    _field,
+    _spec,
+    as_edition,
+)
 
 
 @dataclass
@@ -169,19 +178,30 @@ def _assemble(fn: str, cat: int, n: int, items: list[_Item], per_block: int) -> 
     return out.tobytes()
 
 
+def _real(fn: str, name: str, v: Any) -> np.ndarray:
+    """``v`` as a float array: real numbers only (text, booleans, complex numbers, ``None``
+    entries, mappings and ragged nested lists are refused, not converted)."""
+    try:
+        a = np.asarray(v)
+    except (TypeError, ValueError):  # ragged nested lists
+        a = None
+    if a is None or a.dtype.kind not in "iuf":
+        what = "nested lists of different lengths" if a is None else f"{a.dtype} values"
+        raise ProblemError(
+            f"asterix.{fn} {name}: expected real numbers, got {what} ({type(v).__name__} {v!r:.40})"
+        )
+    return a.astype(float)
+
+
 def _cols(fn: str, **arrays: Any) -> dict[str, np.ndarray]:
-    """Numeric 1-D (or scalar) columns of one length; NaN allowed only where it means
-    "item absent" (``flight_level``, ``height``)."""
+    """Numeric 1-D (or scalar) columns of one length, the first 1-D one's (normally
+    ``time_of_day``'s: one value per record); NaN allowed only where it means "item
+    absent" (``flight_level``, ``height``)."""
     out: dict[str, np.ndarray] = {}
     for name, v in arrays.items():
         if v is None:
             continue
-        try:
-            a = np.asarray(v, dtype=float)
-        except (TypeError, ValueError) as exc:
-            raise ProblemError(
-                f"asterix.{fn} {name}: expected numbers, got {type(v).__name__}"
-            ) from exc
+        a = _real(fn, name, v)
         if a.ndim > 1:
             raise ProblemError(
                 f"asterix.{fn} {name}: expected one value per record, got shape {a.shape}"
@@ -190,12 +210,16 @@ def _cols(fn: str, **arrays: Any) -> dict[str, np.ndarray]:
         if bad.any():
             raise ProblemError(f"asterix.{fn} {name}: {int(bad.sum())} non-finite values")
         out[name] = a
-    n = max((a.size for a in out.values() if a.ndim == 1), default=1)
+    first = next((k for k, a in out.items() if a.ndim == 1), None)
+    n = 1 if first is None else out[first].size
     for name, a in out.items():
         if a.ndim == 0:
             out[name] = np.broadcast_to(a, (n,))
         elif a.shape != (n,):
-            raise ProblemError(f"asterix.{fn} {name}: expected {n} values, got {a.shape}")
+            raise ProblemError(
+                f"asterix.{fn} {name}: expected {n} values (one per record, as "
+                f"{first}), got {a.size}"
+            )
     return out
 
 
@@ -209,6 +233,16 @@ def _ints(fn: str, c: dict[str, np.ndarray], names: tuple[str, ...]) -> None:
                 raise ProblemError(
                     f"asterix.{fn} {name}: need integers, got {float(v[bad][0]):.10g}"
                 )
+
+
+def _within(fn: str, c: dict[str, np.ndarray], name: str, limit: float) -> None:
+    """|value| ≤ ``limit`` degrees (latitude 90°, longitude 180°)."""
+    bad = np.abs(c[name]) > limit
+    if bad.any():
+        raise ProblemError(
+            f"asterix.{fn} {name}: need -{limit:g}° to {limit:g}°, got "
+            f"{float(c[name][bad][0]):.10g} ({int(bad.sum())} values outside)"
+        )
 
 
 def _optional(c: dict[str, np.ndarray], name: str, nan: bool) -> np.ndarray | None:
@@ -293,7 +327,7 @@ def encode_cat048(
             f"asterix.{fn} range: need slant ranges ≥ 0 m, got "
             f"{float(c['range'][c['range'] < 0][0]):.8g}"
         )
-    spec = _spec(48, {48: edition})
+    spec = _spec(48, {48: as_edition(f"asterix.{fn} edition", edition)})
     n = c["time_of_day"].size
     f140, frho = _where(spec, ("140",)), _where(spec, ("040", "RHO"))
     fth = _where(spec, ("040", "THETA"))
@@ -389,9 +423,9 @@ def encode_cat021(
         address=address,
     )
     _ints(fn, c, ("sac", "sic", "address"))
-    if np.any(np.abs(c["latitude"]) > 90) or np.any(np.abs(c["longitude"]) > 180):
-        raise ProblemError(f"asterix.{fn} latitude/longitude: need |lat| ≤ 90°, |lon| ≤ 180°")
-    spec = _spec(21, {21: edition})
+    _within(fn, c, "latitude", 90.0)
+    _within(fn, c, "longitude", 180.0)
+    spec = _spec(21, {21: as_edition(f"asterix.{fn} edition", edition)})
     n = c["time_of_day"].size
     pos = "131" if as_flag(f"asterix.{fn} high_resolution", high_resolution) else "130"
     f073 = _where(spec, ("073",))

@@ -34,20 +34,22 @@ def is_asterix(
     (default :data:`EDITIONS`; a file cut inside a later block still counts:
     :func:`read_asterix` then reports the truncation). A pcap/pcapng capture (detected by
     its magic number): its first UDP payloads that are whole datablocks pass the same test.
-    Reads at most 256 KiB (a capture: its first 64 ASTERIX datagrams); never raises for a
-    readable file.
+    Reads at most 256 KiB (a capture: its first 64 ASTERIX datagrams); whatever the
+    content of a readable file (empty, text, damaged), the answer is True or False.
 
     Raises
     ------
     ProblemError
-        For a ``path`` that is not a path, a bad ``blocks`` or ``editions``.
+        For a ``path`` that is not a path or not a readable file (missing, a folder: a
+        question about content that has no answer, refused rather than answered False),
+        a bad ``blocks`` or ``editions``.
     """
     from optmodels.io.asterix.capture import read_capture
-    from optmodels.io.paths import as_path
+    from optmodels.io.paths import input_file
 
-    p = as_path("asterix.is_asterix path", path)
     blocks = as_count("asterix.is_asterix blocks", blocks, minimum=1)
     editions = as_editions("asterix.is_asterix editions", editions)
+    p = input_file(path, what="recording (ASTERIX)", name="asterix.is_asterix path")
     try:
         with open(p, "rb") as fh:
             head = fh.read(1 << 18)

@@ -285,6 +285,20 @@ class _Layout:
         return out
 
 
+def as_edition(name: str, edition: Any) -> tuple[int, int]:
+    """One edition checked: a (major, minor) pair of whole numbers (tuple or list)."""
+    if not (
+        isinstance(edition, tuple | list)
+        and len(edition) == 2
+        and all(isinstance(v, int) and not isinstance(v, bool) for v in edition)
+    ):
+        raise ProblemError(
+            f"{name}: expected (major, minor) whole numbers, e.g. (1, 32), got "
+            f"{type(edition).__name__} {edition!r:.40}"
+        )
+    return int(edition[0]), int(edition[1])
+
+
 def as_editions(name: str, editions: Any) -> dict[int, tuple[int, int]] | None:
     """``editions`` checked: None or a dict category (int) → (major, minor) ints."""
     if editions is None:
@@ -296,17 +310,10 @@ def as_editions(name: str, editions: Any) -> dict[int, tuple[int, int]] | None:
         )
     out: dict[int, tuple[int, int]] = {}
     for cat, ed in editions.items():
-        ok = (
-            isinstance(cat, int)
-            and not isinstance(cat, bool)
-            and isinstance(ed, tuple | list)
-            and len(ed) == 2
-            and all(isinstance(v, int) and not isinstance(v, bool) for v in ed)
-        )
-        if not ok:
+        if not isinstance(cat, int) or isinstance(cat, bool):
             raise ProblemError(
                 f"{name}: expected category (int) → (major, minor) ints, got "
                 f"{cat!r:.20}: {ed!r:.20}"
             )
-        out[cat] = (int(ed[0]), int(ed[1]))
+        out[cat] = as_edition(f"{name}[{cat}]", ed)
     return out

@@ -10,7 +10,8 @@ from typing import Any
 import numpy as np
 
 from optmodels.core import ProblemError, as_count, as_flag
-from optmodels.io.asterix.layout import DAY, EDITIONS, FT, NM, _spec
+from optmodels.io.asterix.encode import _cols
+from optmodels.io.asterix.layout import DAY, EDITIONS, FT, NM, _spec, as_edition
 
 
 def _blocks(spec: Any, records: list[Any], per_block: int) -> bytes:
@@ -19,36 +20,6 @@ def _blocks(spec: Any, records: list[Any], per_block: int) -> bytes:
         spec.create(records[i : i + per_block]).unparse().to_bytes()
         for i in range(0, len(records), per_block)
     )
-
-
-def _cols(fn: str, **arrays: Any) -> dict[str, np.ndarray]:
-    """Numeric 1-D (or scalar) columns of one length; NaN allowed only where it means
-    "item absent" (``flight_level``, ``height``)."""
-    out: dict[str, np.ndarray] = {}
-    for name, v in arrays.items():
-        if v is None:
-            continue
-        try:
-            a = np.asarray(v, dtype=float)
-        except (TypeError, ValueError) as exc:
-            raise ProblemError(
-                f"asterix.{fn} {name}: expected numbers, got {type(v).__name__}"
-            ) from exc
-        if a.ndim > 1:
-            raise ProblemError(
-                f"asterix.{fn} {name}: expected one value per record, got shape {a.shape}"
-            )
-        bad = ~np.isfinite(a) if name not in ("flight_level", "height") else np.isinf(a)
-        if bad.any():
-            raise ProblemError(f"asterix.{fn} {name}: {int(bad.sum())} non-finite values")
-        out[name] = a
-    n = max((a.size for a in out.values() if a.ndim == 1), default=1)
-    for name, a in out.items():
-        if a.ndim == 0:
-            out[name] = np.broadcast_to(a, (n,))
-        elif a.shape != (n,):
-            raise ProblemError(f"asterix.{fn} {name}: expected {n} values, got {a.shape}")
-    return out
 
 
 def _ints(fn: str, c: dict[str, np.ndarray], limits: dict[str, int]) -> None:
@@ -100,7 +71,7 @@ def encode_cat048(
     _ints("encode_cat048", c, {"sac": 255, "sic": 255, "address": 2**24 - 1, "mode3a": 4095})
     if np.any(c["range"] < 0) or np.any(c["range"] >= 256 * NM):
         raise ProblemError("asterix.encode_cat048 range: need 0 ≤ range < 256 NM (474 112 m)")
-    spec = _spec(48, {48: edition})
+    spec = _spec(48, {48: as_edition("asterix.encode_cat048 edition", edition)})
     tod = np.mod(c["time_of_day"], DAY)
     az = np.degrees(np.mod(c["azimuth"], 2 * math.pi))
     recs = []
@@ -159,7 +130,7 @@ def encode_cat021(
         raise ProblemError(
             "asterix.encode_cat021 latitude/longitude: need |lat| ≤ 90°, |lon| ≤ 180°"
         )
-    spec = _spec(21, {21: edition})
+    spec = _spec(21, {21: as_edition("asterix.encode_cat021 edition", edition)})
     tod = np.mod(c["time_of_day"], DAY)
     pos_item = "131" if as_flag("asterix.encode_cat021 high_resolution", high_resolution) else "130"
     recs = []

@@ -65,6 +65,11 @@ def _source(path: Path, editions: dict[int, tuple[int, int]] | None) -> tuple[An
     """The ASTERIX byte stream of one file (memory-mapped raw datablocks, or a capture's
     UDP payloads) after the content check."""
     buf = _map(path)
+    if not len(buf):
+        raise ProblemError(
+            f"asterix.read {path}: empty file (expected a recording: raw ASTERIX "
+            "datablocks or a pcap/pcapng capture of ASTERIX over UDP)"
+        )
     if capture_kind(bytes(buf[:4])):
         cap = read_capture(path)
         if not cap.stream:
@@ -73,7 +78,7 @@ def _source(path: Path, editions: dict[int, tuple[int, int]] | None) -> tuple[An
                 f"asterix.read {path}: a {cap.kind} capture without ASTERIX over UDP ({counts})"
             )
         return cap.stream, cap
-    if len(buf) and not is_asterix(path, editions=editions):
+    if not is_asterix(path, editions=editions):
         why = diagnose(bytes(buf[: 1 << 16]))
         if why:
             raise ProblemError(f"asterix.read {path}: damaged ASTERIX: {why}")
@@ -124,9 +129,9 @@ def read_asterix(
     Raises
     ------
     ProblemError
-        Naming the file and the byte offset: a missing or unreadable file, a file that
-        is not ASTERIX (or damaged ASTERIX), a truncated datablock or record, a record
-        libasterix refuses, times that cannot be placed; bad arguments.
+        Naming the file and the byte offset: a missing or unreadable file, an empty
+        file, a file that is not ASTERIX (or damaged ASTERIX), a truncated datablock or
+        record, a record libasterix refuses, times that cannot be placed; bad arguments.
     """
     check = as_choice("asterix.read check", check, ("layouts", "all"))
     epoch = _as_date(date)

@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 
 from optmodels.core import ProblemError
-from optmodels.io.asterix.encode import _item, _raw, _where
+from optmodels.io.asterix.encode import _item, _raw, _real, _where
 from optmodels.io.asterix.framing import _frame
 from optmodels.io.asterix.layout import NM, _Layout, _spec, as_editions
 from optmodels.io.asterix.read import _paths, _source
@@ -24,16 +24,16 @@ def _ids(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     try:
         ids = np.asarray(record_id)
-        rng = np.asarray(range_m, dtype=float)
-        az = np.asarray(azimuth_rad, dtype=float)
-    except (TypeError, ValueError) as exc:
-        raise ProblemError(f"asterix.{fn} range_m/azimuth_rad: expected numbers ({exc})") from None
+    except (TypeError, ValueError):  # ragged nested lists
+        ids = np.zeros((0, 0))
     if ids.ndim != 1 or not (ids.size == 0 or np.issubdtype(ids.dtype, np.integer)):
         raise ProblemError(
             f"asterix.{fn} record_id: expected a 1-D integer array "
             "(Cat048Reports.record_id), got "
-            f"{ids.dtype} shape {ids.shape}"
+            f"{type(record_id).__name__} {record_id!r:.40}"
         )
+    rng = _real(fn, "range_m", range_m)
+    az = _real(fn, "azimuth_rad", azimuth_rad)
     for name, a in (("range_m", rng), ("azimuth_rad", az)):
         if a.shape != ids.shape:
             raise ProblemError(

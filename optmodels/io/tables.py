@@ -155,7 +155,7 @@ def _cells(fn: str, column: Any, cells: Any, lines: Any) -> tuple[np.ndarray, Se
         if ln.ndim != 1 or (ln.size and ln.dtype.kind not in "iu") or ln.size != arr.size:
             raise ProblemError(
                 f"{fn} lines: expected {arr.size} file line numbers (whole numbers, one per "
-                f"cell), got {ln.dtype} shape {ln.shape}"
+                f"cell), got {type(lines).__name__} {lines!r:.40}"
             )
     return arr, lines
 
@@ -185,9 +185,7 @@ def _numbers(
         for i, c in enumerate(arr):
             cell = c.item() if isinstance(c, np.generic) else c
             try:
-                if isinstance(cell, complex):
-                    raise TypeError
-                float(cell)
+                float(cell)  # a complex cell: TypeError
             except (TypeError, ValueError, OverflowError):
                 raise ProblemError(
                     f"{path}: {where(i)}, column {column!r}: {cell!r:.40} is not a number"

@@ -49,6 +49,7 @@ from optmodels.core import (
     as_finite_array,
     as_flag,
     as_positive,
+    check_spd,
 )
 
 __all__ = [
@@ -317,6 +318,13 @@ def _settings(
     if subset_share > 1:
         raise ProblemError(f"{fn} subset_share: expected a share in (0, 1], got {subset_share}")
     check_tables(fn, plots, radars)
+    if P is not None:  # checked here, not after the fits and the averaging
+        P = as_finite_array(f"{fn} P", P, ndim=2, max_abs=MAX_MAGNITUDE)
+        if P.shape not in ((2, 2), (2 * radars.m, 2 * radars.m)):
+            raise ProblemError(
+                f"{fn} P: expected (2, 2) or ({2 * radars.m}, {2 * radars.m}), got {P.shape}"
+            )
+        check_spd(f"{fn} P", P)
     if coverage == "union" and radars.m > MAX_UNION_RADARS:
         raise ProblemError(
             f"{fn} radars: coverage='union' handles up to {MAX_UNION_RADARS} "
@@ -460,7 +468,7 @@ def _field_data(
             ]
         ).toarray()
     else:
-        p = as_finite_array(f"{fn} P", s.P, ndim=2, max_abs=MAX_MAGNITUDE)
+        p = np.asarray(s.P, dtype=float)  # checked by _settings
     assert radars.sites is not None  # set by RadarSet.__post_init__
     if radars.geodetic is None or radars.origin is None:  # 2-D
         return FieldData(radars.sites, centers, xi, adj, p, xi_cov, seen=seen)

@@ -34,7 +34,7 @@ from typing import Any
 
 import numpy as np
 
-from optmodels.core import FloatArray
+from optmodels.core import FloatArray, ProblemError, as_finite_array
 
 
 def log_not_merged(u: FloatArray, group: tuple[int, ...]) -> float:
@@ -102,13 +102,56 @@ def connected_probability(
     """P_conn(S): the probability that the members of S form one chain of unresolved
     pairs (the random graph on S with independent edges u_ij is connected).
 
+    ``u``: the symmetric (Q, Q) table of pair probabilities in [0, 1] (the diagonal is not
+    read; the others are clipped to [U_FLOOR, 1 − U_CEIL_GAP] as the sensor's pair
+    probabilities, :mod:`~optmodels.assignment.sensor`) or a
+    :class:`~optmodels.assignment.sensor.PairTable`; ``group``: the distinct members
+    (indices 0..Q−1); ``memo``: a dict kept between calls on the same ``u``, or None.
+
     |S| ≤ 5: the sum over the connected edge subsets of S of Π u_e Π (1 − u_e) (at most
     728 positive terms: exact to rounding). |S| ≥ 6: the recursion over the component T
     of S's first member, P_conn(S) = 1 − Σ_{T∋s₁, T⊊S} P_conn(T) Π_{i∈T, j∈S∖T}(1 − u_ij)
     (memoised over subsets in ``memo``, as logarithms keyed by bit mask); where it is within
     ``_CANCEL_MARGIN`` of its rounding bound (an almost surely resolved group) the
     max-tree lower bound :func:`_log_max_tree` is used instead."""
-    return math.exp(_log_connected(u, tuple(group), {} if memo is None else memo))
+    table, members = _checked(u, group)
+    if memo is not None and not isinstance(memo, dict):
+        raise ProblemError(
+            f"assignment.connected_probability memo: expected a dict or None, got "
+            f"{type(memo).__name__}"
+        )
+    return math.exp(_log_connected(table, members, {} if memo is None else memo))
+
+
+def _checked(u: Any, group: Any) -> tuple[Any, tuple[int, ...]]:
+    """The pair table (a dense one checked and clipped) and the group's members, or one
+    ProblemError naming ``u`` or ``group``."""
+    from optmodels.assignment.sensor import U_CEIL_GAP, U_FLOOR, PairTable
+
+    fn = "assignment.connected_probability"
+    if isinstance(u, PairTable):
+        table: Any = u
+        q = u.q
+    else:
+        dense = as_finite_array(f"{fn} u", u, ndim=2)
+        q = dense.shape[0]
+        if dense.shape != (q, q) or q == 0:
+            raise ProblemError(f"{fn} u: expected a square (Q, Q) table, got {dense.shape}")
+        if np.any((dense < 0) | (dense > 1)):
+            raise ProblemError(f"{fn} u: pair probabilities must lie in [0, 1]")
+        if not np.array_equal(dense, dense.T):
+            raise ProblemError(f"{fn} u: the pair table must be symmetric (u_ij = u_ji)")
+        table = np.clip(dense, U_FLOOR, 1.0 - U_CEIL_GAP)
+        np.fill_diagonal(table, 1.0)
+    g = as_finite_array(f"{fn} group", group, ndim=1)
+    if g.size == 0 or np.any(g != np.round(g)) or np.any((g < 0) | (g >= q)):
+        raise ProblemError(
+            f"{fn} group: expected ≥ 1 member indices in 0..{q - 1}, got {g.tolist()!r:.60}"
+        )
+    members = tuple(int(v) for v in g)
+    if len(set(members)) != len(members):
+        raise ProblemError(f"{fn} group: repeated members {members!r:.60}")
+    return table, members
 
 
 def _log_connected(u: FloatArray, group: tuple[int, ...], memo: dict[Any, float]) -> float:

@@ -35,7 +35,7 @@ from optmodels.biasfield import geometry3d as g3
 from optmodels.biasfield.geometry import to_polar
 from optmodels.biasfield.polyline import polyline_knots, polyline_normal, split_at_gaps, whiten
 from optmodels.biasfield.tables import PlotTable, RadarSet, check_tables
-from optmodels.core import FloatArray, ProblemError, as_positive
+from optmodels.core import FloatArray, ProblemError, as_float_array, as_positive
 
 __all__ = ["BaselineResult", "azimuth_bias_baseline"]
 
@@ -76,6 +76,8 @@ def azimuth_bias_baseline(
     knot_spacing = as_positive(f"{fn} knot_spacing (s)", knot_spacing)
     gap = knot_spacing if max_gap is None else as_positive(f"{fn} max_gap (s)", max_gap)
     if objects is not None:
+        # ragged rows, text, None entries, complex values, mappings: one named refusal
+        as_float_array(f"{fn} objects", objects)
         obj = np.asarray(objects)
         if obj.ndim != 1 or (obj.size and not np.issubdtype(obj.dtype, np.integer)):
             raise ProblemError(
@@ -83,6 +85,13 @@ def azimuth_bias_baseline(
             )
     check_tables(fn, plots, radars)
     plots.check(radars)
+    if objects is not None:
+        bad = np.setdiff1d(obj, plots.object[plots.object >= 0])
+        if bad.size or np.unique(obj).size != obj.size:
+            raise ProblemError(
+                f"{fn} objects: expected distinct ids of objects in the plots (≥ 0), got "
+                + (f"{bad[:5].tolist()} without plots" if bad.size else "repeated ids")
+            )
     m = radars.m
     z_all = plots.cartesian(radars)
     vinv_all = np.empty((len(plots), 2, 2))

@@ -16,6 +16,7 @@ objects, the centres) → run (the per-cell sums) → finish (:func:`_field_data
 
 from __future__ import annotations
 
+import inspect
 import time
 import warnings
 from dataclasses import dataclass, field
@@ -46,10 +47,18 @@ from optmodels.core import (
     as_choice,
     as_count,
     as_finite_array,
+    as_flag,
     as_positive,
+    check_spd,
 )
 
-__all__ = ["MAX_UNION_RADARS", "Diagnostics", "build_field_data", "place_centers"]
+__all__ = [
+    "MAX_UNION_RADARS",
+    "Diagnostics",
+    "build_field_data",
+    "check_build_arguments",
+    "place_centers",
+]
 
 
 def place_centers(
@@ -291,14 +300,16 @@ def _settings(
 ) -> _Settings:
     """Validate the arguments of :func:`build_field_data` (one ProblemError naming the
     argument)."""
-    if np.ndim(cells) == 0:
+    if isinstance(cells, list | tuple) or (isinstance(cells, np.ndarray) and cells.ndim):
+        cells = _given_centres(fn, cells)
+    else:  # a number of k-means centres
         cells = as_count(f"{fn} cells", cells, minimum=2)
     if cell_radius is not None:
         cell_radius = as_positive(f"{fn} cell_radius (m)", cell_radius)
     knot_spacing = as_positive(f"{fn} knot_spacing (s)", knot_spacing)
     sample_step = as_positive(f"{fn} sample_step (s)", sample_step)
     neighbour_method = as_choice(f"{fn} neighbour_method", neighbour_method, ("delaunay", "radius"))
-    if neighbour_method == "radius":
+    if neighbour_method == "radius" or neighbour_radius is not None:
         neighbour_radius = as_positive(f"{fn} neighbour_radius (m)", neighbour_radius)
     exclude_radius = as_positive(f"{fn} exclude_radius (m)", exclude_radius, allow_zero=True)
     seed = as_count(f"{fn} seed", seed)
@@ -307,6 +318,13 @@ def _settings(
     if subset_share > 1:
         raise ProblemError(f"{fn} subset_share: expected a share in (0, 1], got {subset_share}")
     check_tables(fn, plots, radars)
+    if P is not None:  # checked here, not after the fits and the averaging
+        P = as_finite_array(f"{fn} P", P, ndim=2, max_abs=MAX_MAGNITUDE)
+        if P.shape not in ((2, 2), (2 * radars.m, 2 * radars.m)):
+            raise ProblemError(
+                f"{fn} P: expected (2, 2) or ({2 * radars.m}, {2 * radars.m}), got {P.shape}"
+            )
+        check_spd(f"{fn} P", P)
     if coverage == "union" and radars.m > MAX_UNION_RADARS:
         raise ProblemError(
             f"{fn} radars: coverage='union' handles up to {MAX_UNION_RADARS} "
@@ -324,8 +342,26 @@ def _settings(
         seed,
         coverage == "union",
         subset_share,
-        bool(progress),
+        as_flag(f"{fn} progress", progress),
     )
+
+
+def check_build_arguments(fn: str, plots: Any, radars: Any, **kwargs: Any) -> None:
+    """The checks of :func:`build_field_data`'s arguments (its defaults for those not
+    given), for a caller that does work before calling it
+    (:func:`~optmodels.biasfield.pipeline.field_data_from_plots`): one ProblemError naming
+    ``fn`` and the argument, also for a name that is not an argument of
+    :func:`build_field_data`."""
+    params = inspect.signature(build_field_data).parameters
+    unknown = sorted(set(kwargs) - set(params))
+    if unknown:
+        raise ProblemError(
+            f"{fn} {unknown[0]}: not an option of biasfield.build_field_data (it takes "
+            f"{', '.join(k for k in params if k not in ('plots', 'radars'))})"
+        )
+    names = [k for k in inspect.signature(_settings).parameters if k in params]
+    args = {k: kwargs.get(k, params[k].default) for k in names if k not in ("plots", "radars")}
+    _settings(fn, plots, radars, **args)
 
 
 def _sampled_objects(
@@ -363,6 +399,11 @@ def _centres(fn: str, s: _Settings, all_pos: list[FloatArray]) -> FloatArray:
                 f"{'two radars or more' if s.union else 'all radars'}"
             )
         return place_centers(pts, cells, seed=s.seed)
+    return cells  # the centres given, checked by _given_centres
+
+
+def _given_centres(fn: str, cells: Any) -> FloatArray:
+    """The cell centres given as ``cells`` (K, 2) (m, K ≥ 2), or ProblemError."""
     centers = as_finite_array(f"{fn} cells", cells, ndim=2, max_abs=MAX_MAGNITUDE)
     if centers.shape[1] != 2 or centers.shape[0] < 2:
         raise ProblemError(
@@ -427,7 +468,7 @@ def _field_data(
             ]
         ).toarray()
     else:
-        p = as_finite_array(f"{fn} P", s.P, ndim=2, max_abs=MAX_MAGNITUDE)
+        p = np.asarray(s.P, dtype=float)  # checked by _settings
     assert radars.sites is not None  # set by RadarSet.__post_init__
     if radars.geodetic is None or radars.origin is None:  # 2-D
         return FieldData(radars.sites, centers, xi, adj, p, xi_cov, seen=seen)

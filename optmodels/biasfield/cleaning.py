@@ -62,6 +62,7 @@ from optmodels.core import (
     ProblemError,
     as_count,
     as_finite_array,
+    as_float_array,
     as_instance,
     as_number,
     as_positive,
@@ -362,6 +363,19 @@ def _report(n: int, codes: np.ndarray, segments: int) -> CleaningReport:
     return rep
 
 
+def _labels(name: str, value: Any, n: int) -> np.ndarray:
+    """(n,) labels (numbers or strings), or one ProblemError naming ``name``."""
+    try:
+        obj = np.asarray(value)
+    except (TypeError, ValueError) as exc:  # ragged rows
+        raise ProblemError(f"{name}: expected {n} labels, not usable as an array ({exc})") from None
+    if obj.shape != (n,) or obj.dtype.kind not in "biufUS":
+        raise ProblemError(
+            f"{name}: expected {n} labels (numbers or strings), got {obj.dtype} shape {obj.shape}"
+        )
+    return obj
+
+
 def clean_reports(
     objects: ArrayLike,
     times: ArrayLike,
@@ -404,19 +418,14 @@ def clean_reports(
     x = as_finite_array(f"{fn} positions (m)", positions, ndim=2, max_abs=MAX_MAGNITUDE)
     if x.shape[0] != n or x.shape[1] not in (2, 3):
         raise ProblemError(f"{fn} positions (m): expected ({n}, 2) or ({n}, 3), got {x.shape}")
-    s = (
-        np.broadcast_to(as_finite_array(f"{fn} sigma (m)", sigma, ndim=(0, 1)), (n,))
-        if np.ndim(sigma) == 0 or np.size(sigma) == n
-        else None
-    )
-    if s is None or np.any(s < 0):
-        raise ProblemError(f"{fn} sigma (m): expected one value ≥ 0 or {n}, got {np.shape(sigma)}")
-    obj = np.asarray(objects)
-    if obj.shape != (n,):
-        raise ProblemError(f"{fn} objects: expected {n} labels, got shape {obj.shape}")
+    sg = as_finite_array(f"{fn} sigma (m)", sigma, ndim=(0, 1))
+    if sg.size not in (1, n) or np.any(sg < 0):
+        raise ProblemError(f"{fn} sigma (m): expected one value ≥ 0 or {n}, got {sg.shape}")
+    s = np.broadcast_to(sg.reshape(-1) if sg.ndim else sg, (n,))
+    obj = _labels(f"{fn} objects", objects, n)
     h = None
     if heights is not None:
-        h = np.asarray(heights, dtype=float)
+        h = as_float_array(f"{fn} heights (m)", heights)  # NaN: unknown height
         if h.shape != (n,):
             raise ProblemError(f"{fn} heights (m): expected {n} values, got {h.shape}")
     _, first, inv = np.unique(obj, return_index=True, return_inverse=True)

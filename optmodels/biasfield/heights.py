@@ -15,7 +15,15 @@ from typing import Any
 
 import numpy as np
 
-from optmodels.core import FloatArray, as_float_array, as_number
+from optmodels.core import (
+    FloatArray,
+    ProblemError,
+    as_count,
+    as_finite_array,
+    as_float_array,
+    as_number,
+    as_positive,
+)
 
 __all__ = ["R_ISA", "adsb_height_spikes", "fl_to_height", "interp_by_object"]
 
@@ -66,9 +74,21 @@ def adsb_height_spikes(
     :func:`~optmodels.biasfield.recording.read_recording`. Vectorised
     over all objects at once (``scipy.signal.medfilt`` works on one series: a Python call
     per aircraft, and it pads the ends and gaps with zeros).
+
+    ``obj`` (n,) object numbers, ``t`` (n,) times (s), ``height`` (n,) m (NaN: absent);
+    ``neighbours`` ≥ 1, ``tolerance`` (m) and ``vertical_rate`` (m/s) ≥ 0: anything else
+    is one :class:`ProblemError` naming the argument.
     """
-    h = np.asarray(height, dtype=float)
+    fn = "biasfield.adsb_height_spikes"
+    h = as_float_array(f"{fn} height", height)  # NaN: no height in that report
+    if h.ndim != 1:
+        raise ProblemError(f"{fn} height: expected (n,) heights (m), got shape {h.shape}")
     n = h.size
+    t = as_finite_array(f"{fn} t", t, shape=(n,))
+    obj = as_finite_array(f"{fn} obj", obj, shape=(n,))
+    neighbours = as_count(f"{fn} neighbours", neighbours, minimum=1)
+    tolerance = as_positive(f"{fn} tolerance (m)", tolerance, allow_zero=True)
+    vertical_rate = as_positive(f"{fn} vertical_rate (m/s)", vertical_rate, allow_zero=True)
     out = np.zeros(n, dtype=bool)
     if n < 3:
         return out

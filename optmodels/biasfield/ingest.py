@@ -339,6 +339,11 @@ def read_plots(
         beyond their radar's ``max_range`` unless ``drop_out_of_range``.
     """
     as_instance("biasfield.read_plots radars", radars, RadarSet)
+    if labels is not None and not isinstance(labels, list):
+        raise ProblemError(
+            "biasfield.read_plots labels: expected a list (it receives the object labels) "
+            f"or None, got {type(labels).__name__}"
+        )
     unit = as_choice("biasfield.read_plots azimuth_unit", azimuth_unit, ("deg", "rad"))
     as_flag("biasfield.read_plots drop_out_of_range", drop_out_of_range)
     tab = table_file(path, "plots")

@@ -11,7 +11,14 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from optmodels.biasfield import geometry3d as g3
-from optmodels.core import MAX_MAGNITUDE, FloatArray, ProblemError, as_count, as_finite_array
+from optmodels.core import (
+    MAX_MAGNITUDE,
+    FloatArray,
+    ProblemError,
+    as_count,
+    as_finite_array,
+    as_float_array,
+)
 
 __all__ = ["AircraftPaths"]
 
@@ -74,6 +81,8 @@ class AircraftPaths:
             shape=(None, t.size, 2),
             max_abs=MAX_MAGNITUDE,
         )
+        # ragged rows, text, None entries, complex values, mappings: one named refusal
+        as_float_array("biasfield.AircraftPaths active", active)
         act = np.asarray(active)
         if act.dtype != bool or act.shape != pos.shape[:2]:
             raise ProblemError(

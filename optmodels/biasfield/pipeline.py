@@ -25,10 +25,10 @@ from typing import Any, Literal
 import numpy as np
 from numpy.typing import ArrayLike
 
-from optmodels.biasfield.cells import Diagnostics, build_field_data
+from optmodels.biasfield.cells import Diagnostics, build_field_data, check_build_arguments
 from optmodels.biasfield.data import FieldData
 from optmodels.biasfield.tables import PlotTable, RadarSet
-from optmodels.core import ProblemError, as_instance
+from optmodels.core import ProblemError, as_flag, as_instance
 
 __all__ = ["FieldBuild", "field_data_from_plots", "field_data_names", "save_field_data"]
 
@@ -108,6 +108,25 @@ def field_data_from_plots(
     fn = "biasfield.field_data_from_plots"
     plots = as_instance(f"{fn} plots", plots, PlotTable)
     radars = as_instance(f"{fn} radars", radars, RadarSet)
+    clean = as_flag(f"{fn} clean", clean)
+    locate = as_flag(f"{fn} locate", locate)
+    from optmodels.execution import as_scheduler
+
+    scheduler = as_scheduler(f"{fn} scheduler", scheduler, default="serial")
+    if "positions" in options:
+        raise ProblemError(f"{fn} positions: computed here (after the placement and cleaning)")
+    # every argument of the build checked before the placement, cleaning and positions
+    check_build_arguments(
+        fn,
+        plots,
+        radars,
+        cells=cells,
+        knot_spacing=knot_spacing,
+        coverage=coverage,
+        seed=seed,
+        progress=progress,
+        **options,
+    )
     timings: dict[str, float] = {}
     dropped: dict[str, int] = {}
     clock = time.perf_counter()
@@ -170,8 +189,17 @@ def save_field_data(
     from optmodels.io import save_npz
 
     data = as_instance("biasfield.save_field_data data", data, FieldData)
+    if isinstance(names, str | bytes) or not isinstance(names, list | tuple | np.ndarray):
+        raise ProblemError(
+            f"biasfield.save_field_data names: expected a list of {data.m} radar names, "
+            f"got {type(names).__name__} {names!r:.60}"
+        )
+    if not all(isinstance(v, str) for v in names):
+        raise ProblemError(
+            f"biasfield.save_field_data names: expected text names, got {names!r:.60}"
+        )
     arrays = data.npz_arrays()
-    names = tuple(str(v) for v in names)
+    names = tuple(names)
     if names:
         if len(names) != data.m:
             raise ProblemError(

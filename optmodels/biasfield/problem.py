@@ -1,7 +1,8 @@
 r"""The original problem of section 4 (paper 001, (8)-(10)) and what every method shares.
 
 The objective (9) J(φ) = φᵀ(Q ⊗ P)φ written as ‖Gφ‖² with the sparse edge-difference
-factor G (:func:`edge_factor`, :func:`objective`) and R = Q ⊗ P itself (:func:`r_matrix`);
+factor G (:func:`edge_factor`, :func:`objective`) and R = Q ⊗ P itself (:func:`r_matrix`,
+its null space :func:`r_null_space` on each radar's connected parts :func:`radar_parts`);
 the sets (10) as computed once per solve (:data:`Sets`, from
 :func:`optmodels.biasfield.data.uncertainty_sets`); the box (8) as bounds on φ
 (:func:`box_bounds`); the checks of the arguments common to the solves
@@ -151,6 +152,36 @@ def r_matrix(data: FieldData) -> sparse.csr_matrix:
     return sparse.kron(
         laplacian(data.centers, data.adjacency), sparse.csr_matrix(p_full(data)), format="csr"
     )
+
+
+def radar_parts(data: FieldData) -> list[tuple[int, np.ndarray]]:
+    """Per radar i, the connected parts of its own neighbour graph (the edges between cells
+    it both sees; every edge without per-cell subsets): (number of parts, part of each
+    cell). R couples radar i's cells only along these edges (:func:`r_matrix`)."""
+    if data.seen is None:
+        part = csgraph.connected_components(data.adjacency, directed=False)
+        return [(int(part[0]), part[1])] * data.m
+    out = []
+    for i in range(data.m):
+        on = sparse.diags(data.seen[:, i].astype(float))
+        n, labels = csgraph.connected_components(on @ data.adjacency @ on, directed=False)
+        out.append((int(n), labels))
+    return out
+
+
+def r_null_space(data: FieldData) -> sparse.csr_matrix:
+    """The null space of R: fields constant per radar on each connected part of that
+    radar's neighbour graph (:func:`radar_parts`) (2m·K × 2·Σ parts)."""
+    k, m = data.k, data.m
+    rows, cols = [], []
+    first = 0
+    for i, (n, labels) in enumerate(radar_parts(data)):
+        for comp in (0, 1):
+            rows.append(2 * (np.arange(k) * m + i) + comp)
+            cols.append(2 * (first + labels) + comp)
+        first += n
+    r, c = np.concatenate(rows), np.concatenate(cols)
+    return sparse.csr_matrix((np.ones(r.size), (r, c)), shape=(2 * m * k, 2 * first))
 
 
 def box_bounds(

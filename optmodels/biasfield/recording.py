@@ -49,6 +49,7 @@ from optmodels.biasfield.tables import PlotTable, RadarSet
 from optmodels.core import (
     FloatArray,
     ProblemError,
+    as_finite_array,
     as_flag,
     as_instance,
     as_number,
@@ -286,6 +287,11 @@ def read_recording(
     data = read_asterix(
         [Path(p) if isinstance(p, str) else p for p in _paths(paths)], date=date, editions=editions
     )
+    if not any(data.records.get(cat, 0) for cat in (48, 21)):
+        raise ProblemError(
+            f"{_FN} paths: no CAT048 plot and no CAT021 report in {', '.join(data.files)} "
+            f"(an empty file, or other categories only: {data.skipped or 'none'})"
+        )
     sel = _select_plots(data.cat048, radars, opts.drop_out_of_range)
     adsb, addresses, adsb_dropped = _adsb_reports(data.cat021, data.cat048.address[sel.keep])
     heights = _plot_heights(data.cat048, sel.keep, addresses, adsb, opts)
@@ -320,11 +326,8 @@ def _validate(
     given = read_sites(radars, origin=origin) if isinstance(radars, str | os.PathLike) else radars
     checked = as_instance(f"{_FN} radars", given, RadarSet)
     if origin is not None and not isinstance(origin, str) and checked.origin is not None:
-        try:
-            same = np.allclose(np.asarray(origin, dtype=float), checked.origin, rtol=0, atol=1e-9)
-        except (TypeError, ValueError):
-            same = False
-        if not same:
+        org = as_finite_array(f"{_FN} origin", origin, shape=(3,))
+        if not np.allclose(org, checked.origin, rtol=0, atol=1e-9):
             raise ProblemError(
                 f"{_FN} origin: {origin!r:.60} differs from the RadarSet's "
                 f"origin {tuple(map(float, checked.origin))}; give the origin "

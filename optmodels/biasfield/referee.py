@@ -30,13 +30,13 @@ The reference positions of the plots come from a recording's ADS-B reports throu
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any, NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike
 from scipy import sparse
-from scipy.sparse import csgraph
 from scipy.sparse import linalg as splinalg
 from scipy.spatial import cKDTree
 
@@ -45,21 +45,23 @@ from optmodels.biasfield.correction import correct_plots
 from optmodels.biasfield.data import FieldData
 from optmodels.biasfield.fieldmap import FieldMap, Triangles, field_map
 from optmodels.biasfield.geometry import wrap_angle
-from optmodels.biasfield.problem import check_graph, r_matrix
+from optmodels.biasfield.problem import check_graph, r_matrix, r_null_space, radar_parts
 from optmodels.biasfield.registration import (
     RegistrationError,
     plane_positions,
     registration_error,
     systematic_square,
 )
-from optmodels.biasfield.tables import PlotTable, RadarSet
+from optmodels.biasfield.tables import PlotTable, RadarSet, check_tables
 from optmodels.core import (
     MAX_MAGNITUDE,
     FloatArray,
     ProblemError,
     Status,
     as_choice,
+    as_count,
     as_finite_array,
+    as_float_array,
     as_instance,
     as_positive,
     timed,
@@ -181,7 +183,8 @@ def adsb_reference(
 
 
 def _reference(fn: str, plots: PlotTable, reference: ArrayLike) -> FloatArray:
-    ref = np.asarray(reference, dtype=float)
+    # NaN marks a plot without ADS-B position: not as_finite_array
+    ref = as_float_array(f"{fn} reference", reference)
     if ref.shape != (len(plots), 2):
         raise ProblemError(
             f"{fn} reference: expected ADS-B positions ({len(plots)}, 2) (m, "
@@ -250,11 +253,12 @@ def adsb_field(
     k, m = data.k, data.m
     with timed() as tm:
         sys_ = _adsb_system(fn, data, plots, radars, ref, tree, radius, sig_ref, model)
+        _check_determined(fn, data, radars, sys_.amat)
         awa = (sys_.amat.T @ sys_.wmat @ sys_.amat).tocsc()
         rhs = sys_.amat.T @ (sys_.wmat @ sys_.dvec)
         r = r_matrix(data).tocsc()
         dof = 2 * sys_.n_used
-        null = _null_space(data)
+        null = r_null_space(data)
         phi, chi2, mu, status = _smoothing_level(sys_, awa, rhs, r, null, dof, level)
         if not np.all(np.isfinite(phi)):
             raise ProblemError(
@@ -356,16 +360,22 @@ def _adsb_system(
     return _AdsbSystem(amat, wmat, np.concatenate(d_list), mean, counts, n_used)
 
 
-def _null_space(data: FieldData) -> sparse.csr_matrix:
-    """The null space of R: fields constant per radar on each connected part of the
-    neighbour graph (2m·K × 2m·components)."""
+def _check_determined(fn: str, data: FieldData, radars: RadarSet, amat: sparse.csr_matrix) -> None:
+    """Every radar has ADS-B data on every connected part of its own neighbour graph
+    (:func:`~optmodels.biasfield.problem.radar_parts`); else its constant there (the null
+    space of R) is determined by no μ: ProblemError naming the radar and the cells."""
     k, m = data.k, data.m
-    n_comp, labels = csgraph.connected_components(data.adjacency, directed=False)
-    return sparse.kron(
-        sparse.csr_matrix((np.ones(k), (np.arange(k), labels)), shape=(k, n_comp)),
-        sparse.identity(2 * m),
-        format="csr",
-    )
+    touched = np.asarray(abs(amat).sum(axis=0)).reshape(k, m, 2)[:, :, 0] > 0
+    for i, (n, labels) in enumerate(radar_parts(data)):
+        has = np.zeros(n, dtype=bool)
+        np.logical_or.at(has, labels, touched[:, i])
+        if not has.all():
+            cells = np.flatnonzero(labels == np.flatnonzero(~has)[0])
+            raise ProblemError(
+                f"{fn} reference: radar {radars.names[i]!r} has no plot with an ADS-B "
+                f"position in cells {cells[:10].tolist()} (a connected part of the cells "
+                "it sees): its field there is not determined"
+            )
 
 
 def _smoothing_level(
@@ -486,11 +496,13 @@ def absolute_error(
     plots = as_instance(f"{fn} plots", plots, PlotTable)
     radars = as_instance(f"{fn} radars", radars, RadarSet)
     area = as_positive(f"{fn} area (m)", area)
+    min_samples = as_count(f"{fn} min_samples", min_samples, minimum=1)
+    if within is not None:
+        within = as_instance(f"{fn} within", within, FieldMap)
     ref = _reference(fn, plots, reference)
     z = plane_positions(fn, plots, radars, positions)
     ok = np.all(np.isfinite(ref), axis=1) & (plots.object >= 0)
     if within is not None:
-        within = as_instance(f"{fn} within", within, FieldMap)
         ok &= within.covered(z)
     out: dict[str, float] = {}
     tot = var_tot = raw = 0.0
@@ -544,9 +556,13 @@ def compare_fields(
     "adsb": ...}``), all measured on the area covered by every field. Returns a dict
     ``{"before": {...}, name: {...}}`` of ``registration`` and ``absolute`` figures (m)."""
     fn = "biasfield.compare_fields"
-    if not fields:
-        raise ProblemError(f"{fn} fields: give at least one FieldMap")
+    check_tables(fn, plots, radars)
+    if not isinstance(fields, Mapping) or not fields:
+        raise ProblemError(
+            f"{fn} fields: expected a dict of at least one name → FieldMap, got {fields!r:.60}"
+        )
     maps = {str(k): as_instance(f"{fn} fields[{k!r}]", v, FieldMap) for k, v in fields.items()}
+    area = as_positive(f"{fn} area (m)", area)
     ref = _reference(fn, plots, reference)
     first = next(iter(maps.values()))
     covered_all = np.ones(len(plots), dtype=bool)

@@ -514,8 +514,11 @@ def residual_check(fits: list[TrackFit], m: int) -> ResidualCheck:
     from scipy import stats
 
     m = as_count("biasfield.residual_check m", m, minimum=1)
-    if not all(isinstance(f, TrackFit) for f in fits):
-        raise ProblemError("biasfield.residual_check fits: expected a list of TrackFit")
+    if not isinstance(fits, list | tuple) or not all(isinstance(f, TrackFit) for f in fits):
+        raise ProblemError(
+            "biasfield.residual_check fits: expected a list of TrackFit (e.g. "
+            f"Diagnostics.fits), got {type(fits).__name__}"
+        )
 
     mean = np.full((m, 2), np.nan)
     cov = np.full((m, 2, 2), np.nan)

@@ -25,7 +25,6 @@ from tqdm import tqdm
 from optmodels import biasfield as bf
 from optmodels.backends.cvxpy_backend import available_solvers
 from optmodels.biasfield import verify as sel
-from optmodels.io import markdown_table
 from solvers_cmp import cases, report
 from solvers_cmp.cases import HIGH_OPTIONS, Outcome, Run, cvxpy_qp_solvers
 from solvers_cmp.common import repeat
@@ -66,60 +65,46 @@ def rows(
     installed = set(available_solvers())
     use = [s for s in (solvers or QP_SOLVERS) if s in installed]
     out: list[dict[str, Any]] = []
-    cases = [(k, b) for k in cells for b in (False, True)]
-    for k, with_box in tqdm(cases, desc="biasfield comparison", disable=not progress):
+    grid = [(k, b) for k in cells for b in (False, True)]
+    for k, with_box in tqdm(grid, desc="biasfield comparison", disable=not progress):
         data, _ = bf.synthetic_field_data(seed, cells=k)
         cf_rep = repeat(lambda d=data: bf.closed_form(d), repeats)
         cf = cf_rep.last
         box = binding_box(data, cf) if with_box else None
         if with_box and box is None:
             continue
-        runs: list[tuple[str, str, Any, float, float]] = []
+        runs: list[cases.TimedRun] = []
         if not with_box:
             runs.append(("closed_form", "numpy", cf, 0.0, cf_rep.median))
-        for form in formulations:
-            for s in use:
-                sols = repeat(
-                    lambda d=data, s=s, f=form, b=box: bf.solve(d, box=b, solver=s, formulation=f),
-                    repeats,
-                ).results
-                runs.append(
-                    (
-                        form,
-                        s,
-                        sols[-1],
-                        float(np.median([x.build_time for x in sols])),
-                        float(np.median([x.solve_time for x in sols])),
-                    )
-                )
+        runs += [
+            cases.timed_solves(
+                form,
+                s,
+                lambda d=data, s=s, f=form, b=box: bf.solve(d, box=b, solver=s, formulation=f),
+                repeats,
+            )
+            for form in formulations
+            for s in use
+        ]
         ok = [r[2] for r in runs if r[2].status.ok]
         ref = cf if not with_box else min(ok, key=lambda x: x.objective) if ok else None
-        for form, solver, sol, build, solve in runs:
-            good = sol.status.ok and ref is not None
-            out.append(
-                {
-                    "problem": "biasfield",
-                    "case": "box (8) binding" if with_box else "no box",
-                    "size": k,
-                    "radars": data.m,
-                    "seed": seed,
-                    "formulation": form,
-                    "solver": solver,
-                    "settings": "default",
-                    "status": sol.status.value,
-                    "objective": sol.objective,
-                    "objective_gap": (sol.objective - ref.objective) / ref.objective
-                    if good
-                    else float("nan"),
-                    "solution_error": _error(sol.field, ref.field) if good else float("nan"),
-                    "max_violation": sol.max_residual,
-                    "active_bounds": int(np.sum(sol.active != 0)) if sol.status.ok else 0,
-                    "build_time": build,
-                    "solve_time": solve,
-                    "total_time": build + solve,
-                    "iterations": sol.iterations,
-                }
+        head = {
+            "problem": "biasfield",
+            "case": "box (8) binding" if with_box else "no box",
+            "size": k,
+            "radars": data.m,
+            "seed": seed,
+        }
+        out += [
+            cases.details_row(
+                head,
+                run,
+                ref,
+                lambda s, r: _error(s.field, r.field),
+                lambda s: {"active_bounds": int(np.sum(s.active != 0)) if s.status.ok else 0},
             )
+            for run in runs
+        ]
     return out
 
 
@@ -271,27 +256,6 @@ def write_report(
     """Write ``biasfield_results.csv`` (and ``biasfield_benchmark.csv``) and return the
     Markdown section."""
     report._results_csv(out, "biasfield", rows)
-    cols = [
-        "case",
-        "size",
-        "formulation",
-        "solver",
-        "status",
-        "solution_error",
-        "objective_gap",
-        "max_violation",
-        "active_bounds",
-        "build_time",
-        "solve_time",
-        "iterations",
-    ]
-    fmt = {
-        "solution_error": ".1e",
-        "objective_gap": ".1e",
-        "max_violation": ".1e",
-        "build_time": ".3f",
-        "solve_time": ".3f",
-    }
     md = (
         "## Smoothest radar bias field (paper 001, section 4)\n\n"
         "Synthetic uncertainty sets (4 radars, smooth fields), size = K cells. The sparse "
@@ -300,7 +264,7 @@ def write_report(
         "and with the box (8) at 99-99.9 % of the unconstrained field's largest |f| (binding "
         "in a few cells). Error: per component (range, azimuth) relative to its largest "
         "value, against the closed form (no box) or the lowest-J solve (box):\n\n"
-        + markdown_table(rows, cols, fmt)
+        + cases.details_table(rows, ["case", "size"], extra=["active_bounds"], time_digits=".3f")
     )
     md += (
         "\nSCS cannot take the reduced problem without any constraint row (reported as "

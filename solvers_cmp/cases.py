@@ -8,8 +8,10 @@ reference. :mod:`solvers_cmp.harness` does the rest (isolation, time limits, res
 metrics); adapters never time out or catch crashes themselves.
 
 This module holds what every adapter shares (:class:`Adapter`, :class:`Outcome`,
-:class:`Run`, the solver lists, :func:`_from_solution`, :data:`HIGH_OPTIONS`) and the
-registry. Each problem's adapter is ``class Adapter(cases.Adapter)`` in its face file
+:class:`Run`, the solver lists, :func:`_from_solution`, :data:`HIGH_OPTIONS`), what the
+face files' ``compare --details`` rows and tables share (:func:`timed_solves`,
+:func:`details_row`, :func:`details_table`) and the registry.
+Each problem's adapter is ``class Adapter(cases.Adapter)`` in its face file
 ``solvers_cmp/<problem>.py``, found by the problem's name (:func:`_adapter_path`): adding
 a problem adds one file, no list here. Register your own with :func:`register` (e.g. a
 new problem or a new instance family): the adapter class is named by its import path so
@@ -19,11 +21,13 @@ that worker processes can rebuild it.
 from __future__ import annotations
 
 import importlib
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+
+from solvers_cmp.common import repeat
 
 
 #: Solution-comparison outcome of one run.
@@ -105,6 +109,95 @@ def _from_solution(sol: Any, x: Any, objective: float | None = None) -> Outcome:
         iterations=sol.iterations,
         message=str(sol.message or "")[:300],
     )
+
+
+# ------------------------------------------------ the compare --details rows and tables
+#: One run of a face file's ``rows``: (formulation, solver, solution, build time, solve
+#: time), times in s.
+TimedRun = tuple[str, str, Any, float, float]
+
+
+def timed_solves(formulation: str, solver: str, fn: Callable[[], Any], repeats: int) -> TimedRun:
+    """``repeats`` calls of the generic solve ``fn``: the last solution, with the median
+    of the solutions' own build and solve times."""
+    sols = repeat(fn, repeats).results
+    return (
+        formulation,
+        solver,
+        sols[-1],
+        float(np.median([x.build_time for x in sols])),
+        float(np.median([x.solve_time for x in sols])),
+    )
+
+
+def details_row(
+    head: dict[str, Any],
+    run: TimedRun,
+    ref: Any,
+    error: Callable[[Any, Any], float],
+    extra: Callable[[Any], dict[str, Any]] | None = None,
+) -> dict[str, Any]:
+    """A ``compare --details`` row, in the report's column order: ``head`` (what the
+    instance is), the run's formulation and solver, settings, status, objective,
+    ``objective_gap`` (relative to the absolute value of the reference's objective) and
+    ``solution_error`` (``error(solution, ref)``) -- NaN unless the solution is OK and
+    there is a reference ``ref`` --, ``max_violation``, then ``extra(solution)`` (e.g.
+    ``active_bounds``), build, solve and total time (s) and iterations."""
+    form, solver, sol, build, solve = run
+    good = bool(sol.status.ok) and ref is not None
+    return {
+        **head,
+        "formulation": form,
+        "solver": solver,
+        "settings": "default",
+        "status": sol.status.value,
+        "objective": sol.objective,
+        "objective_gap": (sol.objective - ref.objective) / abs(ref.objective)
+        if good
+        else float("nan"),
+        "solution_error": error(sol, ref) if good else float("nan"),
+        "max_violation": sol.max_residual,
+        **(extra(sol) if extra is not None else {}),
+        "build_time": build,
+        "solve_time": solve,
+        "total_time": build + solve,
+        "iterations": sol.iterations,
+    }
+
+
+def details_table(
+    rows: list[dict[str, Any]],
+    lead: Sequence[str],
+    *,
+    extra: Sequence[str] = (),
+    time_digits: str = ".4f",
+) -> str:
+    """The Markdown table of a ``compare --details`` section: the columns ``lead`` (what
+    the instance is), formulation, solver, status, the errors (``.1e``), ``extra``, build
+    and solve time (``time_digits``) and iterations."""
+    from optmodels.io import markdown_table
+
+    cols = [
+        *lead,
+        "formulation",
+        "solver",
+        "status",
+        "solution_error",
+        "objective_gap",
+        "max_violation",
+        *extra,
+        "build_time",
+        "solve_time",
+        "iterations",
+    ]
+    fmt = {
+        "solution_error": ".1e",
+        "objective_gap": ".1e",
+        "max_violation": ".1e",
+        "build_time": time_digits,
+        "solve_time": time_digits,
+    }
+    return markdown_table(rows, cols, fmt)
 
 
 # ---------------------------------------------------------------------------- adapters

@@ -25,7 +25,6 @@ from tqdm import tqdm
 
 from optmodels import fusion as fu
 from optmodels.backends.cvxpy_backend import available_solvers
-from optmodels.io import markdown_table
 from solvers_cmp import cases, report
 from solvers_cmp.cases import Outcome, Run, _rel_max, cvxpy_qp_solvers
 from solvers_cmp.common import repeat
@@ -58,56 +57,34 @@ def _fusion_rows(
     dimensions: tuple[int, ...], use: list[str], seed: int, repeats: int, progress: bool
 ) -> list[dict[str, Any]]:
     out: list[dict[str, Any]] = []
-    cases = [(c, m) for c in (False, True) for m in dimensions]
-    for corr, m in tqdm(cases, desc="fusion comparison", disable=not progress):
+    grid = [(c, m) for c in (False, True) for m in dimensions]
+    for corr, m in tqdm(grid, desc="fusion comparison", disable=not progress):
         d = instance(m, seed, corr)
         kw = {"s12": d["s12"]} if corr else {}
         cf = repeat(lambda d=d, kw=kw: fu.fuse(d["a1"], d["s1"], d["a2"], d["s2"], **kw), repeats)
         ref = cf.last
-        scale = float(np.max(np.abs(ref.estimate)))
-        runs = [("closed_form", "numpy", ref, 0.0, cf.median)]
-        for s in use:
-            sols = repeat(
+        runs: list[cases.TimedRun] = [("closed_form", "numpy", ref, 0.0, cf.median)]
+        runs += [
+            cases.timed_solves(
+                "min-trace W" if corr else "weighted LSQ",
+                s,
                 lambda d=d, kw=kw, s=s: fu.fuse(
                     d["a1"], d["s1"], d["a2"], d["s2"], method="cvxpy", solver=s, **kw
                 ),
                 repeats,
-            ).results
-            runs.append(
-                (
-                    "min-trace W" if corr else "weighted LSQ",
-                    s,
-                    sols[-1],
-                    float(np.median([x.build_time for x in sols])),
-                    float(np.median([x.solve_time for x in sols])),
-                )
             )
-        for form, solver, sol, build, solve in runs:
-            ok = sol.status.ok
-            out.append(
-                {
-                    "problem": "fusion",
-                    "case": "correlated" if corr else "independent",
-                    "size": m,
-                    "seed": seed,
-                    "formulation": form,
-                    "solver": solver,
-                    "settings": "default",
-                    "status": sol.status.value,
-                    "objective": sol.objective,
-                    "objective_gap": (sol.objective - ref.objective) / abs(ref.objective)
-                    if ok
-                    else float("nan"),
-                    "solution_error": float(np.max(np.abs(sol.estimate - ref.estimate))) / scale
-                    if ok
-                    else float("nan"),
-                    "max_violation": sol.max_residual,
-                    "build_time": build,
-                    "solve_time": solve,
-                    "total_time": build + solve,
-                    "iterations": sol.iterations,
-                }
-            )
+            for s in use
+        ]
+        head = {
+            "problem": "fusion",
+            "case": "correlated" if corr else "independent",
+            "size": m,
+            "seed": seed,
+        }
+        out += [
+            cases.details_row(head, run, ref, lambda s, r: _rel_max(s.estimate, r.estimate))
+            for run in runs
+        ]
     return out
 
 
@@ -126,30 +103,16 @@ def _ml_rows(ml_rows: tuple[int, ...], seed: int, repeats: int) -> list[dict[str
             ("gauss_newton", gn, 0.0),
             ("casadi:ipopt", ip, ip.results[0].build_time),
         ):
-            sol = rep.last
             solve = float(np.median([r.solve_time for r in rep.results]))
             out.append(
-                {
-                    "problem": "fusion",
-                    "case": "two-site joint ML",
-                    "size": t,
-                    "seed": seed,
-                    "formulation": "ML (all 3 measurements)",
-                    "solver": name,
-                    "settings": "default",
-                    "status": sol.status.value,
-                    "objective": sol.objective,
-                    "objective_gap": (sol.objective - ref.objective) / ref.objective,
-                    "solution_error": float(
-                        np.max(np.linalg.norm(sol.estimate - ref.estimate, axis=1))
-                    )
-                    / crb,
-                    "max_violation": sol.max_residual,
-                    "build_time": build,
-                    "solve_time": solve,
-                    "total_time": build + solve,
-                    "iterations": sol.iterations,
-                }
+                cases.details_row(
+                    {"problem": "fusion", "case": "two-site joint ML", "size": t, "seed": seed},
+                    ("ML (all 3 measurements)", name, rep.last, build, solve),
+                    ref,
+                    lambda s, r: (
+                        float(np.max(np.linalg.norm(s.estimate - r.estimate, axis=1))) / crb
+                    ),
+                )
             )
     return out
 
@@ -283,26 +246,6 @@ def write_report(
     """Write ``fusion_results.csv`` (and ``fusion_benchmark.csv``) and return the Markdown
     section."""
     report._results_csv(out, "fusion", rows)
-    cols = [
-        "case",
-        "size",
-        "formulation",
-        "solver",
-        "status",
-        "solution_error",
-        "objective_gap",
-        "max_violation",
-        "build_time",
-        "solve_time",
-        "iterations",
-    ]
-    fmt = {
-        "solution_error": ".1e",
-        "objective_gap": ".1e",
-        "max_violation": ".1e",
-        "build_time": ".4f",
-        "solve_time": ".4f",
-    }
     md = (
         "## Fusion of two estimates (paper 003)\n\n"
         "Closed forms ((1)-(2) for independent estimates, (S1 − S12)D⁺ for correlated "
@@ -310,7 +253,7 @@ def write_report(
         "minimum trace of the fused covariance in W), size = m; and the two-site joint "
         "ML (size = number of independent problems T, solved as one block-separable NLP) "
         "by IPOPT against a NumPy Gauss-Newton, solution error in units of the CRB "
-        "RMS:\n\n" + markdown_table(rows, cols, fmt)
+        "RMS:\n\n" + cases.details_table(rows, ["case", "size"])
     )
     md += (
         "\nEvery problem here is an unconstrained least-squares problem: Clarabel and "

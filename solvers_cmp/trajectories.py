@@ -24,7 +24,6 @@ from tqdm import tqdm
 
 from optmodels import trajectories as tr
 from optmodels.backends.cvxpy_backend import available_solvers
-from optmodels.io import markdown_table
 from solvers_cmp import cases, report
 from solvers_cmp.cases import Outcome, Run, cvxpy_qp_solvers
 from solvers_cmp.common import repeat
@@ -73,61 +72,35 @@ def rows(
     installed = set(available_solvers())
     use = [s for s in (solvers or QP_SOLVERS) if s in installed]
     out: list[dict[str, Any]] = []
-    cases = [(f, q, n) for f in FAMILIES for q in objects for n in points]
-    for family, q, n in tqdm(cases, desc="trajectories comparison", disable=not progress):
+    grid = [(f, q, n) for f in FAMILIES for q in objects for n in points]
+    for family, q, n in tqdm(grid, desc="trajectories comparison", disable=not progress):
         data = instance(family, q, n, seed)
         cf = repeat(lambda d=data, f=family: tr.closed_form(d, f), repeats)
         ref = cf.last
-        scale = float(np.max(np.abs(ref.theta)))
-        # (formulation, solver, solution, build time, solve time): closed form first
-        runs: list[tuple[str, str, tr.TrajectorySolution, float, float]] = [
-            ("closed_form", "numpy", ref, 0.0, cf.median)
-        ]
-        for form in FORMULATIONS:
-            for s in use:
-                sols = repeat(
-                    lambda d=data, f=family, fo=form, so=s: tr.solve(
-                        d, f, formulation=fo, solver=so
-                    ),
-                    repeats,
-                ).results
-                runs.append(
-                    (
-                        form,
-                        s,
-                        sols[-1],
-                        float(np.median([x.build_time for x in sols])),
-                        float(np.median([x.solve_time for x in sols])),
-                    )
-                )
-        for form, solver, sol, build, solve in runs:
-            ok = sol.status.ok
-            out.append(
-                {
-                    "problem": "trajectories",
-                    "family": family,
-                    "objects": q,
-                    "points": n,
-                    "size": q * n,
-                    "seed": seed,
-                    "formulation": form,
-                    "solver": solver,
-                    "settings": "default",
-                    "status": sol.status.value,
-                    "objective": sol.objective,
-                    "objective_gap": (sol.objective - ref.objective) / ref.objective
-                    if ok
-                    else float("nan"),
-                    "solution_error": float(np.max(np.abs(sol.theta - ref.theta))) / scale
-                    if ok
-                    else float("nan"),
-                    "max_violation": sol.max_residual,
-                    "build_time": build,
-                    "solve_time": solve,
-                    "total_time": build + solve,
-                    "iterations": sol.iterations,
-                }
+        # closed form first
+        runs: list[cases.TimedRun] = [("closed_form", "numpy", ref, 0.0, cf.median)]
+        runs += [
+            cases.timed_solves(
+                form,
+                s,
+                lambda d=data, f=family, fo=form, so=s: tr.solve(d, f, formulation=fo, solver=so),
+                repeats,
             )
+            for form in FORMULATIONS
+            for s in use
+        ]
+        head = {
+            "problem": "trajectories",
+            "family": family,
+            "objects": q,
+            "points": n,
+            "size": q * n,
+            "seed": seed,
+        }
+        out += [
+            cases.details_row(head, run, ref, lambda s, r: cases._rel_max(s.theta, r.theta))
+            for run in runs
+        ]
     return out
 
 
@@ -226,34 +199,15 @@ def write_report(
     """Write ``trajectories_results.csv`` (and ``trajectories_benchmark.csv``) and return
     the Markdown section."""
     report._results_csv(out, "trajectories", rows)
-    cols = [
-        "family",
-        "objects",
-        "points",
-        "formulation",
-        "solver",
-        "status",
-        "solution_error",
-        "objective_gap",
-        "max_violation",
-        "build_time",
-        "solve_time",
-        "iterations",
-    ]
-    fmt = {
-        "solution_error": ".1e",
-        "objective_gap": ".1e",
-        "max_violation": ".1e",
-        "build_time": ".4f",
-        "solve_time": ".4f",
-    }
     big = max(r["size"] for r in rows)
     md = (
         "## Dependent linear trajectories (paper 002)\n\n"
         "Closed form against CVXPY solvers on the original constrained problem (Q lines + "
         "the family's equalities) and on the reduced problem in θ. Full grid in "
         "`trajectories_results.csv`; largest instance:\n\n"
-        + markdown_table([r for r in rows if r["size"] == big], cols, fmt)
+        + cases.details_table(
+            [r for r in rows if r["size"] == big], ["family", "objects", "points"]
+        )
     )
     worst = max((r["solution_error"] for r in rows if r["status"] == "optimal"), default=0.0)
     md += (

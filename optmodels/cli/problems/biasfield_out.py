@@ -309,9 +309,96 @@ def print_build(res: dict[str, Any]) -> None:
 
 
 # --------------------------------------------------------------------------- simulate
+#: WGS-84 semi-major axis (m): sites beyond 0.9 of it from the origin have no footprint on
+#: the common plane (:func:`optmodels.biasfield.geometry3d.plane_to_geodetic` refuses them).
+WGS84_A = 6378137.0
+#: Neighbouring sites closer than this many times a plot's cross-range noise at the
+#: traffic area's half-side are one site to the simulated plots (``--spacing``).
+SITE_SEPARATION_NOISES = 5.0
+
+
+def _network_limits() -> dict[str, float]:
+    """The simulator's own figures behind the refusals of ``--spacing`` and
+    ``--max-range``: ``min_separation`` (m), the closest two neighbouring sites may be
+    (:data:`SITE_SEPARATION_NOISES` × the plots' azimuth noise × the half-side of the
+    square the traffic enters in); ``min_range`` (m), the slant range below which no
+    radar ever sees an aircraft (the lowest flight level, above the highest site, inside
+    the cone of silence: (level − site height) / sin(max elevation), rounded down to
+    100 m); ``site_height`` (m), the highest site; and the figures they come from."""
+    import inspect
+
+    from optmodels.scenarios.radar_network import (
+        DEFAULT_SITE_HEIGHTS,
+        MAX_ELEVATION,
+        radar_network,
+    )
+    from optmodels.scenarios.recording import simulate_recording
+
+    sim = inspect.signature(simulate_recording).parameters
+    region = float(sim["region"].default)
+    sigma_az = float(np.deg2rad(sim["sigma_azimuth_deg"].default))
+    lowest = float(inspect.signature(radar_network).parameters["levels"].default[0])
+    site_h = float(np.max(DEFAULT_SITE_HEIGHTS))
+    return {
+        "min_separation": SITE_SEPARATION_NOISES * sigma_az * region,
+        "min_range": float(np.floor((lowest - site_h) / np.sin(MAX_ELEVATION) / 100) * 100),
+        "site_height": site_h,
+        "region": region,
+        "sigma_azimuth_deg": float(sim["sigma_azimuth_deg"].default),
+        "lowest_level": lowest,
+        "max_elevation_deg": float(np.rad2deg(MAX_ELEVATION)),
+    }
+
+
+def _check_network(n: int, spacing: float, max_range: float) -> None:
+    """Refuse a ``--spacing`` or ``--max-range`` that cannot be meant in metres for a
+    radar network (km typed for m): neighbouring sites closer than
+    ``min_separation`` (one site, not a network), a range below ``min_range`` (no radar
+    ever sees an aircraft), or neighbouring sites more than twice the range apart (no
+    aircraft is ever within range of two radars: nothing to register; the bound allows
+    for the sites' heights, so that it holds in 3-D). :func:`_network_limits`."""
+    lim = _network_limits()
+    # the ring of radius `spacing`: neighbours 2·R·sin(π/n) apart (2R for two radars)
+    gap = 2.0 * spacing * float(np.sin(np.pi / n))
+    if gap < lim["min_separation"]:
+        smallest = lim["min_separation"] / (2.0 * np.sin(np.pi / n))
+        raise ProblemError(
+            f"--spacing {spacing:.10g}: the radius of the ring of sites is in METRES: {n} radars "
+            f"on a ring of {spacing:.10g} m are {gap:.0f} m apart, closer than "
+            f"{lim['min_separation']:.0f} m ({SITE_SEPARATION_NOISES:g} × a plot's "
+            f"cross-range noise, {lim['sigma_azimuth_deg']:g}° at {lim['region'] / 1e3:g} km, "
+            f"the traffic area's half-side): one site, not a network; give at least "
+            f"{np.ceil(smallest):.0f} (m) for {n} radars ({spacing:.10g} km is "
+            f"--spacing {spacing * 1e3:.10g})"
+        )
+    if spacing >= 0.9 * WGS84_A:
+        raise ProblemError(
+            f"--spacing {spacing:.10g}: the radius of the ring of sites is in METRES; sites "
+            f"farther than {0.9 * WGS84_A:.0f} m (0.9 earth radii) from the origin have no "
+            "place on the common plane"
+        )
+    if max_range < lim["min_range"]:
+        raise ProblemError(
+            f"--max-range {max_range:.10g}: the slant range is in METRES: below "
+            f"{lim['min_range']:.0f} m no radar ever sees an aircraft (the lowest fly "
+            f"{lim['lowest_level']:.0f} m up, {lim['lowest_level'] - lim['site_height']:.0f} m "
+            f"above the highest site, and a radar sees nothing above "
+            f"{lim['max_elevation_deg']:g}° elevation) ({max_range:.10g} km is --max-range "
+            f"{max_range * 1e3:.10g})"
+        )
+    if gap > 2.0 * (max_range + lim["site_height"]):
+        raise ProblemError(
+            f"--spacing {spacing:.10g} with --max-range {max_range:.10g} (both METRES): "
+            f"neighbouring sites are {gap:.0f} m apart, more than twice the range: no "
+            "aircraft is ever within range of two radars (nothing to register); give a "
+            f"smaller --spacing or a larger --max-range"
+        )
+
+
 def _simulate(args: argparse.Namespace) -> tuple[dict[str, Any], bool]:
     from optmodels.scenarios.recording import simulate_recording
 
+    _check_network(args.n_radars, args.spacing, args.max_range)
     out = writable_dir("--out", args.out)
     for f in ("recording.ast", "sites.csv"):
         if (out / f).is_dir():
@@ -380,9 +467,24 @@ def register_simulate(bsub: Any, positive: Any, count: Any, finite: Any) -> None
     p.add_argument(
         "--n-radars", type=count(2), default=4, help="number of radars, on a ring about the origin"
     )
-    p.add_argument("--spacing", type=positive, default=150e3, help="radius of the ring of sites, m")
     p.add_argument(
-        "--max-range", type=positive, default=250e3, help="each radar's maximum slant range, m"
+        "--spacing",
+        type=positive,
+        default=150e3,
+        metavar="METRES",
+        help="radius of the ring of sites, in metres (150 km: 150000); refused when "
+        "neighbouring sites would be closer than ~1 km (5 × a plot's cross-range noise, "
+        "0.08° at the traffic area's 150 km half-side: one site, not a network) or more "
+        "than twice --max-range apart (no aircraft within range of two radars)",
+    )
+    p.add_argument(
+        "--max-range",
+        type=positive,
+        default=250e3,
+        metavar="METRES",
+        help="each radar's maximum slant range, in metres (250 km: 250000); refused below "
+        "3.7 km, where no radar sees any aircraft (the lowest fly 3 km up, and nothing is "
+        "seen above 40° elevation)",
     )
     p.add_argument("--aircraft", type=count(1), default=30, help="number of aircraft")
     p.add_argument("--duration", type=positive, default=1800.0, help="simulated span, s")

@@ -16,7 +16,8 @@ from typing import Any, Literal
 import numpy as np
 
 from optmodels.cli.args import _finite, _level, _positive
-from optmodels.cli.contract import _OK_STATUSES, Outcome, _group, _leaf, _out_file, _reading
+from optmodels.cli.contract import Outcome, _group, _leaf, _out_file, _reading
+from optmodels.cli.problems.plane_out import SIGN_CONVENTION, orientation, print_plane_fit
 from optmodels.core import VERIFY_TOL, ProblemError
 
 # the problem package is imported inside the handlers only: `optmodels --help` imports no
@@ -41,22 +42,6 @@ def _parse_cov(text: str) -> np.ndarray:
         xx, xy, xz, yy, yz, zz = v
         return np.array([[xx, xy, xz], [xy, yy, yz], [xz, yz, zz]])
     raise ProblemError(f"--cov: expected 6 or 9 numbers, got {len(v)}")
-
-
-def _orientation(normal: Any) -> dict[str, float]:
-    """The plane's orientation in degrees, for a person (the file's frame read as local
-    ENU: x east, y north, z up): ``tilt_deg``, the angle between the plane and the
-    horizontal (0: a level turn, 90: a vertical plane), and ``tilt_azimuth_deg``, the
-    direction in which the plane rises most steeply, clockwise from north (NaN for a
-    level plane)."""
-    n = np.asarray(normal, dtype=float)
-    if not np.all(np.isfinite(n)):
-        return {"tilt_deg": float("nan"), "tilt_azimuth_deg": float("nan")}
-    tilt = float(np.degrees(np.arccos(min(1.0, abs(float(n[2]))))))
-    # the plane rises along the horizontal part of -n·sign(nz) (up-slope direction)
-    up = -np.sign(n[2]) * n[:2] if n[2] != 0 else n[:2]
-    az = float(np.degrees(np.arctan2(up[0], up[1])) % 360.0) if tilt > 1e-9 else float("nan")
-    return {"tilt_deg": tilt, "tilt_azimuth_deg": az}
 
 
 def _method(args: argparse.Namespace) -> str:
@@ -116,7 +101,8 @@ def _plane_fit(args: argparse.Namespace) -> Outcome:
         "resolved": sol.resolved,
         "normal": np.asarray(sol.normal, dtype=float).tolist(),
         "offset": sol.offset,
-        **_orientation(sol.normal),
+        "sign_convention": SIGN_CONVENTION,
+        **orientation(sol.normal),
         "line_direction": (
             np.asarray(sol.line_direction, dtype=float).tolist() if sol.resolved is False else None
         ),
@@ -140,50 +126,6 @@ def _plane_fit(args: argparse.Namespace) -> Outcome:
         test = plane.planarity_test(data, sol, level=args.level)
         out["planarity_test"] = test.to_dict()
     return out, sol.ok
-
-
-def _print_plane_fit(res: dict[str, Any]) -> None:
-    n = res["normal"]
-    span = res.get("time_span")
-    when = f", t = {span[0]:g} ... {span[1]:g} s" if span else ""
-    print(f"{res['file']}: N = {res['n_points']}{when}, {res['method']} -> {res['status']}")
-    if res["status"] not in _OK_STATUSES:
-        print(f"  {res['message']}")
-        if res.get("line_direction"):
-            d = res["line_direction"]
-            print(f"  line direction = ({d[0]:.9f}, {d[1]:.9f}, {d[2]:.9f})")
-        return
-    print(f"  normal  = ({n[0]:.9f}, {n[1]:.9f}, {n[2]:.9f})")
-    print(f"  offset  = {res['offset']:.6f} m")
-    az = res["tilt_azimuth_deg"]
-    print(
-        f"  tilt    = {res['tilt_deg']:.3f}° from the horizontal"
-        + (
-            f", rising towards azimuth {az:.1f}° (clockwise from north)"
-            if az == az
-            else " (a level plane)"
-        )
-    )
-    print(
-        f"  objective (1.2) = {res['objective']:.6g}; max residual (1.3) = "
-        f"{max(res['residuals'].values(), default=0.0):.1e}"
-    )
-    t = res.get("planarity_test")
-    if t:
-        verdict = "planar" if t["planar"] else "NOT planar"
-        print(
-            f"  χ² test: Λ = {t['statistic']:.6g}, dof = {t['dof']}, threshold "
-            f"{t['threshold']:.6g} at level {t['level']} -> {verdict} (p = {t['p_value']:.3g})"
-        )
-        print(
-            f"  line test: {t['line_statistic']:.6g} > {t['line_threshold']:.6g} "
-            f"(χ²({t['line_dof']})) -> the plane is resolved"
-        )
-        pv = "planar" if t["paper_planar"] else "NOT planar"
-        print(
-            f"  paper (1.17): √(2Λ) = {t['paper_statistic']:.4f} vs √(2N)+2 = "
-            f"{t['paper_threshold']:.4f} -> {pv}"
-        )
 
 
 def _time_range(
@@ -434,6 +376,7 @@ def _plane_track(args: argparse.Namespace) -> Outcome:
             "scales": "s, or points with a points window",
             "statistic": "dimensionless, chi2(n_points - 3) if planar",
         },
+        "sign_convention": SIGN_CONVENTION,
         **settings,
         "status_counts": counts,
         "status": "optimal" if ok else "error",
@@ -492,7 +435,9 @@ def register(sub: Any) -> None:
     plsub = _group(sub, "plane", "plane of maneuver (paper 000)")
     fit = _leaf(plsub, "fit", "fit the ML plane to a CSV of positions; prints its tilt")
     fit.epilog = (
-        "Exit 0: a resolved plane; 1: not OK, or unresolved (the points lie on a "
+        "The normal's sign: offset ≥ 0, i.e. the normal points from the origin (0, 0, 0) "
+        "of the file's frame towards the plane (the data fix (normal, offset) only up to "
+        "a common sign). Exit 0: a resolved plane; 1: not OK, or unresolved (the points lie on a "
         "line at --level: the line's direction is reported, no plane); 2: bad "
         "input."
     )
@@ -523,7 +468,7 @@ def register(sub: Any) -> None:
     )
     fit.add_argument("--start", type=_finite(), help="fit only rows with t >= START (s)")
     fit.add_argument("--end", type=_finite(), help="fit only rows with t <= END (s)")
-    fit.set_defaults(func=_plane_fit, printer=_print_plane_fit)
+    fit.set_defaults(func=_plane_fit, printer=print_plane_fit)
 
     tr = _leaf(
         plsub,
@@ -531,7 +476,8 @@ def register(sub: Any) -> None:
         "the plane along a track: sliding windows, plane-change detection, one row per step",
     )
     tr.epilog = (
-        "One row per step: time (s), nx, ny, nz (unit normal, the file's frame; "
+        "One row per step: time (s), nx, ny, nz (unit normal, the file's frame, pointing "
+        "from its origin towards the plane: offset ≥ 0; "
         "empty/nan where not resolved), offset (m), statistic and threshold (χ², "
         "dimensionless), resolved, planar, change, detector, detector_threshold, "
         "change_time (s), detectable_tilt_deg, detectable_tilt_any_deg (deg), "

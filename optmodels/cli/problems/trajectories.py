@@ -106,6 +106,7 @@ def _trajectories_fit(args: argparse.Namespace) -> Outcome:
         "method": sol.method,
         "theta": sol.theta,
         "theta_std": std,
+        "theta_labels": _theta_labels(fam, labels, cols["coordinates"]),
         "covariance": covariance,
         "sigma2_source": source,
         "sigma2_estimate": s2,
@@ -132,6 +133,43 @@ def _trajectories_fit(args: argparse.Namespace) -> Outcome:
     return out, sol.ok
 
 
+def _unit(coordinates: list[str]) -> str:
+    """The unit of the measured values: the y column's, or the coordinates' (x, y[, z])."""
+    return "unit of y" if list(coordinates) == ["y"] else f"unit of {', '.join(coordinates)}"
+
+
+def _theta_labels(fam: Any, objects: list[str], coordinates: list[str]) -> list[dict[str, Any]]:
+    """What each entry of θ is, in θ's order (one start per start group, then one velocity
+    per velocity group, :class:`optmodels.trajectories.Family`): ``quantity`` (start or
+    velocity), ``objects`` (the objects sharing it) and ``unit``."""
+    unit = _unit(coordinates)
+    return [
+        {"quantity": quantity, "objects": [objects[i] for i in group], "unit": u}
+        for quantity, groups, u in (
+            ("start", fam.start_groups, unit),
+            ("velocity", fam.velocity_groups, f"{unit} per s"),
+        )
+        for group in groups
+    ]
+
+
+def _print_theta(res: dict[str, Any]) -> None:
+    """θ ± its standard deviation, one labelled line per entry (quantity, objects, unit)."""
+    coords = res["coordinates"]
+    theta = np.asarray(res["theta"], dtype=float).reshape(len(res["theta_labels"]), -1)
+    std = np.asarray(res["theta_std"], dtype=float).reshape(theta.shape)
+    print(f"  θ ± 1 std (θ = shared starts, then velocities; starts at t = {res['epoch']} s):")
+    for lab, v, e in zip(res["theta_labels"], theta, std, strict=True):
+        pairs = [f"{np.round(a, 6)} ± {b:.6g}" for a, b in zip(v, e, strict=True)]
+        value = (
+            pairs[0]
+            if len(pairs) == 1
+            else ", ".join(f"{c} = {p}" for c, p in zip(coords, pairs, strict=True))
+        )
+        sep = " = " if len(pairs) == 1 else ": "
+        print(f"    {lab['quantity']} of {', '.join(lab['objects'])}{sep}{value} ({lab['unit']})")
+
+
 def _print_trajectories_fit(res: dict[str, Any]) -> None:
     print(
         f"{res['file']}: Q = {len(res['objects'])}, N = {res['n_measurements']}, "
@@ -140,20 +178,19 @@ def _print_trajectories_fit(res: dict[str, Any]) -> None:
     if res["status"] not in _OK_STATUSES:
         print(f"  {res['message']}")
         return
-    print(f"  (start in the unit of y at t = {res['epoch']} s; velocity in unit of y per s)")
+    unit = _unit(res["coordinates"])
+    print(f"  (start in the {unit} at t = {res['epoch']} s; velocity in {unit} per s)")
     for lab in res["objects"]:
         print(
             f"  {lab}: start = {np.round(res['start'][lab], 6)}, "
             f"velocity = {np.round(res['velocity'][lab], 6)}"
         )
-    print(
-        f"  θ std = {np.round(res['theta_std'], 6).tolist()} (θ = shared starts, then velocities)"
-    )
+    _print_theta(res)
     pv = res["fit_p_value"]
     if res["sigma2_source"] == "estimated":
         print(
             f"  σ² not given: estimated from the residuals, s² = {res['sigma2_estimate']:.6g} "
-            f"(unit of y)² on {res['dof']} dof; θ std scaled by s (give --sigma2 if known)"
+            f"({unit})² on {res['dof']} dof; θ std scaled by s (give --sigma2 if known)"
         )
     else:
         print(

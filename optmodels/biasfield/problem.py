@@ -2,7 +2,8 @@ r"""The original problem of section 4 (paper 001, (8)-(10)) and what every metho
 
 The objective (9) J(φ) = φᵀ(Q ⊗ P)φ written as ‖Gφ‖² with the sparse edge-difference
 factor G (:func:`edge_factor`, :func:`objective`) and R = Q ⊗ P itself (:func:`r_matrix`,
-its null space :func:`r_null_space` on each radar's connected parts :func:`radar_parts`);
+its null space :func:`r_null_space` on each radar's connected parts :func:`radar_parts`,
+over every entry or only the seen ones :func:`seen_entries`);
 the sets (10) as computed once per solve (:data:`Sets`, from
 :func:`optmodels.biasfield.data.uncertainty_sets`); the box (8) as bounds on φ
 (:func:`box_bounds`); the checks of the arguments common to the solves
@@ -169,19 +170,42 @@ def radar_parts(data: FieldData) -> list[tuple[int, np.ndarray]]:
     return out
 
 
-def r_null_space(data: FieldData) -> sparse.csr_matrix:
+def seen_entries(data: FieldData) -> np.ndarray:
+    """(2m·K,) bool: the entries φ_{k,i} (both components) of the radars i ∈ S_k that see
+    cell k, in φ's layout (cell by cell, radar by radar); all True without subsets. The
+    other entries enter neither J (9) (zero rows and columns of R) nor the sets (10)."""
+    return np.repeat(data.subsets.reshape(-1), 2)
+
+
+def r_null_space(data: FieldData, *, seen_only: bool = False) -> sparse.csr_matrix:
     """The null space of R: fields constant per radar on each connected part of that
-    radar's neighbour graph (:func:`radar_parts`) (2m·K × 2·Σ parts)."""
+    radar's neighbour graph (:func:`radar_parts`) (2m·K × 2·Σ parts). ``seen_only``: the
+    null space of R restricted to the seen entries (rows :func:`seen_entries`; R's zero
+    rows and columns of the other entries dropped): the constants on the parts that hold
+    a cell the radar sees, (n_seen × 2·Σ those parts); a cell a radar does not see is a
+    part of its own in :func:`radar_parts` and has no column here."""
     k, m = data.k, data.m
+    seen = data.subsets
     rows, cols = [], []
     first = 0
     for i, (n, labels) in enumerate(radar_parts(data)):
+        cells = np.flatnonzero(seen[:, i]) if seen_only else np.arange(k)
+        part = labels[cells]
+        if seen_only:  # renumber the parts that hold a seen cell 0, 1, ...
+            used, part = np.unique(part, return_inverse=True)
+            n = used.size
         for comp in (0, 1):
-            rows.append(2 * (np.arange(k) * m + i) + comp)
-            cols.append(2 * (first + labels) + comp)
+            rows.append(2 * (cells * m + i) + comp)
+            cols.append(2 * (first + part.ravel()) + comp)
         first += n
     r, c = np.concatenate(rows), np.concatenate(cols)
-    return sparse.csr_matrix((np.ones(r.size), (r, c)), shape=(2 * m * k, 2 * first))
+    if seen_only:  # full index → index among the seen entries
+        keep = seen_entries(data)
+        r = (np.cumsum(keep) - 1)[r]
+        n_rows = int(keep.sum())
+    else:
+        n_rows = 2 * m * k
+    return sparse.csr_matrix((np.ones(r.size), (r, c)), shape=(n_rows, 2 * first))
 
 
 def box_bounds(

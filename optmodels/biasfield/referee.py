@@ -22,6 +22,12 @@ on log μ so that the constraint is active (χ²(μ) grows with μ). Cells witho
 for a radar get their value from the smoothness alone (``level="means"``: μ → 0, the
 least-squares field).
 
+Over the union of coverage (per-cell radar subsets S_k, ``FieldData.seen``) the unknowns
+are the entries φ_ki with i ∈ S_k only (J (9) sums radar i over the cells it sees); a
+plot of radar i is referred to the cells radar i sees; the entries of the other radars
+are not estimated (0 in :attr:`AdsbField.field`). The system and its solve are in
+:mod:`~optmodels.biasfield.referee_system`.
+
 The reference positions of the plots come from a recording's ADS-B reports through
 :func:`adsb_reference` (or, simulated, ``RadarNetworkScenario.adsb_positions``).
 :func:`absolute_error` measures the radars against ADS-B on per-area means, and
@@ -32,20 +38,18 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any, NamedTuple
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
-from scipy import sparse
-from scipy.sparse import linalg as splinalg
 from scipy.spatial import cKDTree
 
 from optmodels.biasfield import geometry3d as g3
 from optmodels.biasfield.correction import correct_plots
 from optmodels.biasfield.data import FieldData
-from optmodels.biasfield.fieldmap import FieldMap, Triangles, field_map
-from optmodels.biasfield.geometry import wrap_angle
-from optmodels.biasfield.problem import check_graph, r_matrix, r_null_space, radar_parts
+from optmodels.biasfield.fieldmap import FieldMap, field_map
+from optmodels.biasfield.problem import check_graph
+from optmodels.biasfield.referee_system import adsb_system, check_determined, solve_level
 from optmodels.biasfield.registration import (
     RegistrationError,
     plane_positions,
@@ -65,7 +69,6 @@ from optmodels.core import (
     as_instance,
     as_positive,
     timed,
-    verified_status,
 )
 
 __all__ = [
@@ -81,13 +84,19 @@ __all__ = [
 @dataclass(frozen=True)
 class AdsbField:
     """The ADS-B-referenced field: ``field`` (K, m, 2) [range m, azimuth rad] on the cells
-    of the data, ``mean`` (K, m, 2) the per-cell radar-minus-ADS-B means (NaN without
-    data), ``counts`` (K, m) the plots behind them, ``mu`` the multiplier of J at the
-    discrepancy level, ``chi2`` and ``dof`` of the data term at the solution,
-    ``objective`` J(φ), ``status`` (OPTIMAL; OPTIMAL_INACCURATE if the bisection did not
-    close to 1e-2 in χ², or by :func:`~optmodels.core.verified_status` on
-    ``stationarity``, the relative residual of (μR + AᵀWA)φ = AᵀWd re-computed in NumPy;
-    ERROR above REJECT_TOL, and then :meth:`map` refuses), ``solve_time`` (s)."""
+    of the data (0 where a radar does not see a cell: those entries are not estimated, as
+    in :class:`~optmodels.biasfield.solution.FieldSolution`; ``seen`` (K, m) the radars of
+    each cell, None: all), ``mean`` (K, m, 2) the per-cell radar-minus-ADS-B means (NaN
+    without data), ``counts`` (K, m) the plots behind them, ``mu`` the multiplier of J at
+    the discrepancy level, ``chi2`` and ``dof`` (2 × the plots used) of the data term at
+    the solution, ``objective`` J(φ), ``status`` (OPTIMAL; OPTIMAL_INACCURATE if the
+    bisection did not close to 1e-2 in χ², or by :func:`~optmodels.core.verified_status`
+    on the larger of ``stationarity``, the relative residual of (μR + AᵀWA)φ = AᵀWd
+    re-computed in NumPy, and ``conditioning``, κ₁·ε of the (Jacobi-scaled) matrix solved;
+    ERROR above REJECT_TOL, and then :meth:`map` refuses), ``solve_time`` (s); ``moved``:
+    plots whose nearest cell their radar does not see, given to the nearest cell it sees
+    (``model="cells"``); ``unused``: plots with an ADS-B position not used (outside the
+    covered area of their radar's cells, or without a height in 3-D)."""
 
     field: FloatArray
     mean: FloatArray
@@ -99,6 +108,10 @@ class AdsbField:
     status: Status
     solve_time: float
     stationarity: float = float("nan")
+    conditioning: float = float("nan")
+    seen: np.ndarray | None = None
+    moved: int = 0
+    unused: int = 0
 
     def map(
         self, centers: ArrayLike | FieldData, *, names: tuple[str, ...] | list[str] = ()
@@ -106,14 +119,17 @@ class AdsbField:
         """The field as a :class:`~optmodels.biasfield.usage.FieldMap`: on ``centers``
         (K, 2) (m, common plane; no frame), or on the cells of a :class:`FieldData` (the
         one it was estimated on), which also gives the map its frame (sites; geodetic
-        sites and origin in 3-D) and, with ``names``, the radars' names."""
+        sites and origin in 3-D) and, with ``names``, the radars' names. With per-cell
+        subsets each radar is served over the cells it sees only (``seen``)."""
         if not self.status.ok:
             raise ProblemError(
                 f"biasfield.AdsbField.map: status {self.status.value}; the field is not returned"
             )
         if isinstance(centers, FieldData):
             return field_map(self, centers, names=names)
-        return FieldMap(np.asarray(centers, dtype=float), self.field, names=tuple(names))
+        return FieldMap(
+            np.asarray(centers, dtype=float), self.field, names=tuple(names), seen=self.seen
+        )
 
 
 def adsb_reference(
@@ -199,11 +215,6 @@ def _reference(fn: str, plots: PlotTable, reference: ArrayLike) -> FloatArray:
     return ref
 
 
-def _heights(plots: PlotTable, rows: np.ndarray) -> FloatArray | None:
-    h = getattr(plots, "height", None)
-    return None if h is None else np.asarray(h)[rows]
-
-
 def adsb_field(
     data: FieldData,
     plots: PlotTable,
@@ -219,7 +230,7 @@ def adsb_field(
 
     ``reference`` (n, 2): the ADS-B position (m, common plane) of each plot's aircraft at
     the plot time, NaN where there is none. ``cell_radius`` (m): plots farther than this
-    from every cell centre are not used (default 1.5 × the median nearest-neighbour
+    from every cell centre its radar sees are not used (default 1.5 × the median nearest-neighbour
     distance of the centres, as :func:`~optmodels.biasfield.build_field_data`).
     ``sigma_reference`` (m): the ADS-B horizontal position error (1σ per axis; NACp 9-10
     is ≤ 10-30 m at 95 %). In 3-D (a geodetic radar set, plots with heights) the data are
@@ -228,7 +239,11 @@ def adsb_field(
 
     ``model``: ``"cells"`` (each plot's bias is its nearest cell's value, like the paper's
     averages) or ``"interpolant"`` (the P1 interpolant at the ADS-B position, the map that
-    :func:`~optmodels.biasfield.usage.correct_plots` applies). ``level``:
+    :func:`~optmodels.biasfield.usage.correct_plots` applies). With per-cell subsets
+    (``data.seen``) both use only the cells the plot's radar sees: the nearest of them
+    (a plot nearest to a cell its radar does not see is moved there, counted in
+    :attr:`AdsbField.moved`), or the P1 interpolant on their triangulation (as the
+    :class:`~optmodels.biasfield.usage.FieldMap` serves that radar). ``level``:
     ``"discrepancy"`` (the smoothest field with χ² at its expected value, the number of data
     components) or ``"means"`` (the weighted least-squares field: the per-cell means where
     there are data, the smoothest extension elsewhere; the analogue of the paper's
@@ -252,205 +267,27 @@ def adsb_field(
     radius = as_positive(f"{fn} cell_radius (m)", cell_radius)
     k, m = data.k, data.m
     with timed() as tm:
-        sys_ = _adsb_system(fn, data, plots, radars, ref, tree, radius, sig_ref, model)
-        _check_determined(fn, data, radars, sys_.amat)
-        awa = (sys_.amat.T @ sys_.wmat @ sys_.amat).tocsc()
-        rhs = sys_.amat.T @ (sys_.wmat @ sys_.dvec)
-        r = r_matrix(data).tocsc()
-        dof = 2 * sys_.n_used
-        null = r_null_space(data)
-        phi, chi2, mu, status = _smoothing_level(sys_, awa, rhs, r, null, dof, level)
-        if not np.all(np.isfinite(phi)):
-            raise ProblemError(
-                f"{fn}: the solve overflowed (the data and the smoothness "
-                "do not determine the field)"
-            )
-        obj = float(phi @ (r @ phi))
-        resid = _stationarity(phi, mu, awa, rhs, r, null)
-        status = verified_status(status, resid)
+        sys_ = adsb_system(fn, data, plots, radars, ref, radius, sig_ref, model)
+        check_determined(fn, data, radars.names, sys_)
+        sol = solve_level(fn, data, sys_, level)
+    field = np.zeros(2 * m * k)  # the entries of a radar that does not see a cell: 0
+    field[sys_.keep] = sol.phi
     return AdsbField(
-        phi.reshape(k, m, 2), sys_.mean, sys_.counts, mu, chi2, dof, obj, status, tm.elapsed, resid
+        field.reshape(k, m, 2),
+        sys_.mean,
+        sys_.counts,
+        sol.mu,
+        sol.chi2,
+        2 * sys_.n_used,
+        sol.objective,
+        sol.status,
+        tm.elapsed,
+        sol.stationarity,
+        sol.conditioning,
+        None if data.seen is None else data.seen.copy(),
+        sys_.moved,
+        sys_.unused,
     )
-
-
-class _AdsbSystem(NamedTuple):
-    """The weighted least-squares data term of :func:`adsb_field`: A φ ≈ d with weight W
-    (one 2 × 2 block per used plot), the per-cell mean discrepancies and their counts."""
-
-    amat: sparse.csr_matrix
-    wmat: sparse.csr_matrix
-    dvec: FloatArray
-    mean: FloatArray
-    counts: np.ndarray
-    n_used: int
-
-
-def _adsb_system(
-    fn: str,
-    data: FieldData,
-    plots: PlotTable,
-    radars: RadarSet,
-    ref: FloatArray,
-    tree: cKDTree,
-    radius: float,
-    sig_ref: float,
-    model: str,
-) -> _AdsbSystem:
-    """Each used plot's discrepancy d = measured − what its radar would measure of the
-    ADS-B position, its row of A (the plot's cell, or the P1 weights at the ADS-B
-    position) and its weight (V_i + σ_ref² J Jᵀ)⁻¹."""
-    k, m = data.k, data.m
-    tri = Triangles(data.centers)
-    sums = np.zeros((k, m, 2))
-    counts = np.zeros((k, m), dtype=np.int64)
-    has = np.all(np.isfinite(ref), axis=1)
-    a_rows, a_cols, a_vals, w_list, d_list = [], [], [], [], []
-    n_used = 0
-    for i in range(m):
-        rows = np.flatnonzero(has & (plots.radar == i))
-        if rows.size == 0:
-            continue
-        y = ref[rows]
-        simplex = tri.find(y)
-        dist, cell = tree.query(y)
-        ok = (simplex >= 0) & (dist <= radius)
-        if getattr(plots, "height", None) is not None:
-            ok &= np.isfinite(np.asarray(plots.height)[rows])
-        rows, y, cell, simplex = rows[ok], y[ok], cell[ok], simplex[ok]
-        if rows.size == 0:
-            continue
-        h = _heights(plots, rows)
-        # what radar i would measure of the ADS-B position (3-D: slant range and azimuth
-        # in its own frame at the plot's height)
-        d = np.column_stack([plots.range[rows], plots.azimuth[rows]]) - radars.to_polar(i, y, h)
-        d[:, 1] = wrap_angle(d[:, 1])
-        np.add.at(sums[:, i], cell, d)
-        np.add.at(counts[:, i], cell, 1)
-        if model == "interpolant":  # barycentric weights of the FieldMap's P1 at y
-            bary = tri.barycentric(y, simplex)
-            verts = tri.simplices[simplex]
-        else:  # the plot's cell
-            bary = np.ones((rows.size, 1))
-            verts = cell[:, None]
-        base = 2 * (n_used + np.arange(rows.size))
-        for comp in (0, 1):
-            a_rows.append(np.repeat(base + comp, verts.shape[1]))
-            a_cols.append((2 * (verts * m + i) + comp).ravel())
-            a_vals.append(bary.ravel())
-        # per-plot covariance V_i + σ_ref² J Jᵀ (the ADS-B error seen in polar)
-        jac = radars.polar_jacobian(i, y, h)
-        cov = np.diag(
-            [radars.sigma_range[i] ** 2, radars.sigma_azimuth[i] ** 2]
-        ) + sig_ref**2 * jac @ jac.transpose(0, 2, 1)
-        w_list.append(np.linalg.inv(cov))
-        d_list.append(d.reshape(-1))
-        n_used += rows.size
-    if n_used == 0:
-        raise ProblemError(
-            f"{fn} reference: no plot with an ADS-B position lies in the covered area of the cells"
-        )
-    seen = counts > 0
-    mean = np.full((k, m, 2), np.nan)
-    mean[seen] = sums[seen] / counts[seen, None]
-    amat = sparse.csr_matrix(
-        (np.concatenate(a_vals), (np.concatenate(a_rows), np.concatenate(a_cols))),
-        shape=(2 * n_used, 2 * m * k),
-    )
-    wmat = sparse.block_diag(list(np.concatenate(w_list)), format="csr")
-    return _AdsbSystem(amat, wmat, np.concatenate(d_list), mean, counts, n_used)
-
-
-def _check_determined(fn: str, data: FieldData, radars: RadarSet, amat: sparse.csr_matrix) -> None:
-    """Every radar has ADS-B data on every connected part of its own neighbour graph
-    (:func:`~optmodels.biasfield.problem.radar_parts`); else its constant there (the null
-    space of R) is determined by no μ: ProblemError naming the radar and the cells."""
-    k, m = data.k, data.m
-    touched = np.asarray(abs(amat).sum(axis=0)).reshape(k, m, 2)[:, :, 0] > 0
-    for i, (n, labels) in enumerate(radar_parts(data)):
-        has = np.zeros(n, dtype=bool)
-        np.logical_or.at(has, labels, touched[:, i])
-        if not has.all():
-            cells = np.flatnonzero(labels == np.flatnonzero(~has)[0])
-            raise ProblemError(
-                f"{fn} reference: radar {radars.names[i]!r} has no plot with an ADS-B "
-                f"position in cells {cells[:10].tolist()} (a connected part of the cells "
-                "it sees): its field there is not determined"
-            )
-
-
-def _smoothing_level(
-    sys_: _AdsbSystem,
-    awa: sparse.csc_matrix,
-    rhs: FloatArray,
-    r: sparse.csc_matrix,
-    null: sparse.csr_matrix,
-    dof: int,
-    level: str,
-) -> tuple[FloatArray, float, float, Status]:
-    """The field of the smoothing weight μ: (μR + AᵀWA)φ = AᵀWd with χ²(μ) at the expected
-    level ``dof`` (``"discrepancy"``, bisection in log μ) or μ → 0 (``"means"``). Returns
-    φ, χ², μ and the status (OPTIMAL_INACCURATE when the level is not reached)."""
-    amat, wmat, dvec = sys_.amat, sys_.wmat, sys_.dvec
-
-    def fit(mu: float) -> tuple[FloatArray, float]:
-        phi = splinalg.spsolve((mu * r + awa).tocsc(), rhs)
-        res = amat @ phi - dvec
-        return phi, float(res @ (wmat @ res))
-
-    # χ²(μ) increases with μ from its least-squares minimum towards that of the
-    # smoothest fields (μ → ∞: J = 0, constant per radar on each connected part of the
-    # graph, fitted exactly in that null space); the level is the expected χ² = 2n
-    c_inf = np.linalg.solve((null.T @ awa @ null).toarray(), null.T @ rhs)
-    phi_inf = null @ c_inf
-    res_inf = amat @ phi_inf - dvec
-    chi_inf = float(res_inf @ (wmat @ res_inf))
-    status = Status.OPTIMAL
-    scale = float(np.log10(max(abs(awa).max(), 1e-300) / max(abs(r).max(), 1e-300)))
-    if level == "means":  # the least-squares field: the means, smoothness fills the rest
-        mu = 10.0 ** (scale - 12.0)
-        phi, chi2 = fit(mu)
-    elif chi_inf <= dof:  # even the smoothest fields fit the data: take the best of them
-        phi, chi2, mu = phi_inf, chi_inf, float("inf")
-    else:
-        lo, hi = scale - 20.0, scale + 14.0
-        phi, chi2 = fit(10.0**lo)
-        if chi2 >= dof:  # no field reaches the level: the least-squares one
-            mu = 10.0**lo
-            status = Status.OPTIMAL_INACCURATE
-        else:
-            for _ in range(200):
-                mid = 0.5 * (lo + hi)
-                phi, chi2 = fit(10.0**mid)
-                if chi2 > dof:
-                    hi = mid
-                else:
-                    lo = mid
-                # the level itself is uncertain by √(2 dof): 1e-4 relative is ample
-                if abs(chi2 - dof) <= 1e-4 * dof or hi - lo < 1e-12:
-                    break
-            mu = 10.0**mid
-            if abs(chi2 - dof) > 1e-2 * dof:
-                status = Status.OPTIMAL_INACCURATE
-    return phi, chi2, mu, status
-
-
-def _stationarity(
-    phi: FloatArray,
-    mu: float,
-    awa: sparse.csc_matrix,
-    rhs: FloatArray,
-    r: sparse.csc_matrix,
-    null: sparse.csr_matrix,
-) -> float:
-    """The re-check: the stationarity of the Lagrangian, (μR + AᵀWA)φ − AᵀWd (μ = ∞: Rφ = 0
-    and the data term stationary in the null space of R), relative."""
-    ref_scale = max(float(np.max(np.abs(rhs))), 1e-300)
-    if np.isinf(mu):
-        return max(
-            float(np.max(np.abs(null.T @ (awa @ phi - rhs)))) / ref_scale,
-            float(np.max(np.abs(r @ phi))) / max(float(abs(r).max() * np.max(np.abs(phi))), 1e-300),
-        )
-    return float(np.max(np.abs(mu * (r @ phi) + awa @ phi - rhs))) / ref_scale
 
 
 # ----------------------------------------------------------------------------- absolute error

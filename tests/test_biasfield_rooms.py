@@ -56,6 +56,7 @@ STAGES: dict[str, int] = {
     "summary": 4,
     "usage": 4,
     "referee": 4,
+    "referee_system": 4,
 }
 
 STAGE_NAMES = ("inputs", "tracks", "field data", "selection", "use")

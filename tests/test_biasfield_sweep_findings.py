@@ -227,8 +227,10 @@ def test_adsb_field_null_space_follows_each_radars_cells(c: Ctx) -> None:
     it sees: its null space (the smoothest fields, μ → ∞) has one constant per radar and
     per connected part of that radar's graph. Found by the sweep's rescaled references:
     positions × 0.5 left radar R3 without data in cell 2, which it does not see; the
-    solves were "exactly singular" (a MatrixRankWarning, then "the solve overflowed")."""
-    from optmodels.biasfield.problem import r_matrix, r_null_space
+    solves were "exactly singular" (a MatrixRankWarning, then "the solve overflowed"), then
+    refused naming cell 2. The referee's unknowns are the seen entries only: R3's entry in
+    cell 2 is not estimated (0), and R3 is refused only without data on the cells it sees."""
+    from optmodels.biasfield.problem import r_matrix, r_null_space, seen_entries
 
     fd = rec._fd(c)
     assert fd.seen is not None and not fd.seen.all()  # the union field has a hole
@@ -238,15 +240,42 @@ def test_adsb_field_null_space_follows_each_radars_cells(c: Ctx) -> None:
     assert null.shape[1] == int(np.sum(w <= 1e-12 * w[-1])) == 2 * fd.m + 2
     assert np.linalg.matrix_rank(null) == null.shape[1]
     assert np.max(np.abs(r @ null)) <= 1e-12 * np.max(np.abs(r))
+    # over the seen entries the unseen (R3, cell 2) is gone: one part per radar
+    keep = seen_entries(fd)
+    assert keep.sum() == 2 * fd.seen.sum() and not keep.reshape(fd.k, fd.m, 2)[2, 2].any()
+    r_s = r[np.ix_(keep, keep)]
+    null_s = r_null_space(fd, seen_only=True).toarray()
+    w_s = np.linalg.eigvalsh(r_s)
+    assert (
+        null_s.shape == (keep.sum(), 2 * fd.m) == (keep.sum(), int(np.sum(w_s <= 1e-12 * w_s[-1])))
+    )
+    assert np.max(np.abs(r_s @ null_s)) <= 1e-12 * np.max(np.abs(r_s))
     p, radars, ref = rec._plots(c), rec._radars(c), rec._ref(c)
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        with pytest.raises(ProblemError, match=r"radar 'R3' has no plot .* in cells \[2\]"):
-            bf.adsb_field(fd, p, radars, 0.5 * ref, cell_radius=60e3)
+        # positions × 0.5: every plot in cells 0, 1, 3, which R3 sees; the references are
+        # wrong by kilometres, so no field reaches the χ² level: the least-squares field,
+        # flagged OPTIMAL_INACCURATE (the means level asks for that field: OPTIMAL)
+        half = bf.adsb_field(fd, p, radars, 0.5 * ref, cell_radius=60e3)
+        means = bf.adsb_field(fd, p, radars, 0.5 * ref, cell_radius=60e3, level="means")
+        assert half.status.value == "optimal_inaccurate" and half.chi2 > 100 * half.dof
+        assert means.status.value == "optimal" and means.chi2 > 100 * means.dof
+        assert half.field[2, 2].tolist() == [0.0, 0.0] and half.counts[2].sum() == 0
+        for comp in (0, 1):  # both the μ → 0 limit, per component (m, rad)
+            scale = np.abs(means.field[..., comp]).max()
+            np.testing.assert_allclose(
+                half.field[..., comp], means.field[..., comp], rtol=0, atol=1e-6 * scale
+            )
+        # R3 without any reference: its constant on the cells it sees (0, 1, 3) is free
+        blind = ref.copy()
+        blind[p.radar == 2] = np.nan
+        with pytest.raises(ProblemError, match=r"radar 'R3' has no plot .* in cells \[0, 1, 3\]"):
+            bf.adsb_field(fd, p, radars, blind, cell_radius=60e3)
         # the good path: the smoothest fields fit the data (μ = ∞, J = 0), re-checked
         out = bf.adsb_field(fd, p, radars, ref, cell_radius=60e3)
     assert out.status.ok and math.isinf(out.mu) and out.objective <= 1e-20
-    assert out.chi2 <= out.dof and out.stationarity <= 1e-9
+    assert out.chi2 <= out.dof and out.stationarity <= 1e-9 and out.conditioning <= 1e-12
+    assert out.moved == 1 and out.field[2, 2].tolist() == [0.0, 0.0]
 
 
 # ------------------------------------------------------------------ readers

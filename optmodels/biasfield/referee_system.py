@@ -220,7 +220,7 @@ class LevelSolve(NamedTuple):
 class _Scaled(NamedTuple):
     """The factorised Jacobi-scaled matrix S(μR + AᵀWA)S, S = diag(h_jj)^(-1/2)."""
 
-    lu: object
+    lu: splinalg.SuperLU
     s: FloatArray
     hs: sparse.csc_matrix
 
@@ -262,7 +262,7 @@ def solve_level(fn: str, data: FieldData, sys_: AdsbSystem, level: str) -> Level
 
     def fit(mu: float) -> tuple[FloatArray, float, _Scaled]:
         f = _factor(fn, mu, r, awa)
-        phi = f.s * f.lu.solve(f.s * rhs)  # type: ignore[attr-defined]
+        phi = f.s * f.lu.solve(f.s * rhs)
         return phi, chi(phi), f
 
     # χ²(μ) increases with μ from its least-squares minimum towards that of the smoothest

@@ -290,7 +290,7 @@ def test_read_recording_origin_and_empty_file(c: Ctx, tmp_path: Path) -> None:
         bf.read_recording(path, radars, origin=RAGGED)  # type: ignore[arg-type]
     empty = tmp_path / "empty.ast"
     empty.write_bytes(b"")
-    with pytest.raises(ProblemError, match=r"read_recording paths: no CAT048 plot"):
+    with pytest.raises(ProblemError, match=r"empty\.ast: empty file"):  # names the file
         bf.read_recording(empty, radars)
     # the good path: every plot and ADS-B report of the scene, on the same origin
     got = bf.read_recording(path, radars, origin=rec.ORG)

@@ -148,8 +148,9 @@ _FMT = {
 
 
 def _field_data(sc: RadarNetworkScenario, cells: int, seed: int) -> tuple[bf.FieldBuild, str]:
-    """Plots → FieldData on the paper's all-radar cells (the ADS-B referee is written for
-    them); the warnings of the build, as one line of text."""
+    """Plots → FieldData on the paper's all-radar cells (the demo reproduces paper 001's
+    setting; the union of coverage is the library's default); the warnings of the build, as
+    one line of text."""
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         build = bf.field_data_from_plots(

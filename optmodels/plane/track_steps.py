@@ -21,7 +21,7 @@ from optmodels.core import REJECT_TOL, FloatArray, ProblemError
 from optmodels.plane.closedform import _closed_form_from_sums
 from optmodels.plane.data import PlaneData
 from optmodels.plane.detector import (
-    chow_statistic,
+    change_statistic,
     detectable_tilt,
     noise_info_moments,
     noise_info_points,
@@ -214,6 +214,7 @@ def _detect(
             bb = np.empty_like(ba)
             ell = np.empty(len(jj))
             na_noise = np.empty_like(ja)
+            nb_noise = np.empty_like(ja)
             frames = _tangent_basis(na)
             for q, (j, s_, nrm, off) in enumerate(zip(jj, ss, na, aa, strict=True)):
                 a0 = int(s_ - fits.count[s_ - fits.base] + 1)
@@ -226,16 +227,18 @@ def _detect(
                     nrm, off, junction[q], xa, ca, spread, ell[q], frames[q]
                 )
                 na_noise[q] = noise_info_points(nrm, ca, spread, ell[q], frames[q])
+                cb = data.covs[s_ + 1 : j + 1]
                 jb[q], bb[q] = score_info_points(
                     nrm,
                     off,
                     junction[q],
                     data.points[s_ + 1 : j + 1],
-                    data.covs[s_ + 1 : j + 1],
+                    cb,
                     spread,
                     ell[q],
                     frames[q],
                 )
+                nb_noise[q] = noise_info_points(nrm, cb, spread, ell[q], frames[q])
         else:
             assert fits.moments is not None and data.base_cov is not None
             assert data.alpha2 is not None
@@ -256,18 +259,21 @@ def _detect(
             ja, ba = score_info_moments(na, aa, junction, mom_a, data.base_cov, ell)
             jb, bb = score_info_moments(na, aa, junction, mom_b, data.base_cov, ell)
             na_noise = noise_info_moments(na, mom_a.count, data.base_cov, ell, spread)
-        # the reference's information with its errors in variables (the noise of its
-        # in-plane coordinates): J_A alone overstates it on short, densely sampled arcs
+            nb_noise = noise_info_moments(na, mom_b.count, data.base_cov, ell, spread)
+        # errors in variables (the noise of the in-plane coordinates): the reference's
+        # information K_A (J_A overstates it on short, densely sampled arcs) and S_B, which
+        # carries the reference's error into B's score (detector module docstring)
         ka, valid = reference_information(ja, na_noise)
         firm = valid & (reference_tilt_sd(ka, ell) <= max_sd)
         ja = np.where(firm[:, None, None], ja, np.eye(3))  # (placeholders where not firm)
         ka = np.where(firm[:, None, None], ka, np.eye(3))
-        ka_b = np.einsum("kij,kj->ki", ka, np.linalg.solve(ja, ba[..., None])[..., 0])
-        u = np.where(firm, chow_statistic(ka, ka_b, jb, bb), -np.inf)
+        sb = jb - nb_noise
+        beta_a = np.linalg.solve(ja, ba[..., None])[..., 0]
+        u = np.where(firm, change_statistic(ka, beta_a, jb, bb, sb), -np.inf)
         back = np.minimum(5, fits.count[ra].astype(np.int64) - 1)
         vel = velocity_direction(na, _tangent_basis(na), data.points, ss, back)
-        th = np.where(firm, detectable_tilt(ka, jb, ell, lam_star, vel), np.inf)
-        th_any = np.where(firm, detectable_tilt(ka, jb, ell, lam_star), np.inf)
+        th = np.where(firm, detectable_tilt(ka, jb, ell, lam_star, vel, sb), np.inf)
+        th_any = np.where(firm, detectable_tilt(ka, jb, ell, lam_star, sb=sb), np.inf)
         pos = np.flatnonzero(ok)
         better = u > best[pos]
         best[pos[better]] = u[better]

@@ -268,7 +268,7 @@ def _detect(
         ja = np.where(firm[:, None, None], ja, np.eye(3))  # (placeholders where not firm)
         ka = np.where(firm[:, None, None], ka, np.eye(3))
         sb = jb - nb_noise
-        beta_a = np.linalg.solve(ja, ba[..., None])[..., 0]
+        beta_a: FloatArray = np.linalg.solve(ja, ba[..., None])[..., 0].astype(float)
         u = np.where(firm, change_statistic(ka, beta_a, jb, bb, sb), -np.inf)
         back = np.minimum(5, fits.count[ra].astype(np.int64) - 1)
         vel = velocity_direction(na, _tangent_basis(na), data.points, ss, back)

@@ -21,8 +21,11 @@ from optmodels.core import REJECT_TOL, FloatArray, ProblemError
 from optmodels.plane.closedform import _closed_form_from_sums
 from optmodels.plane.data import PlaneData
 from optmodels.plane.detector import (
-    chow_statistic,
+    change_statistic,
     detectable_tilt,
+    noise_info_moments,
+    noise_info_points,
+    reference_information,
     reference_tilt_sd,
     score_info_moments,
     score_info_points,
@@ -210,6 +213,8 @@ def _detect(
             jb = np.empty_like(ja)
             bb = np.empty_like(ba)
             ell = np.empty(len(jj))
+            na_noise = np.empty_like(ja)
+            nb_noise = np.empty_like(ja)
             frames = _tangent_basis(na)
             for q, (j, s_, nrm, off) in enumerate(zip(jj, ss, na, aa, strict=True)):
                 a0 = int(s_ - fits.count[s_ - fits.base] + 1)
@@ -217,19 +222,23 @@ def _detect(
                 ell[q] = max(
                     float(np.sqrt(np.mean(np.sum((xa - xa.mean(0)) ** 2, 1)))) / spread, 1e-300
                 )
+                ca = data.covs[a0 : s_ + 1]
                 ja[q], ba[q] = score_info_points(
-                    nrm, off, junction[q], xa, data.covs[a0 : s_ + 1], spread, ell[q], frames[q]
+                    nrm, off, junction[q], xa, ca, spread, ell[q], frames[q]
                 )
+                na_noise[q] = noise_info_points(nrm, ca, spread, ell[q], frames[q])
+                cb = data.covs[s_ + 1 : j + 1]
                 jb[q], bb[q] = score_info_points(
                     nrm,
                     off,
                     junction[q],
                     data.points[s_ + 1 : j + 1],
-                    data.covs[s_ + 1 : j + 1],
+                    cb,
                     spread,
                     ell[q],
                     frames[q],
                 )
+                nb_noise[q] = noise_info_points(nrm, cb, spread, ell[q], frames[q])
         else:
             assert fits.moments is not None and data.base_cov is not None
             assert data.alpha2 is not None
@@ -249,13 +258,22 @@ def _detect(
             ell = np.sqrt(np.maximum(np.trace(mom_a.q, axis1=1, axis2=2) / mom_a.s0, 1e-300))
             ja, ba = score_info_moments(na, aa, junction, mom_a, data.base_cov, ell)
             jb, bb = score_info_moments(na, aa, junction, mom_b, data.base_cov, ell)
-        firm = reference_tilt_sd(ja, ell) <= max_sd
-        ja = np.where(firm[:, None, None], ja, np.eye(3))  # (placeholder where not firm)
-        u = np.where(firm, chow_statistic(ja, ba, jb, bb), -np.inf)
+            na_noise = noise_info_moments(na, mom_a.count, data.base_cov, ell, spread)
+            nb_noise = noise_info_moments(na, mom_b.count, data.base_cov, ell, spread)
+        # errors in variables (the noise of the in-plane coordinates): the reference's
+        # information K_A (J_A overstates it on short, densely sampled arcs) and S_B, which
+        # carries the reference's error into B's score (detector module docstring)
+        ka, valid = reference_information(ja, na_noise)
+        firm = valid & (reference_tilt_sd(ka, ell) <= max_sd)
+        ja = np.where(firm[:, None, None], ja, np.eye(3))  # (placeholders where not firm)
+        ka = np.where(firm[:, None, None], ka, np.eye(3))
+        sb = jb - nb_noise
+        beta_a: FloatArray = np.linalg.solve(ja, ba[..., None])[..., 0].astype(float)
+        u = np.where(firm, change_statistic(ka, beta_a, jb, bb, sb), -np.inf)
         back = np.minimum(5, fits.count[ra].astype(np.int64) - 1)
         vel = velocity_direction(na, _tangent_basis(na), data.points, ss, back)
-        th = np.where(firm, detectable_tilt(ja, jb, ell, lam_star, vel), np.inf)
-        th_any = np.where(firm, detectable_tilt(ja, jb, ell, lam_star), np.inf)
+        th = np.where(firm, detectable_tilt(ka, jb, ell, lam_star, vel, sb), np.inf)
+        th_any = np.where(firm, detectable_tilt(ka, jb, ell, lam_star, sb=sb), np.inf)
         pos = np.flatnonzero(ok)
         better = u > best[pos]
         best[pos[better]] = u[better]

@@ -260,10 +260,11 @@ def track(
         Level of the χ²(n − 3) planarity test and of the line test behind ``resolved``,
         in (0, 1) (default 0.997 as in the paper).
     false_alarm_rate_per_h : float
-        Bound on the detector's false alarms per HOUR of planar track (default 1). Each of
-        the ``len(scales)`` tests of a step has level ``rate · dt / len(scales)`` (the
-        rate per second, ``dt`` the median sampling interval); their union bounds the rate
-        (see :mod:`optmodels.plane.detector`).
+        Bound on the detector's false alarms per HOUR of planar track (default 1), for
+        every kind of window. Each of the ``len(scales)`` tests of a step has level
+        ``rate · dt / len(scales)`` (the rate per second, ``dt`` the median sampling
+        interval); their union bounds the rate (see :mod:`optmodels.plane.detector`).
+        Alarms may come in clusters after a restart (the bound is on their mean rate).
     alpha2 : (N,), optional
         The factors α_i² of (1.4) with a (3, 3) ``cov``.
     start : float, optional
@@ -278,9 +279,12 @@ def track(
         Fewest points (≥ 4) in a reference window for a test.
     max_reference_sd : float
         A test is made only when the reference plane is firm: the largest standard
-        deviation of its tilts (Cramér–Rao, rad) is at most this (default 0.1 rad ≈ 6°).
-        A barely resolved reference (nearly straight, or just after a restart) fits
-        its rotation about the line to the noise, and U is then not χ²(3).
+        deviation of its tilts (rad; errors in variables: the noise of the reference's
+        in-plane coordinates counted, :func:`~optmodels.plane.detector.reference_information`)
+        is at most this (default 0.1 rad ≈ 6°). A barely resolved reference (nearly
+        straight, just after a restart, or a short window of many points: ``"100pts"`` at
+        10 Hz is 10 s of track) fits its rotation about the line to the noise, and U is
+        then not χ²(3); such steps have no test (``detector`` NaN).
     false_alarm_rate : removed
         Was per SECOND; refused with a message: write ``false_alarm_rate_per_h``.
 

@@ -23,14 +23,15 @@ demo: $(STAMP)
 
 ## default test suite (no `slow` tests) plus the tools that hold the rules: the linter, the
 ## type checker ([tool.mypy] in pyproject.toml) and the import contracts of
-## docs/architecture.md ([tool.importlinter])
+## docs/architecture.md ([tool.importlinter]); pytest on 2 workers (pytest-xdist: CI has 2
+## cores, and the suite is mostly subprocesses and single-threaded solves)
 test: $(STAMP)
 	$(BIN)/ruff check optmodels solvers_cmp tests
 	$(BIN)/ruff format --check optmodels solvers_cmp tests
 	$(BIN)/mypy
 	$(BIN)/lint-imports
 	$(BIN)/mkdocs build --strict --quiet
-	$(BIN)/python -m pytest
+	$(BIN)/python -m pytest -n 2
 
 ## the user guide and API reference as a site in build/site (warnings are errors)
 docs: $(STAMP)

@@ -278,6 +278,7 @@ def run_country(
         if dask:
             xi, field, k = fd.xi, sol.field, fd.k
             del fd, plots, sol, cor  # the Dask pass reads the recording again
+            trim_heap()
             res.update(_dask_pass(read, radars, cfg, workers, progress, seed, trace, xi, field, k))
             res["rss_max_per_stage_mb"] = trace.stages()
             res["rss_tree_max_per_stage_mb"] = trace.stages(tree=True)

@@ -62,37 +62,78 @@ def peak_rss_mb() -> tuple[float, float]:
 
 
 class RssTrace:
-    """The resident set of this process sampled every ``period`` s in a thread
-    (``/proc/self/statm``): :meth:`peak` says when the peak was reached (seconds since
-    start), to place it in the stage table."""
+    """The resident set sampled every ``period`` s in a thread (``/proc``): this process
+    and (``tree``) this process plus its descendants (fit workers, a Dask cluster's
+    processes; a sum of resident sets, shared library pages counted in each). :meth:`stop`
+    says when the peak was reached (seconds since the start), :meth:`mark` ends a stage
+    and :meth:`stages` gives each marked stage's largest sample."""
 
     def __init__(self, period: float = 0.1) -> None:
         import os
         import threading
 
         self.samples: list[tuple[float, float]] = []
+        self.tree: list[float] = []
+        self.marks: list[tuple[str, float]] = []
         self._page = os.sysconf("SC_PAGE_SIZE") / 2**20
         self._stop = threading.Event()
+        self._lock = threading.Lock()
         self._t0 = time.perf_counter()
         self._thread = threading.Thread(target=self._loop, args=(period,), daemon=True)
         self._thread.start()
 
     def _loop(self, period: float) -> None:
         while not self._stop.wait(period):
-            try:
-                with open("/proc/self/statm") as fh:
-                    rss = int(fh.read().split()[1]) * self._page
-            except OSError:  # not Linux: no trace
+            if not self._sample():  # not Linux: no trace
                 return
-            self.samples.append((time.perf_counter() - self._t0, rss))
 
-    def per_stage(self, ends: dict[str, float]) -> dict[str, float]:
-        """The largest sampled RSS (MB) in each stage; ``ends`` stage → its end (s since
-        the start, in order)."""
+    def _sample(self) -> bool:
+        import os
+
+        try:
+            with open("/proc/self/statm") as fh:
+                rss = int(fh.read().split()[1]) * self._page
+        except OSError:
+            return False
+        with self._lock:
+            self.samples.append((time.perf_counter() - self._t0, rss))
+            self.tree.append(rss + _descendants_pages(os.getpid()) * self._page)
+        return True
+
+    def now(self) -> float:
+        """Seconds since the start of the trace."""
+        return time.perf_counter() - self._t0
+
+    def mark(self, stage: str) -> None:
+        """``stage`` ends now (it began at the previous mark, or at the start); one
+        sample is taken here, so that a stage shorter than the period has its own."""
+        self._sample()
+        self.marks.append((stage, time.perf_counter() - self._t0))
+
+    def stages(self, tree: bool = False) -> dict[str, float]:
+        """The largest sampled RSS (MB) of each marked stage: this process, or with
+        ``tree`` the sum over it and its descendants."""
+        with self._lock:
+            values = list(self.tree) if tree else [mb for _, mb in self.samples]
+            times = [t for t, _ in self.samples]
         out: dict[str, float] = {}
         lo = 0.0
+        for key, hi in self.marks:
+            seg = [mb for t, mb in zip(times, values, strict=True) if lo <= t <= hi]
+            if seg:
+                out[key] = round(max(seg), 1)
+            lo = hi
+        return out
+
+    def per_stage(self, ends: dict[str, float], start: float = 0.0) -> dict[str, float]:
+        """The largest sampled RSS (MB) in each stage; ``ends`` stage → its end (s since
+        the start of the trace, in order), the first stage beginning at ``start``."""
+        out: dict[str, float] = {}
+        lo = start
+        with self._lock:
+            samples = list(self.samples)
         for key, hi in ends.items():
-            seg = [mb for t, mb in self.samples if lo <= t < hi]
+            seg = [mb for t, mb in samples if lo <= t < hi]
             if seg:
                 out[key] = round(max(seg), 1)
             lo = hi
@@ -105,6 +146,46 @@ class RssTrace:
             return {}
         t, mb = max(self.samples, key=lambda s: s[1])
         return {"peak_mb": round(mb, 1), "at_s": round(t, 1)}
+
+
+def trim_heap() -> None:
+    """Give the freed heap back to the OS (glibc's ``malloc_trim``; nothing elsewhere).
+    Millions of small arrays freed at once (the track fits) leave their pages in the
+    heap, reused only by small allocations: the large arrays of the next stage (mapped
+    apart) would add to them in the resident set."""
+    import ctypes
+    import ctypes.util
+
+    try:
+        ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6").malloc_trim(0)
+    except (OSError, AttributeError):  # not glibc
+        pass
+
+
+def _descendants_pages(root: int) -> int:
+    """Resident pages of the processes descending from ``root`` (a scan of ``/proc``)."""
+    import os
+
+    parent: dict[int, int] = {}
+    pages: dict[int, int] = {}
+    for name in os.listdir("/proc"):
+        if not name.isdigit():
+            continue
+        try:
+            with open(f"/proc/{name}/stat") as fh:
+                stat = fh.read()
+        except OSError:  # the process ended meanwhile
+            continue
+        rest = stat[stat.rindex(")") + 2 :].split()  # after "pid (comm) "
+        parent[int(name)], pages[int(name)] = int(rest[1]), int(rest[21])
+    total = 0
+    for pid, rss in pages.items():
+        p = parent.get(pid, 0)
+        while p > 1 and p != root:
+            p = parent.get(p, 0)
+        if p == root and pid != root:
+            total += rss
+    return total
 
 
 def network(seed: int, m: int) -> tuple[RadarSet, list[BiasField]]:
@@ -192,8 +273,10 @@ def traffic(
             strict=True,
         ):
             c.append(v[seen])
-    out = [np.concatenate(c) for c in cols]
-    cols.clear()
+    out = []
+    for c in cols:  # column by column, each one's pieces freed once joined
+        out.append(np.concatenate(c))
+        c.clear()
     # radar by radar (the pipeline sorts what it needs): no second copy for a time sort
     return PlotTable(out[0], out[1].astype(np.int64), out[2], out[3], out[4].astype(np.int64))
 

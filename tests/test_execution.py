@@ -163,3 +163,44 @@ def test_dask_address_without_distributed_is_bad_input(
     assert r.returncode == 2, r.stderr
     assert "pip install 'optmodels[distributed]'" in r.stdout + r.stderr
     assert "Traceback" not in r.stderr
+
+
+def _square(x: int) -> int:
+    return x * x
+
+
+def test_dask_keeps_a_bounded_number_of_tasks_in_flight() -> None:
+    """On Dask, at most DASK_IN_FLIGHT tasks per worker thread are submitted and not yet
+    handed over (their arguments on the scheduler, their results on the workers), and
+    every task's result still arrives once, under its own index."""
+    import distributed  # in the test extra (pyproject): must be here, never skipped
+
+    from optmodels.execution import engine
+
+    got: dict[int, int] = {}
+    submitted: list[int] = []
+    most = 0
+    with (
+        distributed.LocalCluster(
+            n_workers=2, threads_per_worker=1, processes=False, dashboard_address=None
+        ) as cluster,
+        distributed.Client(cluster) as client,
+    ):
+        submit = client.submit
+
+        def counting(*args: object, **kw: object) -> object:
+            nonlocal most
+            submitted.append(1)
+            most = max(most, len(submitted) - len(got))
+            return submit(*args, **kw)
+
+        client.submit = counting  # type: ignore[method-assign]
+        engine.execute(
+            _square,
+            [(k,) for k in range(40)],
+            on_result=lambda k, r: got.__setitem__(k, r),
+            scheduler=client,
+        )
+    assert got == {k: k * k for k in range(40)}
+    assert len(submitted) == 40
+    assert most == engine.DASK_IN_FLIGHT * 2  # the bound, reached

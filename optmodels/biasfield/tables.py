@@ -307,8 +307,10 @@ class PlotTable:
         object.__setattr__(self, "time", t)
         object.__setattr__(self, "range", r)
         object.__setattr__(self, "azimuth", az)
-        object.__setattr__(self, "radar", rad.astype(np.int64))
-        object.__setattr__(self, "object", obj.astype(np.int64))
+        # int64 columns are kept as given, not copied (like the float columns): a table
+        # derived from another (a subset, corrected ranges) costs no copy of them
+        object.__setattr__(self, "radar", rad.astype(np.int64, copy=False))
+        object.__setattr__(self, "object", obj.astype(np.int64, copy=False))
 
     def __len__(self) -> int:
         return int(self.time.shape[0])

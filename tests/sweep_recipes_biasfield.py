@@ -25,6 +25,7 @@ import numpy as np
 
 from optmodels import biasfield as bf
 from tests.sweep_support import Ctx, Out, file_factory, make_file
+from tests.test_cli_biasfield_build import write_sites
 
 R = dict[str, Callable[[Ctx], Any]]
 
@@ -126,25 +127,9 @@ def _u(c: Ctx) -> np.ndarray:
 def _sites_csv(c: Ctx) -> Any:
     r = _radars(c)
     assert r.geodetic is not None
-    return make_file(
-        c,
-        "bf-sites.csv",
-        "name,sac,sic,lat,lon,alt,sigma_range,sigma_azimuth,max_range\n"
-        + "".join(
-            f"{r.names[i]},25,{10 + i},"
-            + ",".join(
-                repr(float(v))
-                for v in (
-                    *r.geodetic[i],
-                    r.sigma_range[i],
-                    np.rad2deg(r.sigma_azimuth[i]),
-                    r.max_range[i],
-                )
-            )
-            + "\n"
-            for i in range(r.m)
-        ),
-    )
+    assert c.tmp is not None
+    path = c.tmp / "bf-sites.csv"
+    return path if path.exists() else write_sites(path, r)
 
 
 @file_factory()

@@ -55,7 +55,8 @@ def execute(
     ``"processes"``): ``"serial"`` (here, in order), ``"processes"`` (a local spawn pool
     of ``workers`` processes, each exiting with its parent and ignoring SIGINT; at most 2
     tasks per worker in flight), a Dask address (``tcp://host:8786``) or a
-    ``distributed.Client``. ``fn`` and the tasks must pickle for the last three. A task
+    ``distributed.Client`` (at most :data:`DASK_IN_FLIGHT` tasks per worker thread in
+    flight, each result released on the worker once handed over). ``fn`` and the tasks must pickle for the last three. A task
     whose worker died (a crashed pool process, Dask's ``KilledWorker``) goes to
     ``on_lost(k, message)``; without ``on_lost`` the error is raised. An exception of
     ``fn`` itself is raised: tasks that may fail record their failures in their result.

@@ -56,9 +56,10 @@ def execute(
     of ``workers`` processes, each exiting with its parent and ignoring SIGINT; at most 2
     tasks per worker in flight), a Dask address (``tcp://host:8786``) or a
     ``distributed.Client`` (at most :data:`DASK_IN_FLIGHT` tasks per worker thread in
-    flight, each result released on the worker once handed over). ``fn`` and the tasks must pickle for the last three. A task
-    whose worker died (a crashed pool process, Dask's ``KilledWorker``) goes to
-    ``on_lost(k, message)``; without ``on_lost`` the error is raised. An exception of
+    flight, each result released on the worker once handed over). ``fn`` and the tasks
+    must pickle for the last three. A task whose worker died (a crashed pool process,
+    Dask's ``KilledWorker``) goes to ``on_lost(k, message)``; without ``on_lost`` the
+    error is raised. An exception of
     ``fn`` itself is raised: tasks that may fail record their failures in their result.
     Ctrl-C kills the local workers (cancels the Dask futures) and raises
     ``KeyboardInterrupt``: what was handed to ``on_result`` is all that finished.

@@ -139,6 +139,16 @@ class RssTrace:
             lo = hi
         return out
 
+    def children_max(self) -> float:
+        """The largest sampled sum of the descendants' resident sets (MB)."""
+        with self._lock:
+            return round(
+                max(
+                    (t - s for t, (_, s) in zip(self.tree, self.samples, strict=True)), default=0.0
+                ),
+                1,
+            )
+
     def stop(self) -> dict[str, float]:
         self._stop.set()
         self._thread.join()
@@ -154,10 +164,9 @@ def trim_heap() -> None:
     heap, reused only by small allocations: the large arrays of the next stage (mapped
     apart) would add to them in the resident set."""
     import ctypes
-    import ctypes.util
 
-    try:
-        ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6").malloc_trim(0)
+    try:  # the symbols already loaded (no find_library: it forks ldconfig)
+        ctypes.CDLL(None).malloc_trim(0)
     except (OSError, AttributeError):  # not glibc
         pass
 

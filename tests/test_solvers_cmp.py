@@ -5,6 +5,8 @@ from __future__ import annotations
 import csv
 from pathlib import Path
 
+import pytest
+
 from solvers_cmp import plane as cmp_plane
 from solvers_cmp import report
 
@@ -115,3 +117,89 @@ def test_assignment_comparison_small(tmp_path: Path) -> None:
         assert abs(r["objective_gap"]) < 1e-9
     md = report.write_assignment(tmp_path, rows)
     assert "| 5 | 6 | allowed | none | enumeration (14) | python | optimal |" in md
+
+
+def _hold(mb: int, seconds: float) -> None:
+    """Child process: ``mb`` MB resident for ``seconds``."""
+    import time
+
+    import numpy as np
+
+    block = np.ones(mb * 2**17)  # touched: resident
+    time.sleep(seconds)
+    del block
+
+
+def test_rss_trace_places_memory_in_its_stage_and_sees_children() -> None:
+    """The country benchmark's memory figures: 300 MB held in stage "b" only shows there
+    (this process), 200 MB held by a child shows in the children's sum and the tree."""
+    import multiprocessing as mp
+    import time
+
+    import numpy as np
+
+    from solvers_cmp.biasfield_scale import RssTrace
+
+    trace = RssTrace(period=0.02)
+    time.sleep(0.2)
+    trace.mark("a")
+    block = np.ones(300 * 2**17)
+    time.sleep(0.2)
+    trace.mark("b")
+    del block
+    time.sleep(0.1)
+    trace.mark("c")
+    child = mp.get_context("spawn").Process(target=_hold, args=(200, 3.0))
+    child.start()
+    child.join()
+    trace.mark("d")
+    trace.stop()
+    own, tree = trace.stages(), trace.stages(tree=True)
+    assert set(own) == set(tree) == {"a", "b", "c", "d"}
+    assert own["b"] - own["a"] > 280
+    assert own["d"] < own["a"] + 100  # the child's memory is not this process's
+    assert tree["d"] - own["d"] > 180 and trace.children_max() > 180
+
+
+def test_read_hours_joins_the_hourly_files_in_order(tmp_path: Path) -> None:
+    import numpy as np
+
+    from solvers_cmp.biasfield_country import read_hours
+
+    rng = np.random.default_rng(3)
+    cols = {"time": [], "radar": [], "range": [], "azimuth": [], "object": []}
+    for h in (0, 1, 2):
+        n = 5 + h
+        part = {
+            "time": 3600.0 * h + np.sort(rng.uniform(0, 3600, n)),
+            "radar": rng.integers(0, 3, n),
+            "range": rng.uniform(1e3, 2e5, n),
+            "azimuth": rng.uniform(-3, 3, n),
+            "object": rng.integers(0, 9, n),
+        }
+        np.savez(tmp_path / f"hour{h:03d}.npz", **part)
+        for k, v in part.items():
+            cols[k].append(v)
+    (tmp_path / "notes.txt").write_text("not an hour")
+    plots = read_hours(str(tmp_path), progress=False)
+    for k, parts in cols.items():
+        np.testing.assert_array_equal(getattr(plots, k), np.concatenate(parts))
+
+
+@pytest.mark.slow
+def test_country_chain_local_and_dask_agree_at_a_tiny_size() -> None:
+    """Issue 24's country benchmark end to end at a tiny size: the figures it reports are
+    consistent, every plot has one reason, and the Dask pass gives the same field."""
+    from solvers_cmp.biasfield_country import run_country
+
+    r = run_country(aircraft=150, hours=0.5, cells=150, dask=True, progress=False)
+    assert r["status"] == "optimal" and r["cells"] > 100
+    # every plot the pipeline kept (cleaning may drop some) has one reason
+    kept = sum(r["reasons"].values())
+    assert r["plots"] - sum(r["dropped_plots"].values()) <= kept <= r["plots"]
+    assert r["registration_m"]["after"] < 0.2 * r["registration_m"]["before"]
+    stages = {"simulate", "read", "field_data", "solve", "correct", "registration"}
+    assert stages | {"dask.field_data", "dask.correct"} <= set(r["rss_max_per_stage_mb"])
+    assert r["dask_equal"]["cells"]
+    assert r["dask_equal"]["max_abs_xi_diff_m"] < 1e-9
+    assert max(r["dask_equal"]["max_abs_field_diff"]) < 1e-9

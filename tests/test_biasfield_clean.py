@@ -296,7 +296,7 @@ def test_fit_tracks_serial_processes_dask_agree() -> None:
     proc, d_proc = fit_tracks(sc.plots, sc.radars, scheduler="processes", workers=2, chunk=300)
     with (
         LocalCluster(
-            n_workers=1, threads_per_worker=2, processes=False, dashboard_address=None
+            n_workers=1, threads_per_worker=2, processes=False, dashboard_address=":0"
         ) as cluster,
         Client(cluster) as client,
     ):

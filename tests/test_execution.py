@@ -182,7 +182,7 @@ def test_dask_keeps_a_bounded_number_of_tasks_in_flight() -> None:
     most = 0
     with (
         distributed.LocalCluster(
-            n_workers=2, threads_per_worker=1, processes=False, dashboard_address=None
+            n_workers=2, threads_per_worker=1, processes=False, dashboard_address=":0"
         ) as cluster,
         distributed.Client(cluster) as client,
     ):

@@ -398,7 +398,7 @@ def dask_cluster() -> object:
     import distributed  # in the test extra (pyproject): must be here, never skipped
 
     with distributed.LocalCluster(
-        n_workers=1, threads_per_worker=1, processes=True, dashboard_address=None
+        n_workers=1, threads_per_worker=1, processes=True, dashboard_address=":0"
     ) as cluster:
         yield cluster
 

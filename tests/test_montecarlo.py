@@ -79,7 +79,7 @@ def test_dask_local_cluster_identical() -> None:
     import distributed  # in the test extra (pyproject): must be here, never skipped
 
     with distributed.LocalCluster(
-        n_workers=2, threads_per_worker=1, processes=False, dashboard_address=None
+        n_workers=2, threads_per_worker=1, processes=False, dashboard_address=":0"
     ) as cluster:
         by_address = mc.run(Slow(0.0), 50, seed=2, scheduler=cluster.scheduler_address, chunk=6)
         with distributed.Client(cluster) as client:

@@ -33,23 +33,25 @@ R = dict[str, Callable[[Ctx], Any]]
 N48, N21 = 8, 4
 
 
+def cat048_args(n: int, seed: int = 28052) -> dict[str, Any]:
+    """``n`` seeded CAT048 plots: the arguments of ``encode_cat048`` (also used by
+    tests/test_io_sweep_findings.py)."""
+    rng = np.random.default_rng(seed)
+    return {
+        "time_of_day": np.sort(rng.uniform(0.0, 600.0, n)),
+        "sac": 4,
+        "sic": 5,
+        "range": rng.uniform(1e3, 3e5, n),
+        "azimuth": rng.uniform(0.0, 2 * math.pi, n),
+        "flight_level": rng.uniform(10.0, 400.0, n),
+        "address": rng.choice(2**24, n, replace=False),
+        "mode3a": rng.integers(0, 4096, n),
+    }
+
+
 def _plots(c: Ctx) -> dict[str, Any]:
     """Seeded CAT048 plots: the good arguments of ``encode_cat048``."""
-
-    def make() -> dict[str, Any]:
-        rng = np.random.default_rng(20261228)
-        return {
-            "time_of_day": np.sort(rng.uniform(36_000.0, 36_060.0, N48)),
-            "sac": 7,
-            "sic": 3,
-            "range": rng.uniform(5e3, 2e5, N48),
-            "azimuth": rng.uniform(0.0, 2 * math.pi, N48),
-            "flight_level": rng.uniform(50.0, 390.0, N48),
-            "address": rng.choice(2**24, N48, replace=False),
-            "mode3a": rng.integers(0, 4096, N48),
-        }
-
-    return c.get("io.plots", make)
+    return c.get("io.plots", lambda: cat048_args(N48, seed=20261228))
 
 
 def _reports(c: Ctx) -> dict[str, Any]:

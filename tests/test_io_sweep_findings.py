@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import datetime as dt
 import json
-import math
 import os
 from pathlib import Path
 
@@ -16,6 +15,7 @@ import pytest
 from optmodels import io
 from optmodels.core import ProblemError
 from optmodels.io.asterix.layout import FT, NM
+from tests.sweep_recipes_io import cat048_args
 
 
 # --------------------------------------------------------------------------- atomic_write
@@ -121,22 +121,8 @@ def test_csv_times_refuses_an_epoch_that_is_not_a_date_time() -> None:
 
 
 # --------------------------------------------------------------------------- encoders
-def _cat048_args(n: int = 5) -> dict:
-    rng = np.random.default_rng(28052)
-    return {
-        "time_of_day": np.sort(rng.uniform(0.0, 600.0, n)),
-        "sac": 4,
-        "sic": 5,
-        "range": rng.uniform(1e3, 3e5, n),
-        "azimuth": rng.uniform(0.0, 2 * math.pi, n),
-        "flight_level": rng.uniform(10.0, 400.0, n),
-        "address": rng.choice(2**24, n, replace=False),
-        "mode3a": rng.integers(0, 4096, n),
-    }
-
-
 def test_encoders_refuse_values_that_are_not_real_numbers(tmp_path: Path) -> None:
-    good = _cat048_args()
+    good = cat048_args(5)
     n = good["range"].size
     # complex values were a raw ComplexWarning (without the tests' warning filter: the
     # imaginary part silently dropped); text and booleans were read as numbers
@@ -162,7 +148,7 @@ def test_encoders_refuse_values_that_are_not_real_numbers(tmp_path: Path) -> Non
 
 
 def test_encoders_refuse_an_edition_that_is_not_two_whole_numbers() -> None:
-    good = _cat048_args(2)
+    good = cat048_args(2)
     # an array edition was a raw ValueError (the truth value of an array is ambiguous)
     for bad in (np.ones((2, 3)) * (1 + 1j), [[0.0], [1.0, 1.0]], {"a": 1.0}, (1.0, 32.0)):
         with pytest.raises(ProblemError, match=r"asterix\.encode_cat048 edition: expected"):
@@ -206,7 +192,7 @@ def test_encoders_name_the_argument_of_the_wrong_length_and_range() -> None:
 
 
 def test_rewrite_names_record_id_and_refuses_complex_positions(tmp_path: Path) -> None:
-    good = _cat048_args(3)
+    good = cat048_args(3)
     p = tmp_path / "r.ast"
     p.write_bytes(io.encode_cat048(**good))
     rep = io.read_asterix(p).cat048
@@ -236,14 +222,14 @@ def test_is_asterix_refuses_a_missing_path_and_a_folder(tmp_path: Path) -> None:
     with pytest.raises(ProblemError, match="is a directory"):
         io.is_asterix(tmp_path)
     p = tmp_path / "r.ast"
-    p.write_bytes(io.encode_cat048(**_cat048_args(2)))
+    p.write_bytes(io.encode_cat048(**cat048_args(2)))
     empty = tmp_path / "empty.ast"
     empty.write_bytes(b"")
     assert io.is_asterix(p) and not io.is_asterix(empty)  # any readable file: an answer
 
 
 def test_read_asterix_refuses_an_empty_file(tmp_path: Path) -> None:
-    good = _cat048_args(4)
+    good = cat048_args(4)
     p = tmp_path / "r.ast"
     p.write_bytes(io.encode_cat048(**good))
     empty = tmp_path / "empty.ast"
